@@ -1,0 +1,25 @@
+"""The one error type imucal raises for bad input: one line naming file, field and fix."""
+from __future__ import annotations
+
+
+class ImucalError(Exception):
+    """Bad input or an impossible request.
+
+    The message is one line: ``FILE: FIELD: what is wrong (fix: what to do)``.
+    The command line prints it and exits with status 2, without a traceback.
+    """
+
+    def __init__(self, message: str, *, file: str | None = None, field: str | None = None,
+                 fix: str | None = None) -> None:
+        self.message = message
+        self.file = None if file is None else str(file)
+        self.field = field
+        self.fix = fix
+        super().__init__(self.__str__())
+
+    def __str__(self) -> str:
+        parts = [p for p in (self.file, self.field) if p]
+        text = ": ".join(parts + [self.message])
+        if self.fix:
+            text += f" (fix: {self.fix})"
+        return " ".join(text.split())  # always one line
