@@ -1,0 +1,242 @@
+"""A frozen calibration: applies itself, saves itself (self-describing YAML) and loads back.
+
+The apply map is the Theorem: a_orth = E^-T diag(1/b) (raw - s) = A raw + c, with A lower
+triangular (structural zeros above the diagonal). Effects, when present, make A and c depend
+on covariates (temperature, time) and the map is evaluated through the CasADi model.
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+import yaml
+
+from . import __version__
+from .constants import SI_ACCEL_UNIT
+from .errors import ImucalError
+from .parameters import ANGLE_NAMES, BASE_NAMES, Parameter, Parameters
+
+FORMAT = "imucal-calibration"
+FORMAT_VERSION = 1
+OUTPUT_FRAME = ("orthonormal frame f of the Theorem: f1 along sensor axis x, f2 in the plane of "
+                "axes x and y, f3 = f1 x f2")
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """Parameters of a fitted sensor model and everything needed to apply and trace them."""
+
+    params: Parameters
+    std: Mapping[str, float]
+    gravity: float
+    raw_unit: str = "raw"
+    effects: tuple[tuple[str, tuple[int, ...]], ...] = ()
+    fit: Mapping[str, Any] = field(default_factory=dict)  #: rms, chi2, dof, status, ...
+    data: Mapping[str, Any] = field(default_factory=dict)  #: file name, sha256
+    created: str = ""
+    software_version: str = __version__
+
+    # --- the model -------------------------------------------------------------------------
+    @property
+    def model(self):
+        from .model import build_model
+
+        return build_model(self.effect_objects())
+
+    def effect_objects(self) -> list:
+        if not self.effects:
+            return []
+        from .effects import make_effect
+
+        return [make_effect(name, axes) for name, axes in self.effects]
+
+    @property
+    def covariates(self) -> tuple[str, ...]:
+        return self.model.covariates if self.effects else ()
+
+    @property
+    def model_name(self) -> str:
+        return self.model.name
+
+    @property
+    def values(self) -> np.ndarray:
+        return np.array(self.params.values(), float)
+
+    def linear_map(self) -> tuple[np.ndarray, np.ndarray]:
+        """A (3x3, lower triangular) and c (3) with a_orth = A raw + c (Theorem).
+
+        With effects, the map at covariates zero (reference temperature, t = 0).
+        """
+        from .model import build_model
+
+        base = build_model()
+        A, c = base.linear_map(self.values[: len(BASE_NAMES)])
+        return np.asarray(A), np.asarray(c).ravel()
+
+    @property
+    def rms_residual(self) -> float:
+        return float(self.fit.get("rms_residual", float("nan")))
+
+    # --- apply -------------------------------------------------------------------------------
+    def apply(self, raw: np.ndarray, covariates: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
+        """Calibrated acceleration [m/s^2] in the Theorem's orthonormal frame, one row per sample."""
+        raw = np.asarray(raw, float)
+        if raw.ndim != 2 or raw.shape[1] != 3:
+            raise ImucalError(f"raw data must have shape (N, 3), got {raw.shape}", field="raw")
+        if not self.effects:
+            A, c = self.linear_map()
+            return raw @ A.T + c
+        covs = self.covariates
+        covariates = covariates or {}
+        missing = [c for c in covs if c not in covariates]
+        if missing:
+            raise ImucalError(f"this calibration needs covariate(s) {missing}", field="covariates",
+                              fix="load a recording with those columns (temp in deg C, time in s)")
+        n = raw.shape[0]
+        C = np.column_stack([np.broadcast_to(np.asarray(covariates[c], float), (n,)) for c in covs])
+        f = self.model.accel.map(n, "thread" if n > 20000 else "serial")
+        return np.asarray(f(raw.T, C.T, self.values)).T
+
+    # --- files -------------------------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        A, c = self.linear_map()
+        return {
+            "format": FORMAT,
+            "format_version": FORMAT_VERSION,
+            "model": self.model_name,
+            "effects": [{"name": n, "axes": ["xyz"[a] for a in ax]} for n, ax in self.effects],
+            "units": {"input": self.raw_unit, "output": SI_ACCEL_UNIT, "angles": "rad",
+                      "time": "s", "temperature": "degC"},
+            "output_frame": OUTPUT_FRAME,
+            "gravity": float(self.gravity),
+            "parameters": {
+                n: {"value": float(p.value), "std": _f(self.std.get(n, float("nan"))), "unit": p.unit,
+                    "lower": _f(p.lower), "upper": _f(p.upper), "fixed": bool(p.fixed),
+                    "scale": float(p.scale)}
+                for n, p in self.params.items()},
+            "apply": {"matrix": A.tolist(), "offset": c.tolist(),
+                      "equation": "a = matrix @ raw + offset (matrix lower triangular)"},
+            "fit": dict(self.fit),
+            "data": dict(self.data),
+            "software": {"name": "imucal", "version": self.software_version},
+            "created": self.created,
+        }
+
+    def save(self, path: str | os.PathLike) -> None:
+        from .output import write_text_atomic
+
+        write_text_atomic(path, yaml.safe_dump(self.to_dict(), sort_keys=False, width=100))
+
+
+def _f(x: float) -> float | None:
+    x = float(x)
+    return x if math.isfinite(x) else (None if math.isnan(x) else x)
+
+
+def _get(d: Mapping, key: str, path: str, where: str) -> Any:
+    if not isinstance(d, Mapping) or key not in d:
+        raise ImucalError(f"missing field {where + key!r}", file=path, field=where + key,
+                          fix="regenerate the file with `imucal calibrate`")
+    return d[key]
+
+
+def _num(x: Any, path: str, field_: str) -> float:
+    if x is None:
+        return float("nan")
+    if isinstance(x, bool) or not isinstance(x, (int, float)):
+        raise ImucalError(f"{x!r} is not a number", file=path, field=field_)
+    return float(x)
+
+
+def from_dict(d: Mapping[str, Any], path: str = "<calibration>") -> Calibration:
+    """Validate a calibration mapping and rebuild the Calibration."""
+    if not isinstance(d, Mapping):
+        raise ImucalError("is not a calibration file (top level is not a mapping)", file=path,
+                          field="format", fix="pass a calibration.yaml written by `imucal calibrate`")
+    fmt = _get(d, "format", path, "")
+    if fmt != FORMAT:
+        raise ImucalError(f"format {fmt!r} is not {FORMAT!r}", file=path, field="format",
+                          fix="pass a calibration.yaml written by `imucal calibrate`")
+    ver = _get(d, "format_version", path, "")
+    if ver != FORMAT_VERSION:
+        raise ImucalError(f"unknown format version {ver!r} (this imucal reads version {FORMAT_VERSION})",
+                          file=path, field="format_version",
+                          fix="regenerate the file with this imucal or upgrade imucal")
+    pd = _get(d, "parameters", path, "")
+    effects_in = d.get("effects") or []
+    effects: list[tuple[str, tuple[int, ...]]] = []
+    for e in effects_in:
+        name = _get(e, "name", path, "effects[].")
+        axes = tuple("xyz".index(a) for a in _get(e, "axes", path, "effects[]."))
+        effects.append((str(name), axes))
+    plist: list[Parameter] = []
+    names = list(BASE_NAMES) + [n for n in pd if n not in BASE_NAMES] if isinstance(pd, Mapping) else []
+    std: dict[str, float] = {}
+    for n in names:
+        e = _get(pd, n, path, "parameters.")
+        where = f"parameters.{n}."
+        val = _num(_get(e, "value", path, where), path, where + "value")
+        if not math.isfinite(val):
+            raise ImucalError("value is not finite", file=path, field=where + "value")
+        lo = _num(e.get("lower", -math.inf), path, where + "lower")
+        hi = _num(e.get("upper", math.inf), path, where + "upper")
+        plist.append(Parameter(n, val, lower=-math.inf if math.isnan(lo) else lo,
+                               upper=math.inf if math.isnan(hi) else hi, unit=str(e.get("unit", "")),
+                               fixed=bool(e.get("fixed", False)), scale=float(e.get("scale", 1.0) or 1.0)))
+        std[n] = _num(e.get("std"), path, where + "std")
+    params = Parameters(plist)
+    validate_parameters(params, path)
+    g = _num(_get(d, "gravity", path, ""), path, "gravity")
+    if not (math.isfinite(g) and g > 0):
+        raise ImucalError(f"gravity {g} must be positive", file=path, field="gravity")
+    units = d.get("units") or {}
+    sw = d.get("software") or {}
+    return Calibration(params=params, std=std, gravity=g, raw_unit=str(units.get("input", "raw")),
+                       effects=tuple(effects), fit=dict(d.get("fit") or {}), data=dict(d.get("data") or {}),
+                       created=str(d.get("created", "")), software_version=str(sw.get("version", "")))
+
+
+def validate_parameters(params: Parameters, path: str = "<calibration>") -> None:
+    """Positive scales and angles that span a right-handed frame (det G > 0)."""
+    for i in (1, 2, 3):
+        if not params[f"b{i}"].value > 0:
+            raise ImucalError(f"scale b{i} = {params[f'b{i}'].value} must be positive", file=path,
+                              field=f"parameters.b{i}.value")
+    ang = [params[a].value for a in ANGLE_NAMES]
+    for a, v in zip(ANGLE_NAMES, ang):
+        if not 0 < v < math.pi:
+            raise ImucalError(f"angle {a} = {v} rad is outside (0, pi)", file=path,
+                              field=f"parameters.{a}.value")
+    cphi, cpsi, cth = (math.cos(v) for v in ang)
+    det = 1 - cphi**2 - cpsi**2 - cth**2 + 2 * cphi * cpsi * cth
+    if not det > 1e-12:
+        raise ImucalError("the angles phi, psi, theta give no valid frame (Gram determinant <= 0)",
+                          file=path, field="parameters", fix="check the angles; they must be near pi/2")
+
+
+def load_calibration(path: str | os.PathLike) -> Calibration:
+    """Read a calibration YAML written by :meth:`Calibration.save`; refuses unknown versions."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ImucalError("file not found", file=str(p), field="calibration",
+                          fix="pass the calibration.yaml written by `imucal calibrate`") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ImucalError(f"cannot read: {exc}", file=str(p), field="calibration") from None
+    try:
+        d = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark else ""
+        raise ImucalError(f"is not valid YAML{where}", file=str(p), field="calibration") from None
+    return from_dict(d, str(p))
+
+
+def now_utc() -> str:
+    return _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat()

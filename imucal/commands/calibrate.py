@@ -1,0 +1,119 @@
+"""`imucal calibrate CONFIG.yaml | --data FILE`: fit, then write calibration.yaml, report.txt, figures."""
+from __future__ import annotations
+
+import argparse
+import math
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("calibrate", help="fit the 9-parameter model to a static multi-pose recording",
+                       description="Fit shifts, scales and axis angles (Nakov & Ivanov) to a recording. "
+                                   "Writes DIR/calibration.yaml, DIR/report.txt and figures.")
+    p.add_argument("config", nargs="?", help="YAML run file (see configs/)")
+    p.add_argument("--data", help="recording to calibrate with default settings (instead of CONFIG)")
+    p.add_argument("--gravity", type=float, help="local gravity [m/s^2] (default: config, else 9.80665)")
+    p.add_argument("--latitude", type=float, help="latitude [deg] for WGS84 normal gravity")
+    p.add_argument("--height", type=float, default=0.0, help="height [m] for WGS84 normal gravity")
+    p.add_argument("--sample-rate", type=float, help="sample rate [Hz] when the file has no time column")
+    p.add_argument("--unit", help="unit of the raw readings (label only, e.g. raw or m/s^2)")
+    p.add_argument("--fix-angles", action="store_true", help="hold the angles at 90 deg (6-parameter model)")
+    p.add_argument("--mode", choices=("means", "samples"), help="fit interval means (default) or samples")
+    p.add_argument("--out", help="output directory (default: config output.dir, else ./out)")
+    p.add_argument("--json", help="also write a machine-readable summary to this file")
+    p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    p.add_argument("--quiet", action="store_true", help="print only where the files went")
+    p.set_defaults(run=run)
+
+
+def _config(args: argparse.Namespace):
+    from ..config import config_from_dict, load_config
+    from ..errors import ImucalError
+    import dataclasses
+
+    if args.config and args.data:
+        raise ImucalError("give either CONFIG or --data, not both", field="arguments",
+                          fix="put data.path in the YAML, or drop the YAML for a quick run")
+    if not args.config and not args.data:
+        raise ImucalError("nothing to calibrate", field="arguments",
+                          fix="give a YAML run file or --data RECORDING")
+    if args.config:
+        cfg = load_config(args.config)
+    else:
+        data = {"path": args.data}
+        cfg = config_from_dict({"data": data}, None)
+    data = cfg.data
+    if args.sample_rate is not None or args.unit is not None:
+        data = dataclasses.replace(data, **{k: v for k, v in (("sample_rate", args.sample_rate),
+                                                            ("unit", args.unit)) if v is not None})
+    grav = cfg.gravity
+    if args.gravity is not None or args.latitude is not None:
+        from ..config import GravitySpec
+
+        grav = GravitySpec(value=args.gravity, latitude=args.latitude, height=args.height)
+    fit = cfg.fit
+    if args.fix_angles or args.mode:
+        fit = dataclasses.replace(fit, fix=tuple(sorted(set(fit.fix) | ({"phi", "psi", "theta"} if args.fix_angles else set()))),
+                                  mode=args.mode or fit.mode)
+    return dataclasses.replace(cfg, data=data, gravity=grav, fit=fit)
+
+
+def summary(run) -> dict:
+    """The machine-readable summary (--json)."""
+    res, cal = run.result, run.calibration
+    v, sd = res.params, res.std
+
+    def nz(x: float):
+        return None if not math.isfinite(x) else float(x)
+
+    return {
+        "status": "ok" if res.success else "failed",
+        "solver_status": res.status,
+        "model": res.model_name,
+        "params": {"s": [v[f"s{i}"].value for i in (1, 2, 3)], "b": [v[f"b{i}"].value for i in (1, 2, 3)],
+                   "phi": v["phi"].value, "psi": v["psi"].value, "theta": v["theta"].value},
+        "std": {"s": [nz(sd[f"s{i}"]) for i in (1, 2, 3)], "b": [nz(sd[f"b{i}"]) for i in (1, 2, 3)],
+                "phi": nz(sd["phi"]), "psi": nz(sd["psi"]), "theta": nz(sd["theta"])},
+        "effects": [{"name": n, "axes": ["xyz"[a] for a in ax],
+                     "coefficients": {k: v[k].value for k in v if k.startswith(n)}} for n, ax in cal.effects],
+        "rms_residual": cal.fit["rms_residual"],
+        "rms_residual_samples": cal.fit["rms_residual_samples"],
+        "chi2": res.chi2, "dof": res.dof, "redchi": nz(res.redchi),
+        "n_intervals": run.intervals.n,
+        "n_distinct_orientations": run.observability.n_distinct,
+        "gravity": cal.gravity,
+        "raw_unit": cal.raw_unit,
+        "matrix": cal.linear_map()[0].tolist(),
+        "offset": cal.linear_map()[1].tolist(),
+        "data": dict(cal.data),
+    }
+
+
+def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from ..output import OutputSet
+    from ..pipeline import calibrate
+    from ..report import fit_report
+
+    cfg = _config(args)
+    out = Path(args.out or cfg.output.dir)
+    if args.out is None and cfg.source:
+        out = cfg.base_dir / cfg.output.dir if not Path(cfg.output.dir).is_absolute() else out
+    result = calibrate(cfg)
+    text = fit_report(result)
+    figures = cfg.output.figures and not args.no_figures
+    with OutputSet() as o:
+        o.call(out / "calibration.yaml", result.calibration.save)
+        o.text(out / "report.txt", text)
+        if figures:
+            from ..figures import FIGURES
+
+            for name, fn in FIGURES.items():
+                o.call(out / name, lambda p, fn=fn: fn(result, p))
+        if args.json:
+            o.json(args.json, summary(result))
+    if not args.quiet:
+        print(text.split("[[Static intervals]]")[0].rstrip())
+    print(f"wrote {out / 'calibration.yaml'}, {out / 'report.txt'}"
+          + (", figures" if figures else "") + (f", {args.json}" if args.json else ""))
+    return 0 if result.result.success else 1

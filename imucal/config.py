@@ -1,0 +1,184 @@
+"""Run configuration: typed dataclasses, filled from YAML (``yaml.safe_load``).
+
+Unknown keys are an error that names the key and the allowed ones.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import yaml
+
+from .constants import DEFAULT_ANGLE_TOL
+from .data import DataSpec
+from .errors import ImucalError
+from .gravity import normal_gravity
+from .parameters import BASE_NAMES
+from .static import StaticSettings
+
+FIT_MODES = ("means", "samples")
+
+
+@dataclass(frozen=True)
+class GravitySpec:
+    """Local gravity: a value [m/s^2], or latitude [deg] and height [m] (WGS84 normal gravity)."""
+
+    value: float | None = None
+    latitude: float | None = None
+    height: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.value is not None and self.latitude is not None:
+            raise ImucalError("give either gravity.value or gravity.latitude, not both", field="gravity")
+        if self.value is not None and not (isinstance(self.value, (int, float)) and math.isfinite(self.value)
+                                           and 9.7 < self.value < 9.9):
+            raise ImucalError(f"gravity {self.value!r} m/s^2 is not a local gravity on Earth",
+                              field="gravity.value", fix="give local g in m/s^2 (9.78 .. 9.84)")
+
+    def resolve(self) -> tuple[float, str]:
+        if self.value is not None:
+            return float(self.value), "given"
+        if self.latitude is not None:
+            return normal_gravity(self.latitude, self.height), (
+                f"WGS84 normal gravity at latitude {self.latitude} deg, height {self.height} m")
+        from .constants import STANDARD_GRAVITY
+
+        return STANDARD_GRAVITY, "standard gravity (no local value given)"
+
+
+@dataclass(frozen=True)
+class EffectSpec:
+    name: str
+    axes: tuple[str, ...] = ("x", "y", "z")
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    mode: str = "means"  #: fit interval means (weighted by their noise) or raw samples
+    angle_tolerance: float = DEFAULT_ANGLE_TOL  #: angles in pi/2 (1 +- tol)
+    fix: tuple[str, ...] = ()  #: parameters held at their initial value
+    initial: Mapping[str, float] = field(default_factory=dict)  #: overrides of the initial guess
+    effects: tuple[EffectSpec, ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.mode not in FIT_MODES:
+            raise ImucalError(f"unknown fit mode {self.mode!r}", field="fit.mode",
+                              fix=f"use one of {', '.join(FIT_MODES)}")
+        if not (isinstance(self.angle_tolerance, (int, float)) and 0 < self.angle_tolerance < 0.5):
+            raise ImucalError(f"angle_tolerance {self.angle_tolerance!r} must lie in (0, 0.5)",
+                              field="fit.angle_tolerance", fix="use e.g. 0.02 (90 deg +- 2 %)")
+        for n in self.fix:
+            if n not in BASE_NAMES:
+                raise ImucalError(f"cannot fix {n!r}", field="fit.fix", fix=f"choose from {', '.join(BASE_NAMES)}")
+        for n, v in self.initial.items():
+            if n not in BASE_NAMES:
+                raise ImucalError(f"unknown parameter {n!r}", field="fit.initial",
+                                  fix=f"choose from {', '.join(BASE_NAMES)}")
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ImucalError(f"initial value {v!r} is not a finite number", field=f"fit.initial.{n}")
+
+
+@dataclass(frozen=True)
+class OutputSettings:
+    dir: str = "out"
+    figures: bool = True
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    data: DataSpec
+    static: StaticSettings = StaticSettings()
+    gravity: GravitySpec = GravitySpec()
+    fit: FitSettings = FitSettings()
+    output: OutputSettings = OutputSettings()
+    source: str | None = None  #: the YAML file, for messages and relative paths
+
+    @property
+    def base_dir(self) -> Path:
+        return Path(self.source).parent if self.source else Path.cwd()
+
+
+def _fill(cls: type, raw: Any, where: str, path: str | None) -> Any:
+    if raw is None:
+        raw = {}
+    if not isinstance(raw, Mapping):
+        raise ImucalError(f"section must be a mapping, got {type(raw).__name__}", file=path,
+                          field=where or "top level")
+    allowed = [f.name for f in dataclasses.fields(cls) if f.name != "source"]
+    unknown = [k for k in raw if k not in allowed]
+    if unknown:
+        raise ImucalError(f"unknown key {unknown[0]!r}", file=path,
+                          field=f"{where}{unknown[0]}", fix=f"allowed keys here: {', '.join(allowed)}")
+    try:
+        return cls(**raw)
+    except ImucalError as exc:
+        if exc.file is None:
+            exc = ImucalError(exc.message, file=path, field=exc.field, fix=exc.fix)
+        raise exc from None
+    except TypeError as exc:
+        raise ImucalError(f"bad values: {exc}", file=path, field=where.rstrip(".")) from None
+
+
+def config_from_dict(d: Any, path: str | None = None) -> RunConfig:
+    if not isinstance(d, Mapping):
+        raise ImucalError("top level must be a mapping with a data: section", file=path, field="top level",
+                          fix="see the YAML schema in the README")
+    allowed = ("data", "static", "gravity", "fit", "output")
+    unknown = [k for k in d if k not in allowed]
+    if unknown:
+        raise ImucalError(f"unknown key {unknown[0]!r}", file=path, field=str(unknown[0]),
+                          fix=f"allowed top-level keys: {', '.join(allowed)}")
+    if "data" not in d or d["data"] is None:
+        raise ImucalError("missing section 'data'", file=path, field="data",
+                          fix="add data: {path: RECORDING}")
+    data = dict(d["data"]) if isinstance(d["data"], Mapping) else d["data"]
+    if isinstance(data, Mapping) and "path" not in data:
+        raise ImucalError("missing key 'path'", file=path, field="data.path", fix="add data.path: RECORDING")
+    if isinstance(data, Mapping) and "columns" in data and not isinstance(data["columns"], Mapping):
+        raise ImucalError("must map roles to columns", file=path, field="data.columns")
+    fitraw = d.get("fit") or {}
+    if isinstance(fitraw, Mapping):
+        fitraw = dict(fitraw)
+        if "fix" in fitraw:
+            fx = fitraw["fix"]
+            fitraw["fix"] = tuple([fx] if isinstance(fx, str) else (fx or ()))
+        if "initial" in fitraw and not isinstance(fitraw["initial"], Mapping):
+            raise ImucalError("must map parameter names to values", file=path, field="fit.initial")
+        if "effects" in fitraw:
+            effs = []
+            for i, e in enumerate(fitraw["effects"] or []):
+                e = {"name": e} if isinstance(e, str) else e
+                es = _fill(EffectSpec, e, f"fit.effects[{i}].", path)
+                effs.append(EffectSpec(es.name, tuple(es.axes)))
+            fitraw["effects"] = tuple(effs)
+    return RunConfig(
+        data=_fill(DataSpec, data, "data.", path),
+        static=_fill(StaticSettings, d.get("static"), "static.", path),
+        gravity=_fill(GravitySpec, d.get("gravity"), "gravity.", path),
+        fit=_fill(FitSettings, fitraw, "fit.", path),
+        output=_fill(OutputSettings, d.get("output"), "output.", path),
+        source=path,
+    )
+
+
+def load_config(path: str | os.PathLike) -> RunConfig:
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ImucalError("file not found", file=str(p), field="config",
+                          fix="pass a YAML run file (see configs/)") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ImucalError(f"cannot read: {exc}", file=str(p), field="config") from None
+    try:
+        d = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark else ""
+        raise ImucalError(f"is not valid YAML{where}", file=str(p), field="config",
+                          fix="check indentation and quoting") from None
+    return config_from_dict(d, str(p))

@@ -1,0 +1,216 @@
+"""The calibration fit: a weighted least-squares IPOPT NLP built from the CasADi model.
+
+Minimise  1/2 sum_k ((|a_k| - g) / sigma_k)^2  over the free parameters, where |a_k| is the
+magnitude of Proposition 2 at interval mean (or sample) k and sigma_k its noise propagated
+from the raw readings. The paper's condition at rest is g = a_nonorth (end of Section 2).
+Unknowns are scaled (x = p / scale) so IPOPT sees numbers near one; the solver is built once
+per problem shape and reused.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from functools import lru_cache
+
+import casadi as ca
+import numpy as np
+
+from .errors import ImucalError
+from .model import SensorModel
+from .parameters import Parameters
+
+#: Maps from IPOPT's return_status to a sentence for the report.
+_STATUS_WORDS = {
+    "Solve_Succeeded": "converged (IPOPT: optimal solution found)",
+    "Solved_To_Acceptable_Level": "converged to an acceptable level (IPOPT)",
+    "Maximum_Iterations_Exceeded": "did not converge: maximum iterations exceeded",
+    "Infeasible_Problem_Detected": "failed: infeasible problem",
+    "Restoration_Failed": "failed: restoration phase failed",
+    "Search_Direction_Becomes_Too_Small": "converged (IPOPT: step below machine precision at the optimum)",
+}
+_CONVERGED = ("Solve_Succeeded", "Solved_To_Acceptable_Level", "Search_Direction_Becomes_Too_Small")
+
+
+@dataclass(frozen=True)
+class FitData:
+    """What the NLP sees: rows of raw readings with covariates and residual noise."""
+
+    raw: np.ndarray  #: (N, 3) raw readings (interval means, or samples)
+    cov: np.ndarray  #: (N, k) covariates in the model's order
+    raw_var: np.ndarray  #: (N, 3) variance of each raw reading [raw^2]
+    group: np.ndarray  #: (N,) interval index of each row
+    mode: str  #: "means" or "samples"
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """A fitted calibration: values, uncertainties, goodness of fit and solver status."""
+
+    params: Parameters
+    initial: Parameters
+    std: dict[str, float]
+    covariance: np.ndarray  #: over the free parameters, in ``free_names`` order
+    correlation: np.ndarray
+    free_names: tuple[str, ...]
+    gravity: float
+    mode: str
+    residuals: np.ndarray  #: |a| - g per row [m/s^2]
+    sigma: np.ndarray  #: noise of each residual [m/s^2]
+    chi2: float
+    dof: int
+    status: str
+    success: bool
+    iterations: int
+    solve_time: float
+    model_name: str
+    at_bound: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def redchi(self) -> float:
+        return self.chi2 / self.dof if self.dof > 0 else float("nan")
+
+    @property
+    def rms_residual(self) -> float:
+        return float(np.sqrt(np.mean(self.residuals**2)))
+
+    @property
+    def status_words(self) -> str:
+        return _STATUS_WORDS.get(self.status, self.status)
+
+    def values(self) -> dict[str, float]:
+        return self.params.value_dict()
+
+
+def _selection(names: tuple[str, ...], free: tuple[str, ...]) -> np.ndarray:
+    S = np.zeros((len(names), len(free)))
+    for j, n in enumerate(free):
+        S[names.index(n), j] = 1.0
+    return S
+
+
+@lru_cache(maxsize=32)
+def _solver(model: SensorModel, n: int, free: tuple[str, ...], mode: str) -> tuple[ca.Function, ca.Function]:
+    """IPOPT solver and residual/Jacobian function for one problem shape, built once."""
+    names, k = model.names, len(model.covariates)
+    nf = len(free)
+    x = ca.MX.sym("x", nf)
+    raw = ca.MX.sym("raw", 3, n)
+    cov = ca.MX.sym("cov", k, n)
+    w = ca.MX.sym("w", 1, n)
+    g = ca.MX.sym("g")
+    pfix = ca.MX.sym("pfix", len(names))  # fixed values (free entries ignored)
+    scale = ca.MX.sym("scale", nf)
+    S = ca.DM(_selection(names, free))
+    mask = ca.DM(1.0 - S.full().sum(axis=1))
+    p = mask * pfix + ca.mtimes(S, scale * x)
+    # Per-row objective term, summed by a reducing map: no per-row symbolic expansion.
+    rs, cs, ps, gs, ws = (ca.SX.sym("r", 3), ca.SX.sym("c", k), ca.SX.sym("p", len(names)),
+                          ca.SX.sym("g"), ca.SX.sym("w"))
+    term = ca.Function("term", [rs, cs, ws, ps, gs], [0.5 * ws * model.residual(rs, cs, ps, gs) ** 2])
+    par = "serial" if n < 20000 else "thread"
+    fsum = term.map("fsum", par, n, [3, 4], [0]) if n > 1 else term
+    obj = fsum(raw, cov, w, p, g)
+    P = ca.vertcat(ca.vec(raw), ca.vec(cov), ca.vec(w), g, pfix, scale)
+    nlp = {"x": x, "p": P, "f": obj}
+    opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
+            "ipopt.tol": 1e-10, "ipopt.acceptable_tol": 1e-8, "ipopt.max_iter": 300}
+    solver = ca.nlpsol("calib", "ipopt", nlp, opts)
+    # Residuals and their Jacobian w.r.t. the free (unscaled) parameters, for the covariance.
+    pf = ca.SX.sym("pf", nf)
+    pfix_s = ca.SX.sym("pfix", len(names))
+    p_s = ca.DM(mask) * pfix_s + ca.mtimes(S, pf)
+    r = model.residual(rs, cs, p_s, gs)
+    jr_raw = ca.jacobian(r, rs)
+    row = ca.Function("row", [rs, cs, pf, pfix_s, gs], [r, ca.jacobian(r, pf), jr_raw])
+    rows = row.map(n, par) if n > 1 else row
+    return solver, rows
+
+
+def _row_eval(rows: ca.Function, data: FitData, pfree: np.ndarray, pfix: np.ndarray, g: float
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    r, J, Jraw = rows(data.raw.T, data.cov.T, pfree, pfix, g)
+    n = data.raw.shape[0]
+    r = np.asarray(r).reshape(n)
+    J = np.asarray(J).reshape(len(pfree), n, order="F").T if n > 1 else np.asarray(J).reshape(1, -1)
+    Jraw = np.asarray(Jraw).reshape(3, n, order="F").T if n > 1 else np.asarray(Jraw).reshape(1, 3)
+    return r, J, Jraw
+
+
+def _sigma(Jraw: np.ndarray, raw_var: np.ndarray) -> np.ndarray:
+    """Noise of |a| - g from the raw noise: first-order propagation."""
+    s = np.sqrt(np.sum(Jraw**2 * raw_var, axis=1))
+    floor = max(float(np.median(s)) * 1e-3, 1e-12)
+    return np.maximum(s, floor)
+
+
+def fit(data: FitData, params: Parameters, model: SensorModel, gravity: float,
+        source: str | None = None) -> FitResult:
+    """Fit the free parameters of ``params`` to ``data`` by weighted least squares (IPOPT)."""
+    names = model.names
+    if tuple(params.names) != names:
+        raise ImucalError(f"parameters {params.names} do not match the model's {names}",
+                          field="parameters")
+    free = params.free_names
+    n = data.raw.shape[0]
+    if n <= len(free):
+        raise ImucalError(f"{n} rows cannot determine {len(free)} free parameters", file=source,
+                          field="intervals", fix="hold the sensor still in more orientations")
+    solver, rows = _solver(model, n, free, data.mode)
+    pfix = np.array(params.values(), float)
+    scale = np.array([params[nm].scale for nm in free])
+    lb = np.array([params[nm].lower for nm in free]) / scale
+    ub = np.array([params[nm].upper for nm in free]) / scale
+    x0 = np.array([params[nm].value for nm in free]) / scale
+    t0 = time.perf_counter()
+    iters = 0
+    # Weights from the noise propagated at the current estimate; refresh once at the solution.
+    for _ in range(2):
+        _, _, Jraw = _row_eval(rows, data, x0 * scale, pfix, gravity)
+        sigma = _sigma(Jraw, data.raw_var)
+        P = np.concatenate([data.raw.T.ravel(order="F"), data.cov.T.ravel(order="F"),
+                            1.0 / sigma**2, [gravity], pfix, scale])
+        sol = solver(x0=x0, p=P, lbx=lb, ubx=ub)
+        stats = solver.stats()
+        iters += int(stats.get("iter_count", 0))
+        x0 = np.asarray(sol["x"]).ravel()
+    solve_time = time.perf_counter() - t0
+    status = str(stats.get("return_status", "unknown"))
+    pfree = x0 * scale
+    r, J, _ = _row_eval(rows, data, pfree, pfix, gravity)
+    fitted = params.with_values(dict(zip(free, pfree)))
+    Jw = J / sigma[:, None]
+    chi2 = float(np.sum((r / sigma) ** 2))
+    dof = n - len(free)
+    redchi = chi2 / dof if dof > 0 else float("nan")
+    # Covariance from the Jacobian at the solution, scaled by the residual variance (lmfit's
+    # scale_covar): (J^T W J)^-1 chi2/dof.
+    try:
+        cov = np.linalg.pinv(Jw.T @ Jw) * redchi
+    except np.linalg.LinAlgError:
+        cov = np.full((len(free), len(free)), np.nan)
+    sd = np.sqrt(np.clip(np.diag(cov), 0, None))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        corr = cov / np.outer(sd, sd)
+    std = {nm: float("nan") for nm in names}
+    std.update({nm: float(v) for nm, v in zip(free, sd)})
+    at_bound = {nm: b for nm in free if (b := fitted[nm].at_bound()) is not None}
+    success = status in _CONVERGED
+    return FitResult(params=fitted, initial=params, std=std, covariance=cov, correlation=corr,
+                     free_names=free, gravity=gravity, mode=data.mode, residuals=r, sigma=sigma,
+                     chi2=chi2, dof=dof, status=status, success=success, iterations=iters,
+                     solve_time=solve_time, model_name=model.name, at_bound=at_bound)
+
+
+def jacobian_rows(data: FitData, params: Parameters, model: SensorModel, gravity: float,
+                  residuals: bool = False) -> np.ndarray:
+    """Residual Jacobian w.r.t. the free parameters, each column times the parameter's scale.
+
+    With ``residuals=True``, the residuals |a| - g instead.
+    """
+    free = params.free_names
+    _, rows = _solver(model, data.raw.shape[0], free, data.mode)
+    pfree = np.array([params[n].value for n in free])
+    r, J, _ = _row_eval(rows, data, pfree, np.array(params.values(), float), gravity)
+    if residuals:
+        return r
+    return J * np.array([params[n].scale for n in free])

@@ -1,0 +1,157 @@
+"""One calibration run: load, detect static intervals, guess, check observability, fit."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .calibration import Calibration, now_utc
+from .config import RunConfig
+from .data import Recording, load_recording
+from .errors import ImucalError
+from .fit import FitData, FitResult, fit, jacobian_rows
+from .initial import InitialGuess, ellipsoid_guess
+from .model import SensorModel, build_model
+from .observability import Observability, analyse, distinct_directions, require_observable
+from .parameters import ANGLE_NAMES, Parameters, base_parameters
+from .static import Intervals, detect_static
+
+
+@dataclass(frozen=True)
+class CalibrationRun:
+    """Everything a run produced: inputs, intervals, fit and the frozen calibration."""
+
+    config: RunConfig
+    recording: Recording
+    intervals: Intervals
+    guess: InitialGuess
+    observability: Observability
+    result: FitResult
+    calibration: Calibration
+    directions: np.ndarray  #: unit gravity direction per interval, calibrated frame
+    sample_residuals: np.ndarray  #: |a| - g for every sample inside an interval [m/s^2]
+    gravity_source: str
+
+    @property
+    def rms_residual_samples(self) -> float:
+        return float(np.sqrt(np.mean(self.sample_residuals**2)))
+
+
+def covariates_for(model: SensorModel, intervals: Intervals | None = None, recording: Recording | None = None,
+                   rows: np.ndarray | None = None, source: str | None = None) -> np.ndarray:
+    """Covariate matrix (rows x k) for interval means, or for recording samples at ``rows``."""
+    cols = []
+    for c in model.covariates:
+        if c == "temp":
+            v = intervals.temp if intervals is not None else (None if recording.temp is None else recording.temp[rows])
+            if v is None:
+                raise ImucalError("the model has a temperature effect but the data have no temp column",
+                                  file=source, field="data.columns.temp",
+                                  fix="add a temperature column (deg C) or drop the temperature effect")
+        elif c == "time":
+            v = intervals.t_mid if intervals is not None else recording.t[rows]
+        else:  # pragma: no cover - effects declare only known covariates
+            raise ImucalError(f"unknown covariate {c!r}", field="fit.effects")
+        cols.append(np.asarray(v, float))
+    n = intervals.n if intervals is not None else len(rows)
+    return np.column_stack(cols) if cols else np.zeros((n, 0))
+
+
+def _rough_guess(means: np.ndarray, gravity: float) -> InitialGuess:
+    lo, hi = means.min(axis=0), means.max(axis=0)
+    b = np.where(hi > lo, (hi - lo) / (2 * gravity), 1.0)
+    return InitialGuess(s=(lo + hi) / 2, b=b, angles=np.full(3, np.pi / 2), method="range")
+
+
+def initial_guess(intervals: Intervals, gravity: float, angles_free: bool, source: str | None
+                  ) -> tuple[InitialGuess, np.ndarray, int]:
+    """Ellipsoid guess (9-parameter when the poses allow it) and interval directions."""
+    try:
+        guess = ellipsoid_guess(intervals.mean, gravity, general=False, source=source)
+    except ImucalError:
+        guess = _rough_guess(intervals.mean, gravity)
+    dirs = (intervals.mean - guess.s) / guess.b
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    n_distinct, _ = distinct_directions(dirs)
+    if angles_free and n_distinct >= 9:
+        try:
+            guess = ellipsoid_guess(intervals.mean, gravity, general=True, source=source)
+        except ImucalError:
+            pass
+    return guess, dirs, n_distinct
+
+
+def make_parameters(guess: InitialGuess, config: RunConfig, gravity: float, model: SensorModel,
+                    raw_unit: str) -> Parameters:
+    fs = config.fit
+    init = dict(fs.initial)
+    angles0 = [init.get(a, np.pi / 2 if a in fs.fix else guess.angles[i]) for i, a in enumerate(ANGLE_NAMES)]
+    s0 = [init.get(f"s{i+1}", guess.s[i]) for i in range(3)]
+    b0 = [init.get(f"b{i+1}", guess.b[i]) for i in range(3)]
+    base = base_parameters(s0, b0, angles0, angle_tol=fs.angle_tolerance, raw_unit=raw_unit, gravity=gravity)
+    base = base.with_fixed(fs.fix)
+    return model.parameters(base)
+
+
+def fit_data(model: SensorModel, intervals: Intervals, recording: Recording, mode: str, source: str | None
+             ) -> FitData:
+    if mode == "means":
+        return FitData(raw=intervals.mean, cov=covariates_for(model, intervals, source=source),
+                       raw_var=intervals.mean_std**2, group=np.arange(intervals.n), mode="means")
+    mask = intervals.sample_mask(recording.n)
+    rows = np.flatnonzero(mask)
+    group = intervals.sample_index()
+    return FitData(raw=recording.raw[rows], cov=covariates_for(model, recording=recording, rows=rows, source=source),
+                   raw_var=intervals.std[group] ** 2, group=group, mode="samples")
+
+
+def calibrate(config: RunConfig) -> CalibrationRun:
+    """Run the whole calibration described by ``config``."""
+    src = config.source
+    rec = load_recording(config.data, config.base_dir)
+    iv = detect_static(rec.t, rec.raw, config.static, rec.temp, source=rec.source)
+    if iv.n == 0:
+        raise ImucalError("no static intervals found", file=rec.source, field="static",
+                          fix="hold the sensor still for longer than static.min_duration in each orientation, "
+                              "or raise static.threshold")
+    if iv.n == 1:
+        raise ImucalError("only one static interval found: the log holds a single still pose", file=rec.source,
+                          field="intervals", fix="record 12 to 50 orientations with movement between them")
+    gravity, gsource = config.gravity.resolve()
+    from .effects_registry import effects_from_specs
+
+    model = build_model(effects_from_specs(config.fit.effects, src))
+    angles_free = not set(ANGLE_NAMES) <= set(config.fit.fix)
+    guess, dirs, n_distinct = initial_guess(iv, gravity, angles_free, rec.source)
+    params = make_parameters(guess, config, gravity, model, config.data.unit)
+    data = fit_data(model, iv, rec, config.fit.mode, rec.source)
+    # Observability on interval means (one row per interval), at the initial guess.
+    mdata = fit_data(model, iv, rec, "means", rec.source) if data.mode != "means" else data
+    J = jacobian_rows(mdata, params, model, gravity)
+    obs = analyse(dirs, J, params.free_names)
+    require_observable(obs, params.free_names, rec.source)
+    res = fit(data, params, model, gravity, source=rec.source)
+    if res.mode != "means":  # report residuals on interval means too
+        rm = jacobian_rows(mdata, res.params, model, gravity, residuals=True)
+    else:
+        rm = res.residuals
+    cal_fit = {
+        "mode": res.mode, "status": res.status, "iterations": res.iterations,
+        "rms_residual": float(np.sqrt(np.mean(rm**2))), "chi2": res.chi2, "dof": res.dof,
+        "redchi": res.redchi, "n_intervals": iv.n, "n_distinct_orientations": obs.n_distinct,
+        "gravity_source": gsource,
+    }
+    cal = Calibration(params=res.params, std=res.std, gravity=gravity, raw_unit=config.data.unit,
+                      effects=tuple((e.name, e.axes) for e in model.effects), fit=cal_fit,
+                      data={"file": rec.source.split("/")[-1], "sha256": rec.sha256, "samples": rec.n},
+                      created=now_utc())
+    mask_rows = np.flatnonzero(iv.sample_mask(rec.n))
+    covs = {c: covariates_for(model, recording=rec, rows=mask_rows)[:, i] for i, c in enumerate(model.covariates)}
+    a = cal.apply(rec.raw[mask_rows], covs)
+    samp_res = np.linalg.norm(a, axis=1) - gravity
+    cal_fit["rms_residual_samples"] = float(np.sqrt(np.mean(samp_res**2)))
+    ai = cal.apply(iv.mean, {c: covariates_for(model, iv)[:, i] for i, c in enumerate(model.covariates)})
+    directions = ai / np.linalg.norm(ai, axis=1, keepdims=True)
+    return CalibrationRun(config=config, recording=rec, intervals=iv, guess=guess, observability=obs,
+                          result=res, calibration=cal, directions=directions, sample_residuals=samp_res,
+                          gravity_source=gsource)
