@@ -98,7 +98,8 @@ class Calibration:
             raise ImucalError(f"this calibration needs covariate(s) {missing}", field="covariates",
                               fix="load a recording with those columns (temp in deg C, time in s)")
         n = raw.shape[0]
-        C = np.column_stack([np.broadcast_to(np.asarray(covariates[c], float), (n,)) for c in covs])
+        C = np.column_stack([np.broadcast_to(np.asarray(covariates[c], float), (n,)) for c in covs]) if covs \
+            else np.zeros((n, 0))  # effects without covariates (scale_nonlinearity)
         f = self.model.accel.map(n, "thread" if n > 20000 else "serial")
         return np.asarray(f(raw.T, C.T, self.values)).T
 
@@ -163,19 +164,26 @@ def from_dict(d: Mapping[str, Any], path: str = "<calibration>") -> Calibration:
         raise ImucalError(f"format {fmt!r} is not {FORMAT!r}", file=path, field="format",
                           fix="pass a calibration.yaml written by `imucal calibrate`")
     ver = _get(d, "format_version", path, "")
-    if ver != FORMAT_VERSION:
+    if ver != FORMAT_VERSION or isinstance(ver, bool):
         raise ImucalError(f"unknown format version {ver!r} (this imucal reads version {FORMAT_VERSION})",
                           file=path, field="format_version",
                           fix="regenerate the file with this imucal or upgrade imucal")
     pd = _get(d, "parameters", path, "")
-    effects_in = d.get("effects") or []
+    if not isinstance(pd, Mapping) or not all(isinstance(n, str) for n in pd):
+        raise ImucalError("must map parameter names to entries", file=path, field="parameters",
+                          fix="regenerate the file with `imucal calibrate`")
+    effects_in = _section(d, "effects", path, list)
     effects: list[tuple[str, tuple[int, ...]]] = []
     for e in effects_in:
         name = _get(e, "name", path, "effects[].")
-        axes = tuple("xyz".index(a) for a in _get(e, "axes", path, "effects[]."))
-        effects.append((str(name), axes))
+        axes = _get(e, "axes", path, "effects[].")
+        if not isinstance(name, str) or not isinstance(axes, (list, str)) or not axes \
+                or not all(isinstance(a, str) and a in ("x", "y", "z") for a in axes):
+            raise ImucalError(f"effect {name!r} on axes {axes!r} is not a named effect on x, y, z", file=path,
+                              field="effects", fix="regenerate the file with `imucal calibrate`")
+        effects.append((name, tuple("xyz".index(a) for a in axes)))
     plist: list[Parameter] = []
-    names = list(BASE_NAMES) + [n for n in pd if n not in BASE_NAMES] if isinstance(pd, Mapping) else []
+    names = list(BASE_NAMES) + [n for n in pd if n not in BASE_NAMES]
     std: dict[str, float] = {}
     for n in names:
         e = _get(pd, n, path, "parameters.")
@@ -185,20 +193,52 @@ def from_dict(d: Mapping[str, Any], path: str = "<calibration>") -> Calibration:
             raise ImucalError("value is not finite", file=path, field=where + "value")
         lo = _num(e.get("lower", -math.inf), path, where + "lower")
         hi = _num(e.get("upper", math.inf), path, where + "upper")
-        plist.append(Parameter(n, val, lower=-math.inf if math.isnan(lo) else lo,
-                               upper=math.inf if math.isnan(hi) else hi, unit=str(e.get("unit", "")),
-                               fixed=bool(e.get("fixed", False)), scale=float(e.get("scale", 1.0) or 1.0)))
+        scale = _num(e.get("scale", 1.0), path, where + "scale")
+        fixed = e.get("fixed", False)
+        if not isinstance(fixed, bool):
+            raise ImucalError(f"{fixed!r} is not true or false", file=path, field=where + "fixed")
+        try:
+            plist.append(Parameter(n, val, lower=-math.inf if math.isnan(lo) else lo,
+                                   upper=math.inf if math.isnan(hi) else hi, unit=str(e.get("unit", "")),
+                                   fixed=fixed, scale=scale))
+        except ImucalError as exc:
+            raise ImucalError(exc.message, file=path, field=exc.field, fix=exc.fix) from None
         std[n] = _num(e.get("std"), path, where + "std")
     params = Parameters(plist)
     validate_parameters(params, path)
     g = _num(_get(d, "gravity", path, ""), path, "gravity")
     if not (math.isfinite(g) and g > 0):
         raise ImucalError(f"gravity {g} must be positive", file=path, field="gravity")
-    units = d.get("units") or {}
-    sw = d.get("software") or {}
-    return Calibration(params=params, std=std, gravity=g, raw_unit=str(units.get("input", "raw")),
-                       effects=tuple(effects), fit=dict(d.get("fit") or {}), data=dict(d.get("data") or {}),
-                       created=str(d.get("created", "")), software_version=str(sw.get("version", "")))
+    units = _section(d, "units", path, Mapping)
+    sw = _section(d, "software", path, Mapping)
+    cal = Calibration(params=params, std=std, gravity=g, raw_unit=str(units.get("input", "raw")),
+                      effects=tuple(effects), fit=dict(_section(d, "fit", path, Mapping)),
+                      data=dict(_section(d, "data", path, Mapping)),
+                      created=str(d.get("created", "")), software_version=str(sw.get("version", "")))
+    if effects:  # the parameters must be exactly the model's (base + each effect's)
+        try:
+            model_names = cal.model.names
+        except ImucalError as exc:
+            raise ImucalError(exc.message, file=path, field=exc.field or "effects", fix=exc.fix) from None
+        if tuple(params.names) != tuple(model_names):
+            raise ImucalError(f"parameters {list(params.names)} do not match the model's {list(model_names)}",
+                              file=path, field="parameters", fix="regenerate the file with `imucal calibrate`")
+    elif len(params) != len(BASE_NAMES):
+        extra = [n for n in params.names if n not in BASE_NAMES]
+        raise ImucalError(f"parameter(s) {extra} belong to no effect of this calibration", file=path,
+                          field="parameters", fix="regenerate the file with `imucal calibrate`")
+    return cal
+
+
+def _section(d: Mapping, key: str, path: str, kind: type) -> Any:
+    """An optional section that must have the given kind (Mapping or list) when present."""
+    v = d.get(key)
+    if v is None:
+        return [] if kind is list else {}
+    if not isinstance(v, kind):
+        raise ImucalError(f"must be a {'list' if kind is list else 'mapping'}, got {type(v).__name__}",
+                          file=path, field=key, fix="regenerate the file with `imucal calibrate`")
+    return v
 
 
 def validate_parameters(params: Parameters, path: str = "<calibration>") -> None:

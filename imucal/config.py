@@ -34,10 +34,17 @@ class GravitySpec:
     def __post_init__(self) -> None:
         if self.value is not None and self.latitude is not None:
             raise ImucalError("give either gravity.value or gravity.latitude, not both", field="gravity")
-        if self.value is not None and not (isinstance(self.value, (int, float)) and math.isfinite(self.value)
+        if self.value is not None and not (_is_real(self.value) and math.isfinite(self.value)
                                            and 9.7 < self.value < 9.9):
             raise ImucalError(f"gravity {self.value!r} m/s^2 is not a local gravity on Earth",
                               field="gravity.value", fix="give local g in m/s^2 (9.78 .. 9.84)")
+        for name in ("latitude", "height"):
+            v = getattr(self, name)
+            if (v is not None or name == "height") and not _is_real(v):
+                raise ImucalError(f"{name} {v!r} is not a number", field=f"gravity.{name}",
+                                  fix="latitude in degrees, height in metres")
+        if self.latitude is not None:
+            normal_gravity(self.latitude, self.height)  # range checks, at load time
 
     def resolve(self) -> tuple[float, str]:
         if self.value is not None:
@@ -50,10 +57,20 @@ class GravitySpec:
         return STANDARD_GRAVITY, "standard gravity (no local value given)"
 
 
+def _is_real(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
 @dataclass(frozen=True)
 class EffectSpec:
     name: str
     axes: tuple[str, ...] = ("x", "y", "z")
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str):
+            raise ImucalError(f"effect name {self.name!r} is not a string", field="fit.effects.name")
+        if not isinstance(self.axes, (str, list, tuple)) or not all(isinstance(a, str) for a in self.axes):
+            raise ImucalError(f"axes {self.axes!r} must be a list of x, y, z", field="fit.effects.axes")
 
 
 @dataclass(frozen=True)
@@ -87,6 +104,12 @@ class OutputSettings:
     dir: str = "out"
     figures: bool = True
 
+    def __post_init__(self) -> None:
+        if not isinstance(self.dir, str) or not self.dir:
+            raise ImucalError(f"dir {self.dir!r} must be a directory name", field="output.dir")
+        if not isinstance(self.figures, bool):
+            raise ImucalError(f"figures {self.figures!r} must be true or false", field="output.figures")
+
 
 @dataclass(frozen=True)
 class RunConfig:
@@ -98,8 +121,8 @@ class RunConfig:
     source: str | None = None  #: the YAML file, for messages and relative paths
 
     @property
-    def base_dir(self) -> Path:
-        return Path(self.source).parent if self.source else Path.cwd()
+    def base_dir(self) -> Path | None:
+        return Path(self.source).parent if self.source else None
 
 
 def _fill(cls: type, raw: Any, where: str, path: str | None) -> Any:
@@ -150,6 +173,9 @@ def config_from_dict(d: Any, path: str | None = None) -> RunConfig:
             raise ImucalError("must map parameter names to values", file=path, field="fit.initial")
         if "effects" in fitraw:
             effs = []
+            if not isinstance(fitraw["effects"] or [], list):
+                raise ImucalError("must be a list of effects", file=path, field="fit.effects",
+                                  fix="e.g. effects: [bias_temperature]")
             for i, e in enumerate(fitraw["effects"] or []):
                 e = {"name": e} if isinstance(e, str) else e
                 es = _fill(EffectSpec, e, f"fit.effects[{i}].", path)
@@ -181,4 +207,7 @@ def load_config(path: str | os.PathLike) -> RunConfig:
         where = f" at line {mark.line + 1}" if mark else ""
         raise ImucalError(f"is not valid YAML{where}", file=str(p), field="config",
                           fix="check indentation and quoting") from None
+    except (ValueError, TypeError, RecursionError) as exc:  # e.g. "!!timestamp 2001-02-30"
+        raise ImucalError(f"is not valid YAML ({type(exc).__name__}: {exc})", file=str(p), field="config",
+                          fix="check the tagged values") from None
     return config_from_dict(d, str(p))

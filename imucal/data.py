@@ -38,6 +38,26 @@ class DataSpec:
     unit: str = "raw"
 
     def __post_init__(self) -> None:
+        if not isinstance(self.path, (str, os.PathLike)) or not str(self.path):
+            raise ImucalError(f"path {self.path!r} must be a file name", field="data.path",
+                              fix="give the recording's path as text")
+        for name in ("format", "time_unit", "unit"):
+            if not isinstance(getattr(self, name), str):
+                raise ImucalError(f"{name} {getattr(self, name)!r} must be text", field=f"data.{name}")
+        if self.delimiter is not None and not (isinstance(self.delimiter, str) and self.delimiter):
+            raise ImucalError(f"delimiter {self.delimiter!r} must be a non-empty string", field="data.delimiter",
+                              fix='e.g. delimiter: ","  (omit it to detect , ; tab or spaces)')
+        if self.sample_rate is not None and (isinstance(self.sample_rate, bool)
+                                             or not isinstance(self.sample_rate, (int, float))):
+            raise ImucalError(f"sample rate {self.sample_rate!r} must be a positive number of Hz",
+                              field="data.sample_rate", fix="give the logging rate in Hz")
+        if not isinstance(self.columns, dict):
+            raise ImucalError("must map roles to columns", field="data.columns")
+        for role, col in self.columns.items():
+            if not ((isinstance(col, int) and not isinstance(col, bool) and col >= 0)
+                    or (isinstance(col, str) and col)):
+                raise ImucalError(f"column {col!r} for {role!r} must be a header name or a 0-based index",
+                                  field=f"data.columns.{role}")
         if self.format not in FORMATS:
             raise ImucalError(f"unknown format {self.format!r}", field="data.format",
                               fix=f"use one of {', '.join(FORMATS)}")
@@ -48,7 +68,7 @@ class DataSpec:
                                                  and self.sample_rate > 0):
             raise ImucalError(f"sample rate {self.sample_rate} must be a positive number of Hz",
                               field="data.sample_rate", fix="give the logging rate in Hz")
-        if not isinstance(self.skip_rows, int) or self.skip_rows < 0:
+        if not isinstance(self.skip_rows, int) or isinstance(self.skip_rows, bool) or self.skip_rows < 0:
             raise ImucalError(f"skip_rows {self.skip_rows!r} must be a non-negative integer",
                               field="data.skip_rows")
         bad = set(self.columns) - {"t", "ax", "ay", "az", "temp"}
@@ -134,7 +154,7 @@ def _sniff_delimiter(line: str) -> str | None:
 def _parse_block(lines: list[str], first_lineno: int, delimiter: str | None, usecols: list[int],
                  path: Path) -> np.ndarray:
     """Parse numeric rows; on failure, find the offending line and name it."""
-    if not lines:
+    if not any(ln.strip() and not ln.lstrip().startswith("#") for ln in lines):
         raise ImucalError("has no data rows", file=str(path), field="data",
                           fix="record samples after the header")
     ncol = max(usecols) + 1

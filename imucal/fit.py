@@ -107,13 +107,15 @@ def _solver(model: SensorModel, n: int, free: tuple[str, ...], mode: str) -> tup
     rs, cs, ps, gs, ws = (ca.SX.sym("r", 3), ca.SX.sym("c", k), ca.SX.sym("p", len(names)),
                           ca.SX.sym("g"), ca.SX.sym("w"))
     term = ca.Function("term", [rs, cs, ws, ps, gs], [0.5 * ws * model.residual(rs, cs, ps, gs) ** 2])
-    par = "serial" if n < 20000 else "thread"
+    par = "serial"
     fsum = term.map("fsum", par, n, [3, 4], [0]) if n > 1 else term
     obj = fsum(raw, cov, w, p, g)
-    P = ca.vertcat(ca.vec(raw), ca.vec(cov), ca.vec(w), g, pfix, scale)
-    nlp = {"x": x, "p": P, "f": obj}
+    fscale = ca.MX.sym("fscale")  # 1 / objective at the start: IPOPT's tolerances become relative
+    P = ca.vertcat(ca.vec(raw), ca.vec(cov), ca.vec(w), g, pfix, scale, fscale)
+    nlp = {"x": x, "p": P, "f": fscale * obj}
     opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
-            "ipopt.tol": 1e-10, "ipopt.acceptable_tol": 1e-8, "ipopt.max_iter": 300}
+            "ipopt.tol": 1e-8, "ipopt.acceptable_tol": 1e-6,
+            "ipopt.acceptable_iter": 3, "ipopt.max_iter": 300}
     solver = ca.nlpsol("calib", "ipopt", nlp, opts)
     # Residuals and their Jacobian w.r.t. the free (unscaled) parameters, for the covariance.
     pf = ca.SX.sym("pf", nf)
@@ -154,8 +156,9 @@ def fit(data: FitData, params: Parameters, model: SensorModel, gravity: float,
     n = data.raw.shape[0]
     if n <= len(free):
         raise ImucalError(f"{n} rows cannot determine {len(free)} free parameters", file=source,
-                          field="intervals", fix="hold the sensor still in more orientations")
-    solver, rows = _solver(model, n, free, data.mode)
+                          field="intervals", fix="hold the sensor still in more orientations, or fit samples (fit.mode: samples)")
+    solver, rows = (None, None) if (data.mode == "samples" and not model.effects) else \
+        _solver(model, n, free, data.mode)
     pfix = np.array(params.values(), float)
     scale = np.array([params[nm].scale for nm in free])
     lb = np.array([params[nm].lower for nm in free]) / scale
@@ -163,12 +166,30 @@ def fit(data: FitData, params: Parameters, model: SensorModel, gravity: float,
     x0 = np.array([params[nm].value for nm in free]) / scale
     t0 = time.perf_counter()
     iters = 0
+    fast = data.mode == "samples" and not model.effects  # vectorised samples path (imucal.samples)
+    if fast:
+        from .samples import SampleResiduals, solve_samples
+
+        sres = SampleResiduals(data.raw, gravity)
+        free_idx = np.array([names.index(nm) for nm in free])
     # Weights from the noise propagated at the current estimate; refresh once at the solution.
     for _ in range(2):
-        _, _, Jraw = _row_eval(rows, data, x0 * scale, pfix, gravity)
+        if fast:
+            p_now = pfix.copy()
+            p_now[free_idx] = x0 * scale
+            r0, Jp = sres.residuals(p_now, jac=True)
+            Jraw = -Jp[:, 0:3]  # dr/draw = -dr/ds
+            sigma = _sigma(Jraw, data.raw_var)
+            f0 = 0.5 * float(np.sum((r0 / sigma) ** 2))
+            x0, stats = solve_samples(data.raw, 1.0 / sigma**2, gravity, pfix, free_idx, scale, x0, lb, ub,
+                                      1.0 / max(f0, 1e-300))
+            iters += int(stats.get("iter_count", 0))
+            continue
+        r0, _, Jraw = _row_eval(rows, data, x0 * scale, pfix, gravity)
         sigma = _sigma(Jraw, data.raw_var)
+        f0 = 0.5 * float(np.sum((r0 / sigma) ** 2))
         P = np.concatenate([data.raw.T.ravel(order="F"), data.cov.T.ravel(order="F"),
-                            1.0 / sigma**2, [gravity], pfix, scale])
+                            1.0 / sigma**2, [gravity], pfix, scale, [1.0 / max(f0, 1e-300)]])
         sol = solver(x0=x0, p=P, lbx=lb, ubx=ub)
         stats = solver.stats()
         iters += int(stats.get("iter_count", 0))
@@ -176,7 +197,13 @@ def fit(data: FitData, params: Parameters, model: SensorModel, gravity: float,
     solve_time = time.perf_counter() - t0
     status = str(stats.get("return_status", "unknown"))
     pfree = x0 * scale
-    r, J, _ = _row_eval(rows, data, pfree, pfix, gravity)
+    if fast:
+        p_now = pfix.copy()
+        p_now[free_idx] = pfree
+        r, Jp = sres.residuals(p_now, jac=True)
+        J = Jp[:, free_idx]
+    else:
+        r, J, _ = _row_eval(rows, data, pfree, pfix, gravity)
     fitted = params.with_values(dict(zip(free, pfree)))
     Jw = J / sigma[:, None]
     chi2 = float(np.sum((r / sigma) ** 2))

@@ -55,18 +55,19 @@ def analyse(directions: np.ndarray, jac_rows: np.ndarray, free_names: tuple[str,
     n_distinct, labels = distinct_directions(directions)
     # One row per distinct direction: repeats of a pose add no information about the model.
     J = np.vstack([jac_rows[labels == k].mean(axis=0) for k in range(n_distinct)])
-    colnorm = np.linalg.norm(J, axis=0)
-    colnorm[colnorm == 0] = 1.0
-    U, sv, Vt = np.linalg.svd(J / colnorm, full_matrices=True)
+    # Columns are already multiplied by each parameter's typical scale (dimensionless), so a
+    # column that the poses barely excite stays small and shows up in the null space.
+    U, sv, Vt = np.linalg.svd(J, full_matrices=True)
     nf = len(free_names)
     svf = np.zeros(nf)
     svf[: sv.size] = sv
     null = svf < RANK_TOL * max(svf[0], 1e-300)
+    null[n_distinct:] = True  # fewer distinct poses than parameters: rank <= n_distinct
     und: list[str] = []
     if null.any():
         V = Vt[null]
-        load = np.abs(V).max(axis=0)
-        und = [free_names[j] for j in np.argsort(-load) if load[j] > 0.3]
+        load = np.sqrt((V**2).sum(axis=0))  # share of each parameter in the null space
+        und = [free_names[j] for j in range(nf) if load[j] > 0.5]
     return Observability(n_distinct, labels, svf, tuple(sorted(und, key=free_names.index)))
 
 

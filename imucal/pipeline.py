@@ -124,6 +124,10 @@ def calibrate(config: RunConfig) -> CalibrationRun:
     angles_free = not set(ANGLE_NAMES) <= set(config.fit.fix)
     guess, dirs, n_distinct = initial_guess(iv, gravity, angles_free, rec.source)
     params = make_parameters(guess, config, gravity, model, config.data.unit)
+    if model.effects:  # covariate spread, enough intervals, reference temperature (imucal.effects)
+        from .effects import prepare_parameters
+
+        params = prepare_parameters(model.effects, params, {"temp": iv.temp, "time": iv.t_mid}, iv.n, rec.source)
     data = fit_data(model, iv, rec, config.fit.mode, rec.source)
     # Observability on interval means (one row per interval), at the initial guess.
     mdata = fit_data(model, iv, rec, "means", rec.source) if data.mode != "means" else data

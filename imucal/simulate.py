@@ -205,3 +205,305 @@ class TemperatureProfile:
     def sample(self, t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         warm = self.plateau + (self.start - self.plateau) * np.exp(-t / self.tau)
         return warm + self.swing * np.sin(2 * np.pi * t / self.period) + rng.normal(0, self.noise, t.size)
+
+
+# --- configuration (YAML -> typed dataclasses) and fitted-sensor replay ---------------------
+#: Named direction sets for ``plan.directions`` in a simulation config.
+DIRECTION_SETS = ("faces", "edges", "corners", "faces+edges", "faces+corners", "edges+corners",
+                  "faces+edges+corners", "random")
+SENSOR_PRESETS = ("mems_counts", "si", "none")
+
+
+@dataclass(frozen=True)
+class SimulationConfig:
+    """Everything one simulated recording needs; ``simulation_from_dict`` fills it from YAML."""
+
+    sensor: SensorSpec
+    plan: PosePlan
+    temperature: "TemperatureProfile | None" = None  #: None: the recording has no temp column
+    gravity: float = STANDARD_GRAVITY  #: [m/s^2]
+    seed: int = 0
+    source: str | None = None  #: the YAML file, for messages
+
+    def run(self) -> Simulation:
+        return simulate(self.sensor, self.plan, gravity=self.gravity, seed=self.seed,
+                        temperature=self.temperature)
+
+
+def _section(d: object, where: str, allowed: tuple[str, ...], path: str | None) -> dict:
+    if d is None:
+        return {}
+    if not isinstance(d, dict):
+        raise ImucalError(f"section must be a mapping, got {type(d).__name__}", file=path, field=where)
+    unknown = [k for k in d if k not in allowed]
+    if unknown:
+        raise ImucalError(f"unknown key {unknown[0]!r}", file=path, field=f"{where}.{unknown[0]}",
+                          fix=f"allowed keys here: {', '.join(allowed)}")
+    return dict(d)
+
+
+def _vec3(v: object, path: str | None, where: str) -> tuple[float, float, float]:
+    vals = [v] * 3 if isinstance(v, (int, float)) and not isinstance(v, bool) else v
+    if (not isinstance(vals, (list, tuple)) or len(vals) != 3
+            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x) for x in vals)):
+        raise ImucalError(f"{v!r} must be three finite numbers (or one for all axes)", file=path, field=where)
+    return tuple(float(x) for x in vals)  # type: ignore[return-value]
+
+
+def _number(v: object, path: str | None, where: str, positive: bool = False, allow_zero: bool = True) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
+        raise ImucalError(f"{v!r} is not a finite number", file=path, field=where)
+    if positive and (v < 0 or (v == 0 and not allow_zero)):
+        raise ImucalError(f"{v!r} must be {'non-negative' if allow_zero else 'positive'}", file=path, field=where)
+    return float(v)
+
+
+def simulation_from_dict(d: object, path: str | None = None) -> SimulationConfig:
+    """Typed simulation config from a YAML mapping; unknown keys are an error naming the allowed ones.
+
+    Top level: ``seed``, ``gravity`` [m/s^2], ``sensor``, ``plan``, ``temperature`` (omit or null
+    for a recording without a temp column). See configs/simulate_example.yaml.
+    """
+    top = _section(d, "top level", ("seed", "gravity", "sensor", "plan", "temperature"), path)
+    if d is None or not isinstance(d, dict):
+        raise ImucalError("top level must be a mapping", file=path, field="top level",
+                          fix="see configs/simulate_example.yaml")
+    seed = top.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ImucalError(f"seed {seed!r} must be a non-negative integer", file=path, field="seed")
+    gravity = _number(top.get("gravity", STANDARD_GRAVITY), path, "gravity", positive=True, allow_zero=False)
+    rng = np.random.default_rng(seed)
+    # sensor: a random preset drawn from the seed, explicit values override it
+    sd = _section(top.get("sensor"), "sensor", ("preset", "s", "b", "angles_deg", "noise", "quantum", "unit",
+                                                 "effects"), path)
+    preset = sd.get("preset", "mems_counts")
+    if preset not in SENSOR_PRESETS:
+        raise ImucalError(f"unknown preset {preset!r}", file=path, field="sensor.preset",
+                          fix=f"use one of {', '.join(SENSOR_PRESETS)}")
+    base = {"mems_counts": lambda: mems_counts_sensor(rng), "si": lambda: si_sensor(rng),
+            "none": SensorSpec}[preset]()
+    kw: dict = {}
+    for key in ("s", "b", "noise"):
+        if key in sd:
+            kw[key] = _vec3(sd[key], path, f"sensor.{key}")
+    if "b" in kw and not all(x > 0 for x in kw["b"]):
+        raise ImucalError("scales must be positive", file=path, field="sensor.b")
+    if "noise" in kw and not all(x >= 0 for x in kw["noise"]):
+        raise ImucalError("noise must be non-negative", file=path, field="sensor.noise")
+    if "angles_deg" in sd:
+        kw["angles"] = tuple(np.radians(_vec3(sd["angles_deg"], path, "sensor.angles_deg")))
+    if "quantum" in sd:
+        kw["quantum"] = _number(sd["quantum"], path, "sensor.quantum", positive=True)
+    if "unit" in sd:
+        kw["unit"] = str(sd["unit"])
+    effects = sd.get("effects") or {}
+    if not isinstance(effects, dict) or not all(isinstance(v, dict) for v in effects.values()):
+        raise ImucalError("must map effect names to {parameter: value}", file=path, field="sensor.effects",
+                          fix="e.g. effects: {bias_temperature: {bias_temperature_x: 2.0}}")
+    for name, coeffs in effects.items():
+        for k, v in coeffs.items():
+            _number(v, path, f"sensor.effects.{name}.{k}")
+    kw["effects"] = {str(n): {str(k): float(v) for k, v in c.items()} for n, c in effects.items()}
+    from dataclasses import replace
+
+    sensor = replace(base, **kw)
+    try:
+        frame_matrix(np.asarray(sensor.angles))
+        if sensor.effects:
+            from .effects import effects_from_coefficients
+
+            effects_from_coefficients(sensor.effects)
+    except ImucalError as exc:
+        raise ImucalError(exc.message, file=path, field=exc.field, fix=exc.fix) from None
+    # pose plan
+    pd = _section(top.get("plan"), "plan", ("directions", "n_random", "hold", "transition", "initial_hold",
+                                             "vibration", "rate"), path)
+    dirs = pd.get("directions", "faces+edges")
+    n_random = pd.get("n_random", 0)
+    if isinstance(n_random, bool) or not isinstance(n_random, int) or n_random < 0:
+        raise ImucalError(f"n_random {n_random!r} must be a non-negative integer", file=path, field="plan.n_random")
+    if isinstance(dirs, str):
+        if dirs not in DIRECTION_SETS:
+            raise ImucalError(f"unknown direction set {dirs!r}", file=path, field="plan.directions",
+                              fix=f"use one of {', '.join(DIRECTION_SETS)} or a list of [x, y, z]")
+        parts = [] if dirs == "random" else [cube_directions(dirs)]
+    else:
+        arr = np.asarray(dirs, float) if isinstance(dirs, list) else np.empty(0)
+        if arr.ndim != 2 or arr.shape[1] != 3 or not np.all(np.isfinite(arr)) or np.any(np.linalg.norm(arr, axis=1) == 0):
+            raise ImucalError("directions must be a set name or a list of non-zero [x, y, z]", file=path,
+                              field="plan.directions")
+        parts = [arr / np.linalg.norm(arr, axis=1, keepdims=True)]
+    if n_random:
+        parts.append(random_directions(n_random, rng))
+    if not parts:
+        raise ImucalError("no directions: 'random' needs n_random > 0", file=path, field="plan.n_random")
+    order = np.vstack(parts)
+    order = order[rng.permutation(len(order))]  # poses in a shuffled order, as a person would
+    pkw = {k: _number(pd[k], path, f"plan.{k}", positive=True) for k in
+           ("hold", "transition", "initial_hold", "vibration", "rate") if k in pd}
+    try:
+        plan = PosePlan(order, **pkw)
+    except ImucalError as exc:
+        raise ImucalError(exc.message, file=path, field=exc.field, fix=exc.fix) from None
+    # temperature profile
+    temperature = None
+    if top.get("temperature") is not None:
+        td = _section(top["temperature"], "temperature", ("start", "plateau", "tau", "swing", "period", "noise"),
+                      path)
+        tkw = {k: _number(v, path, f"temperature.{k}") for k, v in td.items()}
+        for k in ("tau", "period"):
+            if k in tkw and tkw[k] <= 0:
+                raise ImucalError(f"{k} must be positive [s]", file=path, field=f"temperature.{k}")
+        if tkw.get("noise", 0) < 0:
+            raise ImucalError("noise must be non-negative [degC]", file=path, field="temperature.noise")
+        temperature = TemperatureProfile(**tkw)
+    if sensor.effects and temperature is None:
+        from .effects import effects_from_coefficients
+
+        if any("temp" in e.covariates for e in effects_from_coefficients(sensor.effects)):
+            raise ImucalError("the sensor has a temperature effect but there is no temperature: section",
+                              file=path, field="temperature", fix="add temperature: {start: 20, plateau: 35}")
+    return SimulationConfig(sensor=sensor, plan=plan, temperature=temperature, gravity=gravity, seed=seed,
+                            source=path)
+
+
+def load_simulation_config(path: str) -> SimulationConfig:
+    """Read a simulation YAML (``yaml.safe_load``) into a SimulationConfig."""
+    from pathlib import Path
+
+    import yaml
+
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ImucalError("file not found", file=str(p), field="config",
+                          fix="pass a simulation YAML (see configs/simulate_example.yaml)") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ImucalError(f"cannot read: {exc}", file=str(p), field="config") from None
+    try:
+        d = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark else ""
+        raise ImucalError(f"is not valid YAML{where}", file=str(p), field="config",
+                          fix="check indentation and quoting") from None
+    return simulation_from_dict(d, str(p))
+
+
+def sensor_from_values(values: dict, effects: tuple = (), noise: tuple[float, float, float] = (0.0, 0.0, 0.0),
+                       unit: str = "raw") -> SensorSpec:
+    """A SensorSpec from fitted parameter values (e.g. ``Calibration.params.value_dict()``).
+
+    ``effects`` are the model's effect objects; their coefficients (and fixed references) are
+    taken from ``values``. Used to replay what a recording should look like under a fitted model.
+    """
+    eff: dict[str, dict[str, float]] = {}
+    for e in effects:
+        names = list(e.coefficient_names) + ([e.tref_name] if getattr(e, "uses_tref", False) else [])
+        eff[e.name] = {n: float(values[n]) for n in names}
+    return SensorSpec(s=tuple(float(values[f"s{i}"]) for i in (1, 2, 3)),
+                      b=tuple(float(values[f"b{i}"]) for i in (1, 2, 3)),
+                      angles=tuple(float(values[a]) for a in ("phi", "psi", "theta")),
+                      noise=tuple(noise), quantum=0.0, unit=unit, effects=eff)
+
+
+# --- seeded cases with one hidden effect (tests and scripts/discover_study.py) ---------------
+@dataclass(frozen=True)
+class EffectCase:
+    """A simulated recording with at most one hidden effect, drawn from a seed."""
+
+    seed: int
+    effect: str | None  #: None: a clean sensor
+    axes: tuple[int, ...]
+    size: float  #: largest change of a reading at 1 g over the recording [m/s^2]
+    sigma_mean: float  #: noise of one interval mean [m/s^2], for the signal-to-noise ratio
+    config: SimulationConfig
+
+    @property
+    def snr(self) -> float:
+        return self.size / self.sigma_mean if self.sigma_mean > 0 else float("inf")
+
+    @property
+    def label(self) -> str:
+        if self.effect is None:
+            return "clean"
+        return f"{self.effect}[{''.join('xyz'[a] for a in self.axes)}]"
+
+
+def _axis_subsets() -> list[tuple[int, ...]]:
+    import itertools
+
+    return [c for r in (1, 2, 3) for c in itertools.combinations(range(3), r)]
+
+
+def draw_effect_case(seed: int, effect: str | None = "random", axes: tuple[int, ...] | None = None,
+                     snr: float | tuple[float, float] = (15.0, 60.0), noise_mg: float | None = None,
+                     counts: bool | None = None, with_temperature: bool = True,
+                     candidates: tuple[str, ...] | None = None) -> EffectCase:
+    """Draw sensor, pose plan, temperature profile and (unless ``effect`` is None) one effect.
+
+    ``effect``: "random", a name from imucal.effects.EFFECTS, or None for a clean sensor.
+    ``snr``: effect size in units of the noise of one interval mean (a number or a log-uniform
+    range). ``noise_mg``: white noise per sample [mg]; default drawn in 0.1 .. 1 mg.
+    ``counts``: raw counts with quantisation (True) or factory-scaled m/s^2 (False); default random.
+    18 to 26 poses of 3 s at 100 Hz, so a case simulates in milliseconds and fits in well under a second.
+    """
+    from .effects import EFFECTS, make_effect
+
+    rng = np.random.default_rng([seed, 20240611])
+    counts = bool(rng.integers(2)) if counts is None else counts
+    noise_mg = float(np.exp(rng.uniform(np.log(0.1), np.log(1.0)))) if noise_mg is None else float(noise_mg)
+    g = STANDARD_GRAVITY
+    if counts:
+        lsb_per_g = float(rng.choice([4096.0, 8192.0, 16384.0]))
+        sensor = mems_counts_sensor(rng, lsb_per_g=lsb_per_g, noise_counts=noise_mg * 1e-3 * lsb_per_g)
+    else:
+        sensor = si_sensor(rng, noise=noise_mg * 1e-3 * g)
+    kind = ["faces+edges", "faces+corners", "faces+edges+corners"][int(rng.integers(3))]
+    dirs = cube_directions(kind)
+    n_extra = {"faces+edges": int(rng.integers(0, 9)), "faces+corners": int(rng.integers(4, 9)),
+               "faces+edges+corners": 0}[kind]  # 18 to 26 poses
+    if n_extra:
+        dirs = np.vstack([dirs, random_directions(n_extra, rng)])
+    dirs = dirs[rng.permutation(len(dirs))]
+    plan = PosePlan(dirs, hold=3.0, transition=float(rng.uniform(1.5, 2.5)), initial_hold=0.0,
+                    vibration=float(rng.uniform(0.5, 1.5)), rate=100.0)
+    temperature = None
+    if with_temperature:
+        start = float(rng.uniform(15, 25))
+        temperature = TemperatureProfile(start=start, plateau=start + float(rng.uniform(8, 15)),
+                                         tau=float(rng.uniform(30, 90)), swing=float(rng.uniform(2, 4)),
+                                         period=float(rng.uniform(80, 150)), noise=0.02)
+    duration = len(dirs) * plan.hold + (len(dirs) - 1) * plan.transition
+    t = np.linspace(0, duration, 1000)
+    temp_span = 0.0
+    if temperature is not None:
+        temp_clean = TemperatureProfile(**{**temperature.__dict__, "noise": 0.0}).sample(t, rng)
+        temp_span = float(np.ptp(temp_clean))
+    b_mean = float(np.mean(sensor.b))
+    n_hold = 0.8 * plan.hold * plan.rate  # samples an interval keeps after trimming
+    sigma_mean = float(np.mean(sensor.noise)) / b_mean / np.sqrt(n_hold)
+    name, ax, size = None, (), 0.0
+    if effect is not None:
+        pool = [n for n in (candidates or tuple(EFFECTS))
+                if temperature is not None or "temp" not in EFFECTS[n].covariates]
+        name = pool[int(rng.integers(len(pool)))] if effect == "random" else effect
+        if name not in EFFECTS:
+            raise ImucalError(f"unknown effect {name!r}", field="effect", fix=f"choose from {', '.join(EFFECTS)}")
+        subsets = _axis_subsets()
+        ax = tuple(axes) if axes is not None else subsets[int(rng.integers(len(subsets)))]
+        lo, hi = (snr, snr) if isinstance(snr, (int, float)) else snr
+        size = float(np.exp(rng.uniform(np.log(lo), np.log(hi)))) * sigma_mean
+        e = make_effect(name, ax)
+        coeffs = {}
+        for a in e.axes:
+            sign = 1.0 if rng.integers(2) else -1.0
+            coeffs[e.coefficient(a)] = sign * e.coefficient_for_size(size, float(sensor.b[a]), temp_span, duration, g)
+        if e.uses_tref:
+            coeffs[e.tref_name] = float(np.round(rng.uniform(20, 30), 1))
+        from dataclasses import replace
+
+        sensor = replace(sensor, effects={name: coeffs})
+    cfg = SimulationConfig(sensor=sensor, plan=plan, temperature=temperature, gravity=g, seed=int(seed))
+    return EffectCase(seed=int(seed), effect=name, axes=tuple(ax), size=size, sigma_mean=sigma_mean, config=cfg)

@@ -1,0 +1,136 @@
+"""Shared fixtures: simulated recordings with known truth, calibrations of them, the CLI runner.
+
+Everything here is seeded and session-scoped where it is expensive (a simulated recording is
+~10 k samples; a fit takes well under a second). Real recordings live in ../shared/data/real
+and are skipped, with a reason, when absent.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import pytest
+
+from imucal.simulate import (PosePlan, SensorSpec, Simulation, cube_directions, mems_counts_sensor,
+                             si_sensor, simulate)
+
+#: The real recordings shared by all engineers (README.md there lists each folder).
+REAL_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"
+
+#: Short plans keep the suite fast: 3 s holds, 1.5 s transitions, 100 Hz.
+HOLD, TRANSITION, RATE = 3.0, 1.5, 100.0
+
+
+def real_file(*parts: str) -> Path:
+    """Path of a real recording, or skip the test when the shared data are not present."""
+    p = REAL_DATA.joinpath(*parts)
+    if not p.exists():
+        pytest.skip(f"real recording {p} not present")
+    return p
+
+
+@dataclass(frozen=True)
+class SimRecording:
+    """A simulated recording written to CSV, with the truth it was made from."""
+
+    sim: Simulation
+    path: Path
+    sensor: SensorSpec
+
+    @property
+    def truth(self) -> dict[str, float]:
+        return self.sensor.values()
+
+    @property
+    def n_poses(self) -> int:
+        return len(self.sim.hold_bounds)
+
+
+def write_simulation(path: Path, sensor: SensorSpec, directions: np.ndarray, seed: int,
+                     hold: float = HOLD, transition: float = TRANSITION, rate: float = RATE,
+                     gravity: float | None = None, raw_factor: float = 1.0) -> SimRecording:
+    """Simulate ``sensor`` held in ``directions`` and write the CSV (t, ax, ay, az) to ``path``.
+
+    ``raw_factor`` multiplies the raw readings after simulation (a change of raw unit).
+    """
+    from dataclasses import replace
+
+    from imucal.constants import STANDARD_GRAVITY
+
+    plan = PosePlan(np.asarray(directions, float), hold=hold, transition=transition, rate=rate)
+    sim = simulate(sensor, plan, gravity=STANDARD_GRAVITY if gravity is None else gravity, seed=seed)
+    if raw_factor != 1.0:
+        sim = replace(sim, raw=sim.raw * raw_factor)
+    path.write_text(sim.to_csv_text())
+    return SimRecording(sim, path, sensor)
+
+
+@pytest.fixture(scope="session")
+def sim_csv(tmp_path_factory) -> Callable[..., SimRecording]:
+    """Factory: ``sim_csv(name, sensor, directions, seed, **plan)`` -> SimRecording (session tmp dir)."""
+    root = tmp_path_factory.mktemp("sim")
+
+    def make(name: str, sensor: SensorSpec, directions: np.ndarray, seed: int, **kw) -> SimRecording:
+        return write_simulation(root / f"{name}.csv", sensor, directions, seed, **kw)
+
+    return make
+
+
+@pytest.fixture(scope="session")
+def counts_recording(sim_csv) -> SimRecording:
+    """Raw-count MEMS sensor (16384 LSB/g, 4 counts noise, quantised), 26 cube poses."""
+    sensor = mems_counts_sensor(np.random.default_rng(2024))
+    return sim_csv("counts", sensor, cube_directions(), seed=11)
+
+
+@pytest.fixture(scope="session")
+def si_recording(sim_csv) -> SimRecording:
+    """Factory-scaled sensor reporting m/s^2 (0.01 m/s^2 noise), 26 cube poses."""
+    sensor = si_sensor(np.random.default_rng(2025))
+    return sim_csv("si", sensor, cube_directions(), seed=12)
+
+
+def calibrate_file(path: Path | str, **sections):
+    """Run the library pipeline on ``path`` with YAML-like sections (fit=..., static=..., ...)."""
+    from imucal.config import config_from_dict
+    from imucal.pipeline import calibrate
+
+    data = dict(sections.pop("data", {}))
+    data.setdefault("path", str(path))
+    return calibrate(config_from_dict({"data": data, **sections}))
+
+
+@pytest.fixture(scope="session")
+def counts_run(counts_recording):
+    return calibrate_file(counts_recording.path)
+
+
+@pytest.fixture(scope="session")
+def si_run(si_recording):
+    return calibrate_file(si_recording.path)
+
+
+@dataclass(frozen=True)
+class CliResult:
+    code: int
+    out: str
+    err: str
+
+
+@pytest.fixture
+def run_cli(capsys) -> Callable[[list[str]], CliResult]:
+    """``run_cli(args)`` calls ``imucal.cli.main`` in-process and returns (code, stdout, stderr)."""
+    from imucal.cli import main
+
+    def run(args: list[str]) -> CliResult:
+        capsys.readouterr()  # drop anything printed before
+        try:
+            code = main([str(a) for a in args])
+        except SystemExit as exc:  # argparse errors and --help/--version
+            code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
+        out, err = capsys.readouterr()
+        return CliResult(int(code), out, err)
+
+    return run
