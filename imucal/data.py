@@ -165,7 +165,7 @@ def _parse_block(lines: list[str], first_lineno: int, delimiter: str | None, use
             bad = ~np.isfinite(arr).all(axis=1)
             if bad.any():
                 k = int(np.flatnonzero(bad)[0])
-                raise ImucalError(f"row {_lineno(lines, k, first_lineno)} holds NaN or Inf",
+                raise ImucalError(f"line {_lineno(lines, k, first_lineno)} holds NaN or Inf",
                                   file=str(path), field="data",
                                   fix="remove or repair the non-finite rows before calibrating")
             return arr
@@ -311,7 +311,8 @@ def load_recording(spec: DataSpec | str | os.PathLike, base_dir: str | os.PathLi
         dt = np.diff(t)
         if n > 1 and not (dt > 0).all():
             k = int(np.flatnonzero(dt <= 0)[0])
-            raise ImucalError(f"time is not strictly increasing at data row {k + 2}", file=str(path),
+            raise ImucalError(f"time is not strictly increasing at line {_lineno(body, k + 1, body_first)}",
+                              file=str(path),
                               field="data.columns.t", fix="sort the rows by time and drop duplicates")
         t = t - t[0]
     else:

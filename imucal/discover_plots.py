@@ -85,8 +85,7 @@ def residuals_figure(d: Discovery, path: str | Path) -> None:
     fig.legend(h + [plt.Rectangle((0, 0), 1, 1, color="0.9")], lab + [f"within +-{BAND:g} sigma of the noise"],
                loc="lower center", ncol=3, fontsize=9, frameon=False)
     fig.suptitle(f"{Path(d.base.recording.source).name}: {iv.n} static intervals; residual of each interval mean "
-                 f"over its noise sigma
-chi2/dof {d.base.result.redchi:.3g} -> {d.final.result.redchi:.3g}, "
+                 f"over its noise sigma\nchi2/dof {d.base.result.redchi:.3g} -> {d.final.result.redchi:.3g}, "
                  f"RMS {d.rms_before * 1e3:.3g} -> {d.rms_after * 1e3:.3g} mm/s^2 (noise alone "
                  f"{d.rms_noise * 1e3:.3g}); effects: {', '.join(e.label for e in d.effects) or 'none'}",
                  fontsize=11)
@@ -145,11 +144,13 @@ def candidates_figure(d: Discovery, path: str | Path, top: int = 14) -> None:
         ax.set_xscale("log")
         crit = _critical_lr(1, d.settings.alpha_effect / M)
         ax.axvline(crit, color="k", ls="--", lw=1)
-        ax.text(crit, len(cs) - 0.4, f" threshold (1 coeff.)\n p = {d.settings.alpha_effect:g} / {M}",
-                fontsize=7, va="top")
+        ax.text(crit, -0.9, f" significance threshold, 1 coefficient: p = {d.settings.alpha_effect:g} / {M}",
+                fontsize=7, va="center")
+        ax.set_ylim(-1.4, len(cs) - 0.5)
         ax.set_xlabel("likelihood-ratio statistic (chi-square removed / misfit scale)")
         chosen = s.chosen.label if s.chosen else "none significant"
-        ax.set_title(f"Round {s.index}: {M} candidates; added: {chosen}", fontsize=10)
+        ax.set_title(f"Round {s.index}: {M} candidates; added: {chosen}\n(ranked by chi-square left + "
+                     f"{d.settings.penalty:.3g} per coefficient; the best are fitted in full)", fontsize=9)
         ax.grid(axis="x", alpha=0.3)
     from matplotlib.patches import Patch
 
