@@ -21,6 +21,7 @@ from .parameters import BASE_NAMES
 from .static import StaticSettings
 
 FIT_MODES = ("means", "samples")
+WEIGHTS = ("noise", "uniform")
 
 
 @dataclass(frozen=True)
@@ -76,6 +77,7 @@ class EffectSpec:
 @dataclass(frozen=True)
 class FitSettings:
     mode: str = "means"  #: fit interval means (weighted by their noise) or raw samples
+    weights: str = "noise"  #: "noise": 1/sigma^2 from each interval's scatter; "uniform": as imu_tk
     angle_tolerance: float = DEFAULT_ANGLE_TOL  #: angles in pi/2 (1 +- tol)
     fix: tuple[str, ...] = ()  #: parameters held at their initial value
     initial: Mapping[str, float] = field(default_factory=dict)  #: overrides of the initial guess
@@ -85,6 +87,9 @@ class FitSettings:
         if self.mode not in FIT_MODES:
             raise ImucalError(f"unknown fit mode {self.mode!r}", field="fit.mode",
                               fix=f"use one of {', '.join(FIT_MODES)}")
+        if self.weights not in WEIGHTS:
+            raise ImucalError(f"unknown weights {self.weights!r}", field="fit.weights",
+                              fix=f"use one of {', '.join(WEIGHTS)}")
         if not (isinstance(self.angle_tolerance, (int, float)) and 0 < self.angle_tolerance < 0.5):
             raise ImucalError(f"angle_tolerance {self.angle_tolerance!r} must lie in (0, 0.5)",
                               field="fit.angle_tolerance", fix="use e.g. 0.02 (90 deg +- 2 %)")

@@ -233,16 +233,22 @@ def load_recording(spec: DataSpec | str | os.PathLike, base_dir: str | os.PathLi
     header_idx = None
     if fmt in ("auto", "csv"):
         wanted = [str(v) for r, v in spec.columns.items() if isinstance(v, str)]
+        first_text: list[str] | None = None  # the first non-numeric line, for the message
         for i in range(k0, min(len(lines), k0 + _MAX_SCAN_LINES)):
             toks = _split(lines[i], spec.delimiter or _sniff_delimiter(lines[i]))
             if toks and not all(_is_number(t) for t in toks):
                 names = [t.strip().strip('"').strip("'") for t in toks]
+                first_text = names if first_text is None else first_text
                 if wanted and not all(w in names for w in wanted):
                     continue
                 if not wanted and not any(n.lower() in sum(_DEFAULT_NAMES.values(), ()) for n in names):
                     continue
                 header_idx = i
                 break
+        if wanted and header_idx is None and first_text is not None:
+            missing = [w for w in wanted if w not in first_text]
+            raise ImucalError(f"mapped column(s) {missing} not in header {first_text[:12]}", file=str(path),
+                              field="data.columns", fix="map the roles to the header's names")
         if fmt == "csv" and header_idx is None:
             raise ImucalError("no header line with the mapped column names found", file=str(path),
                               field="data.columns",

@@ -492,7 +492,9 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings())
                                               p_adjusted=min(1.0, p * M), fitted=True, converged=res.success,
                                               significant=bool(np.isfinite(res.chi2)) and p * M < settings.alpha_effect)
         sig = [i for i in fits if screened[i].significant]
-        common = max(1.0, min((fits[i].redchi for i in sig), default=1.0))
+        # The misfit scale candidates are compared on: the least misfit among the significant ones
+        # (or among all fitted ones when none is significant, for the report).
+        common = max(1.0, min((fits[i].redchi for i in (sig or fits)), default=1.0))
         for i in fits:
             c = screened[i]
             screened[i] = dataclasses.replace(c, score=c.chi2 / common + settings.penalty * c.k)
@@ -500,6 +502,9 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings())
             steps.append(Step(len(steps) + 1, current.chi2, current.dof, tuple(screened), None, scale=common))
             verdict = (f"disagreement not explained by any candidate: chi2/dof = {current.redchi:.3g} "
                        f"(p = {_p_noise(current):.3g}) and no candidate effect is significant")
+            if found:
+                verdict = (f"partly explained by {_added(found, cur_effects)}; the "
+                           f"remaining {verdict}")
             break
         best = min(sig, key=lambda i: screened[i].score)
         chosen = screened[best]
@@ -512,7 +517,7 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings())
         current = fits[best]
         consistent = _p_noise(current) >= settings.alpha_noise
         if consistent:
-            verdict = (f"explained: after adding {', '.join(_label(n, a) for n, a in cur_effects.items())} "
+            verdict = (f"explained: after adding {_added(found, cur_effects)} "
                        f"chi2/dof = {current.redchi:.3g} (p = {_p_noise(current):.3g}), at noise level")
     # The final calibration: the whole pipeline once more with the effects found.
     final = base
@@ -540,3 +545,7 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings())
 
 def _label(name: str, axes: tuple[int, ...]) -> str:
     return f"{name}[{''.join(AXIS_NAMES[a] for a in axes)}]"
+
+
+def _added(found: list, effects: dict[str, tuple[int, ...]]) -> str:
+    return ", ".join(_label(n, effects[n]) for n in dict.fromkeys(f[0] for f in found))

@@ -138,16 +138,22 @@ def _row_eval(rows: ca.Function, data: FitData, pfree: np.ndarray, pfix: np.ndar
     return r, J, Jraw
 
 
-def _sigma(Jraw: np.ndarray, raw_var: np.ndarray) -> np.ndarray:
+def _sigma(Jraw: np.ndarray, raw_var: np.ndarray, weights: str = "noise") -> np.ndarray:
     """Noise of |a| - g from the raw noise: first-order propagation."""
     s = np.sqrt(np.sum(Jraw**2 * raw_var, axis=1))
     floor = max(float(np.median(s)) * 1e-3, 1e-12)
+    if weights == "uniform":
+        return np.full_like(s, max(float(np.median(s)), floor))
     return np.maximum(s, floor)
 
 
 def fit(data: FitData, params: Parameters, model: SensorModel, gravity: float,
-        source: str | None = None) -> FitResult:
-    """Fit the free parameters of ``params`` to ``data`` by weighted least squares (IPOPT)."""
+        source: str | None = None, weights: str = "noise") -> FitResult:
+    """Fit the free parameters of ``params`` to ``data`` by weighted least squares (IPOPT).
+
+    ``weights="noise"`` weighs each row by 1/sigma^2 (its noise propagated from the raw
+    scatter); ``"uniform"`` gives every row the median sigma (imu_tk's unweighted cost).
+    """
     names = model.names
     if tuple(params.names) != names:
         raise ImucalError(f"parameters {params.names} do not match the model's {names}",
@@ -179,14 +185,14 @@ def fit(data: FitData, params: Parameters, model: SensorModel, gravity: float,
             p_now[free_idx] = x0 * scale
             r0, Jp = sres.residuals(p_now, jac=True)
             Jraw = -Jp[:, 0:3]  # dr/draw = -dr/ds
-            sigma = _sigma(Jraw, data.raw_var)
+            sigma = _sigma(Jraw, data.raw_var, weights)
             f0 = 0.5 * float(np.sum((r0 / sigma) ** 2))
             x0, stats = solve_samples(data.raw, 1.0 / sigma**2, gravity, pfix, free_idx, scale, x0, lb, ub,
                                       1.0 / max(f0, 1e-300))
             iters += int(stats.get("iter_count", 0))
             continue
         r0, _, Jraw = _row_eval(rows, data, x0 * scale, pfix, gravity)
-        sigma = _sigma(Jraw, data.raw_var)
+        sigma = _sigma(Jraw, data.raw_var, weights)
         f0 = 0.5 * float(np.sum((r0 / sigma) ** 2))
         P = np.concatenate([data.raw.T.ravel(order="F"), data.cov.T.ravel(order="F"),
                             1.0 / sigma**2, [gravity], pfix, scale, [1.0 / max(f0, 1e-300)]])

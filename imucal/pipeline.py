@@ -134,13 +134,13 @@ def calibrate(config: RunConfig) -> CalibrationRun:
     J = jacobian_rows(mdata, params, model, gravity)
     obs = analyse(dirs, J, params.free_names)
     require_observable(obs, params.free_names, rec.source)
-    res = fit(data, params, model, gravity, source=rec.source)
+    res = fit(data, params, model, gravity, source=rec.source, weights=config.fit.weights)
     if res.mode != "means":  # report residuals on interval means too
         rm = jacobian_rows(mdata, res.params, model, gravity, residuals=True)
     else:
         rm = res.residuals
     cal_fit = {
-        "mode": res.mode, "status": res.status, "iterations": res.iterations,
+        "mode": res.mode, "weights": config.fit.weights, "status": res.status, "iterations": res.iterations,
         "rms_residual": float(np.sqrt(np.mean(rm**2))), "chi2": res.chi2, "dof": res.dof,
         "redchi": res.redchi, "n_intervals": iv.n, "n_distinct_orientations": obs.n_distinct,
         "gravity_source": gsource,

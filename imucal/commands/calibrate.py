@@ -18,6 +18,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--unit", help="unit of the raw readings (label only, e.g. raw or m/s^2)")
     p.add_argument("--fix-angles", action="store_true", help="hold the angles at 90 deg (6-parameter model)")
     p.add_argument("--mode", choices=("means", "samples"), help="fit interval means (default) or samples")
+    p.add_argument("--weights", choices=("noise", "uniform"),
+                   help="row weights: noise (1/sigma^2, default) or uniform (as imu_tk)")
     p.add_argument("--out", help="output directory (default: config output.dir, else ./out)")
     p.add_argument("--json", help="also write a machine-readable summary to this file")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
@@ -51,9 +53,9 @@ def _config(args: argparse.Namespace):
 
         grav = GravitySpec(value=args.gravity, latitude=args.latitude, height=args.height)
     fit = cfg.fit
-    if args.fix_angles or args.mode:
+    if args.fix_angles or args.mode or args.weights:
         fit = dataclasses.replace(fit, fix=tuple(sorted(set(fit.fix) | ({"phi", "psi", "theta"} if args.fix_angles else set()))),
-                                  mode=args.mode or fit.mode)
+                                  mode=args.mode or fit.mode, weights=args.weights or fit.weights)
     return dataclasses.replace(cfg, data=data, gravity=grav, fit=fit)
 
 

@@ -1,0 +1,263 @@
+"""The effect library: terms, parameters, units, simulate-fit-recover, refusals, calibration files."""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from imucal.calibration import Calibration, from_dict
+from imucal.config import config_from_dict
+from imucal.effects import (EFFECTS, MIN_TEMPERATURE_SPREAD, REFERENCE_TEMPERATURE, ScaleNonlinearity,
+                            check_effects, effects_from_coefficients, make_effect, prepare_parameters,
+                            simulate_effects)
+from imucal.errors import ImucalError
+from imucal.model import build_model
+from imucal.parameters import base_parameters
+from imucal.pipeline import calibrate
+from imucal.simulate import (PosePlan, SensorSpec, TemperatureProfile, cube_directions, mems_counts_sensor,
+                             random_directions, simulate)
+
+G = 9.80665
+
+
+def _plan(rng, n_random=6, hold=3.0):
+    dirs = np.vstack([cube_directions("faces+edges"), random_directions(n_random, rng)])
+    return PosePlan(dirs[rng.permutation(len(dirs))], hold=hold, transition=2.0, rate=100.0)
+
+
+def _write(tmp_path, sim, name="rec.csv"):
+    p = tmp_path / name
+    p.write_text(sim.to_csv_text())
+    return str(p)
+
+
+# --- parameters, names, units -----------------------------------------------------------------
+def test_every_effect_adds_named_parameters_with_units():
+    base = base_parameters([100, -50, 20], [1670, 1670, 1670], raw_unit="raw")
+    units = {"bias_temperature": "raw/degC", "scale_temperature": "1/degC", "bias_drift": "raw/s",
+             "scale_drift": "1/s", "scale_nonlinearity": "1/(m/s^2)"}
+    assert set(EFFECTS) == set(units)
+    for name, unit in units.items():
+        e = make_effect(name, (0, 2))
+        ps = {p.name: p for p in e.parameters(base)}
+        assert f"{name}_x" in ps and f"{name}_z" in ps and f"{name}_y" not in ps
+        assert ps[f"{name}_x"].unit == unit and ps[f"{name}_x"].value == 0.0 and not ps[f"{name}_x"].fixed
+        assert ps[f"{name}_x"].scale > 0
+        if "temp" in e.covariates:  # the reference temperature is a fixed parameter of the file
+            assert ps[f"{name}_tref"].fixed and ps[f"{name}_tref"].unit == "degC"
+        model = build_model([e])
+        assert model.names[:9] == ("s1", "s2", "s3", "b1", "b2", "b3", "phi", "psi", "theta")
+        assert set(model.covariates) == set(e.covariates)
+
+
+def test_unknown_effect_and_bad_axes_messages():
+    with pytest.raises(ImucalError, match="unknown effect 'bias_temp'.*choose from bias_temperature"):
+        make_effect("bias_temp", (0,))
+    with pytest.raises(ImucalError, match="axes .* non-empty subset"):
+        make_effect("bias_drift", (3,))
+
+
+def test_effect_identity_is_name_and_axes():
+    assert make_effect("bias_drift", (1, 0)) == make_effect("bias_drift", (0, 1))
+    assert make_effect("bias_drift", (0,)) != make_effect("scale_drift", (0,))
+    assert build_model([make_effect("bias_drift", (0,))]) is build_model([make_effect("bias_drift", (0,))])
+
+
+# --- the nonlinearity is inverted exactly ----------------------------------------------------
+@settings(max_examples=200, deadline=None)
+@given(q=st.floats(-0.009, 0.009), m=st.floats(-2.5 * G, 2.5 * G))
+def test_nonlinearity_correct_inverts_distort(q, m):
+    e = ScaleNonlinearity((0,))
+    p = {"scale_nonlinearity_x": q}
+    u = e.distort([m, 0.0, 0.0], p)[0]
+    back = e.correct([u, 0.0, 0.0], None, {}, p)[0]
+    assert back == pytest.approx(m, rel=1e-9, abs=1e-9)
+
+
+# --- the simulator's forward terms ------------------------------------------------------------
+def test_simulate_effects_matches_the_model_terms():
+    """raw from simulate_effects, put through the model's measured map, gives back m."""
+    rng = np.random.default_rng(3)
+    n = 50
+    m = rng.normal(0, 5, (n, 3))
+    t = np.linspace(0, 100, n)
+    temp = 25 + 10 * np.sin(t / 20)
+    spec = {"bias_temperature": {"bias_temperature_x": 3.0, "bias_temperature_tref": 27.0},
+            "scale_temperature": {"scale_temperature_y": 2e-4},
+            "bias_drift": {"bias_drift_z": -0.5},
+            "scale_drift": {"scale_drift_x": 1e-5},
+            "scale_nonlinearity": {"scale_nonlinearity_y": 3e-3}}
+    sensor = SensorSpec(s=(10, -20, 30), b=(1600, 1650, 1700), effects=spec)
+    raw = sensor.forward(m, t, temp)
+    effects = effects_from_coefficients(spec)
+    model = build_model(effects)
+    vals = {**sensor.values(), "scale_temperature_tref": REFERENCE_TEMPERATURE}
+    p = np.array([vals.get(nm, 0.0) for nm in model.names])
+    cov = np.column_stack([{"temp": temp, "time": t}[c] for c in model.covariates])
+    got = np.asarray(model.measured.map(n)(raw.T, cov.T, p)).T
+    np.testing.assert_allclose(got, m, rtol=1e-10, atol=1e-9)
+
+
+def test_simulate_effects_refuses_bad_specs():
+    with pytest.raises(ImucalError, match="unknown parameter 'bias_drift_w' of effect bias_drift"):
+        effects_from_coefficients({"bias_drift": {"bias_drift_w": 1.0}})
+    with pytest.raises(ImucalError, match="unknown effect 'wobble'"):
+        effects_from_coefficients({"wobble": {"x": 1.0}})
+    sensor = SensorSpec(effects={"bias_temperature": {"bias_temperature_x": 1.0}})
+    with pytest.raises(ImucalError, match="temperature effect but the simulation has no temperature profile"):
+        simulate_effects(sensor, np.zeros((3, 3)), np.arange(3.0), None, np.zeros((3, 3)))
+
+
+# --- known truth: simulate, fit, recover -------------------------------------------------------
+CASES = [
+    ("bias_temperature", (0, 2), {"bias_temperature_x": 4.0, "bias_temperature_z": -3.0}),
+    ("scale_temperature", (1,), {"scale_temperature_y": 3e-4}),
+    ("bias_drift", (0, 1, 2), {"bias_drift_x": 0.05, "bias_drift_y": -0.04, "bias_drift_z": 0.03}),
+    ("scale_drift", (2,), {"scale_drift_z": 3e-5}),
+    ("scale_nonlinearity", (0, 1), {"scale_nonlinearity_x": 2e-4, "scale_nonlinearity_y": -3e-4}),
+]
+
+
+@pytest.mark.parametrize("name,axes,coeffs", CASES, ids=[c[0] for c in CASES])
+def test_simulate_fit_recover(tmp_path, name, axes, coeffs):
+    rng = np.random.default_rng(11)
+    sensor = mems_counts_sensor(rng, noise_counts=1.0)
+    true = dict(coeffs)
+    if make_effect(name, axes).uses_tref:
+        true[f"{name}_tref"] = 25.0
+    sensor = dataclasses.replace(sensor, effects={name: true})
+    sim = simulate(sensor, _plan(rng), seed=5, temperature=TemperatureProfile(period=100.0, swing=4.0))
+    cfg = config_from_dict({"data": {"path": _write(tmp_path, sim)},
+                            "fit": {"effects": [{"name": name, "axes": ["xyz"[a] for a in axes]}]}})
+    run = calibrate(cfg)
+    res = run.result
+    assert res.redchi < 3.0
+    for pname, v in coeffs.items():
+        est, sd = res.params[pname].value, res.std[pname]
+        assert abs(est - v) < 5 * sd, (pname, est, v, sd)
+        assert abs(est - v) < 0.1 * abs(v), (pname, est, v)
+    if make_effect(name, axes).uses_tref:  # T_ref = mean interval temperature, stored fixed
+        tref = res.params[f"{name}_tref"]
+        assert tref.fixed and tref.value == pytest.approx(np.mean(run.intervals.temp), abs=1e-3)
+        # s at T_ref: the true shift moved along the temperature line
+        for a in axes:
+            if name == "bias_temperature":
+                expect = sensor.s[a] + coeffs[f"{name}_{'xyz'[a]}"] * (tref.value - 25.0)
+                assert res.params[f"s{a + 1}"].value == pytest.approx(expect, abs=5 * res.std[f"s{a + 1}"] + 0.5)
+
+
+def test_rescaled_readings_give_the_same_relative_coefficients(tmp_path):
+    """The same recording in counts and in counts / 1000: k scales by 1/1000, c is unchanged."""
+    rng = np.random.default_rng(21)
+    sensor = dataclasses.replace(mems_counts_sensor(rng, noise_counts=1.0), quantum=0.0,
+                                 effects={"bias_temperature": {"bias_temperature_y": 5.0},
+                                          "scale_temperature": {"scale_temperature_x": 2e-4}})
+    sim = simulate(sensor, _plan(rng), seed=2, temperature=TemperatureProfile(period=90.0, swing=4.0))
+    small = dataclasses.replace(sim, raw=sim.raw / 1000.0)
+    fx = {"effects": [{"name": "bias_temperature", "axes": ["y"]}, {"name": "scale_temperature", "axes": ["x"]}]}
+    r1 = calibrate(config_from_dict({"data": {"path": _write(tmp_path, sim, "a.csv")}, "fit": fx})).result
+    r2 = calibrate(config_from_dict({"data": {"path": _write(tmp_path, small, "b.csv")}, "fit": fx})).result
+    assert r2.params["bias_temperature_y"].value * 1000 == pytest.approx(r1.params["bias_temperature_y"].value,
+                                                                          rel=1e-4)
+    assert r2.params["scale_temperature_x"].value == pytest.approx(r1.params["scale_temperature_x"].value, rel=1e-4)
+    assert r2.chi2 == pytest.approx(r1.chi2, rel=1e-3)
+
+
+# --- refusals ----------------------------------------------------------------------------------
+def test_refuses_temperature_effect_without_temp_column():
+    e = [make_effect("bias_temperature", (0,))]
+    with pytest.raises(ImucalError) as exc:
+        check_effects(e, {"temp": None, "time": np.arange(20.0)}, 20, 10, "rec.csv")
+    msg = str(exc.value)
+    assert "rec.csv" in msg and "data.columns.temp" in msg and "no temp column" in msg and "fix:" in msg
+    assert "\n" not in msg
+
+
+def test_refuses_constant_temperature():
+    e = [make_effect("scale_temperature", (1,))]
+    temp = np.full(20, 31.0) + np.linspace(0, MIN_TEMPERATURE_SPREAD / 2, 20)
+    with pytest.raises(ImucalError, match=r"temperature is constant \(interval means span 0.25 degC < 0.5 degC\)"):
+        check_effects(e, {"temp": temp, "time": np.arange(20.0)}, 20, 10, None)
+
+
+def test_refuses_too_few_intervals_for_the_effect_parameters():
+    e = [make_effect("bias_drift", (0, 1, 2))]
+    with pytest.raises(ImucalError, match="14 static intervals are too few for 12 free parameters.*at least 15"):
+        check_effects(e, {"temp": None, "time": np.arange(14.0)}, 14, 12, None)
+
+
+def test_calibrate_refuses_temperature_effect_on_constant_temperature(tmp_path):
+    rng = np.random.default_rng(5)
+    sim = simulate(mems_counts_sensor(rng), _plan(rng), seed=1,
+                   temperature=TemperatureProfile(start=30.0, plateau=30.0, swing=0.0, noise=0.01))
+    cfg = config_from_dict({"data": {"path": _write(tmp_path, sim)},
+                            "fit": {"effects": [{"name": "bias_temperature", "axes": ["x"]}]}})
+    with pytest.raises(ImucalError) as exc:
+        calibrate(cfg)
+    assert "temperature is constant" in str(exc.value) and "rec.csv" in str(exc.value)
+
+
+def test_calibrate_refuses_temperature_effect_without_temp(tmp_path):
+    rng = np.random.default_rng(6)
+    sim = simulate(mems_counts_sensor(rng), _plan(rng), seed=1)
+    cfg = config_from_dict({"data": {"path": _write(tmp_path, sim)},
+                            "fit": {"effects": [{"name": "scale_temperature", "axes": ["x", "y"]}]}})
+    with pytest.raises(ImucalError, match="scale_temperature needs temperature but the data have no temp column"):
+        calibrate(cfg)
+
+
+def test_prepare_parameters_sets_reference_temperature():
+    effects = [make_effect("bias_temperature", (0,)), make_effect("scale_temperature", (2,))]
+    model = build_model(effects)
+    params = model.parameters(base_parameters([0, 0, 0], [1, 1, 1]))
+    temp = np.linspace(20, 40, 30)
+    out = prepare_parameters(effects, params, {"temp": temp, "time": np.arange(30.0)}, 30)
+    assert out["bias_temperature_tref"].value == pytest.approx(30.0)
+    assert out["scale_temperature_tref"].value == pytest.approx(30.0)
+    assert out["bias_temperature_tref"].fixed
+
+
+# --- the calibration file carries the effects -----------------------------------------------------
+def test_calibration_file_round_trip_and_apply_with_temperature(tmp_path):
+    rng = np.random.default_rng(8)
+    sensor = dataclasses.replace(mems_counts_sensor(rng, noise_counts=1.0),
+                                 effects={"bias_temperature": {"bias_temperature_z": 6.0}})
+    sim = simulate(sensor, _plan(rng), seed=3, temperature=TemperatureProfile(period=100.0, swing=4.0))
+    cfg = config_from_dict({"data": {"path": _write(tmp_path, sim)},
+                            "fit": {"effects": [{"name": "bias_temperature", "axes": ["z"]}]}})
+    run = calibrate(cfg)
+    cal = run.calibration
+    path = tmp_path / "cal.yaml"
+    cal.save(path)
+    import yaml
+
+    d = yaml.safe_load(path.read_text())
+    assert d["effects"] == [{"name": "bias_temperature", "axes": ["z"]}]
+    assert d["parameters"]["bias_temperature_z"]["unit"] == "raw/degC"
+    assert d["parameters"]["bias_temperature_tref"]["fixed"] is True
+    back = from_dict(d, str(path))
+    assert isinstance(back, Calibration) and back.covariates == ("temp",)
+    still = sim.still
+    a = back.apply(sim.raw[still], {"temp": sim.temp[still]})
+    a0 = cal.apply(sim.raw[still], {"temp": sim.temp[still]})
+    np.testing.assert_allclose(a, a0, rtol=1e-12, atol=1e-12)
+    # with the effect the norm is g; the same parameters without it are visibly off at the extremes
+    assert abs(np.mean(np.linalg.norm(a, axis=1)) - G) < 2e-3
+    with pytest.raises(ImucalError, match=r"needs covariate\(s\) \['temp'\]"):
+        back.apply(sim.raw[:5])
+
+
+def test_effect_without_covariates_applies(tmp_path):
+    rng = np.random.default_rng(9)
+    sensor = dataclasses.replace(mems_counts_sensor(rng, noise_counts=1.0),
+                                 effects={"scale_nonlinearity": {"scale_nonlinearity_x": 5e-4}})
+    sim = simulate(sensor, _plan(rng, n_random=8), seed=4)
+    run = calibrate(config_from_dict({"data": {"path": _write(tmp_path, sim)},
+                                      "fit": {"effects": [{"name": "scale_nonlinearity", "axes": ["x"]}]}}))
+    a = run.calibration.apply(sim.raw[sim.still])
+    assert abs(np.sqrt(np.mean((np.linalg.norm(a, axis=1) - G) ** 2))) < 5e-3
+    assert math.isfinite(run.result.std["scale_nonlinearity_x"])
