@@ -100,8 +100,15 @@ class Calibration:
         n = raw.shape[0]
         C = np.column_stack([np.broadcast_to(np.asarray(covariates[c], float), (n,)) for c in covs]) if covs \
             else np.zeros((n, 0))  # effects without covariates (scale_nonlinearity)
-        f = self.model.accel.map(n, "thread" if n > 20000 else "serial")
+        # Serial map: CasADi's "thread" map aborts the process for large n (one thread per call).
+        f = self.model.accel.map(n, "serial")
         return np.asarray(f(raw.T, C.T, self.values)).T
+
+    def generate_c(self, prefix: str = "imucal", precision: str = "float"):
+        """C source applying this calibration (see imucal.codegen.generate_c)."""
+        from .codegen import generate_c
+
+        return generate_c(self, prefix=prefix, precision=precision)
 
     # --- files -------------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
