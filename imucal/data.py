@@ -6,6 +6,7 @@ import io
 import math
 import os
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -51,7 +52,7 @@ class DataSpec:
                                              or not isinstance(self.sample_rate, (int, float))):
             raise ImucalError(f"sample rate {self.sample_rate!r} must be a positive number of Hz",
                               field="data.sample_rate", fix="give the logging rate in Hz")
-        if not isinstance(self.columns, dict):
+        if not isinstance(self.columns, Mapping):
             raise ImucalError("must map roles to columns", field="data.columns")
         for role, col in self.columns.items():
             if not ((isinstance(col, int) and not isinstance(col, bool) and col >= 0)

@@ -145,8 +145,9 @@ def crlb(F: np.ndarray, free: Sequence[str] = BASE_NAMES) -> np.ndarray:
     c = np.sqrt(np.clip(np.diag(F), 1e-300, None))
     Fn = F / np.outer(c, c)
     w, V = np.linalg.eigh(Fn)
-    if w[0] <= 1e-10 * max(w[-1], 1e-300):
-        und = [free[j] for j in np.flatnonzero(np.abs(V[:, 0]) > 0.3)]
+    null = w <= 1e-10 * max(w[-1], 1e-300)
+    if null.any():
+        und = [free[j] for j in np.flatnonzero(np.abs(V[:, null]).max(axis=1) > 0.3)]
         raise ImucalError(f"the poses leave {', '.join(und) or 'some parameters'} undetermined "
                           "(Fisher information is singular)", field="poses",
                           fix="add orientations with gravity between the axes, e.g. the 12 cube edges")
@@ -274,7 +275,7 @@ def evaluate(directions: np.ndarray, criterion: str = "D", noise: float = DEFAUL
     F = fisher(u, noise, sensor, gravity, free)
     C = crlb(F, free)
     c = sensor.column_scale(gravity)[idx]
-    Fn = F / np.outer(c, c) * noise**2  # unit noise, acceleration-equivalent units
+    Fn = F * np.outer(c, c) * noise**2  # unit noise, acceleration-equivalent units
     sign, logdet = np.linalg.slogdet(F)
     return Design(directions=u, criterion=criterion, value=criterion_value(Fn, criterion),
                   log_det_fisher=float(logdet) if sign > 0 else -math.inf,
@@ -330,8 +331,23 @@ class _Scorer:
         return np.where(missing == 0, -np.sum(1 / wv, axis=1), -1e12 * missing - 1e9)
 
 
-def _rows(u: np.ndarray, sensor: DesignSensor, gravity: float, idx: list[int], c: np.ndarray) -> np.ndarray:
-    return sensitivity(u, sensor, gravity)[:, idx] / c
+class _RowMap:
+    """Normalised sensitivity rows for many directions, with the sensor's matrices precomputed."""
+
+    def __init__(self, sensor: DesignSensor, gravity: float, idx: list[int], c: np.ndarray) -> None:
+        E = _frame(sensor.angles)
+        self.EinvT = np.linalg.inv(E).T
+        self.gE = gravity * E
+        self.b = np.asarray(sensor.b, float)
+        self.gs = gravity * np.sin(np.asarray(sensor.angles, float))
+        self.idx, self.c = idx, c
+
+    def __call__(self, u: np.ndarray) -> np.ndarray:
+        w = u @ self.EinvT  # E^-1 u
+        m = u @ self.gE
+        J = np.concatenate([-w / self.b, -w * m / self.b,
+                            self.gs * (w[:, [0, 0, 1]] * w[:, [1, 2, 2]])], axis=1)  # as sensitivity()
+        return J[:, self.idx] * self.c
 
 
 def _exchange(cand: np.ndarray, rows_c: np.ndarray, start: np.ndarray, scorer: _Scorer,
@@ -362,89 +378,112 @@ def _exchange(cand: np.ndarray, rows_c: np.ndarray, start: np.ndarray, scorer: _
 
 def _tangent_basis(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     a = np.array([1.0, 0, 0]) if abs(u[0]) < 0.9 else np.array([0, 1.0, 0])
-    t1 = np.cross(u, a)
-    t1 /= np.linalg.norm(t1)
-    return t1, np.cross(u, t1)
+    t1 = a - (a @ u) * u
+    t1 /= math.sqrt(t1 @ t1)
+    t2 = np.array([u[1] * t1[2] - u[2] * t1[1], u[2] * t1[0] - u[0] * t1[2], u[0] * t1[1] - u[1] * t1[0]])
+    return t1, t2
 
 
-def _refine(U: np.ndarray, scorer: _Scorer, rowfn, step0: float = 0.06, step_min: float = 1e-7,
-            max_sweeps: int = 30) -> tuple[np.ndarray, float]:
-    """Continuous pattern search for each pose on the sphere (others fixed), sweep until stable."""
+def _refine(U: np.ndarray, scorer: _Scorer, rowfn: _RowMap, step0: float = 0.05, step_min: float = 1e-6,
+            max_rounds: int = 400) -> tuple[np.ndarray, float]:
+    """Continuous pattern search on the sphere, one pose at a time with its own step size.
+
+    Each round tries 8 moves of every pose at its step; success grows the step, failure halves
+    it; stops when every step is below ``step_min`` [rad].
+    """
     U = U.copy()
     R = rowfn(U)
     F = R.T @ R
     best = scorer.score(F)
     ang = np.linspace(0, 2 * math.pi, 8, endpoint=False)
-    dirs2 = np.column_stack([np.cos(ang), np.sin(ang)])
-    for _ in range(max_sweeps):
-        gain = 0.0
-        for k in range(U.shape[0]):
-            F_rest = F - np.outer(R[k], R[k])
-            step = step0
-            while step > step_min:
-                t1, t2 = _tangent_basis(U[k])
-                cand = U[k] + step * (dirs2[:, :1] * t1 + dirs2[:, 1:] * t2)
-                cand /= np.linalg.norm(cand, axis=1, keepdims=True)
-                rc = rowfn(cand)
-                v = scorer.batch(F_rest, rc)
-                j = int(np.argmax(v))
-                if v[j] > best + 1e-13 * max(1.0, abs(best)):
-                    gain += v[j] - best
-                    U[k], R[k] = cand[j], rc[j]
-                    F = F_rest + np.outer(R[k], R[k])
-                    best = scorer.score(F)
-                else:
-                    step *= 0.5
-        if gain <= 1e-10 * max(1.0, abs(best)):
+    cs, sn = np.cos(ang)[:, None], np.sin(ang)[:, None]
+    steps = np.full(U.shape[0], step0)
+    for _ in range(max_rounds):
+        if np.all(steps < step_min):
             break
+        for k in np.flatnonzero(steps >= step_min):
+            F_rest = F - np.outer(R[k], R[k])
+            t1, t2 = _tangent_basis(U[k])
+            cand = U[k] + steps[k] * (cs * t1 + sn * t2)
+            cand /= np.linalg.norm(cand, axis=1, keepdims=True)
+            rc = rowfn(cand)
+            v = scorer.batch(F_rest, rc)
+            j = int(np.argmax(v))
+            if v[j] > best + 1e-14 * max(1.0, abs(best)):
+                U[k], R[k] = cand[j], rc[j]
+                F = F_rest + np.outer(R[k], R[k])
+                best = scorer.score(F)
+                steps[k] = min(steps[k] * 1.5, step0)
+            else:
+                steps[k] *= 0.5
     return U, best
 
 
-def optimal_design(n: int, criterion: str = "D", noise: float = DEFAULT_NOISE,
-                   sensor: DesignSensor = DesignSensor(), gravity: float = STANDARD_GRAVITY,
-                   free: Sequence[str] = BASE_NAMES, seed: int = 0, starts: int = 6,
-                   grid: int = 600, candidates: np.ndarray | None = None, refine: bool = True,
-                   distinct: bool = False) -> Design:
-    """N poses maximising the information on the free parameters (coordinate exchange + refinement).
-
-    ``candidates`` restricts the search to given directions (e.g. the 26 cube directions, with
-    ``distinct=True`` and ``refine=False`` for the best cube subset).
-    """
-    free = tuple(free)
+def _setup(n: int, criterion: str, sensor: DesignSensor, gravity: float, free: tuple[str, ...]
+           ) -> tuple[_Scorer, _RowMap]:
     if criterion not in CRITERIA:
         raise ImucalError(f"unknown criterion {criterion!r}", field="criterion", fix="use D, A or E")
-    if not isinstance(n, (int, np.integer)) or n < len(free):
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < len(free):
         raise ImucalError(f"{n} poses cannot determine {len(free)} parameters", field="n",
                           fix=f"ask for at least {len(free)} poses (12 or more leave room to check the fit)")
     if n > 1000:
         raise ImucalError(f"{n} poses is more than a calibration needs", field="n", fix="ask for at most 1000")
-    from .simulate import cube_directions
-
-    if candidates is None:
-        cand = np.vstack([cube_directions("faces+edges+corners"), fibonacci_sphere(grid)])
-    else:
-        cand = unit_rows(candidates)
-    if distinct and n > cand.shape[0]:
-        raise ImucalError(f"{n} distinct poses requested from {cand.shape[0]} candidates", field="n")
     idx_p = _select(free)
-    c = sensor.column_scale(gravity)[idx_p]
+    return _Scorer(criterion, len(free)), _RowMap(sensor, gravity, idx_p, sensor.column_scale(gravity)[idx_p])
 
-    def rowfn(u: np.ndarray) -> np.ndarray:
-        return _rows(u, sensor, gravity, idx_p, c)
 
+def _exchange_starts(cand: np.ndarray, n: int, scorer: _Scorer, rowfn: _RowMap, rng: np.random.Generator,
+                     starts: int, distinct: bool) -> list[tuple[float, np.ndarray]]:
     rows_c = rowfn(cand)
-    scorer = _Scorer(criterion, len(free))
-    rng = np.random.default_rng(seed)
-    best_u, best_v = None, -np.inf
-    for s in range(max(1, starts)):
+    found = []
+    for _ in range(max(1, starts)):
         start = rng.choice(cand.shape[0], size=n, replace=n > cand.shape[0])
         idx, v = _exchange(cand, rows_c, start, scorer, distinct)
-        U = cand[idx]
-        if refine:
-            U, v = _refine(U, scorer, rowfn)
-        if v > best_v:
-            best_u, best_v = U, v
-    assert best_u is not None
+        found.append((v, cand[idx]))
+    return sorted(found, key=lambda t: -t[0])
+
+
+def best_cube_subset(n: int, criterion: str = "D", noise: float = DEFAULT_NOISE,
+                     sensor: DesignSensor = DesignSensor(), gravity: float = STANDARD_GRAVITY,
+                     free: Sequence[str] = BASE_NAMES, seed: int = 0, starts: int = 20) -> Design:
+    """The best n distinct directions among the 26 of a cube (faces, edges, corners), by exchange."""
+    from .simulate import cube_directions
+
+    free = tuple(free)
+    scorer, rowfn = _setup(n, criterion, sensor, gravity, free)
+    if n > 26:
+        raise ImucalError(f"a cube has 26 directions, not {n}", field="n")
+    v, U = _exchange_starts(cube_directions("faces+edges+corners"), n, scorer, rowfn,
+                            np.random.default_rng(seed), starts, distinct=True)[0]
+    return evaluate(U, criterion, noise, sensor, gravity, free, label="best cube subset", check_distinct=False)
+
+
+def optimal_design(n: int, criterion: str = "D", noise: float = DEFAULT_NOISE,
+                   sensor: DesignSensor = DesignSensor(), gravity: float = STANDARD_GRAVITY,
+                   free: Sequence[str] = BASE_NAMES, seed: int = 0, starts: int = 6, grid: int = 600) -> Design:
+    """N poses maximising the information on the free parameters.
+
+    Coordinate exchange from ``starts`` seeded random subsets of a Fibonacci grid (plus the 26 cube
+    directions); the common schemes with N poses and the best N-subset of the cube directions join
+    as starting designs; the best three are polished by a pattern search on the sphere. The result
+    therefore never scores below those schemes.
+    """
+    from .simulate import cube_directions
+
+    free = tuple(free)
+    scorer, rowfn = _setup(n, criterion, sensor, gravity, free)
+    rng = np.random.default_rng(seed)
+    cand = np.vstack([cube_directions("faces+edges+corners"), fibonacci_sphere(grid)])
+    found = _exchange_starts(cand, n, scorer, rowfn, rng, starts, distinct=False)
+    seeds = [scheme_directions(k) for k, m in SCHEMES.items() if m == n]
+    if n <= 26:
+        seeds.append(best_cube_subset(n, criterion, noise, sensor, gravity, free, seed=seed).directions)
+    for U in seeds:
+        R = rowfn(U)
+        found.append((scorer.score(R.T @ R), U))
+    found.sort(key=lambda t: -t[0])
+    # polish the three best off the grid; refinement only improves a design
+    best_u, _ = max((_refine(U, scorer, rowfn) for _, U in found[:3]), key=lambda t: t[1])
     d = evaluate(best_u, criterion, noise, sensor, gravity, free, label=f"planned-{criterion}",
                  check_distinct=False)
     return Design(**{**d.__dict__, "meta": {"seed": seed, "starts": starts, "grid": grid}})
@@ -478,22 +517,14 @@ def compare(planned: Design, sensor: DesignSensor = DesignSensor(), gravity: flo
     n, crit, free = planned.n, planned.criterion, planned.free
     others: list[Design] = []
     for name, k in SCHEMES.items():
-        if k != n:
+        if k != n or name == planned.label:
             continue
         try:
             others.append(evaluate(scheme_directions(name), crit, planned.noise, sensor, gravity, free, label=name))
         except ImucalError:
             pass  # e.g. cube-24: only 6 distinct directions (reported by evaluate when asked)
     if cube_subset and n <= 26:
-        from .simulate import cube_directions
-
-        sub = optimal_design(n, crit, planned.noise, sensor, gravity, free, seed=seed, starts=20,
-                             candidates=cube_directions("faces+edges+corners"), refine=False, distinct=True)
-        try:
-            others.append(evaluate(sub.directions, crit, planned.noise, sensor, gravity, free,
-                                   label="best cube subset"))
-        except ImucalError:
-            pass
+        others.append(best_cube_subset(n, crit, planned.noise, sensor, gravity, free, seed=seed))
     rng = np.random.default_rng(seed)
     vals = []
     for _ in range(n_random):

@@ -381,39 +381,97 @@ def _found(name: str, axes: tuple[int, ...], res: FitResult, lr: float, p: float
                        ambiguous_with=ambiguous)
 
 
+def _candidates(names: Sequence[str], cur_effects: dict[str, tuple[int, ...]], n_free: int, n_rows: int,
+                n_distinct: int) -> list[tuple[str, tuple[int, ...], tuple[int, ...]]]:
+    """(name, merged axes, new axes) of every candidate: each effect on each axis subset, merged
+    with the same effect already in the model, that the intervals can still carry."""
+    out, seen = [], set()
+    for n in names:
+        have = set(cur_effects.get(n, ()))
+        for sub in _subsets():
+            new = tuple(sorted(set(sub) - have))
+            merged = tuple(sorted(set(sub) | have))
+            nf = n_free + len(new)
+            if not new or (n, merged) in seen or n_rows - nf < MIN_DOF or nf > n_distinct:
+                continue
+            seen.add((n, merged))
+            out.append((n, merged, new))
+    return out
+
+
+def _round(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]], names: Sequence[str],
+           cands: list, settings: DiscoverSettings, index: int, notes: list[str]
+           ) -> tuple[Step, dict[int, FitResult]]:
+    """Screen every candidate, fit the finalists, test them, pick the winner (if any)."""
+    # Screening: Gauss-Newton chi-square of each candidate from the current fit.
+    Jw, rw, col, cur_free = _screen(prob, current, cur_effects, names)
+    base_cols = [col[n] for n in cur_free]
+    screened = [Candidate(n, merged, new, chi2_screen=_linear_chi2(
+        Jw, rw, base_cols + [col[c] for c in make_effect(n, new).coefficient_names])) for n, merged, new in cands]
+    # Full fits: the best few by the screening score, and every non-nested competitor close
+    # enough to the best to matter for the ambiguity check.
+    def pre(c: Candidate) -> float:
+        return c.chi2_screen + settings.penalty * c.k
+
+    order = sorted(range(len(screened)), key=lambda i: pre(screened[i]))
+    top = screened[order[0]]
+    pick = list(order[: settings.full_fits])
+    pick += [i for i in order[settings.full_fits:]
+             if pre(screened[i]) - pre(top) < settings.ambiguity + _SCREEN_SLACK and not _nested(screened[i], top)]
+    pick = pick[: 2 * settings.full_fits]
+    M = len(screened)  # Bonferroni over every candidate of the round, screened or fitted
+    fits: dict[int, FitResult] = {}
+    for i in pick:
+        c = screened[i]
+        try:
+            res = prob.fit(_canonical({**cur_effects, c.name: c.axes}), current.values())
+        except ImucalError as exc:
+            notes.append(f"{c.label}: {exc.message}")
+            continue
+        fits[i] = res
+        # LR scaled by the misfit the candidate leaves: an underestimated noise cannot pass for an effect.
+        # A fit that stopped early has a chi2 above its optimum, so its LR errs on the small side.
+        lr = max(0.0, (current.chi2 - res.chi2) / max(1.0, res.redchi))
+        p = chi2_sf(lr, c.k)
+        screened[i] = dataclasses.replace(c, chi2=res.chi2, dof=res.dof, lr=lr, p_value=p,
+                                          p_adjusted=min(1.0, p * M), fitted=True, converged=res.success,
+                                          significant=bool(np.isfinite(res.chi2)) and p * M < settings.alpha_effect)
+    sig = [i for i in fits if screened[i].significant]
+    # The misfit scale candidates are ranked on: the least misfit among the significant ones (or
+    # among all fitted ones when none is significant, for the report).
+    common = max(1.0, min((fits[i].redchi for i in (sig or fits)), default=1.0))
+    for i in fits:
+        screened[i] = dataclasses.replace(screened[i], score=screened[i].chi2 / common + settings.penalty * screened[i].k)
+    if not sig:
+        return Step(index, current.chi2, current.dof, tuple(screened), None, scale=common), fits
+    best = min(sig, key=lambda i: screened[i].score)
+    chosen = screened[best]
+    amb = tuple(screened[i] for i in sig if i != best and not _nested(screened[i], chosen)
+                and screened[i].score - chosen.score < settings.ambiguity)
+    return Step(index, current.chi2, current.dof, tuple(screened), chosen, amb, common), {best: fits[best]}
+
+
 def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings()) -> Discovery:
     """Fit the base model, test its residual against the noise, add effects while they are needed."""
     notes: list[str] = []
     if config.fit.mode != "means":
         notes.append("discovery works on interval means; fit.mode: samples was ignored")
         config = dataclasses.replace(config, fit=dataclasses.replace(config.fit, mode="means"))
-    base = calibrate(config)
+    try:
+        base = calibrate(config)
+    except ImucalError as exc:
+        if exc.field != "intervals":
+            raise
+        raise ImucalError(f"discover fits interval means: {exc.message}", file=exc.file, field=exc.field,
+                          fix="record more static orientations (e.g. 18 to 30 holds of 3 s)") from None
     prob = _Problem(config, base)
-    iv = base.intervals
-    names = list(settings.candidates)
-    # Which candidates the data can carry at all.
-    temp_names = [n for n in names if "temp" in EFFECTS[n].covariates]
-    if temp_names:
-        reason = None
-        if iv.temp is None:
-            reason = "the data have no temp column"
-        elif temperature_spread(iv.temp) < MIN_TEMPERATURE_SPREAD:
-            reason = (f"the temperature is constant (interval means span {temperature_spread(iv.temp):.3g} degC "
-                      f"< {MIN_TEMPERATURE_SPREAD} degC)")
-        if reason:
-            if len(temp_names) == len(names):
-                raise ImucalError(f"{', '.join(temp_names)} cannot be tested: {reason}", file=base.recording.source,
-                                  field="candidates", fix="record with a changing temperature column, or test "
-                                                          "other effects")
-            notes.append(f"temperature effects not tested: {reason}")
-            names = [n for n in names if n not in temp_names]
+    iv, src = base.intervals, base.recording.source
+    names = _testable(list(settings.candidates), iv, src, notes)
     n_free0 = len(base.result.free_names)
-    n_distinct = base.observability.n_distinct
     if iv.n - (n_free0 + 1) < MIN_DOF:
         raise ImucalError(f"{iv.n} static intervals are too few to test effects: the base model has {n_free0} free "
                           f"parameters, one effect coefficient more needs at least {n_free0 + 1 + MIN_DOF} intervals",
-                          file=base.recording.source, field="intervals",
-                          fix="record more static orientations (e.g. 18 to 30 holds of 3 s)")
+                          file=src, field="intervals", fix="record more static orientations (e.g. 18 to 30 holds of 3 s)")
 
     current = base.result
     cur_effects = _as_dict(base.calibration.effect_objects())
@@ -422,125 +480,79 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings())
     steps: list[Step] = []
     found: list[tuple[str, float, float, tuple[str, ...]]] = []  # name, lr, p, ambiguous
     disagreement: list[tuple[str, float]] = []
-    verdict = ""
-    if consistent:
-        verdict = (f"consistent with noise: chi2/dof = {current.redchi:.3g} (p = {p_before:.3g}); "
-                   "the base model explains the data")
+    verdict = (f"consistent with noise: chi2/dof = {current.redchi:.3g} (p = {p_before:.3g}); "
+               "the base model explains the data")
     while not consistent:
         if len(steps) >= settings.max_effects:
             verdict = f"stopped after {settings.max_effects} effects; the residual still disagrees with the noise"
             break
-        # Candidates: each effect on each axis subset, merged with what the model already has.
-        cands: list[tuple[str, tuple[int, ...], tuple[int, ...]]] = []
-        seen = set()
-        for n in names:
-            have = set(cur_effects.get(n, ()))
-            for sub in _subsets():
-                new = tuple(sorted(set(sub) - have))
-                merged = tuple(sorted(set(sub) | have))
-                if not new or (n, merged) in seen:
-                    continue
-                nf = len(current.free_names) + len(new)
-                if iv.n - nf < MIN_DOF or nf > n_distinct:
-                    continue
-                seen.add((n, merged))
-                cands.append((n, merged, new))
+        cands = _candidates(names, cur_effects, len(current.free_names), iv.n, base.observability.n_distinct)
         if not cands:
-            notes.append(f"no candidate fits: {iv.n} intervals ({n_distinct} distinct orientations) leave too few "
-                         f"degrees of freedom for {len(current.free_names)} + 1 free parameters")
+            notes.append(f"no candidate fits: {iv.n} intervals ({base.observability.n_distinct} distinct "
+                         f"orientations) leave too few degrees of freedom for {len(current.free_names)} + 1 "
+                         "free parameters")
             verdict = "disagreement, but too few intervals to test more effects"
             break
-        # Screening: Gauss-Newton chi-square of each candidate from the current fit.
-        Jw, rw, col, cur_free = _screen(prob, current, cur_effects, names)
-        base_cols = [col[n] for n in cur_free]
-        screened = []
-        for n, merged, new in cands:
-            e = make_effect(n, new)
-            cols = base_cols + [col[c] for c in e.coefficient_names]
-            screened.append(Candidate(n, merged, new, chi2_screen=_linear_chi2(Jw, rw, cols)))
-        if not steps:
-            single = [c for c in screened if len(c.new_axes) == 1 and c.axes == c.new_axes]
-            disagreement = sorted(((f"{c.name}[{AXIS_NAMES[c.axes[0]]}]", current.chi2 - c.chi2_screen)
-                                   for c in single), key=lambda t: -t[1])
-        # Full fits: the best few by the screening score, and every non-nested competitor close
-        # enough to the best to matter for the ambiguity check.
-        order = sorted(range(len(screened)), key=lambda i: screened[i].chi2_screen + settings.penalty * screened[i].k)
-        top = screened[order[0]]
-        top_score = top.chi2_screen + settings.penalty * top.k
-        pick = list(order[: settings.full_fits])
-        for i in order[settings.full_fits:]:
-            c = screened[i]
-            if (c.chi2_screen + settings.penalty * c.k - top_score < settings.ambiguity + _SCREEN_SLACK
-                    and not _nested(c, top) and len(pick) < 2 * settings.full_fits):
-                pick.append(i)
-        M = len(screened)
-        fits: dict[int, FitResult] = {}
-        for i in pick:
-            c = screened[i]
-            trial = dict(cur_effects)
-            trial[c.name] = c.axes
-            try:
-                res = prob.fit(_canonical(trial), current.values())
-            except ImucalError as exc:
-                notes.append(f"{c.label}: {exc.message}")
-                continue
-            fits[i] = res
-            scale = max(1.0, res.redchi)
-            lr = max(0.0, (current.chi2 - res.chi2) / scale)
-            p = chi2_sf(lr, c.k)
-            screened[i] = dataclasses.replace(c, chi2=res.chi2, dof=res.dof, lr=lr, p_value=p,
-                                              p_adjusted=min(1.0, p * M), fitted=True, converged=res.success,
-                                              significant=bool(np.isfinite(res.chi2)) and p * M < settings.alpha_effect)
-        sig = [i for i in fits if screened[i].significant]
-        # The misfit scale candidates are compared on: the least misfit among the significant ones
-        # (or among all fitted ones when none is significant, for the report).
-        common = max(1.0, min((fits[i].redchi for i in (sig or fits)), default=1.0))
-        for i in fits:
-            c = screened[i]
-            screened[i] = dataclasses.replace(c, score=c.chi2 / common + settings.penalty * c.k)
-        if not sig:
-            steps.append(Step(len(steps) + 1, current.chi2, current.dof, tuple(screened), None, scale=common))
+        step, fits = _round(prob, current, cur_effects, names, cands, settings, len(steps) + 1, notes)
+        steps.append(step)
+        if step.index == 1:  # where the base model disagrees: single-axis patterns, linearised
+            disagreement = sorted(((c.label, current.chi2 - c.chi2_screen) for c in step.candidates
+                                   if len(c.axes) == 1 and c.axes == c.new_axes), key=lambda t: -t[1])
+        if step.chosen is None:
             verdict = (f"disagreement not explained by any candidate: chi2/dof = {current.redchi:.3g} "
                        f"(p = {_p_noise(current):.3g}) and no candidate effect is significant")
             if found:
-                verdict = (f"partly explained by {_added(found, cur_effects)}; the "
-                           f"remaining {verdict}")
+                verdict = f"partly explained by {_added(found, cur_effects)}; the remaining {verdict}"
             break
-        best = min(sig, key=lambda i: screened[i].score)
-        chosen = screened[best]
-        amb = tuple(screened[i] for i in sig if i != best and not _nested(screened[i], chosen)
-                    and screened[i].score - chosen.score < settings.ambiguity)
-        steps.append(Step(len(steps) + 1, current.chi2, current.dof, tuple(screened), chosen, amb, common))
-        found.append((chosen.name, chosen.lr, chosen.p_adjusted, tuple(c.label for c in amb)))
-        cur_effects = dict(cur_effects)
-        cur_effects[chosen.name] = chosen.axes
-        current = fits[best]
+        c = step.chosen
+        found.append((c.name, c.lr, c.p_adjusted, tuple(a.label for a in step.ambiguous_with)))
+        cur_effects = {**cur_effects, c.name: c.axes}
+        (current,) = fits.values()
         consistent = _p_noise(current) >= settings.alpha_noise
         if consistent:
             verdict = (f"explained: after adding {_added(found, cur_effects)} "
                        f"chi2/dof = {current.redchi:.3g} (p = {_p_noise(current):.3g}), at noise level")
-    # The final calibration: the whole pipeline once more with the effects found.
-    final = base
-    if found:
-        specs = tuple(EffectSpec(n, tuple(AXIS_NAMES[a] for a in ax)) for n, ax in
-                      sorted(cur_effects.items(), key=lambda kv: _EFFECT_ORDER[kv[0]]))
-        cfg = dataclasses.replace(config, fit=dataclasses.replace(config.fit, effects=specs))
-        final = calibrate(cfg)
-        if final.result.chi2 > current.chi2 * (1 + 1e-6) + 1e-9:
-            notes.append(f"the final calibration's chi2 {final.result.chi2:.6g} is above the discovery fit's "
-                         f"{current.chi2:.6g} (a different local optimum)")
-    effects: list[FoundEffect] = []
-    last_lr: dict[str, tuple[float, float, tuple[str, ...]]] = {}
-    for n, lr, p, amb in found:
-        last_lr[n] = (lr, p, amb)
-    for n, ax in sorted(cur_effects.items(), key=lambda kv: _EFFECT_ORDER[kv[0]]):
-        if n in last_lr:
-            effects.append(_found(n, ax, final.result, *last_lr[n]))
+    final = _final_run(config, base, found, cur_effects, current, notes)
+    last = {n: (lr, p, amb) for n, lr, p, amb in found}
+    effects = tuple(_found(n, ax, final.result, *last[n]) for n, ax in
+                    sorted(cur_effects.items(), key=lambda kv: _EFFECT_ORDER[kv[0]]) if n in last)
     p_after = _p_noise(final.result)
-    return Discovery(base=base, final=final, steps=tuple(steps), effects=tuple(effects), verdict=verdict,
+    return Discovery(base=base, final=final, steps=tuple(steps), effects=effects, verdict=verdict,
                      consistent_before=p_before >= settings.alpha_noise,
                      consistent_after=p_after >= settings.alpha_noise, p_before=p_before, p_after=p_after,
                      disagreement=tuple(disagreement), notes=tuple(notes), settings=settings)
+
+
+def _testable(names: list[str], iv, source: str, notes: list[str]) -> list[str]:
+    """Drop the temperature effects when the data cannot carry them (and say why)."""
+    temp_names = [n for n in names if "temp" in EFFECTS[n].covariates]
+    reason = None
+    if temp_names and iv.temp is None:
+        reason = "the data have no temp column"
+    elif temp_names and temperature_spread(iv.temp) < MIN_TEMPERATURE_SPREAD:
+        reason = (f"the temperature is constant (interval means span {temperature_spread(iv.temp):.3g} degC "
+                  f"< {MIN_TEMPERATURE_SPREAD} degC)")
+    if reason is None:
+        return names
+    if len(temp_names) == len(names):
+        raise ImucalError(f"{', '.join(temp_names)} cannot be tested: {reason}", file=source, field="candidates",
+                          fix="record with a changing temperature column, or test other effects")
+    notes.append(f"temperature effects not tested: {reason}")
+    return [n for n in names if n not in temp_names]
+
+
+def _final_run(config: RunConfig, base: CalibrationRun, found: list, cur_effects: dict[str, tuple[int, ...]],
+               current: FitResult, notes: list[str]) -> CalibrationRun:
+    """The whole pipeline once more with the effects found: the calibration file to keep."""
+    if not found:
+        return base
+    specs = tuple(EffectSpec(n, tuple(AXIS_NAMES[a] for a in ax)) for n, ax in
+                  sorted(cur_effects.items(), key=lambda kv: _EFFECT_ORDER[kv[0]]))
+    final = calibrate(dataclasses.replace(config, fit=dataclasses.replace(config.fit, effects=specs)))
+    if final.result.chi2 > current.chi2 * (1 + 1e-6) + 1e-9:
+        notes.append(f"the final calibration's chi2 {final.result.chi2:.6g} is above the discovery fit's "
+                     f"{current.chi2:.6g} (a different local optimum)")
+    return final
 
 
 def _label(name: str, axes: tuple[int, ...]) -> str:

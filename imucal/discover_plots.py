@@ -52,43 +52,54 @@ def residuals_figure(d: Discovery, path: str | Path) -> None:
                for i in range(3)]
     lim = max(BAND * 1.5, float(np.nanmax(np.abs(np.concatenate([before, after])))) * 1.1)
     for ax, x, label in panels:
+        if x is None:
+            ax.axis("off")
+            ax.text(0.5, 0.5, "no temperature column:\ntemperature effects not tested", ha="center",
+                    va="center", transform=ax.transAxes, color="0.35")
+            continue
         ax.axhspan(-BAND, BAND, color="0.9", zorder=0)
         ax.axhline(0, color="k", lw=0.7)
-        if x is None:
-            ax.text(0.5, 0.5, "no temperature column", ha="center", va="center", transform=ax.transAxes,
-                    color="0.4")
-            ax.set_xticks([])
-        else:
-            ax.plot(x, before, "o", ms=5, mfc="none", color="tab:red", label=f"base model ({d.base.result.model_name})")
-            if changed:
-                ax.plot(x, after, ".", ms=7, color="tab:blue", label=f"with effects ({d.final.result.model_name})")
+        ax.plot(x, before, "o", ms=5, mfc="none", color="tab:red", label=f"base model ({d.base.result.model_name})")
+        if changed:
+            ax.plot(x, after, ".", ms=7, color="tab:blue", label=f"with effects ({d.final.result.model_name})")
         ax.set_xlabel(label)
         ax.set_ylim(-lim, lim)
         ax.grid(alpha=0.3)
         ax.set_ylabel("(|a| - g) / sigma")
     # What the effects explain, interval by interval.
     ax = axes[0, 2]
-    ax.axhspan(-BAND, BAND, color="0.9", zorder=0)
     if changed:
+        ax.axhspan(-BAND, BAND, color="0.9", zorder=0)
         explained = before - after
         lo, hi = float(min(explained.min(), before.min())), float(max(explained.max(), before.max()))
         ax.plot([lo, hi], [lo, hi], color="tab:blue", lw=1, label="base residual = explained part")
         ax.plot(explained, before, "o", ms=5, mfc="none", color="tab:red")
         ax.set_xlabel("part explained by " + ", ".join(e.label for e in d.effects) + "  / sigma")
         ax.legend(fontsize=7, loc="upper left")
-    else:
-        ax.text(0.5, 0.5, "no effect added", ha="center", va="center", transform=ax.transAxes, color="0.4")
-        ax.set_xticks([])
-    ax.set_ylabel("base residual / sigma")
+        ax.set_ylabel("base residual / sigma")
+    else:  # nothing added: how the residuals compare with the noise they should have
+        edges = np.linspace(-lim, lim, 25)
+        ax.hist(before, bins=edges, color="tab:red", alpha=0.6, label="residual / sigma")
+        z = np.linspace(-lim, lim, 200)
+        width = edges[1] - edges[0]
+        ax.plot(z, before.size * width * np.exp(-z**2 / 2) / np.sqrt(2 * np.pi), color="k", lw=1,
+                label="noise alone: N(0, 1)")
+        ax.set_xlabel("(|a| - g) / sigma  (no effect added)")
+        ax.set_ylabel("intervals")
+        ax.legend(fontsize=7, loc="upper left")
     ax.grid(alpha=0.3)
     h, lab = axes[1, 0].get_legend_handles_labels()
     fig.legend(h + [plt.Rectangle((0, 0), 1, 1, color="0.9")], lab + [f"within +-{BAND:g} sigma of the noise"],
                loc="lower center", ncol=3, fontsize=9, frameon=False)
+    if changed:
+        gap = (f"chi2/dof {d.base.result.redchi:.3g} -> {d.final.result.redchi:.3g}, RMS {d.rms_before * 1e3:.3g} -> "
+               f"{d.rms_after * 1e3:.3g} mm/s^2 (noise alone {d.rms_noise * 1e3:.3g}); effects added: "
+               + ", ".join(e.label for e in d.effects))
+    else:
+        gap = (f"chi2/dof {d.base.result.redchi:.3g}, RMS {d.rms_before * 1e3:.3g} mm/s^2 (noise alone "
+               f"{d.rms_noise * 1e3:.3g}); no effect added")
     fig.suptitle(f"{Path(d.base.recording.source).name}: {iv.n} static intervals; residual of each interval mean "
-                 f"over its noise sigma\nchi2/dof {d.base.result.redchi:.3g} -> {d.final.result.redchi:.3g}, "
-                 f"RMS {d.rms_before * 1e3:.3g} -> {d.rms_after * 1e3:.3g} mm/s^2 (noise alone "
-                 f"{d.rms_noise * 1e3:.3g}); effects: {', '.join(e.label for e in d.effects) or 'none'}",
-                 fontsize=11)
+                 f"over its noise sigma\n{gap}", fontsize=11)
     fig.tight_layout(rect=(0, 0.04, 1, 1))
     fig.savefig(path, format="png")
     plt.close(fig)
@@ -123,7 +134,7 @@ def candidates_figure(d: Discovery, path: str | Path, top: int = 14) -> None:
         fig.savefig(path, format="png")
         plt.close(fig)
         return
-    fig, axes = plt.subplots(1, len(steps), figsize=(6.2 * len(steps), 0.36 * top + 1.8), dpi=100,
+    fig, axes = plt.subplots(1, len(steps), figsize=(7.5 * len(steps), 0.36 * top + 1.8), dpi=100,
                              squeeze=False)
     for ax, s in zip(axes[0], steps):
         cs = sorted(s.candidates, key=lambda c: (not c.fitted, c.score if c.fitted else c.chi2_screen))[:top]
@@ -144,9 +155,10 @@ def candidates_figure(d: Discovery, path: str | Path, top: int = 14) -> None:
         ax.set_xscale("log")
         crit = _critical_lr(1, d.settings.alpha_effect / M)
         ax.axvline(crit, color="k", ls="--", lw=1)
-        ax.text(crit, -0.9, f" significance threshold, 1 coefficient: p = {d.settings.alpha_effect:g} / {M}",
-                fontsize=7, va="center")
+        ax.text(crit, -0.9, f"significance threshold (1 coefficient, p = {d.settings.alpha_effect:g} / {M}) ",
+                fontsize=7, va="center", ha="right")
         ax.set_ylim(-1.4, len(cs) - 0.5)
+        ax.set_xlim(min(0.5, min(vals) * 0.8 if min(vals) > 0 else 0.5), max(max(vals), crit) * 3)
         ax.set_xlabel("likelihood-ratio statistic (chi-square removed / misfit scale)")
         chosen = s.chosen.label if s.chosen else "none significant"
         ax.set_title(f"Round {s.index}: {M} candidates; added: {chosen}\n(ranked by chi-square left + "
@@ -167,26 +179,33 @@ def gap_figure(d: Discovery, path: str | Path) -> None:
     """RMS and chi-square per dof before and after, with the noise level."""
     plt = _plt()
     b, f = d.base.result, d.final.result
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(9, 3.6), dpi=100)
-    labels = ["base model", "with effects" if d.effects else "base model\n(nothing added)"]
-    a1.bar([0, 1], [d.rms_before * 1e3, d.rms_after * 1e3], color=["tab:red", "tab:blue"], width=0.6)
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(9, 3.8), dpi=100)
+    if d.effects:
+        labels, x = ["base model", "with " + ", ".join(e.label for e in d.effects)], [0, 1]
+        rms, red, colors = [d.rms_before, d.rms_after], [b.redchi, f.redchi], ["tab:red", "tab:blue"]
+    else:
+        labels, x = ["base model (nothing added)"], [0]
+        rms, red, colors = [d.rms_before], [b.redchi], ["tab:red"]
+    a1.bar(x, np.array(rms) * 1e3, color=colors, width=0.5)
     a1.axhline(d.rms_noise * 1e3, color="k", ls="--", lw=1, label="noise of the means alone")
-    a1.set_xticks([0, 1])
-    a1.set_xticklabels(labels)
     a1.set_ylabel("RMS of |a| - g on interval means [mm/s^2]")
-    a1.legend(fontsize=8)
-    a2.bar([0, 1], [b.redchi, f.redchi], color=["tab:red", "tab:blue"], width=0.6)
+    a2.bar(x, red, color=colors, width=0.5)
     a2.axhline(1.0, color="k", ls="--", lw=1, label="1 = at noise level")
     crit = _critical_lr(max(f.dof, 1), d.settings.alpha_noise) / max(f.dof, 1)
-    a2.axhline(crit, color="tab:gray", ls=":", lw=1, label=f"p = {d.settings.alpha_noise:g} limit ({f.dof} dof)")
-    a2.set_xticks([0, 1])
-    a2.set_xticklabels(labels)
+    a2.axhline(crit, color="tab:gray", ls=":", lw=1.2, label=f"p = {d.settings.alpha_noise:g} limit ({f.dof} dof)")
     a2.set_ylabel("chi-square per degree of freedom")
-    if max(b.redchi, f.redchi) > 20:
-        a2.set_yscale("log")
-    a2.legend(fontsize=8)
-    fig.suptitle("The gap before and after: " + ", ".join(e.label for e in d.effects) if d.effects
-                 else "The gap: no effect added")
+    for ax, top in ((a1, max(max(rms), d.rms_noise) * 1e3), (a2, max(max(red), crit))):
+        ax.set_xticks(x)
+        ax.set_xticklabels(labels, fontsize=8)
+        ax.set_xlim(-0.6, len(x) - 0.4)
+        if ax is a2 and top > 30:
+            ax.set_yscale("log")
+            ax.set_ylim(0.1, top * 8)
+        else:
+            ax.set_ylim(0, top * 1.35)
+        ax.legend(fontsize=8, loc="upper right")
+    fig.suptitle("The gap before and after adding the effects found" if d.effects
+                 else "The gap: no effect added (" + d.verdict.split(":")[0] + ")", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, format="png")
     plt.close(fig)

@@ -3,8 +3,9 @@
 Minimise  1/2 sum_k ((|a_k| - g) / sigma_k)^2  over the free parameters, where |a_k| is the
 magnitude of Proposition 2 at interval mean (or sample) k and sigma_k its noise propagated
 from the raw readings. The paper's condition at rest is g = a_nonorth (end of Section 2).
-Unknowns are scaled (x = p / scale) so IPOPT sees numbers near one; the solver is built once
-per problem shape and reused.
+Unknowns are scaled, p = p0 + d x with d each parameter's predicted standard error, so IPOPT
+sees numbers near one and a Hessian near the identity; the solver is built once per problem
+shape and reused.
 """
 from __future__ import annotations
 
@@ -99,10 +100,11 @@ def _solver(model: SensorModel, n: int, free: tuple[str, ...], mode: str) -> tup
     w = ca.MX.sym("w", 1, n)
     g = ca.MX.sym("g")
     pfix = ca.MX.sym("pfix", len(names))  # fixed values (free entries ignored)
-    scale = ca.MX.sym("scale", nf)
+    off = ca.MX.sym("off", nf)  # free parameters at the start
+    step = ca.MX.sym("step", nf)  # their predicted standard errors: x is in those units
     S = ca.DM(_selection(names, free))
     mask = ca.DM(1.0 - S.full().sum(axis=1))
-    p = mask * pfix + ca.mtimes(S, scale * x)
+    p = mask * pfix + ca.mtimes(S, off + step * x)
     # Per-row objective term, summed by a reducing map: no per-row symbolic expansion.
     rs, cs, ps, gs, ws = (ca.SX.sym("r", 3), ca.SX.sym("c", k), ca.SX.sym("p", len(names)),
                           ca.SX.sym("g"), ca.SX.sym("w"))
@@ -110,9 +112,8 @@ def _solver(model: SensorModel, n: int, free: tuple[str, ...], mode: str) -> tup
     par = "serial"
     fsum = term.map("fsum", par, n, [3, 4], [0]) if n > 1 else term
     obj = fsum(raw, cov, w, p, g)
-    fscale = ca.MX.sym("fscale")  # 1 / objective at the start: IPOPT's tolerances become relative
-    P = ca.vertcat(ca.vec(raw), ca.vec(cov), ca.vec(w), g, pfix, scale, fscale)
-    nlp = {"x": x, "p": P, "f": fscale * obj}
+    P = ca.vertcat(ca.vec(raw), ca.vec(cov), ca.vec(w), g, pfix, off, step)
+    nlp = {"x": x, "p": P, "f": obj}
     opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
             "ipopt.tol": 1e-8, "ipopt.acceptable_tol": 1e-6,
             "ipopt.acceptable_iter": 3, "ipopt.max_iter": 300}
@@ -147,6 +148,43 @@ def _sigma(Jraw: np.ndarray, raw_var: np.ndarray, weights: str = "noise") -> np.
     return np.maximum(s, floor)
 
 
+class _Rows:
+    """Residuals, their parameter Jacobian and raw Jacobian at a parameter vector."""
+
+    def __init__(self, data: FitData, model: SensorModel, free: tuple[str, ...], gravity: float,
+                 pfix: np.ndarray) -> None:
+        self.data, self.g, self.pfix = data, gravity, pfix
+        self.free_idx = np.array([model.names.index(nm) for nm in free], int)
+        self.fast = data.mode == "samples" and not model.effects  # vectorised path (imucal.samples)
+        if self.fast:
+            from .samples import SampleResiduals
+
+            self.sres = SampleResiduals(data.raw, gravity)
+            self.solver = None
+        else:
+            self.solver, self.rows = _solver(model, data.raw.shape[0], free, data.mode)
+
+    def __call__(self, pfree: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        if self.fast:
+            p = self.pfix.copy()
+            p[self.free_idx] = pfree
+            r, Jp = self.sres.residuals(p, jac=True)
+            return r, Jp[:, self.free_idx], -Jp[:, 0:3]  # dr/draw = -dr/ds
+        return _row_eval(self.rows, self.data, pfree, self.pfix, self.g)
+
+
+def _step_scale(Jw: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """Predicted standard error of each free parameter: the solver's unit (x = (p - p0)/d).
+
+    In these units IPOPT sees an objective whose Hessian is near the identity, so its
+    tolerances mean "a tiny fraction of a standard error" for every parameter alike.
+    """
+    with np.errstate(invalid="ignore"):
+        d = np.sqrt(np.clip(np.diag(np.linalg.pinv(Jw.T @ Jw)), 0, None))
+    d = np.where(np.isfinite(d) & (d > 0), d, scale)
+    return np.clip(d, 1e-9 * scale, scale)
+
+
 def fit(data: FitData, params: Parameters, model: SensorModel, gravity: float,
         source: str | None = None, weights: str = "noise") -> FitResult:
     """Fit the free parameters of ``params`` to ``data`` by weighted least squares (IPOPT).
@@ -160,67 +198,53 @@ def fit(data: FitData, params: Parameters, model: SensorModel, gravity: float,
                           field="parameters")
     free = params.free_names
     n = data.raw.shape[0]
-    if n <= len(free):
+    if n < len(free):
         raise ImucalError(f"{n} rows cannot determine {len(free)} free parameters", file=source,
-                          field="intervals", fix="hold the sensor still in more orientations, or fit samples (fit.mode: samples)")
-    solver, rows = (None, None) if (data.mode == "samples" and not model.effects) else \
-        _solver(model, n, free, data.mode)
+                          field="intervals",
+                          fix="hold the sensor still in more orientations, or fit samples (fit.mode: samples)")
     pfix = np.array(params.values(), float)
     scale = np.array([params[nm].scale for nm in free])
-    lb = np.array([params[nm].lower for nm in free]) / scale
-    ub = np.array([params[nm].upper for nm in free]) / scale
-    x0 = np.array([params[nm].value for nm in free]) / scale
+    lo = np.array([params[nm].lower for nm in free])
+    hi = np.array([params[nm].upper for nm in free])
+    p_now = np.array([params[nm].value for nm in free])
+    rows = _Rows(data, model, free, gravity, pfix)
     t0 = time.perf_counter()
     iters = 0
-    fast = data.mode == "samples" and not model.effects  # vectorised samples path (imucal.samples)
-    if fast:
-        from .samples import SampleResiduals, solve_samples
-
-        sres = SampleResiduals(data.raw, gravity)
-        free_idx = np.array([names.index(nm) for nm in free])
     # Weights from the noise propagated at the current estimate; refresh once at the solution.
     for _ in range(2):
-        if fast:
-            p_now = pfix.copy()
-            p_now[free_idx] = x0 * scale
-            r0, Jp = sres.residuals(p_now, jac=True)
-            Jraw = -Jp[:, 0:3]  # dr/draw = -dr/ds
-            sigma = _sigma(Jraw, data.raw_var, weights)
-            f0 = 0.5 * float(np.sum((r0 / sigma) ** 2))
-            x0, stats = solve_samples(data.raw, 1.0 / sigma**2, gravity, pfix, free_idx, scale, x0, lb, ub,
-                                      1.0 / max(f0, 1e-300))
-            iters += int(stats.get("iter_count", 0))
-            continue
-        r0, _, Jraw = _row_eval(rows, data, x0 * scale, pfix, gravity)
+        r0, J0, Jraw = rows(p_now)
         sigma = _sigma(Jraw, data.raw_var, weights)
-        f0 = 0.5 * float(np.sum((r0 / sigma) ** 2))
-        P = np.concatenate([data.raw.T.ravel(order="F"), data.cov.T.ravel(order="F"),
-                            1.0 / sigma**2, [gravity], pfix, scale, [1.0 / max(f0, 1e-300)]])
-        sol = solver(x0=x0, p=P, lbx=lb, ubx=ub)
-        stats = solver.stats()
+        d = _step_scale(J0 / sigma[:, None], scale)  # p = p0 + d * x
+        lb, ub = (lo - p_now) / d, (hi - p_now) / d
+        x0 = np.zeros(len(free))
+        if rows.fast:
+            from .samples import solve_samples
+
+            x, stats = solve_samples(data.raw, 1.0 / sigma**2, gravity, pfix, rows.free_idx, p_now, d,
+                                     x0, lb, ub)
+        else:
+            P = np.concatenate([data.raw.T.ravel(order="F"), data.cov.T.ravel(order="F"),
+                                1.0 / sigma**2, [gravity], pfix, p_now, d])
+            sol = rows.solver(x0=x0, p=P, lbx=lb, ubx=ub)
+            stats = rows.solver.stats()
+            x = np.asarray(sol["x"]).ravel()
         iters += int(stats.get("iter_count", 0))
-        x0 = np.asarray(sol["x"]).ravel()
+        p_now = np.clip(p_now + d * x, lo, hi)
     solve_time = time.perf_counter() - t0
     status = str(stats.get("return_status", "unknown"))
-    pfree = x0 * scale
-    if fast:
-        p_now = pfix.copy()
-        p_now[free_idx] = pfree
-        r, Jp = sres.residuals(p_now, jac=True)
-        J = Jp[:, free_idx]
-    else:
-        r, J, _ = _row_eval(rows, data, pfree, pfix, gravity)
+    pfree = p_now
+    r, J, _ = rows(pfree)
     fitted = params.with_values(dict(zip(free, pfree)))
     Jw = J / sigma[:, None]
     chi2 = float(np.sum((r / sigma) ** 2))
     dof = n - len(free)
     redchi = chi2 / dof if dof > 0 else float("nan")
-    # Covariance from the Jacobian at the solution, scaled by the residual variance (lmfit's
-    # scale_covar): (J^T W J)^-1 chi2/dof.
-    try:
-        cov = np.linalg.pinv(Jw.T @ Jw) * redchi
-    except np.linalg.LinAlgError:
-        cov = np.full((len(free), len(free)), np.nan)
+    # Covariance from the Jacobian at the solution (via its SVD, symmetric by construction),
+    # scaled by the residual variance as lmfit's scale_covar does: (J^T W J)^-1 chi2/dof.
+    # With no degrees of freedom left, the noise-only covariance (J^T W J)^-1.
+    _, sv, Vt = np.linalg.svd(Jw, full_matrices=False)
+    inv = np.where(sv > sv.max(initial=0) * 1e-12, 1.0 / np.maximum(sv, 1e-300) ** 2, 0.0)
+    cov = (Vt.T * inv) @ Vt * (redchi if dof > 0 else 1.0)
     sd = np.sqrt(np.clip(np.diag(cov), 0, None))
     with np.errstate(divide="ignore", invalid="ignore"):
         corr = cov / np.outer(sd, sd)
@@ -235,15 +259,18 @@ def fit(data: FitData, params: Parameters, model: SensorModel, gravity: float,
 
 
 def jacobian_rows(data: FitData, params: Parameters, model: SensorModel, gravity: float,
-                  residuals: bool = False) -> np.ndarray:
+                  residuals: bool = False, weighted: bool = False) -> np.ndarray:
     """Residual Jacobian w.r.t. the free parameters, each column times the parameter's scale.
 
-    With ``residuals=True``, the residuals |a| - g instead.
+    ``weighted=True`` divides each row by its noise sigma (so J^T J is the Fisher information
+    in scaled units); ``residuals=True`` returns the residuals |a| - g instead.
     """
     free = params.free_names
-    _, rows = _solver(model, data.raw.shape[0], free, data.mode)
-    pfree = np.array([params[n].value for n in free])
-    r, J, _ = _row_eval(rows, data, pfree, np.array(params.values(), float), gravity)
+    rows = _Rows(data, model, free, gravity, np.array(params.values(), float))
+    r, J, Jraw = rows(np.array([params[n].value for n in free]))
     if residuals:
         return r
-    return J * np.array([params[n].scale for n in free])
+    J = J * np.array([params[n].scale for n in free])
+    if weighted:
+        J = J / _sigma(Jraw, data.raw_var)[:, None]
+    return J

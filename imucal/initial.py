@@ -44,7 +44,10 @@ def ellipsoid_guess(means: np.ndarray, gravity: float, general: bool = True,
                               "for the 6-parameter model", file=source, field="intervals",
                               fix="hold the sensor still in more orientations (>= 9 distinct for 9 parameters)")
         M = np.column_stack([X * X, Y * Y, Z * Z, X, Y, Z])
-    coef, *_ = np.linalg.lstsq(M, np.ones(n), rcond=None)
+    coef, _, rank, sv = np.linalg.lstsq(M, np.ones(n), rcond=None)
+    if rank < M.shape[1] or sv[-1] < 1e-3 * sv[0]:
+        # The points do not pin down a quadric (e.g. all directions in one plane).
+        raise _degenerate(source)
     if general:
         a, bq, cq, d, e, f, gx, gy, gz = coef
         Q = np.array([[a, d, e], [d, bq, f], [e, f, cq]])

@@ -17,6 +17,26 @@ from .parameters import ANGLE_NAMES
 DISTINCT_ANGLE_DEG = 10.0
 #: Relative singular value below which a direction of parameter space is undetermined.
 RANK_TOL = 1e-6
+#: Predicted standard error above which the poses leave a parameter undetermined, in units of
+#: the parameter's scale (b_i for a scale, one g of raw output for a shift, pi/2 for an angle):
+#: 1 % of the sensitivity, 1 % of g of bias; for an angle, the half-width of its bound box
+#: (the angle tolerance), since the bounds alone already pin it that well.
+UNDETERMINED_Z = {"s": 0.01, "b": 0.01}
+#: Reported as poorly determined above this fraction of the threshold.
+POOR_FRACTION = 0.1
+
+
+def thresholds(free_names: tuple[str, ...], angle_tol: float) -> np.ndarray:
+    """Per-parameter undetermined thresholds in scaled units (effect parameters: 1)."""
+    out = []
+    for n in free_names:
+        if n in ANGLE_NAMES:
+            out.append(angle_tol)
+        elif n[:1] in UNDETERMINED_Z and n[1:] in ("1", "2", "3"):
+            out.append(UNDETERMINED_Z[n[:1]])
+        else:
+            out.append(1.0)
+    return np.array(out)
 
 
 @dataclass(frozen=True)
@@ -25,6 +45,8 @@ class Observability:
     labels: np.ndarray  #: cluster index of each interval
     singular_values: np.ndarray  #: of the column-scaled Jacobian, largest first
     undetermined: tuple[str, ...]
+    predicted_z: dict = None  #: predicted std / scale per free parameter (noise only)
+    poorly_determined: tuple[str, ...] = ()
 
     @property
     def condition(self) -> float:
@@ -49,9 +71,13 @@ def distinct_directions(directions: np.ndarray, min_angle_deg: float = DISTINCT_
     return len(centres), labels
 
 
-def analyse(directions: np.ndarray, jac_rows: np.ndarray, free_names: tuple[str, ...]
-            ) -> Observability:
-    """Distinct poses and Jacobian rank; ``jac_rows`` is (n_intervals, n_free), column-scaled."""
+def analyse(directions: np.ndarray, jac_rows: np.ndarray, free_names: tuple[str, ...],
+            weighted_rows: np.ndarray | None = None, limits: np.ndarray | None = None) -> Observability:
+    """Distinct poses, Jacobian rank and predicted standard errors.
+
+    ``jac_rows`` is (n_intervals, n_free) with columns times each parameter's scale;
+    ``weighted_rows`` the same divided by each row's noise (Fisher information J^T J).
+    """
     n_distinct, labels = distinct_directions(directions)
     # One row per distinct direction: repeats of a pose add no information about the model.
     J = np.vstack([jac_rows[labels == k].mean(axis=0) for k in range(n_distinct)])
@@ -68,7 +94,26 @@ def analyse(directions: np.ndarray, jac_rows: np.ndarray, free_names: tuple[str,
         V = Vt[null]
         load = np.sqrt((V**2).sum(axis=0))  # share of each parameter in the null space
         und = [free_names[j] for j in range(nf) if load[j] > 0.5]
-    return Observability(n_distinct, labels, svf, tuple(sorted(und, key=free_names.index)))
+    z: dict[str, float] = {}
+    poor: list[str] = []
+    if weighted_rows is not None and n_distinct >= nf:
+        # Noise-only Fisher information at the initial guess, in units of each parameter's
+        # threshold. Its eigenvectors whose predicted standard error exceeds 1 are directions
+        # the poses do not determine; the parameters that load on them are named. (Exact
+        # degeneracies show up at noise level in the singular values, so a rank test alone
+        # misses them.)
+        lim = np.ones(nf) if limits is None else np.asarray(limits, float)
+        Jt = weighted_rows * lim
+        lam, V = np.linalg.eigh(Jt.T @ Jt)
+        bad = 1.0 / np.sqrt(np.maximum(lam, 1e-300)) > 1.0
+        if bad.any():
+            load = np.sqrt((V[:, bad] ** 2).sum(axis=1))
+            und += [free_names[j] for j in range(nf) if load[j] > 0.5 and free_names[j] not in und]
+        with np.errstate(invalid="ignore"):
+            zt = np.sqrt(np.clip(np.diag(np.linalg.pinv(Jt.T @ Jt)), 0, None))
+        z = {n: float(v * l) for n, v, l in zip(free_names, zt, lim)}  # std / scale
+        poor = [n for n, v in zip(free_names, zt) if v > POOR_FRACTION and n not in und]
+    return Observability(n_distinct, labels, svf, tuple(sorted(und, key=free_names.index)), z, tuple(poor))
 
 
 def require_observable(obs: Observability, free_names: tuple[str, ...], source: str | None) -> None:
@@ -88,6 +133,11 @@ def require_observable(obs: Observability, free_names: tuple[str, ...], source: 
         raise ImucalError(f"only {obs.n_distinct} distinct orientations for {nf} free parameters: {what}",
                           file=source, field="intervals", fix=fix)
     if obs.undetermined:
-        raise ImucalError(f"the orientations leave {', '.join(obs.undetermined)} undetermined "
-                          f"(Jacobian condition {obs.condition:.3g})", file=source, field="intervals",
-                          fix="add orientations that tilt gravity towards the missing axes, or fix those parameters")
+        detail = f"Jacobian condition {obs.condition:.3g}"
+        fix = "add orientations that tilt gravity towards the missing axes (cube faces, edges and corners)"
+        if not angles_free:
+            fix += "; fixing the angles does not help here"
+        else:
+            fix += ", or fix those parameters"
+        raise ImucalError(f"the orientations leave {', '.join(obs.undetermined)} undetermined ({detail})",
+                          file=source, field="intervals", fix=fix)

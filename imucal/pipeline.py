@@ -12,7 +12,7 @@ from .errors import ImucalError
 from .fit import FitData, FitResult, fit, jacobian_rows
 from .initial import InitialGuess, ellipsoid_guess
 from .model import SensorModel, build_model
-from .observability import Observability, analyse, distinct_directions, require_observable
+from .observability import Observability, analyse, distinct_directions, require_observable, thresholds
 from .parameters import ANGLE_NAMES, Parameters, base_parameters
 from .static import Intervals, detect_static
 
@@ -58,8 +58,13 @@ def covariates_for(model: SensorModel, intervals: Intervals | None = None, recor
 
 
 def _rough_guess(means: np.ndarray, gravity: float) -> InitialGuess:
+    """Mid-range shift and half-range scale; an axis that gravity barely reached (range below
+    half the largest) borrows the largest scale. Only used where no ellipsoid can be fitted,
+    to analyse observability."""
     lo, hi = means.min(axis=0), means.max(axis=0)
-    b = np.where(hi > lo, (hi - lo) / (2 * gravity), 1.0)
+    b = (hi - lo) / (2 * gravity)
+    ref = b.max() if b.max() > 0 else 1.0
+    b = np.where(b > 0.5 * ref, b, ref)
     return InitialGuess(s=(lo + hi) / 2, b=b, angles=np.full(3, np.pi / 2), method="range")
 
 
@@ -132,7 +137,8 @@ def calibrate(config: RunConfig) -> CalibrationRun:
     # Observability on interval means (one row per interval), at the initial guess.
     mdata = fit_data(model, iv, rec, "means", rec.source) if data.mode != "means" else data
     J = jacobian_rows(mdata, params, model, gravity)
-    obs = analyse(dirs, J, params.free_names)
+    Jw = jacobian_rows(mdata, params, model, gravity, weighted=True)
+    obs = analyse(dirs, J, params.free_names, Jw, thresholds(params.free_names, config.fit.angle_tolerance))
     require_observable(obs, params.free_names, rec.source)
     res = fit(data, params, model, gravity, source=rec.source, weights=config.fit.weights)
     if res.mode != "means":  # report residuals on interval means too

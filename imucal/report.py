@@ -38,6 +38,10 @@ def fit_report(run: CalibrationRun, correl_min: float = CORREL_MIN) -> str:
     L.append(f"    RMS |a|-g, samples = {cal.fit['rms_residual_samples']:.6g} m/s^2")
     L.append(f"    noise inflation    = {iv.noise_inflation:.3g}  (batch-means / white-noise variance)")
     L.append(f"    Jacobian condition = {run.observability.condition:.4g}")
+    if run.observability.poorly_determined:
+        L.append("    WARNING            = poorly determined by these poses: "
+                 + ", ".join(f"{n} (predicted std {run.observability.predicted_z[n]:.2g} x scale)"
+                             for n in run.observability.poorly_determined))
     L.append("[[Variables]]")
     w = max(len(n) for n in res.params)
     for n, p in res.params.items():

@@ -72,19 +72,19 @@ class SampleResiduals:
 
 
 class _Objective(ca.Callback):
-    """f(x) = fscale/2 sum w r^2 over the free scaled unknowns x; gradient via get_jacobian."""
+    """f(x) = 1/2 sum w r^2, free parameters p = off + scale * x; gradient via get_jacobian."""
 
     def __init__(self, res: SampleResiduals, w: np.ndarray, pfix: np.ndarray, free_idx: np.ndarray,
-                 scale: np.ndarray, fscale: float) -> None:
+                 off: np.ndarray, scale: np.ndarray, fscale: float = 1.0) -> None:
         ca.Callback.__init__(self)
         self.res, self.w, self.pfix, self.free_idx = res, w, pfix, free_idx
-        self.scale, self.fscale = scale, fscale
+        self.off, self.scale, self.fscale = off, scale, fscale
         self._keep: list = []  # CasADi holds raw pointers: keep every derived callback alive
         self.construct("samples_objective", {})
 
     def p_of(self, x: np.ndarray) -> np.ndarray:
         p = self.pfix.copy()
-        p[self.free_idx] = self.scale * np.asarray(x).ravel()
+        p[self.free_idx] = self.off + self.scale * np.asarray(x).ravel()
         return p
 
     def get_n_in(self): return 1
@@ -160,10 +160,10 @@ class _GaussNewtonHessian(ca.Callback):
 
 
 def solve_samples(raw: np.ndarray, w: np.ndarray, gravity: float, pfix: np.ndarray, free_idx: np.ndarray,
-                  scale: np.ndarray, x0: np.ndarray, lb: np.ndarray, ub: np.ndarray, fscale: float):
+                  off: np.ndarray, scale: np.ndarray, x0: np.ndarray, lb: np.ndarray, ub: np.ndarray):
     """One IPOPT solve of the samples-mode NLP; returns (x, stats)."""
     res = SampleResiduals(raw, gravity)
-    obj = _Objective(res, w, pfix, free_idx, scale, fscale)
+    obj = _Objective(res, w, pfix, free_idx, off, scale)
     x = ca.MX.sym("x", len(free_idx))
     solver = ca.nlpsol("calib_samples", "ipopt", {"x": x, "f": obj(x)},
                        {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",

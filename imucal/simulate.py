@@ -237,7 +237,8 @@ def _section(d: object, where: str, allowed: tuple[str, ...], path: str | None) 
         raise ImucalError(f"section must be a mapping, got {type(d).__name__}", file=path, field=where)
     unknown = [k for k in d if k not in allowed]
     if unknown:
-        raise ImucalError(f"unknown key {unknown[0]!r}", file=path, field=f"{where}.{unknown[0]}",
+        raise ImucalError(f"unknown key {unknown[0]!r}", file=path,
+                          field=str(unknown[0]) if where == "top level" else f"{where}.{unknown[0]}",
                           fix=f"allowed keys here: {', '.join(allowed)}")
     return dict(d)
 
@@ -264,10 +265,10 @@ def simulation_from_dict(d: object, path: str | None = None) -> SimulationConfig
     Top level: ``seed``, ``gravity`` [m/s^2], ``sensor``, ``plan``, ``temperature`` (omit or null
     for a recording without a temp column). See configs/simulate_example.yaml.
     """
-    top = _section(d, "top level", ("seed", "gravity", "sensor", "plan", "temperature"), path)
-    if d is None or not isinstance(d, dict):
+    if not isinstance(d, dict):
         raise ImucalError("top level must be a mapping", file=path, field="top level",
                           fix="see configs/simulate_example.yaml")
+    top = _section(d, "top level", ("seed", "gravity", "sensor", "plan", "temperature"), path)
     seed = top.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ImucalError(f"seed {seed!r} must be a non-negative integer", file=path, field="seed")

@@ -97,8 +97,13 @@ def main(argv: list[str] | None = None) -> int:
                     jobs.append((seed, eff, snr, noise))
                     seed += 1
     t0 = time.perf_counter()
+    rows = []
     with mp.get_context("fork").Pool(a.jobs) as pool:
-        rows = pool.map(run_case, jobs, chunksize=4)
+        for k, row in enumerate(pool.imap_unordered(run_case, jobs, chunksize=2), 1):
+            rows.append(row)
+            if k % 25 == 0 or k == len(jobs):
+                print(f"{k}/{len(jobs)} cases, {time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)
+    rows.sort(key=lambda r: r["seed"])
     wall = time.perf_counter() - t0
     text = report(rows, a, wall)
     from imucal.output import write_text_atomic

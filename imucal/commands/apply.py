@@ -22,8 +22,9 @@ def run(args: argparse.Namespace) -> int:
 
     from ..calibration import load_calibration
     from ..data import DataSpec, load_recording
-    from ..output import write_text_atomic
+    from ..output import check_destination, write_text_atomic
 
+    check_destination(args.out)
     cal = load_calibration(args.calibration)
     rec = load_recording(DataSpec(path=args.data, sample_rate=args.sample_rate))
     covs = {}

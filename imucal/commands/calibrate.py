@@ -93,7 +93,7 @@ def summary(run) -> dict:
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from ..output import OutputSet
+    from ..output import OutputSet, check_destination
     from ..pipeline import calibrate
     from ..report import fit_report
 
@@ -101,6 +101,9 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out or cfg.output.dir)
     if args.out is None and cfg.source:
         out = cfg.base_dir / cfg.output.dir if not Path(cfg.output.dir).is_absolute() else out
+    check_destination(out / "calibration.yaml")  # fail before the work, not after it
+    if args.json:
+        check_destination(args.json)
     result = calibrate(cfg)
     text = fit_report(result)
     figures = cfg.output.figures and not args.no_figures

@@ -1,0 +1,314 @@
+#!/usr/bin/env python
+"""Speed and memory of imucal on this machine (issue 6); writes docs/benchmarks.md.
+
+Cases, each in a fresh subprocess so that its peak resident memory (ru_maxrss) is its own:
+  calibrate   end-to-end `imucal calibrate --no-figures` on the shipped Xsens recording
+              (hyperfine when installed, else the median of repeated subprocess runs)
+  fit-means   fit time against the number of interval means (10 .. 1000); first call builds the
+              IPOPT solver for that problem shape, later calls reuse it
+  fit-samples samples-mode fit time against the number of samples (10^4 .. 10^6)
+  apply       Calibration.apply on 10^7 samples against a plain numpy matrix product
+
+    python scripts/bench_speed.py            # all cases, writes docs/benchmarks.md
+    python scripts/bench_speed.py --quick    # smaller sizes, fewer repeats
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import resource
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+XSENS = ROOT / "data" / "xsens-mti-imutk" / "xsens_acc.mat"
+G = 9.80665  # m/s^2, simulations (imucal.constants.STANDARD_GRAVITY)
+
+
+# --- cases run inside a child process -----------------------------------------------------------
+def _sim_means(n: int, seed: int = 0):
+    from imucal.simulate import frame_matrix, mems_counts_sensor, random_directions
+
+    rng = np.random.default_rng(seed)
+    sensor = mems_counts_sensor(np.random.default_rng(7))
+    u = random_directions(n, rng)
+    clean = np.asarray(sensor.s) + np.asarray(sensor.b) * (G * u @ frame_matrix(np.asarray(sensor.angles)))
+    return sensor, clean, rng
+
+
+def _params(means: np.ndarray):
+    from imucal.initial import ellipsoid_guess
+    from imucal.parameters import base_parameters
+
+    g = ellipsoid_guess(means, G)
+    return base_parameters(g.s, g.b, g.angles, raw_unit="raw", gravity=G)
+
+
+def case_fit_means(n: int, repeats: int) -> dict:
+    from imucal.fit import FitData, fit
+    from imucal.model import build_model
+
+    sensor, clean, rng = _sim_means(n)
+    sig = 0.2  # counts per mean (4 counts per sample, 400 samples)
+    model = build_model()
+    times, statuses = [], []
+    for k in range(repeats + 1):
+        means = clean + rng.normal(0, sig, clean.shape)
+        data = FitData(raw=means, cov=np.zeros((n, 0)), raw_var=np.full(means.shape, sig**2), group=np.arange(n),
+                       mode="means")
+        params = _params(means)
+        t0 = time.perf_counter()
+        res = fit(data, params, model, G)
+        times.append(time.perf_counter() - t0)
+        statuses.append(res.status)
+    return {"n": n, "first_s": times[0], "cached_median_s": statistics.median(times[1:]),
+            "cached_min_s": min(times[1:]), "status": statuses}
+
+
+def case_fit_samples(n: int, repeats: int) -> dict:
+    from imucal.fit import FitData, fit
+    from imucal.model import build_model
+
+    n_poses = 50
+    sensor, clean, rng = _sim_means(n_poses)
+    k = np.repeat(np.arange(n_poses), -(-n // n_poses))[:n]
+    noise = 4.0  # counts per sample
+    model = build_model()
+    times, statuses, iters = [], [], []
+    for _ in range(repeats):
+        raw = clean[k] + rng.normal(0, noise, (n, 3))
+        data = FitData(raw=raw, cov=np.zeros((n, 0)), raw_var=np.full((n, 3), noise**2), group=k, mode="samples")
+        params = _params(np.array([raw[k == j].mean(axis=0) for j in range(n_poses)]))
+        t0 = time.perf_counter()
+        res = fit(data, params, model, G)
+        times.append(time.perf_counter() - t0)
+        statuses.append(res.status)
+        iters.append(res.iterations)
+    return {"n": n, "median_s": statistics.median(times), "min_s": min(times), "status": statuses,
+            "iterations": iters}
+
+
+def case_apply(n: int, repeats: int) -> dict:
+    import tracemalloc
+
+    from imucal.calibration import Calibration
+    from imucal.parameters import base_parameters
+
+    sensor, clean, rng = _sim_means(30)
+    params = base_parameters(sensor.s, sensor.b, sensor.angles, raw_unit="raw", gravity=G)
+    cal = Calibration(params=params, std={}, gravity=G)
+    raw = rng.normal(0, 1000, (n, 3))
+    A, c = cal.linear_map()
+    out = {"n": n}
+    for name, fn in (("imucal", lambda: cal.apply(raw)), ("numpy", lambda: raw @ A.T + c)):
+        fn()  # warm
+        ts = []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            fn()
+            ts.append(time.perf_counter() - t0)
+        tracemalloc.start()
+        fn()
+        _, peak = tracemalloc.get_traced_memory()
+        tracemalloc.stop()
+        out[name] = {"median_s": statistics.median(ts), "samples_per_s": n / statistics.median(ts),
+                     "tracemalloc_peak_mb": peak / 2**20}
+    out["max_abs_diff"] = float(np.max(np.abs(cal.apply(raw) - (raw @ A.T + c))))
+    return out
+
+
+def child(case: str, n: int, repeats: int) -> None:
+    t0 = time.perf_counter()
+    out = {"fit-means": case_fit_means, "fit-samples": case_fit_samples, "apply": case_apply}[case](n, repeats)
+    out["wall_s"] = time.perf_counter() - t0
+    out["maxrss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(json.dumps(out))
+
+
+def run_child(case: str, n: int, repeats: int) -> dict:
+    p = subprocess.run([sys.executable, __file__, "--child", case, "--size", str(n), "--repeats", str(repeats)],
+                       capture_output=True, text=True, cwd=ROOT)
+    if p.returncode != 0:
+        return {"n": n, "error": p.stderr.strip().splitlines()[-1] if p.stderr.strip() else f"exit {p.returncode}"}
+    return json.loads(p.stdout.strip().splitlines()[-1])
+
+
+# --- end-to-end calibrate ----------------------------------------------------------------------
+def calibrate_cmd(out: str) -> list[str]:
+    exe = shutil.which("imucal") or f"{sys.executable} -m imucal"
+    return [*exe.split(), "calibrate", "--data", str(XSENS), "--gravity", "9.81744", "--out", out,
+            "--no-figures", "--quiet"]
+
+
+def bench_calibrate(runs: int) -> dict:
+    tmp = tempfile.mkdtemp(prefix="imucal-bench-")
+    cmd = calibrate_cmd(tmp)
+    res: dict = {"command": " ".join(cmd).replace(str(ROOT) + "/", "").replace(tmp, "OUT")}
+    hf = shutil.which("hyperfine")
+    if hf:
+        jpath = Path(tmp) / "hf.json"
+        subprocess.run([hf, "--warmup", "2", "--runs", str(runs), "--export-json", str(jpath), "-N",
+                        " ".join(cmd)], capture_output=True, text=True, check=True)
+        r = json.loads(jpath.read_text())["results"][0]
+        res.update(tool="hyperfine", median_s=r["median"], mean_s=r["mean"], stddev_s=r["stddev"],
+                   min_s=r["min"], runs=len(r["times"]))
+    else:
+        ts = []
+        for i in range(runs + 2):
+            t0 = time.perf_counter()
+            subprocess.run(cmd, capture_output=True, check=True)
+            if i >= 2:
+                ts.append(time.perf_counter() - t0)
+        res.update(tool="subprocess loop", median_s=statistics.median(ts), min_s=min(ts), runs=len(ts))
+    # peak memory of one run
+    p = subprocess.run([sys.executable, "-c",
+                        "import resource, subprocess, sys; subprocess.run(sys.argv[1:], capture_output=True); "
+                        "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)", *cmd],
+                       capture_output=True, text=True)
+    res["maxrss_mb"] = int(p.stdout.strip()) / 1024
+    # interpreter + import floor
+    ts = []
+    for _ in range(7):
+        t0 = time.perf_counter()
+        subprocess.run([sys.executable, "-c", "import numpy, casadi"], capture_output=True)
+        ts.append(time.perf_counter() - t0)
+    res["floor_numpy_casadi_s"] = statistics.median(ts)
+    res["import_top"] = import_profile(cmd)
+    shutil.rmtree(tmp, ignore_errors=True)
+    return res
+
+
+def import_profile(cmd: list[str], top: int = 8) -> list[tuple[str, float]]:
+    """Largest cumulative import times (python -X importtime) of one calibrate run [s]."""
+    args = cmd[1:] if cmd[0].endswith("imucal") else cmd[3:]
+    p = subprocess.run([sys.executable, "-X", "importtime", "-m", "imucal", *args], capture_output=True, text=True)
+    rows = []
+    for line in p.stderr.splitlines():
+        if not line.startswith("import time:") or "cumulative" in line:
+            continue
+        parts = line.split("|")
+        name = parts[2].rstrip()
+        if len(name) - len(name.lstrip()) == 1:  # one space: imported at top level
+            rows.append((name.strip(), int(parts[1]) / 1e6))
+    rows.sort(key=lambda t: -t[1])
+    return rows[:top]
+
+
+# --- report ------------------------------------------------------------------------------------
+def markdown(r: dict, args) -> str:
+    cpu = platform.processor() or platform.machine()
+    try:
+        model = next(ln.split(":", 1)[1].strip() for ln in Path("/proc/cpuinfo").read_text().splitlines()
+                     if ln.startswith("model name"))
+    except (OSError, StopIteration):
+        model = cpu
+    L = ["# Benchmarks", "",
+         f"Generated by `python scripts/bench_speed.py{' --quick' if args.quick else ''}` on {model}, "
+         f"{os.cpu_count()} cores, Python {platform.python_version()}, casadi "
+         f"{__import__('casadi').__version__}, numpy {np.__version__}. Every case runs in a fresh process; "
+         "memory is that process's peak resident set (ru_maxrss). Do not edit by hand.", ""]
+    c = r.get("calibrate")
+    if c:
+        L += ["## End-to-end calibrate (Xsens MTi, 51,175 samples, 38 intervals)", "",
+              f"    {c['command']}", "",
+              f"| tool | runs | median [s] | min [s] | peak RSS [MB] | floor: `python -c 'import numpy, casadi'` [s] |",
+              "|---|---|---|---|---|---|",
+              f"| {c['tool']} | {c['runs']} | {c['median_s']:.3f} | {c['min_s']:.3f} | {c['maxrss_mb']:.0f} | "
+              f"{c['floor_numpy_casadi_s']:.3f} |", "",
+              "imu_tk (C++/Ceres) takes about 0.35 s for the same file on these machines (whole process, "
+              "accelerometer part, including its re-fits for 9 thresholds).", "",
+              "Largest top-level imports in one run (`python -X importtime`, cumulative):", "",
+              "| module | s |", "|---|---|"] + [f"| {m} | {t:.3f} |" for m, t in c["import_top"]] + [""]
+    fm = r.get("fit-means")
+    if fm:
+        L += ["## Fit time against the number of interval means", "",
+              "Random directions, raw-count sensor (16384 LSB/g), 0.2 counts noise per mean. `first` includes "
+              "building the IPOPT solver for that problem shape; later fits of the same shape reuse it.", "",
+              "| intervals | first [s] | cached, median [s] | peak RSS [MB] | IPOPT status (cached runs) |",
+              "|---|---|---|---|---|"]
+        for x in fm:
+            if "error" in x:
+                L.append(f"| {x['n']} | error: {x['error']} | | | |")
+                continue
+            st = {s: x["status"][1:].count(s) for s in set(x["status"][1:])}
+            L.append(f"| {x['n']} | {x['first_s']:.3f} | {x['cached_median_s']:.3f} | {x['maxrss_mb']:.0f} | "
+                     + ", ".join(f"{k} x{v}" for k, v in sorted(st.items())) + " |")
+        L.append("")
+    fs = r.get("fit-samples")
+    if fs:
+        L += ["## Samples mode: fit time against the number of samples", "",
+              "50 poses, 4 counts white noise per sample; `imucal.fit.fit` with `mode=\"samples\"` (vectorised "
+              "residuals and Gauss-Newton Hessian, `imucal/samples.py`). Time of the fit call only (data in memory).",
+              "", "| samples | median [s] | min [s] | IPOPT iterations | peak RSS [MB] |", "|---|---|---|---|---|"]
+        for x in fs:
+            if "error" in x:
+                L.append(f"| {x['n']:,} | error: {x['error']} | | | |")
+                continue
+            L.append(f"| {x['n']:,} | {x['median_s']:.3f} | {x['min_s']:.3f} | {x['iterations']} | "
+                     f"{x['maxrss_mb']:.0f} |")
+        L.append("")
+    ap = r.get("apply")
+    if ap and "error" not in ap:
+        L += ["## Apply throughput", "",
+              f"{ap['n']:,} samples (N x 3 float64 in memory), median of repeats.", "",
+              "| implementation | median [s] | samples/s | tracemalloc peak [MB] |", "|---|---|---|---|",
+              f"| `Calibration.apply` | {ap['imucal']['median_s']:.3f} | {ap['imucal']['samples_per_s']:.3g} | "
+              f"{ap['imucal']['tracemalloc_peak_mb']:.0f} |",
+              f"| `raw @ A.T + c` (numpy) | {ap['numpy']['median_s']:.3f} | {ap['numpy']['samples_per_s']:.3g} | "
+              f"{ap['numpy']['tracemalloc_peak_mb']:.0f} |", "",
+              f"Largest difference between the two: {ap['max_abs_diff']:.2g} m/s^2. Process peak RSS "
+              f"{ap['maxrss_mb']:.0f} MB (input 10^7 x 3 doubles = {ap['n'] * 24 / 2**20:.0f} MB).", ""]
+    return "\n".join(L)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--only", default="calibrate,fit-means,fit-samples,apply")
+    ap.add_argument("--out", default=str(ROOT / "docs" / "benchmarks.md"))
+    ap.add_argument("--child", help=argparse.SUPPRESS)
+    ap.add_argument("--size", type=int, help=argparse.SUPPRESS)
+    ap.add_argument("--repeats", type=int, default=3, help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    if args.child:
+        child(args.child, args.size, args.repeats)
+        return 0
+    only = set(args.only.split(","))
+    r: dict = {}
+    if "calibrate" in only:
+        print("calibrate ...", file=sys.stderr)
+        r["calibrate"] = bench_calibrate(5 if args.quick else 20)
+    if "fit-means" in only:
+        sizes = (10, 100) if args.quick else (10, 30, 100, 300, 1000)
+        r["fit-means"] = []
+        for n in sizes:
+            print(f"fit-means {n} ...", file=sys.stderr)
+            r["fit-means"].append(run_child("fit-means", n, 3 if args.quick else 10))
+    if "fit-samples" in only:
+        sizes = (10_000, 100_000) if args.quick else (10_000, 100_000, 1_000_000)
+        r["fit-samples"] = []
+        for n in sizes:
+            print(f"fit-samples {n} ...", file=sys.stderr)
+            r["fit-samples"].append(run_child("fit-samples", n, 2 if args.quick else 3))
+    if "apply" in only:
+        print("apply ...", file=sys.stderr)
+        r["apply"] = run_child("apply", 10**6 if args.quick else 10**7, 3 if args.quick else 5)
+    text = markdown(r, args)
+    from imucal.output import write_text_atomic
+
+    write_text_atomic(args.out, text + "\n")
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,185 @@
+"""The calibration file: self-describing YAML that loads back losslessly; unknown versions refused."""
+from __future__ import annotations
+
+import hashlib
+import math
+
+import numpy as np
+import pytest
+import yaml
+
+import imucal
+from imucal.calibration import FORMAT, FORMAT_VERSION, Calibration, from_dict, load_calibration
+from imucal.constants import SI_ACCEL_UNIT
+from imucal.errors import ImucalError
+from imucal.parameters import BASE_NAMES
+
+
+@pytest.fixture(scope="module")
+def saved(counts_run, tmp_path_factory):
+    path = tmp_path_factory.mktemp("cal") / "calibration.yaml"
+    counts_run.calibration.save(path)
+    return counts_run.calibration, path
+
+
+def test_file_describes_itself(saved, counts_recording):
+    cal, path = saved
+    d = yaml.safe_load(path.read_text())
+    assert d["format"] == FORMAT == "imucal-calibration"
+    assert d["format_version"] == FORMAT_VERSION
+    assert d["model"] == "nakov-ivanov-9"
+    assert d["units"]["input"] == "raw" and d["units"]["output"] == SI_ACCEL_UNIT == "m/s^2"
+    assert d["units"]["angles"] == "rad"
+    assert "orthonormal" in d["output_frame"]
+    assert d["gravity"] == pytest.approx(9.80665)
+    for n in BASE_NAMES:
+        e = d["parameters"][n]
+        assert set(e) >= {"value", "std", "unit", "lower", "upper", "fixed"}
+        assert e["std"] > 0 and e["fixed"] is False
+    assert d["parameters"]["phi"]["unit"] == "rad"
+    assert d["parameters"]["b1"]["unit"] == "raw/(m/s^2)"
+    A = np.array(d["apply"]["matrix"])
+    c = np.array(d["apply"]["offset"])
+    assert A.shape == (3, 3) and c.shape == (3,)
+    assert A[0, 1] == A[0, 2] == A[1, 2] == 0.0  # exact zeros, lower triangular
+    A0, c0 = cal.linear_map()
+    np.testing.assert_array_equal(A, A0)
+    np.testing.assert_array_equal(c, c0)
+    assert d["data"]["file"] == counts_recording.path.name
+    assert d["data"]["sha256"] == hashlib.sha256(counts_recording.path.read_bytes()).hexdigest()
+    assert d["data"]["samples"] == counts_recording.sim.t.size
+    assert d["software"] == {"name": "imucal", "version": imucal.__version__}
+    assert d["created"]  # ISO timestamp
+    for k in ("rms_residual", "rms_residual_samples", "chi2", "dof", "status", "iterations", "n_intervals"):
+        assert k in d["fit"]
+
+
+def test_loads_back_losslessly(saved):
+    cal, path = saved
+    back = load_calibration(path)
+    assert back.params.names == cal.params.names
+    for n in cal.params:
+        p, q = cal.params[n], back.params[n]
+        assert (q.value, q.lower, q.upper, q.unit, q.fixed, q.scale) == (p.value, p.lower, p.upper, p.unit,
+                                                                         p.fixed, p.scale), n
+        assert back.std[n] == cal.std[n]
+    assert back.gravity == cal.gravity
+    assert back.raw_unit == cal.raw_unit
+    assert dict(back.fit) == dict(cal.fit)
+    assert dict(back.data) == dict(cal.data)
+    assert back.created == cal.created and back.software_version == cal.software_version
+    assert back.model_name == cal.model_name
+    raw = np.array([[30000.0, 100.0, -16000.0], [1.0, 2.0, 3.0]])
+    np.testing.assert_array_equal(back.apply(raw), cal.apply(raw))
+    # and a second round trip writes the same text
+    again = path.with_name("again.yaml")
+    back.save(again)
+    assert again.read_text() == path.read_text()
+
+
+def test_fixed_parameters_round_trip(tmp_path, counts_recording):
+    from conftest import calibrate_file
+
+    run = calibrate_file(counts_recording.path, fit={"fix": ["phi", "psi", "theta"]})
+    path = tmp_path / "c.yaml"
+    run.calibration.save(path)
+    d = yaml.safe_load(path.read_text())
+    assert d["parameters"]["phi"]["fixed"] is True and d["parameters"]["phi"]["std"] is None
+    back = load_calibration(path)
+    assert back.params["phi"].fixed and math.isnan(back.std["phi"])
+    assert back.params["phi"].value == math.pi / 2
+    assert math.isinf(back.params["s1"].lower) and back.params["s1"].lower < 0
+
+
+def _dict(saved) -> dict:
+    return yaml.safe_load(saved[1].read_text())
+
+
+@pytest.mark.parametrize("version", [2, 0, "1", 1.5, True, None])
+def test_unknown_version_is_refused(saved, tmp_path, version):
+    d = _dict(saved)
+    d["format_version"] = version
+    p = tmp_path / "v.yaml"
+    p.write_text(yaml.safe_dump(d))
+    with pytest.raises(ImucalError, match=rf"unknown format version {version!r} \(this imucal reads version 1\)") \
+            as ei:
+        load_calibration(p)
+    assert ei.value.field == "format_version" and str(ei.value).startswith(str(p))
+    assert "upgrade imucal" in str(ei.value)
+
+
+@pytest.mark.parametrize("mutate, field, match", [
+    (lambda d: d.update(format="something-else"), "format", "format 'something-else' is not 'imucal-calibration'"),
+    (lambda d: d.pop("format"), "format", "missing field 'format'"),
+    (lambda d: d.pop("parameters"), "parameters", "missing field 'parameters'"),
+    (lambda d: d["parameters"].pop("psi"), "parameters.psi", "missing field 'parameters.psi'"),
+    (lambda d: d["parameters"]["b2"].update(value=-3.0), "parameters.b2.value", "scale b2 = -3.0 must be positive"),
+    (lambda d: d["parameters"]["b2"].update(value="big"), "parameters.b2.value", "'big' is not a number"),
+    (lambda d: d["parameters"]["phi"].update(value=4.0), "parameters.phi.value", r"angle phi = 4.0 rad is outside"),
+    (lambda d: [d["parameters"][a].update(value=v) for a, v in (("phi", 0.3), ("psi", 0.3), ("theta", 2.5))],
+     "parameters",
+     "give no valid frame"),
+    (lambda d: d["parameters"]["s1"].update(value=float("nan")), "parameters.s1.value", "value is not finite"),
+    (lambda d: d["parameters"]["s1"].update(scale=-1.0), "parameters.s1.scale", "scale must be positive"),
+    (lambda d: d["parameters"]["s1"].update(fixed="yes"), "parameters.s1.fixed", "'yes' is not true or false"),
+    (lambda d: d["parameters"].update(q1={"value": 1.0}), "parameters", r"parameter\(s\) \['q1'\] belong to no effect"),
+    (lambda d: d.update(gravity=-9.8), "gravity", "gravity -9.8 must be positive"),
+    (lambda d: d.update(effects=[{"name": "warp_drive", "axes": ["x"]}]), "effects", "unknown effect 'warp_drive'"),
+    (lambda d: d.update(effects=[{"name": "bias_drift", "axes": ["w"]}]), "effects", "is not a named effect on x, y, z"),
+    (lambda d: d.update(effects=[{"name": "bias_drift", "axes": ["x"]}]), "parameters", "do not match the model's"),
+    (lambda d: d.update(effects="all"), "effects", "must be a list"),
+    (lambda d: d.update(units=5), "units", "must be a mapping"),
+])
+def test_invalid_contents_are_refused(saved, tmp_path, mutate, field, match):
+    d = _dict(saved)
+    mutate(d)
+    p = tmp_path / "bad.yaml"
+    p.write_text(yaml.safe_dump(d))
+    with pytest.raises(ImucalError, match=match) as ei:
+        load_calibration(p)
+    assert ei.value.field == field
+    assert str(ei.value).startswith(str(p)) and "\n" not in str(ei.value)
+
+
+def test_unreadable_files(tmp_path):
+    with pytest.raises(ImucalError, match="file not found") as ei:
+        load_calibration(tmp_path / "none.yaml")
+    assert "imucal calibrate" in str(ei.value)
+    p = tmp_path / "bad.yaml"
+    p.write_text("format: [\n")
+    with pytest.raises(ImucalError, match="is not valid YAML at line 2"):
+        load_calibration(p)
+    p.write_text("- 1\n- 2\n")
+    with pytest.raises(ImucalError, match="top level is not a mapping"):
+        load_calibration(p)
+    p.write_bytes(b"\xff\xfe format")
+    with pytest.raises(ImucalError, match="cannot read"):
+        load_calibration(p)
+    with pytest.raises(ImucalError, match="cannot read"):
+        load_calibration(tmp_path)
+
+
+def test_from_dict_of_to_dict_is_identity(saved):
+    cal, _ = saved
+    back = from_dict(cal.to_dict())
+    assert back.to_dict() == cal.to_dict()
+
+
+def test_apply_checks_its_input(saved):
+    cal, _ = saved
+    with pytest.raises(ImucalError, match=r"raw data must have shape \(N, 3\), got \(4,\)"):
+        cal.apply(np.zeros(4))
+
+
+def test_save_is_atomic(saved, tmp_path, monkeypatch):
+    """A failing save leaves neither the file nor a temporary behind."""
+    cal, _ = saved
+    import imucal.calibration as mod
+
+    def boom(*a, **k):
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(mod.yaml, "safe_dump", boom)
+    with pytest.raises(RuntimeError):
+        cal.save(tmp_path / "c.yaml")
+    assert list(tmp_path.iterdir()) == []
