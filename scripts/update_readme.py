@@ -1,0 +1,47 @@
+#!/usr/bin/env python3
+"""Splice the generated result tables from docs/ into README.md.
+
+Each README block between `<!-- begin:NAME -->` and `<!-- end:NAME -->` is replaced by the
+file docs/NAME.md (or the part of it between the same markers, if it has them). The docs are
+written by the scripts named in each of them; run those first, then:
+
+    python scripts/update_readme.py
+"""
+from __future__ import annotations
+
+import re
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from imucal.output import write_text_atomic  # noqa: E402
+
+BLOCK = re.compile(r"(<!-- begin:([\w/.-]+) -->\n)(.*?)(<!-- end:\2 -->)", re.S)
+
+
+def body(name: str) -> str:
+    text = (ROOT / "docs" / f"{name}.md").read_text(encoding="utf-8")
+    m = BLOCK.search(text)
+    if m:
+        text = m.group(3)
+    # Drop the doc's own top-level title; the README gives the section heading.
+    lines = [ln for ln in text.splitlines() if not ln.startswith("# ")]
+    return "\n".join(lines).strip() + "\n"
+
+
+def main() -> int:
+    readme = ROOT / "README.md"
+    text = readme.read_text(encoding="utf-8")
+    new = BLOCK.sub(lambda m: m.group(1) + body(m.group(2)) + m.group(4), text)
+    if new != text:
+        write_text_atomic(readme, new)
+        print("README.md updated")
+    else:
+        print("README.md already up to date")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
