@@ -92,12 +92,12 @@ class Intervals:
 
     def table(self, directions: np.ndarray | None = None) -> str:
         """The interval table: start, end, duration, mean, std (and direction if given)."""
-        head = f"{'#':>3} {'t_start':>8} {'t_end':>8} {'dur':>6} {'mean_x':>12} {'mean_y':>12} {'mean_z':>12} {'std_x':>9} {'std_y':>9} {'std_z':>9}"
+        head = f"{'#':>3} {'start':>8} {'end':>8} {'t_start':>8} {'t_end':>8} {'dur':>6} {'mean_x':>12} {'mean_y':>12} {'mean_z':>12} {'std_x':>9} {'std_y':>9} {'std_z':>9}"
         if directions is not None:
             head += f"  {'dir_x':>6} {'dir_y':>6} {'dir_z':>6}"
         rows = [head]
         for k in range(self.n):
-            r = (f"{k:3d} {self.t_start[k]:8.2f} {self.t_end[k]:8.2f} {self.t_end[k]-self.t_start[k]:6.2f} "
+            r = (f"{k:3d} {self.start[k]:8d} {self.end[k]:8d} {self.t_start[k]:8.2f} {self.t_end[k]:8.2f} {self.t_end[k]-self.t_start[k]:6.2f} "
                  + " ".join(f"{v:12.6g}" for v in self.mean[k]) + " "
                  + " ".join(f"{v:9.3g}" for v in self.std[k]))
             if directions is not None:

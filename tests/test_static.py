@@ -125,13 +125,14 @@ def test_table_has_start_end_mean_std_direction(counts_run):
     iv = run.intervals
     text = iv.table(run.directions)
     head = text.splitlines()[0].split()
-    for col in ("t_start", "t_end", "mean_x", "mean_y", "mean_z", "std_x", "std_y", "std_z",
+    for col in ("start", "end", "t_start", "t_end", "mean_x", "mean_y", "mean_z", "std_x", "std_y", "std_z",
                 "dir_x", "dir_y", "dir_z"):
         assert col in head
     assert len(text.splitlines()) == iv.n + 1
     row = text.splitlines()[1].split()
-    assert float(row[1]) == pytest.approx(iv.t_start[0], abs=0.01)
-    assert float(row[4]) == pytest.approx(iv.mean[0, 0], rel=1e-5)
+    assert int(row[1]) == iv.start[0] and int(row[2]) == iv.end[0]
+    assert float(row[3]) == pytest.approx(iv.t_start[0], abs=0.01)
+    assert float(row[6]) == pytest.approx(iv.mean[0, 0], rel=1e-5)
     np.testing.assert_allclose(np.linalg.norm(run.directions, axis=1), 1.0, atol=1e-12)
 
 
