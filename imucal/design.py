@@ -19,15 +19,17 @@ Design criteria are evaluated in acceleration-equivalent units, so that A and E 
 the raw unit: shifts as s_i/b_i [m/s^2], scales as g b_i / b_i0 [m/s^2], angles as g * angle
 [m/s^2]; every sensitivity is then O(1) (for an ideal sensor: -u_i, -u_i^2, u_i u_j).
 D (max log det F) is invariant to that choice; A (min trace F^-1) is the summed variance of the
-nine error terms in (m/s^2)^2; E (max smallest eigenvalue) bounds the worst direction.
+nine error terms; E (max smallest eigenvalue) bounds the worst-determined combination. Criterion
+values are reported for unit noise (F's noise factor 1/sigma^2 taken out).
 
 Optimiser: coordinate exchange (Meyer & Nachtsheim 1995) over a dense Fibonacci grid on the
 sphere plus the 26 cube directions, with closed-form rank-one updates (matrix determinant lemma
 for D, Sherman-Morrison for A), several seeded starts, then a continuous pattern search per pose
 on the sphere. Why not an IPOPT NLP over spherical angles: log det of a 9x9 symbolic matrix is
 costly to differentiate, the problem has many equivalent local optima (the cube's 48 symmetries),
-and the exchange step needs no derivatives and is exact for the rank-one structure. Exchange finds
-the basin; the pattern search removes the grid's discretisation (~3 deg).
+E is not differentiable where eigenvalues coincide (at the symmetric schemes, where its optima
+lie), and the exchange step needs no derivatives and is exact for the rank-one structure. Exchange
+finds the basin; the pattern search removes the grid's discretisation (~8 deg spacing).
 """
 from __future__ import annotations
 

@@ -66,6 +66,7 @@ class DiscoverSettings:
     ambiguity: float = 10.0  #: competitors within this (scaled chi-square) are "cannot tell apart"
     max_effects: int = 3  #: effects added at most
     full_fits: int = 4  #: candidates fitted in full per round (best by the screening score)
+    lookahead: int = 3  #: when no single candidate passes, pairs starting from this many are tried
 
     def __post_init__(self) -> None:
         unknown = [c for c in self.candidates if c not in EFFECTS]
@@ -143,6 +144,7 @@ class Step:
     chosen: Candidate | None
     ambiguous_with: tuple[Candidate, ...] = ()
     scale: float = 1.0  #: the misfit scale used to compare candidates
+    jointly_with: str | None = None  #: the second effect that made the chosen one significant (lookahead)
 
 
 @dataclass(frozen=True)
@@ -231,6 +233,7 @@ class Discovery:
             "disagreement": [{"pattern": p, "chi2_removed": num(v)} for p, v in self.disagreement],
             "steps": [{"round": s.index, "chi2_before": s.chi2_before, "dof_before": s.dof_before,
                        "scale": s.scale, "chosen": s.chosen.label if s.chosen else None,
+                       "jointly_with": s.jointly_with,
                        "ambiguous_with": [c.label for c in s.ambiguous_with],
                        "candidates": [{"effect": c.label, "new_axes": [AXIS_NAMES[a] for a in c.new_axes],
                                        "chi2_screen": num(c.chi2_screen), "chi2": num(c.chi2),
@@ -281,6 +284,8 @@ class Discovery:
                     L.append(f"    {c.label:<28s} chi2 ~ {c.chi2_screen:8.5g} (screened out)")
             if s.chosen is not None:
                 L.append(f"    -> added {s.chosen.label}"
+                         + (f" (significant given {s.jointly_with}: no single effect explains enough, the pair "
+                            "does)" if s.jointly_with else "")
                          + (f"; cannot be told apart from {', '.join(c.label for c in s.ambiguous_with)}"
                             if s.ambiguous_with else ""))
             else:
@@ -443,12 +448,94 @@ def _round(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int,
     for i in fits:
         screened[i] = dataclasses.replace(screened[i], score=screened[i].chi2 / common + settings.penalty * screened[i].k)
     if not sig:
-        return Step(index, current.chi2, current.dof, tuple(screened), None, scale=common), fits
+        step = Step(index, current.chi2, current.dof, tuple(screened), None, scale=common)
+        return _lookahead(prob, current, cur_effects, names, step, fits, settings, notes)
     best = min(sig, key=lambda i: screened[i].score)
     chosen = screened[best]
     amb = tuple(screened[i] for i in sig if i != best and not _nested(screened[i], chosen)
                 and screened[i].score - chosen.score < settings.ambiguity)
     return Step(index, current.chi2, current.dof, tuple(screened), chosen, amb, common), {best: fits[best]}
+
+
+def _lookahead(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]], names: Sequence[str],
+               step: Step, fits: dict[int, FitResult], settings: DiscoverSettings, notes: list[str]
+               ) -> tuple[Step, dict[int, FitResult]]:
+    """Two comparable effects: neither alone leaves a residual at noise level, so each one's LR,
+    scaled by the misfit it leaves, is small. Try pairs (c, then the best d after c): when the
+    pair's misfit scale makes *both* members significant (each tested given the other, Bonferroni
+    over all pairs), add c now; the next round finds d with the ordinary test."""
+    firsts = sorted(fits, key=lambda i: step.candidates[i].score)[: settings.lookahead]
+    n_distinct = prob.run.observability.n_distinct
+    M1 = len(step.candidates)
+    best = None
+    for i in firsts:
+        c, res_c = step.candidates[i], fits[i]
+        eff_c = {**cur_effects, c.name: c.axes}
+        cands2 = _candidates(names, eff_c, len(res_c.free_names), prob.iv.n, n_distinct)
+        if not cands2:
+            continue
+        Jw, rw, col, cur_free = _screen(prob, res_c, eff_c, names)
+        base_cols = [col[n] for n in cur_free]
+
+        def pre(n: str, new: tuple[int, ...]) -> float:
+            cols = base_cols + [col[x] for x in make_effect(n, new).coefficient_names]
+            return _linear_chi2(Jw, rw, cols) + settings.penalty * len(new)
+
+        n2, ax2, new2 = min(cands2, key=lambda t: pre(t[0], t[2]))
+        try:
+            res_cd = prob.fit(_canonical({**eff_c, n2: ax2}), res_c.values())
+            d_alone = tuple(sorted(set(cur_effects.get(n2, ())) | set(new2)))
+            res_d = prob.fit(_canonical({**cur_effects, n2: d_alone}), current.values())
+        except ImucalError as exc:
+            notes.append(f"lookahead {c.label} + {_label(n2, ax2)}: {exc.message}")
+            continue
+        s2 = max(1.0, res_cd.redchi)
+        M2 = M1 * len(cands2)
+        lr_c = max(0.0, (res_d.chi2 - res_cd.chi2) / s2)
+        lr_d = max(0.0, (res_c.chi2 - res_cd.chi2) / s2)
+        p_c, p_d = chi2_sf(lr_c, c.k) * M2, chi2_sf(lr_d, len(new2)) * M2
+        if p_c < settings.alpha_effect and p_d < settings.alpha_effect:
+            score = res_cd.chi2 / s2 + settings.penalty * (c.k + len(new2))
+            if best is None or score < best[0]:
+                best = (score, i, lr_c, min(1.0, p_c), _label(n2, ax2))
+    if best is None:
+        return step, fits
+    _, i, lr_c, p_c, second = best
+    cands = list(step.candidates)
+    cands[i] = dataclasses.replace(cands[i], lr=lr_c, p_adjusted=p_c, significant=True)
+    return (dataclasses.replace(step, candidates=tuple(cands), chosen=cands[i], jointly_with=second),
+            {i: fits[i]})
+
+
+def _prune(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]], found_names: set[str],
+           settings: DiscoverSettings, notes: list[str]) -> tuple[FitResult, dict[str, tuple[int, ...]]]:
+    """Backward step: drop a coefficient (effect, axis) added earlier that the final model no
+    longer needs, i.e. whose removal costs less than ``penalty`` in scaled chi-square. A greedy
+    forward search can pick an extra axis early that a later effect explains better."""
+    while True:
+        scale = max(1.0, current.redchi)
+        trials = []
+        for n in sorted(found_names & set(cur_effects), key=_EFFECT_ORDER.get):
+            for a in cur_effects[n]:
+                reduced = dict(cur_effects)
+                rest = tuple(x for x in cur_effects[n] if x != a)
+                if rest:
+                    reduced[n] = rest
+                else:
+                    del reduced[n]
+                try:
+                    res = prob.fit(_canonical(reduced), current.values())
+                except ImucalError:
+                    continue
+                trials.append(((res.chi2 - current.chi2) / scale, n, a, res, reduced))
+        if not trials:
+            return current, cur_effects
+        cost, n, a, res, reduced = min(trials, key=lambda t: t[0])
+        if cost >= settings.penalty:
+            return current, cur_effects
+        notes.append(f"dropped {n} on axis {AXIS_NAMES[a]} after the later effects: it removed only "
+                     f"{max(cost, 0.0):.3g} of scaled chi-square (< {settings.penalty:.3g} per coefficient)")
+        current, cur_effects = res, reduced
 
 
 def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings()) -> Discovery:
@@ -512,7 +599,15 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings())
         if consistent:
             verdict = (f"explained: after adding {_added(found, cur_effects)} "
                        f"chi2/dof = {current.redchi:.3g} (p = {_p_noise(current):.3g}), at noise level")
+    if found:
+        current, cur_effects = _prune(prob, current, cur_effects, {f[0] for f in found}, settings, notes)
+        found = [f for f in found if f[0] in cur_effects]
     final = _final_run(config, base, found, cur_effects, current, notes)
+    if found and verdict.startswith("explained"):  # name the effects as kept after the backward step
+        verdict = (f"explained: after adding {_added(found, cur_effects)} chi2/dof = {final.result.redchi:.3g} "
+                   f"(p = {_p_noise(final.result):.3g}), at noise level")
+    elif found and verdict.startswith("partly"):
+        verdict = f"partly explained by {_added(found, cur_effects)}; the remaining " + verdict.split("; the remaining ", 1)[1]
     last = {n: (lr, p, amb) for n, lr, p, amb in found}
     effects = tuple(_found(n, ax, final.result, *last[n]) for n, ax in
                     sorted(cur_effects.items(), key=lambda kv: _EFFECT_ORDER[kv[0]]) if n in last)

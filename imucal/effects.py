@@ -45,7 +45,9 @@ class AxisEffect(Effect):
 
     #: unit of the coefficient; "{raw}" is replaced by the raw unit of the shifts
     unit: str = ""
-    #: typical magnitude of the coefficient, as a multiple of ``scale_base`` (see ``_scale``)
+    #: A generous magnitude of the coefficient (the large end of what MEMS parts show), used as the
+    #: parameter's scale: IPOPT's steps are bounded by it, and the observability check calls the
+    #: coefficient undetermined when the poses predict a standard error above it.
     typical: float = 1.0
     #: physical meaning, for the description and the docs
     meaning: str = ""
@@ -59,10 +61,6 @@ class AxisEffect(Effect):
         if not self.axes or any(a not in (0, 1, 2) for a in self.axes):
             raise ImucalError(f"axes {list(axes)} must be a non-empty subset of 0, 1, 2 (x, y, z)",
                               field=f"effects.{self.name}.axes")
-
-    @property
-    def axes_label(self) -> str:
-        return "".join(AXIS_NAMES[a] for a in self.axes)
 
     def coefficient(self, axis: int) -> str:
         return f"{self.name}_{AXIS_NAMES[axis]}"
@@ -112,7 +110,7 @@ class BiasTemperature(AxisEffect):
     name = "bias_temperature"
     covariates = ("temp",)
     unit = "{raw}/degC"
-    typical = 1e-4  # x one g in raw units: 0.1 mg/degC
+    typical = 1e-3  # x one g in raw units: 1 mg/degC
     meaning = "change of the shift s_i per degC"
     uses_tref = True
 
@@ -135,7 +133,7 @@ class ScaleTemperature(AxisEffect):
     name = "scale_temperature"
     covariates = ("temp",)
     unit = "1/degC"
-    typical = 1e-4  # 100 ppm/degC
+    typical = 1e-3  # 0.1 %/degC
     bound = 0.01  # 1 %/degC: far beyond any MEMS part, keeps b_i(T) > 0
     meaning = "relative change of the scale b_i per degC"
     uses_tref = True
@@ -156,7 +154,7 @@ class BiasDrift(AxisEffect):
     name = "bias_drift"
     covariates = ("time",)
     unit = "{raw}/s"
-    typical = 1e-5  # x one g in raw units: 10 ug/s
+    typical = 1e-4  # x one g in raw units: 0.1 mg/s
     meaning = "change of the shift s_i per second"
 
     def _scale(self, base: Parameters, axis: int) -> float:
@@ -178,7 +176,7 @@ class ScaleDrift(AxisEffect):
     name = "scale_drift"
     covariates = ("time",)
     unit = "1/s"
-    typical = 1e-6
+    typical = 1e-5  # 10 ppm/s
     bound = 1e-3  # 0.1 %/s
     meaning = "relative change of the scale b_i per second"
 
@@ -201,7 +199,7 @@ class ScaleNonlinearity(AxisEffect):
 
     name = "scale_nonlinearity"
     unit = "1/(m/s^2)"
-    typical = 1e-4  # 0.1 % of reading at 1 g
+    typical = 1e-3  # 1 % of the reading at 1 g
     bound = 0.01  # keeps 1 + 4 q u > 0 up to |u| = 2.5 g
     meaning = "quadratic coefficient of the axis's own reading"
 
@@ -234,14 +232,6 @@ def make_effect(name: str, axes: Sequence[int] = (0, 1, 2)) -> AxisEffect:
         raise ImucalError(f"unknown effect {name!r}", field="effects",
                           fix=f"choose from {', '.join(EFFECTS)}")
     return EFFECTS[name](axes)
-
-
-def axes_from_letters(letters: Sequence[str] | str, field: str = "axes") -> tuple[int, ...]:
-    """'xz' or ['x', 'z'] -> (0, 2)."""
-    bad = [a for a in letters if a not in AXIS_NAMES]
-    if bad or not letters:
-        raise ImucalError(f"axes {list(letters)!r} must be a non-empty list of x, y, z", field=field)
-    return tuple(sorted({AXIS_NAMES.index(a) for a in letters}))
 
 
 # --- data checks and reference values ---------------------------------------------------------

@@ -508,3 +508,27 @@ def draw_effect_case(seed: int, effect: str | None = "random", axes: tuple[int, 
         sensor = replace(sensor, effects={name: coeffs})
     cfg = SimulationConfig(sensor=sensor, plan=plan, temperature=temperature, gravity=g, seed=int(seed))
     return EffectCase(seed=int(seed), effect=name, axes=tuple(ax), size=size, sigma_mean=sigma_mean, config=cfg)
+
+
+def draw_pair_case(seed: int, snr: float = 40.0, noise_mg: float | None = None) -> tuple[EffectCase, EffectCase]:
+    """Two different effects, each on one random axis and of the same SNR, in one recording.
+
+    Returns the two single-effect cases; the recording is ``pair_config(...)`` of them (the
+    first case's sensor, plan and temperature with both effects).
+    """
+    from .effects import EFFECTS
+
+    rng = np.random.default_rng([seed, 977])
+    names = list(EFFECTS)
+    a, b = rng.choice(len(names), 2, replace=False)
+    c1 = draw_effect_case(seed, effect=names[a], axes=(int(rng.integers(3)),), snr=snr, noise_mg=noise_mg)
+    c2 = draw_effect_case(seed, effect=names[b], axes=(int(rng.integers(3)),), snr=snr, noise_mg=noise_mg)
+    return c1, c2
+
+
+def pair_config(c1: EffectCase, c2: EffectCase) -> SimulationConfig:
+    """The simulation of ``c1`` with the effects of both cases (same seed: same sensor and plan)."""
+    from dataclasses import replace
+
+    sensor = replace(c1.config.sensor, effects={**c1.config.sensor.effects, **c2.config.sensor.effects})
+    return replace(c1.config, sensor=sensor)

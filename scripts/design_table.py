@@ -71,7 +71,6 @@ def simulation_check(cache: Path) -> list[str]:
         return [f"(Monte-Carlo cache {cache} not found: run scripts/mc_uncertainty.py first.)"]
     with open(cache, "rb") as f:
         saved = pickle.load(f)
-    from imucal.design import evaluate, optimal_design, scheme_directions
     from imucal.parameters import BASE_NAMES
 
     by = {(s.scheme, s.sensor, s.series, s.orthogonal): saved["results"][i] for i, s in enumerate(saved["settings"])}
@@ -101,7 +100,7 @@ def simulation_check(cache: Path) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from imucal.design import (DEFAULT_NOISE, SIX_NAMES, BASE_NAMES, evaluate, scheme_directions)
+    from imucal.design import BASE_NAMES, DEFAULT_NOISE, SIX_NAMES, evaluate, scheme_directions
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", default=str(ROOT / "docs" / "design.md"))

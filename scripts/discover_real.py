@@ -5,7 +5,8 @@
 For each recording: the verdict, the gap (RMS and chi-square per dof on interval means), the
 effects found (or why none), the patterns that carry most of the disagreement, and the three
 figures under docs/discover/<name>/. None of these recordings has a temperature column, so only
-bias_drift, scale_drift and scale_nonlinearity can be tested.
+bias_drift, scale_drift and scale_nonlinearity can be tested. Also writes the figures of the
+simulated example of docs/discover.md (configs/simulate_example.yaml) to docs/discover/example/.
 """
 from __future__ import annotations
 
@@ -61,7 +62,8 @@ def main() -> int:
             d = discover(cfg)
         except ImucalError as exc:
             L.append(f"| {name} ({what}) | - | - | - | - | - | - | - | refused: {exc.message} |")
-            details.append(f"## {name}\n\n{what}. Refused with a one-line message:\n\n```\n{exc}\n```\n")
+            msg = str(exc).replace(str(ROOT.parent) + "/", "../").replace("/main/configs/../", "/")
+            details.append(f"## {name}\n\n{what}. Refused with a one-line message:\n\n```\n{msg}\n```\n")
             print(f"{name}: refused: {exc}")
             continue
         dt = time.perf_counter() - t0
@@ -91,7 +93,25 @@ def main() -> int:
         print(f"{name}: {d.verdict} ({dt:.1f} s)")
     text = "\n".join(L) + "\n\n" + "\n".join(details)
     write_text_atomic(docs / "discover_real.md", text)
+    example(figdir / "example")
     return 0
+
+
+def example(out: Path) -> None:
+    """The figures of docs/discover.md: configs/simulate_example.yaml (simulated, bias_temperature on x)."""
+    import tempfile
+
+    from imucal.simulate import load_simulation_config
+
+    sim = load_simulation_config(str(ROOT / "configs" / "simulate_example.yaml")).run()
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "simulate_example.csv"
+        path.write_text(sim.to_csv_text())
+        d = discover(config_from_dict({"data": {"path": str(path)}}, None))
+    with OutputSet() as o:
+        for fname, fn in FIGURES.items():
+            o.call(out / fname, lambda p, fn=fn: fn(d, p))
+    print(f"simulated example: {d.verdict}")
 
 
 if __name__ == "__main__":

@@ -238,3 +238,29 @@ def test_chi2_sf_known_values():
     assert chi2_sf(3.841458820694124, 1) == pytest.approx(0.05, rel=1e-9)
     assert chi2_sf(10.827566170662733, 1) == pytest.approx(1e-3, rel=1e-9)
     assert chi2_sf(0.0, 5) == 1.0 and chi2_sf(math.inf, 3) == 0.0
+
+
+# --- two effects: rounds, lookahead, backward step ----------------------------------------------
+def test_two_comparable_effects_are_both_named(tmp_path):
+    """Neither effect alone brings the residual to the noise, so neither passes alone; the pair
+    does (lookahead), and an axis picked up on the way is dropped again (backward step)."""
+    from imucal.simulate import draw_pair_case, pair_config
+
+    c1, c2 = draw_pair_case(30)
+    d = _discover_sim(pair_config(c1, c2).run(), c1.config.sensor.unit, tmp_path, "pair")
+    assert sorted(e.label for e in d.effects) == sorted([c1.label, c2.label])
+    assert any(s.jointly_with for s in d.steps)
+    assert d.consistent_after and d.final.result.redchi < 2.5
+    assert "given" in d.report()
+    assert any(n.startswith("dropped scale_nonlinearity on axis y") for n in d.notes)
+
+
+def test_two_effect_cases_score(tmp_path):
+    from imucal.simulate import draw_pair_case, pair_config
+
+    right = []
+    for seed in range(300, 310):
+        c1, c2 = draw_pair_case(seed)
+        d = _discover_sim(pair_config(c1, c2).run(), c1.config.sensor.unit, tmp_path, f"p{seed}")
+        right.append(sorted(e.label for e in d.effects) == sorted([c1.label, c2.label]))
+    assert sum(right) >= 8, right

@@ -175,3 +175,17 @@ def test_sensor_from_fitted_values_replays_the_recording():
     m = np.random.default_rng(0).normal(0, 5, (20, 3))
     t = np.linspace(0, 100, 20)
     np.testing.assert_allclose(replay.forward(m, t, None), s.forward(m, t, None), rtol=1e-12)
+
+
+def test_discover_cli_temperature_effect_in_config_without_temp(tmp_path, capsys):
+    """A config that asks for a temperature effect on a recording with no temp column."""
+    case = draw_effect_case(8200, effect=None, with_temperature=False)
+    data = tmp_path / "notemp.csv"
+    data.write_text(case.config.run().to_csv_text())
+    cfg = tmp_path / "run.yaml"
+    cfg.write_text(f"data: {{path: {data}, unit: {case.config.sensor.unit}}}\n"
+                   "fit: {effects: [{name: bias_temperature, axes: [x]}]}\n")
+    code, _, err = _cli(capsys, "discover", "--config", cfg)
+    assert code == 2 and err.count("\n") == 1
+    assert "effect bias_temperature needs temperature but the data have no temp column" in err
+    assert "notemp.csv" in err and "fix:" in err
