@@ -104,6 +104,9 @@ def run(args: argparse.Namespace) -> int:
     check_destination(out / "calibration.yaml")  # fail before the work, not after it
     if args.json:
         check_destination(args.json)
+    import os
+
+    out = Path(os.path.normpath(out))
     result = calibrate(cfg)
     text = fit_report(result)
     figures = cfg.output.figures and not args.no_figures
