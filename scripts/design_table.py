@@ -73,13 +73,18 @@ def simulation_check(cache: Path) -> list[str]:
         saved = pickle.load(f)
     from imucal.parameters import BASE_NAMES
 
-    by = {(s.scheme, s.sensor, s.series, s.orthogonal): saved["results"][i] for i, s in enumerate(saved["settings"])}
+    from imucal.design import evaluate, optimal_design, scheme_directions
+
+    pred_eff = optimal_design(12, "D").d_efficiency(evaluate(scheme_directions("edges"), "D"))
+    dets: list[str] = []
+    by = {(s["scheme"], s["sensor"], s["series"], s["orthogonal"], s.get("noise_factor", 1.0)): saved["results"][i]
+          for i, s in enumerate(saved["settings"])}
     L = ["Empirical standard deviation of the estimates over the Monte-Carlo recordings (`scripts/mc_uncertainty.py`, "
          "same sensor and noise for both designs), as the ratio edges / planned-D-12, beside the predicted ratio "
          "(square roots of the CRLB diagonals). > 1: the planned poses estimate that parameter better.", "",
          "| sensor | recordings | | " + " | ".join(BASE_NAMES) + " | geometric mean |", "|---|---|---|" + "---|" * 10]
     for sensor in ("si", "counts"):
-        e, p = by.get(("edges", sensor, False, False)), by.get(("planned-D-12", sensor, False, False))
+        e, p = by.get(("edges", sensor, False, False, 1.0)), by.get(("planned-D-12", sensor, False, False, 1.0))
         if not e or not p:
             continue
         se = np.std([r["err"] for r in e if "err" in r], axis=0, ddof=1)
@@ -91,11 +96,14 @@ def simulation_check(cache: Path) -> list[str]:
                  + f" | {math.exp(np.mean(np.log(emp))):.3f} |")
         L.append(f"| {sensor} | | predicted | " + " | ".join(f"{x:.3f}" for x in pred)
                  + f" | {math.exp(np.mean(np.log(pred))):.3f} |")
-        # det of the empirical covariance, the D criterion measured
+        # the D criterion measured: determinants of the empirical covariances
         ce = np.cov(np.array([r["err"] for r in e if "err" in r]).T)
         cp = np.cov(np.array([r["err"] for r in p if "err" in r]).T)
-        eff = math.exp((np.linalg.slogdet(ce)[1] - np.linalg.slogdet(cp)[1]) / 18)
-        L.append(f"| {sensor} | | det ratio | (det C_edges / det C_planned)^(1/18) = {eff:.3f} |" + " |" * 9)
+        eff = math.exp((np.linalg.slogdet(ce)[1] - np.linalg.slogdet(cp)[1]) / 9)
+        sd = math.sqrt(2) * math.sqrt(2 * 9 / len(e)) / 9
+        dets.append(f"{sensor}: measured (det C_edges / det C_planned)^(1/9) = {eff:.3f} (+- {1.96 * sd * eff:.3f})")
+    L += ["", "D-efficiency of planned-D-12 over the edges, predicted (det F_planned / det F_edges)^(1/9) = "
+          f"{pred_eff:.3f}; " + "; ".join(dets) + "."]
     return L
 
 

@@ -9,7 +9,7 @@ signal-to-noise ratio (SNR) divides it by the noise of one interval mean. For ev
 and effect the script finds the smallest SNR (and size in mg) at which the right effect on the
 right axes is named in at least 90 % of the cases, and counts false positives on clean data.
 
-    python scripts/discover_study.py                 # the full study (2100 cases, ~12 min on 2 cores)
+    python scripts/discover_study.py                 # the full study (2100 cases, ~9 min on 2 cores)
     python scripts/discover_study.py --quick         # a smoke run
 Writes docs/discover_study.md (and prints it).
 """

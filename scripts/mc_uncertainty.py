@@ -30,7 +30,7 @@ import sys
 import tempfile
 import time
 import zlib
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -580,16 +580,18 @@ def main(argv: list[str] | None = None) -> int:
     if args.report_only:
         with open(args.cache, "rb") as f:
             saved = pickle.load(f)
-        settings, results, elapsed = saved["settings"], saved["results"], saved["elapsed"]
+        settings = [Setting(**(d if isinstance(d, dict) else asdict(d))) for d in saved["settings"]]
+        results, elapsed = saved["results"], saved["elapsed"]
         for k in ("n", "n_series", "seed", "jobs", "quick"):
             setattr(args, k, saved["args"][k])
     else:
         t0 = time.perf_counter()
         results = run_study(settings, args.n, args.n_series, args.seed, args.jobs)
         elapsed = time.perf_counter() - t0
-        with open(args.cache, "wb") as f:
-            pickle.dump({"settings": settings, "results": results, "elapsed": elapsed,
-                         "args": {k: getattr(args, k) for k in ("n", "n_series", "seed", "jobs", "quick")}}, f)
+    # plain data only (settings as dicts), so that other scripts can read the cache
+    with open(args.cache, "wb") as f:
+        pickle.dump({"settings": [asdict(s) for s in settings], "results": results, "elapsed": elapsed,
+                     "args": {k: getattr(args, k) for k in ("n", "n_series", "seed", "jobs", "quick")}}, f)
     summ = [summarise(s, results[i]) for i, s in enumerate(settings)]
     write_report(summ, args, elapsed, Path(args.out))
     for s in summ:
