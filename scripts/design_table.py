@@ -131,8 +131,8 @@ def main(argv: list[str] | None = None) -> int:
          f"{NOISE} m/s^2 per interval mean (a MEMS part held 4 s at 100 Hz). Criteria use parameters in "
          "acceleration-equivalent units (s/b, g b, g angle, all in m/s^2), so every sensitivity is O(1):", "",
          "* **D**: log det F (unit noise). Invariant to the units; D-efficiency of a design relative to the "
-         "planned one = (det F / det F_planned)^(1/9), the factor by which its parameter volume per parameter is "
-         "larger.",
+         "planned one = (det F / det F_planned)^(1/9); an efficiency of 0.97 means the design needs 1/0.97 = 1.03 "
+         "times as many recordings to match the planned poses' determinant.",
          "* **A**: trace F^-1 (unit noise): summed variance of the nine error terms.",
          "* **E**: smallest eigenvalue of F (unit noise): the worst-determined combination.", "",
          "Optimiser: coordinate exchange (Meyer & Nachtsheim) over a Fibonacci grid of 600 directions plus the 26 "
