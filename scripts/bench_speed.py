@@ -166,7 +166,8 @@ def calibrate_cmd(out: str) -> list[str]:
 def bench_calibrate(runs: int) -> dict:
     tmp = tempfile.mkdtemp(prefix="imucal-bench-")
     cmd = calibrate_cmd(tmp)
-    res: dict = {"command": " ".join(cmd).replace(str(ROOT) + "/", "").replace(tmp, "OUT")}
+    shown = ["imucal", *cmd[cmd.index("calibrate"):]]
+    res: dict = {"command": " ".join(shown).replace(str(ROOT) + "/", "").replace(tmp, "OUT")}
     hf = shutil.which("hyperfine")
     if hf:
         jpath = Path(tmp) / "hf.json"

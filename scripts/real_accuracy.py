@@ -84,13 +84,13 @@ RECORDINGS = [
     RealRecording("mpu6050-tomisuarez", {"path": "mpu6050-tomisuarez/example_data_calibration.csv",
                                          "sample_rate": 100, "unit": "raw"}, 9.80665,
                   "mpu6050-tomisuarez/published_results/params_acc.csv", tomisuarez, "tomisuarez (Tedaldi)"),
-    RealRecording("mpu6050-tomisuarez, 6-param", {"path": "mpu6050-tomisuarez/example_data_calibration.csv",
-                                                  "sample_rate": 100, "unit": "raw"}, 9.80665,
+    RealRecording("mpu6050-tomisuarez, phi fixed", {"path": "mpu6050-tomisuarez/example_data_calibration.csv",
+                                                    "sample_rate": 100, "unit": "raw"}, 9.80665,
                   "mpu6050-tomisuarez/published_results/params_acc.csv", tomisuarez, "tomisuarez (Tedaldi)",
-                  fit={"fix": ["phi", "psi", "theta"]},
-                  note="10 poses, only one more than the 9 parameters: the angle between x and y is poorly "
-                       "determined (predicted std of several degrees); the 6-parameter row holds the angles at "
-                       "90 deg, close to the authors' fitted misalignments (< 1e-5 rad)"),
+                  fit={"fix": ["phi"]},
+                  note="10 poses, only one more than the 9 parameters: the poses leave phi (the x-y angle) "
+                       "undetermined and imucal refuses the full fit; as in configs/mpu6050-tomisuarez.yaml, this "
+                       "row holds phi at 90 deg (the authors' fit left their misalignments within 1e-5 rad of 0)"),
     RealRecording("imucal-ferraris (mad-lab)", {"path": "imucal-ferraris/annotated_session.csv",
                                                 "columns": {"ax": "acc_x", "ay": "acc_y", "az": "acc_z"},
                                                 "sample_rate": 204.8, "unit": "raw"}, 9.81,

@@ -32,7 +32,7 @@ def outcomes() -> dict:
     return {r.name: ra.evaluate(r) for r in ra.RECORDINGS}
 
 
-USABLE = ["xsens-mti-imutk", "ros-imu data2", "ros-imu data3", "ros-imu data4", "mpu6050-tomisuarez, 6-param",
+USABLE = ["xsens-mti-imutk", "ros-imu data2", "ros-imu data3", "ros-imu data4", "mpu6050-tomisuarez, phi fixed",
           "imucal-ferraris (mad-lab), 6-param"]
 
 
