@@ -90,7 +90,9 @@ class Calibration:
             raise ImucalError(f"raw data must have shape (N, 3), got {raw.shape}", field="raw")
         if not self.effects:
             A, c = self.linear_map()
-            return raw @ A.T + c
+            out = (A @ raw.T).T  # one BLAS call; half the peak memory of raw @ A.T + c
+            out += c
+            return out
         covs = self.covariates
         covariates = covariates or {}
         missing = [c for c in covs if c not in covariates]

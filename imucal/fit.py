@@ -155,7 +155,9 @@ class _Rows:
                  pfix: np.ndarray) -> None:
         self.data, self.g, self.pfix = data, gravity, pfix
         self.free_idx = np.array([model.names.index(nm) for nm in free], int)
-        self.fast = data.mode == "samples" and not model.effects  # vectorised path (imucal.samples)
+        # Base model: the vectorised NLP (imucal.samples), for means and samples alike; with
+        # effects, the CasADi map NLP over the extended model.
+        self.fast = not model.effects
         if self.fast:
             from .samples import SampleResiduals
 

@@ -11,6 +11,16 @@ from .pipeline import CalibrationRun
 CORREL_MIN = 0.3
 
 
+def t_quantile_975(dof: int) -> float:
+    """Student-t 97.5 % quantile (Cornish-Fisher expansion about the normal; < 1 % off for dof >= 3)."""
+    z = 1.959963984540054
+    if dof <= 0:
+        return float("nan")
+    v = float(dof)
+    return (z + (z**3 + z) / (4 * v) + (5 * z**5 + 16 * z**3 + 3 * z) / (96 * v**2)
+            + (3 * z**7 + 19 * z**5 + 17 * z**3 - 15 * z) / (384 * v**3))
+
+
 def _fmt(v: float) -> str:
     return "nan" if not math.isfinite(v) else f"{v:.10g}"
 
@@ -34,6 +44,8 @@ def fit_report(run: CalibrationRun, correl_min: float = CORREL_MIN) -> str:
     L.append(f"    # free parameters  = {len(res.free_names)}")
     L.append(f"    chi-square         = {res.chi2:.6g}")
     L.append(f"    reduced chi-square = {res.redchi:.6g}  (1 = residuals match the noise of the means)")
+    L.append(f"    degrees of freedom = {res.dof}  (95 % intervals: value +/- {t_quantile_975(res.dof):.3g} x std, "
+             "Student-t, since std is scaled by the reduced chi-square)")
     L.append(f"    RMS |a|-g, means   = {cal.fit['rms_residual']:.6g} m/s^2")
     L.append(f"    RMS |a|-g, samples = {cal.fit['rms_residual_samples']:.6g} m/s^2")
     L.append(f"    noise inflation    = {iv.noise_inflation:.3g}  (batch-means / white-noise variance)")
