@@ -58,9 +58,17 @@ def case_fit_means(n: int, repeats: int) -> dict:
     from imucal.fit import FitData, fit
     from imucal.model import build_model
 
+    from imucal.effects import make_effect
+
     sensor, clean, rng = _sim_means(n)
     sig = 0.2  # counts per mean (4 counts per sample, 400 samples)
     model = build_model()
+    mapped_model = build_model([make_effect("bias_drift", (0, 1, 2))])
+
+    def mapped_params(base):
+        p = mapped_model.parameters(base)
+        extra = [k for k in p.names if k not in base.names]
+        return p.with_fixed(extra, values={k: 0.0 for k in extra})
     times, statuses, vec = [], [], []
     for k in range(repeats + 1):
         means = clean + rng.normal(0, sig, clean.shape)
@@ -71,10 +79,11 @@ def case_fit_means(n: int, repeats: int) -> dict:
         res = fit(data, params, model, G)
         times.append(time.perf_counter() - t0)
         statuses.append(res.status)
-        # the same rows through the vectorised samples path (imucal/samples.py), for comparison
+        # the same rows through the CasADi map NLP that fits models with effects (an effect whose
+        # coefficients are held at zero), for comparison
         t0 = time.perf_counter()
-        res_v = fit(FitData(raw=means, cov=data.cov, raw_var=data.raw_var, group=data.group, mode="samples"),
-                    params, model, G)
+        res_v = fit(FitData(raw=means, cov=np.zeros((n, 1)), raw_var=data.raw_var, group=data.group,
+                            mode="means"), mapped_params(params), mapped_model, G)
         vec.append(time.perf_counter() - t0)
         dmax = max(abs(res_v.params[p].value - res.params[p].value) / res.std[p] for p in res.free_names)
     return {"n": n, "first_s": times[0], "cached_median_s": statistics.median(times[1:]),
@@ -219,6 +228,29 @@ def import_profile(cmd: list[str], top: int = 8) -> list[tuple[str, float]]:
 
 
 # --- report ------------------------------------------------------------------------------------
+def summary(r: dict) -> list[str]:
+    """The headline numbers, between markers that scripts/update_readme.py splices into the README."""
+    L = ["<!-- begin:summary -->", "| what | measured |", "|---|---|"]
+    c = r.get("calibrate")
+    if c:
+        L.append(f"| end-to-end `imucal calibrate --no-figures`, Xsens (51,175 samples, 38 intervals) | "
+                 f"{c['median_s']:.3f} s median ({c['tool']}, {c['runs']} runs), peak {c['maxrss_mb']:.0f} MB; "
+                 "imu_tk: about 0.35 s |")
+    for x in r.get("fit-means") or []:
+        if "error" not in x and x["n"] in (10, 1000):
+            L.append(f"| fit of {x['n']:,} interval means | {x['cached_median_s']:.3f} s (first call "
+                     f"{x['first_s']:.3f} s) |")
+    for x in r.get("fit-samples") or []:
+        if "error" not in x:
+            L.append(f"| samples mode, {x['n']:,} samples | {x['median_s']:.2f} s, peak {x['maxrss_mb']:.0f} MB |")
+    ap = r.get("apply")
+    if ap and "error" not in ap:
+        L.append(f"| apply, {ap['n']:,} samples | `Calibration.apply` {ap['imucal']['samples_per_s']:.3g} "
+                 f"samples/s; plain `raw @ A.T + c` {ap['numpy']['samples_per_s']:.3g} samples/s |")
+    L.append("<!-- end:summary -->")
+    return L
+
+
 def markdown(r: dict, args) -> str:
     cpu = platform.processor() or platform.machine()
     try:
@@ -234,6 +266,7 @@ def markdown(r: dict, args) -> str:
          f"Load average when the run started: {r.get('load', (math.nan,) * 3)[0]:.2f} (1 min) on {os.cpu_count()} "
          "cores: this machine is shared, so wall times carry the noise of other jobs; `user` CPU time (hyperfine) "
          "is the steadier figure.", ""]
+    L += summary(r) + [""]
     c = r.get("calibrate")
     if c:
         L += ["## End-to-end calibrate (Xsens MTi, 51,175 samples, 38 intervals)", "",
@@ -250,10 +283,12 @@ def markdown(r: dict, args) -> str:
     fm = r.get("fit-means")
     if fm:
         L += ["## Fit time against the number of interval means", "",
-              "Random directions, raw-count sensor (16384 LSB/g), 0.2 counts noise per mean. `first` includes "
-              "building the IPOPT solver for that problem shape; later fits of the same shape reuse it.", "",
-              "| intervals | first [s] | cached, median [s] | same rows, vectorised path, median [s] | "
-              "peak RSS [MB] | IPOPT status (cached runs) |",
+              "Random directions, raw-count sensor (16384 LSB/g), 0.2 counts noise per mean. The base model is "
+              "fitted by the vectorised NLP (`imucal/samples.py`); models with effects by the CasADi map NLP over "
+              "the symbolic model, timed here on the same rows with an effect held at zero. `first` includes "
+              "building the solver for that problem shape; later fits of the same shape reuse it.", "",
+              "| intervals | first [s] | median [s] | CasADi map NLP (models with effects), median [s] | "
+              "peak RSS [MB] | IPOPT status |",
               "|---|---|---|---|---|---|"]
         for x in fm:
             if "error" in x:
@@ -263,9 +298,9 @@ def markdown(r: dict, args) -> str:
             L.append(f"| {x['n']} | {x['first_s']:.3f} | {x['cached_median_s']:.3f} | {x['vectorised_median_s']:.3f} | "
                      f"{x['maxrss_mb']:.0f} | "
                      + ", ".join(f"{k} x{v}" for k, v in sorted(st.items())) + " |")
-        L += ["", "The vectorised column fits the same interval means through `imucal/samples.py` (FitData mode "
-              "\"samples\"); its estimates agree with the means path to "
-              f"{max(x.get('vectorised_max_diff_std', math.nan) for x in fm if 'error' not in x):.1g} standard errors.", ""]
+        L += ["", "The two NLPs agree to "
+              f"{max(x.get('vectorised_max_diff_std', math.nan) for x in fm if 'error' not in x):.1g} standard errors "
+              "(also asserted by tests/test_fit_paths.py).", ""]
     fs = r.get("fit-samples")
     if fs:
         L += ["## Samples mode: fit time against the number of samples", "",
@@ -282,7 +317,7 @@ def markdown(r: dict, args) -> str:
     ap, ap1 = r.get("apply"), r.get("apply_1thread")
     if ap and "error" not in ap:
         names = {"imucal": "`Calibration.apply(raw)`", "numpy": "`raw @ A.T + c` (plain numpy)",
-                 "numpy_t": "`out = (A @ raw.T).T; out += c`"}
+                 "numpy_t": "`out = (A @ raw.T).T; out += c` (what Calibration.apply does)"}
         L += ["## Apply throughput", "",
               f"{ap['n']:,} samples (N x 3 float64 in memory), median of repeats; numpy's BLAS with its default "
               "threads, and with `OPENBLAS_NUM_THREADS=1`. On a shared 2-core machine a multithreaded BLAS call "

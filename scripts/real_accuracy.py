@@ -184,6 +184,7 @@ def markdown(outs: list[Outcome], ros: list[Outcome]) -> str:
          "Both calibrations are then evaluated on **imucal's** static intervals: RMS of |a| - g over the interval "
          "means, the authors' |a| computed with their own formula (no conversion involved), and the chi-square "
          "with the noise of each mean (the quantity the means fit minimises).", "",
+         "<!-- begin:table -->",
          "| recording | unit | intervals (distinct) | model | RMS ours [m/s^2] | RMS authors [m/s^2] | authors' tool | "
          "chi2 ours | chi2 authors |", "|---|---|---|---|---|---|---|---|---|"]
     for o in outs:
@@ -194,6 +195,7 @@ def markdown(outs: list[Outcome], ros: list[Outcome]) -> str:
         L.append(f"| {o.rec.name} | {o.rec.data.get('unit', '')} | {run.intervals.n} ({run.observability.n_distinct}) | "
                  f"{len(run.result.free_names)} parameters, {run.result.mode} | {o.rms_ours:.6f} | {o.rms_authors:.6f} | "
                  f"{o.rec.tool} | {o.chi2_ours:.1f} | {o.chi2_authors:.1f} |")
+    L.append("<!-- end:table -->")
     usable = [o for o in outs if o.run is not None and np.isfinite(o.rms_authors)]
     if usable:
         L += ["", "Ours / authors' RMS on the same intervals: " + ", ".join(

@@ -2,7 +2,8 @@
 """Splice the generated result tables from docs/ into README.md.
 
 Each README block between `<!-- begin:NAME -->` and `<!-- end:NAME -->` is replaced by the
-file docs/NAME.md (or the part of it between the same markers, if it has them). The docs are
+file docs/NAME.md, or, for NAME = FILE#BLOCK, by the part of docs/FILE.md between that block's
+markers. The docs are
 written by the scripts named in each of them; run those first, then:
 
     python scripts/update_readme.py
@@ -18,14 +19,18 @@ sys.path.insert(0, str(ROOT))
 
 from imucal.output import write_text_atomic  # noqa: E402
 
-BLOCK = re.compile(r"(<!-- begin:([\w/.-]+) -->\n)(.*?)(<!-- end:\2 -->)", re.S)
+BLOCK = re.compile(r"(<!-- begin:([\w/.#-]+) -->\n)(.*?)(<!-- end:\2 -->)", re.S)
 
 
 def body(name: str) -> str:
-    text = (ROOT / "docs" / f"{name}.md").read_text(encoding="utf-8")
-    m = BLOCK.search(text)
-    if m:
-        text = m.group(3)
+    """docs/NAME.md, or with NAME = FILE#BLOCK the part of docs/FILE.md between BLOCK's markers."""
+    fname, _, block = name.partition("#")
+    text = (ROOT / "docs" / f"{fname}.md").read_text(encoding="utf-8")
+    if block:
+        m = re.search(rf"<!-- begin:{re.escape(block)} -->\n(.*?)<!-- end:{re.escape(block)} -->", text, re.S)
+        if not m:
+            raise SystemExit(f"docs/{fname}.md has no block {block!r}")
+        text = m.group(1)
     # Drop the doc's own top-level title; the README gives the section heading.
     lines = [ln for ln in text.splitlines() if not ln.startswith("# ")]
     return "\n".join(lines).strip() + "\n"
