@@ -10,7 +10,6 @@ import datetime as _dt
 import math
 import os
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
@@ -270,21 +269,10 @@ def validate_parameters(params: Parameters, path: str = "<calibration>") -> None
 
 def load_calibration(path: str | os.PathLike) -> Calibration:
     """Read a calibration YAML written by :meth:`Calibration.save`; refuses unknown versions."""
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ImucalError("file not found", file=str(p), field="calibration",
-                          fix="pass the calibration.yaml written by `imucal calibrate`") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ImucalError(f"cannot read: {exc}", file=str(p), field="calibration") from None
-    try:
-        d = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}" if mark else ""
-        raise ImucalError(f"is not valid YAML{where}", file=str(p), field="calibration") from None
-    return from_dict(d, str(p))
+    from .yamlio import read_yaml
+
+    d = read_yaml(path, "calibration", "pass the calibration.yaml written by `imucal calibrate`")
+    return from_dict(d, str(path))
 
 
 def now_utc() -> str:

@@ -534,7 +534,7 @@ def _header(c: _Context, k_apply: Kernel | None, k_cov: Kernel | None) -> str:
         " * division; call it once, not per sample." + (" Base model only: effects are not included."
                                                         if c.effects else "") + " */",
         f"int {p}_prepare(const {real} params[9], {p}_coeffs *c);", "",
-        f"/* acc = L (raw - s) with run-time coefficients: 6 multiplies, 6 additions/subtractions. */",
+        "/* acc = L (raw - s) with run-time coefficients: 6 multiplies, 6 additions/subtractions. */",
         f"void {p}_apply_coeffs(const {p}_coeffs *c, const {real} raw[3], {real} acc[3]);", "",
         f"/* {p}_apply_coeffs over n samples stored as x y z x y z ... */",
         f"void {p}_apply_coeffs_batch(const {p}_coeffs *c, const {real} *raw, {real} *acc, size_t n);",

@@ -11,7 +11,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
-import yaml
 
 from .constants import DEFAULT_ANGLE_TOL
 from .data import DataSpec
@@ -197,22 +196,7 @@ def config_from_dict(d: Any, path: str | None = None) -> RunConfig:
 
 
 def load_config(path: str | os.PathLike) -> RunConfig:
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ImucalError("file not found", file=str(p), field="config",
-                          fix="pass a YAML run file (see configs/)") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ImucalError(f"cannot read: {exc}", file=str(p), field="config") from None
-    try:
-        d = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}" if mark else ""
-        raise ImucalError(f"is not valid YAML{where}", file=str(p), field="config",
-                          fix="check indentation and quoting") from None
-    except (ValueError, TypeError, RecursionError) as exc:  # e.g. "!!timestamp 2001-02-30"
-        raise ImucalError(f"is not valid YAML ({type(exc).__name__}: {exc})", file=str(p), field="config",
-                          fix="check the tagged values") from None
-    return config_from_dict(d, str(p))
+    from .yamlio import read_yaml
+
+    d = read_yaml(path, "config", "pass a YAML run file (see configs/)")
+    return config_from_dict(d, str(path))

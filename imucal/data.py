@@ -5,7 +5,6 @@ import hashlib
 import io
 import math
 import os
-import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path

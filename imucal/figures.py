@@ -68,7 +68,7 @@ def directions_figure(run: CalibrationRun, path: str | Path) -> None:
         for ang in (30, 60):
             r = 2 * np.sin(np.radians(ang) / 2)
             ax.plot(r * np.cos(circ), r * np.sin(circ), color="0.8", lw=0.6)
-        sc = ax.scatter(x, y, c=labels[sel], cmap="tab20", s=40, edgecolor="k", vmin=0,
+        ax.scatter(x, y, c=labels[sel], cmap="tab20", s=40, edgecolor="k", vmin=0,
                         vmax=max(labels.max(), 1))
         for i, (xx, yy) in zip(np.flatnonzero(sel), zip(x, y)):
             ax.annotate(str(i), (xx, yy), fontsize=6, xytext=(3, 3), textcoords="offset points")

@@ -3,8 +3,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from .pipeline import CalibrationRun
 
 #: Correlations above this are listed.
@@ -38,7 +36,7 @@ def fit_report(run: CalibrationRun, correl_min: float = CORREL_MIN) -> str:
     L.append("[[Fit Statistics]]")
     L.append(f"    solver             = IPOPT: {res.status_words}")
     L.append(f"    # iterations       = {res.iterations}")
-    L.append(f"    fit on             = interval means" if res.mode == "means" else
+    L.append("    fit on             = interval means" if res.mode == "means" else
              f"    fit on             = {res.residuals.size} samples")
     L.append(f"    # intervals        = {iv.n} ({run.observability.n_distinct} distinct orientations)")
     L.append(f"    # free parameters  = {len(res.free_names)}")
@@ -86,8 +84,6 @@ def fit_report(run: CalibrationRun, correl_min: float = CORREL_MIN) -> str:
     L.append("[[Static intervals]]")
     L.append(iv.table(run.directions))
     L.append("[[Residuals per interval]]  |a| - g [m/s^2], sigma from the interval's own scatter")
-    from .fit import jacobian_rows  # noqa: F401  (kept import-light for the report)
-
     r = res.residuals if res.mode == "means" else None
     if r is not None:
         for k in range(iv.n):

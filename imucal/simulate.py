@@ -370,26 +370,10 @@ def simulation_from_dict(d: object, path: str | None = None) -> SimulationConfig
 
 def load_simulation_config(path: str) -> SimulationConfig:
     """Read a simulation YAML (``yaml.safe_load``) into a SimulationConfig."""
-    from pathlib import Path
+    from .yamlio import read_yaml
 
-    import yaml
-
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ImucalError("file not found", file=str(p), field="config",
-                          fix="pass a simulation YAML (see configs/simulate_example.yaml)") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ImucalError(f"cannot read: {exc}", file=str(p), field="config") from None
-    try:
-        d = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}" if mark else ""
-        raise ImucalError(f"is not valid YAML{where}", file=str(p), field="config",
-                          fix="check indentation and quoting") from None
-    return simulation_from_dict(d, str(p))
+    d = read_yaml(path, "config", "pass a simulation YAML (see configs/simulate_example.yaml)")
+    return simulation_from_dict(d, str(path))
 
 
 def sensor_from_values(values: dict, effects: tuple = (), noise: tuple[float, float, float] = (0.0, 0.0, 0.0),

@@ -9,7 +9,7 @@ import pytest
 import yaml
 
 import imucal
-from imucal.calibration import FORMAT, FORMAT_VERSION, Calibration, from_dict, load_calibration
+from imucal.calibration import FORMAT, FORMAT_VERSION, from_dict, load_calibration
 from imucal.constants import SI_ACCEL_UNIT
 from imucal.errors import ImucalError
 from imucal.parameters import BASE_NAMES

@@ -9,16 +9,14 @@
 from __future__ import annotations
 
 import math
-import string
 
 import numpy as np
-import pytest
 import yaml
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from imucal.calibration import Calibration, from_dict, load_calibration
-from imucal.config import config_from_dict, load_config
+from imucal.calibration import Calibration, load_calibration
+from imucal.config import load_config
 from imucal.data import DataSpec, load_recording
 from imucal.errors import ImucalError
 from imucal.fit import FitData, fit

@@ -2,7 +2,6 @@
 threshold from the data, intervals reported as a table (start, end, mean, std, direction)."""
 from __future__ import annotations
 
-import dataclasses
 
 import numpy as np
 import pytest
@@ -10,7 +9,7 @@ import pytest
 from conftest import real_file
 from imucal.data import DataSpec, load_recording
 from imucal.errors import ImucalError
-from imucal.simulate import SensorSpec, cube_directions, frame_matrix, mems_counts_sensor, si_sensor
+from imucal.simulate import cube_directions, frame_matrix, mems_counts_sensor, si_sensor
 from imucal.static import StaticSettings, detect_static, moving_variance
 
 
