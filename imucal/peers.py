@@ -49,3 +49,29 @@ def read_imutk_calib(path: str | Path) -> AffineCalibration:
     T = np.array(nums[:9]).reshape(3, 3)
     K = np.array(nums[9:18]).reshape(3, 3)
     return AffineCalibration(M=T @ K, o=np.array(nums[18:]), source=str(path))
+
+
+def read_tomisuarez_params(path: str | Path) -> AffineCalibration:
+    """tomisuarez2/ImuCalibration params_acc.csv: a_yz, a_zy, a_zx [rad], K (3) [m/s^2 per count],
+    b (3) [counts]; a = T K (raw + b) with T = [[1, -a_yz, a_zy], [0, 1, -a_zx], [0, 0, 1]]."""
+    try:
+        v = np.loadtxt(path, delimiter=",").ravel()
+    except (OSError, ValueError) as exc:
+        raise ImucalError(f"cannot read: {exc}", file=str(path), field="params") from None
+    if v.size != 9:
+        raise ImucalError(f"expected 9 numbers, found {v.size}", file=str(path), field="params")
+    a_yz, a_zy, a_zx = v[:3]
+    T = np.array([[1, -a_yz, a_zy], [0, 1, -a_zx], [0, 0, 1]])
+    return AffineCalibration(M=T @ np.diag(v[3:6]), o=-v[6:9], source=str(path))  # "+ b": offset is -b
+
+
+def read_madlab_calibration(path: str | Path) -> AffineCalibration:
+    """mad-lab-fau/imucal calibration JSON (accelerometer part): a = R_a^-1 K_a^-1 (raw - b_a)."""
+    import json
+
+    try:
+        d = json.loads(Path(path).read_text())
+        K, R, b = (np.asarray(d[k], float) for k in ("K_a", "R_a", "b_a"))
+    except (OSError, ValueError, KeyError) as exc:
+        raise ImucalError(f"cannot read mad-lab-fau calibration: {exc}", file=str(path), field="K_a/R_a/b_a") from None
+    return AffineCalibration(M=np.linalg.inv(R) @ np.linalg.inv(K), o=b.ravel(), source=str(path))

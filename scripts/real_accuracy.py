@@ -37,24 +37,15 @@ def imutk(path: Path):
 
 
 def tomisuarez(path: Path):
-    """params_acc.csv: a_yz, a_zy, a_zx [rad], K (3) [m/s^2 per count], b (3) [counts]; a = T K (raw + b)."""
-    from imucal.peers import AffineCalibration
+    from imucal.peers import read_tomisuarez_params
 
-    v = np.loadtxt(path, delimiter=",").ravel()
-    a_yz, a_zy, a_zx = v[:3]
-    T = np.array([[1, -a_yz, a_zy], [0, 1, -a_zx], [0, 0, 1]])
-    return AffineCalibration(M=T @ np.diag(v[3:6]), o=-v[6:9], source=str(path))  # "+ b": offset is -b
+    return read_tomisuarez_params(path)
 
 
 def madlab(path: Path):
-    """example_cal.json (accelerometer part): a = R_a^-1 K_a^-1 (raw - b_a)."""
-    import json
+    from imucal.peers import read_madlab_calibration
 
-    from imucal.peers import AffineCalibration
-
-    d = json.loads(path.read_text())
-    K, R, b = np.asarray(d["K_a"], float), np.asarray(d["R_a"], float), np.asarray(d["b_a"], float)
-    return AffineCalibration(M=np.linalg.inv(R) @ np.linalg.inv(K), o=b.ravel(), source=str(path))
+    return read_madlab_calibration(path)
 
 
 @dataclass(frozen=True)
