@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -153,7 +154,7 @@ def calibrate(config: RunConfig) -> CalibrationRun:
     }
     cal = Calibration(params=res.params, std=res.std, gravity=gravity, raw_unit=config.data.unit,
                       effects=tuple((e.name, e.axes) for e in model.effects), fit=cal_fit,
-                      data={"file": rec.source.split("/")[-1], "sha256": rec.sha256, "samples": rec.n},
+                      data={"file": Path(rec.source).name, "sha256": rec.sha256, "samples": rec.n},
                       created=now_utc())
     mask_rows = np.flatnonzero(iv.sample_mask(rec.n))
     covs = {c: covariates_for(model, recording=rec, rows=mask_rows)[:, i] for i, c in enumerate(model.covariates)}
