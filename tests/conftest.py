@@ -10,8 +10,16 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, NamedTuple
 
+import os
+
 import numpy as np
 import pytest
+from hypothesis import settings as _hyp_settings
+
+# CI explores the same examples every run (reproducible verdicts); locally, hypothesis explores.
+_hyp_settings.register_profile("ci", derandomize=True, print_blob=True)
+if os.environ.get("CI"):
+    _hyp_settings.load_profile("ci")
 
 from imucal.simulate import (PosePlan, SensorSpec, Simulation, cube_directions, mems_counts_sensor,
                              si_sensor, simulate)
