@@ -90,7 +90,7 @@ def _selection(names: tuple[str, ...], free: tuple[str, ...]) -> np.ndarray:
 
 
 @lru_cache(maxsize=32)
-def _solver(model: SensorModel, n: int, free: tuple[str, ...], mode: str) -> tuple[ca.Function, ca.Function]:
+def _solver(model: SensorModel, n: int, free: tuple[str, ...]) -> tuple[ca.Function, ca.Function]:
     """IPOPT solver and residual/Jacobian function for one problem shape, built once."""
     names, k = model.names, len(model.covariates)
     nf = len(free)
@@ -164,7 +164,7 @@ class _Rows:
             self.sres = SampleResiduals(data.raw, gravity)
             self.solver = None
         else:
-            self.solver, self.rows = _solver(model, data.raw.shape[0], free, data.mode)
+            self.solver, self.rows = _solver(model, data.raw.shape[0], free)
 
     def __call__(self, pfree: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         if self.fast:

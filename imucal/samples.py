@@ -75,10 +75,10 @@ class _Objective(ca.Callback):
     """f(x) = 1/2 sum w r^2, free parameters p = off + scale * x; gradient via get_jacobian."""
 
     def __init__(self, res: SampleResiduals, w: np.ndarray, pfix: np.ndarray, free_idx: np.ndarray,
-                 off: np.ndarray, scale: np.ndarray, fscale: float = 1.0) -> None:
+                 off: np.ndarray, scale: np.ndarray) -> None:
         ca.Callback.__init__(self)
         self.res, self.w, self.pfix, self.free_idx = res, w, pfix, free_idx
-        self.off, self.scale, self.fscale = off, scale, fscale
+        self.off, self.scale = off, scale
         self._keep: list = []  # CasADi holds raw pointers: keep every derived callback alive
         self.construct("samples_objective", {})
 
@@ -94,7 +94,7 @@ class _Objective(ca.Callback):
 
     def eval(self, arg):
         r = self.res.residuals(self.p_of(arg[0]))
-        return [self.fscale * 0.5 * float(np.sum(self.w * r * r))]
+        return [0.5 * float(np.sum(self.w * r * r))]
 
     def has_jacobian(self): return True
 
@@ -121,7 +121,7 @@ class _Gradient(ca.Callback):
     def eval(self, arg):
         o = self.obj
         r, J = o.res.residuals(o.p_of(arg[0]), jac=True)
-        g = (J.T[o.free_idx] @ (o.w * r)) * o.scale * o.fscale
+        g = (J.T[o.free_idx] @ (o.w * r)) * o.scale
         return [ca.DM(g).T]
 
     def has_jacobian(self): return True
@@ -156,7 +156,7 @@ class _GaussNewtonHessian(ca.Callback):
         _, J = o.res.residuals(o.p_of(arg[0]), jac=True)
         Jt = J.T[o.free_idx] * o.scale[:, None]
         H = (Jt * o.w) @ Jt.T
-        return [ca.DM(H * o.fscale), ca.DM(ca.Sparsity(len(o.free_idx), 1))]
+        return [ca.DM(H), ca.DM(ca.Sparsity(len(o.free_idx), 1))]
 
 
 def solve_samples(raw: np.ndarray, w: np.ndarray, gravity: float, pfix: np.ndarray, free_idx: np.ndarray,
