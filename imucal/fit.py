@@ -261,11 +261,12 @@ def fit(data: FitData, params: Parameters, model: SensorModel, gravity: float,
 
 
 def jacobian_rows(data: FitData, params: Parameters, model: SensorModel, gravity: float,
-                  residuals: bool = False, weighted: bool = False) -> np.ndarray:
+                  residuals: bool = False, weighted: bool = False):
     """Residual Jacobian w.r.t. the free parameters, each column times the parameter's scale.
 
-    ``weighted=True`` divides each row by its noise sigma (so J^T J is the Fisher information
-    in scaled units); ``residuals=True`` returns the residuals |a| - g instead.
+    ``weighted=True`` returns ``(J, J / sigma)``: also each row divided by its noise (so the
+    second's J^T J is the Fisher information in scaled units); ``residuals=True`` returns the
+    residuals |a| - g instead.
     """
     free = params.free_names
     rows = _Rows(data, model, free, gravity, np.array(params.values(), float))
@@ -274,5 +275,5 @@ def jacobian_rows(data: FitData, params: Parameters, model: SensorModel, gravity
         return r
     J = J * np.array([params[n].scale for n in free])
     if weighted:
-        J = J / _sigma(Jraw, data.raw_var)[:, None]
+        return J, J / _sigma(Jraw, data.raw_var)[:, None]
     return J

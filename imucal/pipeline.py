@@ -137,8 +137,7 @@ def calibrate(config: RunConfig) -> CalibrationRun:
     data = fit_data(model, iv, rec, config.fit.mode, rec.source)
     # Observability on interval means (one row per interval), at the initial guess.
     mdata = fit_data(model, iv, rec, "means", rec.source) if data.mode != "means" else data
-    J = jacobian_rows(mdata, params, model, gravity)
-    Jw = jacobian_rows(mdata, params, model, gravity, weighted=True)
+    J, Jw = jacobian_rows(mdata, params, model, gravity, weighted=True)
     obs = analyse(dirs, J, params.free_names, Jw, thresholds(params.free_names, config.fit.angle_tolerance))
     require_observable(obs, params.free_names, rec.source)
     res = fit(data, params, model, gravity, source=rec.source, weights=config.fit.weights)
