@@ -23,3 +23,11 @@ class ImucalError(Exception):
         if self.fix:
             text += f" (fix: {self.fix})"
         return " ".join(text.split())  # always one line
+
+
+# Exit statuses of the command line (README "Exit statuses"). One meaning each.
+EXIT_OK = 0  #: success
+EXIT_NOT_CONVERGED = 1  #: the solver did not converge (outputs written, status "failed")
+EXIT_BAD_INPUT = 2  #: bad input, a refused run or a usage error: one line naming file, field, fix
+EXIT_INTERNAL = 3  #: an unexpected internal error (a bug): one line; rerun with --debug for the traceback
+EXIT_INTERRUPTED = 130  #: SIGINT (Ctrl-C) or SIGTERM: staged outputs removed, nothing published

@@ -147,3 +147,34 @@ def run_cli(capsys) -> Callable[[list[str]], CliResult]:
         return CliResult(int(code), out, err)
 
     return run
+
+
+def tree_state(root: Path) -> dict[str, tuple[int, bytes]]:
+    """Every file and folder under ``root`` with its mode and content (folders: b"")."""
+    import hashlib
+
+    out: dict[str, tuple[int, bytes]] = {}
+    for p in sorted(Path(root).rglob("*")):
+        st = p.lstat()
+        data = hashlib.sha256(p.read_bytes()).digest() if p.is_file() and not p.is_symlink() else b""
+        out[str(p.relative_to(root))] = (st.st_mode, data)
+    return out
+
+
+@pytest.fixture
+def unchanged(tmp_path):
+    """``with unchanged(folder): ...`` asserts that the block changed nothing under ``folder``
+    (no input modified, no output, staging or lock file left behind)."""
+    from contextlib import contextmanager
+
+    @contextmanager
+    def check(root: Path = tmp_path):
+        before = tree_state(root)
+        yield
+        after = tree_state(root)
+        added = sorted(set(after) - set(before))
+        removed = sorted(set(before) - set(after))
+        changed = sorted(k for k in before.keys() & after.keys() if before[k] != after[k])
+        assert not (added or removed or changed), f"added {added}, removed {removed}, changed {changed}"
+
+    return check
