@@ -31,3 +31,13 @@ EXIT_NOT_CONVERGED = 1  #: the solver did not converge (outputs written, status 
 EXIT_BAD_INPUT = 2  #: bad input, a refused run or a usage error: one line naming file, field, fix
 EXIT_INTERNAL = 3  #: an unexpected internal error (a bug): one line; rerun with --debug for the traceback
 EXIT_INTERRUPTED = 130  #: SIGINT (Ctrl-C) or SIGTERM: staged outputs removed, nothing published
+
+
+def short(value: object, limit: int = 40) -> str:
+    """repr of a value for a message, cut to ``limit`` characters (never repr an unbounded value)."""
+    try:
+        text = repr(value)
+    except Exception:  # noqa: BLE001 - a hostile __repr__ must not escape
+        text = f"<{type(value).__name__}>"
+    text = " ".join(text.split())
+    return text if len(text) <= limit else text[: limit - 3] + "..."

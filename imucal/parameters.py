@@ -141,3 +141,15 @@ def base_parameters(s0: Iterable[float], b0: Iterable[float],
         params.append(Parameter(name, float(min(max(a0, lo), hi)), lower=lo, upper=hi, unit="rad",
                                 scale=RIGHT_ANGLE, description=descr[name]))
     return Parameters(params)
+
+
+def model_label(model_name: str, params: "Parameters") -> str:
+    """The model's name as fitted: the paper's 9-parameter model becomes "nakov-ivanov-6" when
+    all three angles are held at 90 deg, and names any other held parameter."""
+    fixed = [n for n in BASE_NAMES if n in params and params[n].fixed]
+    base, sep, rest = model_name.partition("+")
+    if base == "nakov-ivanov-9" and set(ANGLE_NAMES) <= set(fixed):
+        base = "nakov-ivanov-6"
+        fixed = [n for n in fixed if n not in ANGLE_NAMES]
+    label = base + sep + rest
+    return label + (f" ({', '.join(fixed)} held fixed)" if fixed else "")
