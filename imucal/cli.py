@@ -7,10 +7,12 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import signal
 import sys
+import traceback
 
 from . import __version__
-from .errors import ImucalError
+from .errors import (EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, ImucalError, short)
 
 #: Subcommand name -> module. Modules import their heavy dependencies inside run().
 COMMANDS = {
@@ -35,6 +37,8 @@ class _Parser(argparse.ArgumentParser):
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="imucal", description="Calibrate MEMS accelerometers (Nakov & Ivanov model).")
     parser.add_argument("--version", action="version", version=f"imucal {__version__}")
+    parser.add_argument("--debug", action="store_true",
+                        help="on an internal error, print the traceback instead of one line")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     for name, modname in COMMANDS.items():
         try:
@@ -47,20 +51,50 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the program is, so staged outputs are removed as on Ctrl-C."""
+
+
+def _on_sigterm(signum, frame) -> None:  # noqa: ARG001 - signal handler signature
+    raise _Terminated()
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Run one command. Exit statuses: imucal.errors.EXIT_* (README, "Exit status")."""
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "run", None):
         parser.print_help()
-        return 2
+        return EXIT_BAD_INPUT
+    previous = None
+    try:
+        previous = signal.signal(signal.SIGTERM, _on_sigterm)
+    except ValueError:  # not the main thread (e.g. a test runner's worker): leave it alone
+        pass
     try:
         return int(args.run(args) or 0)
     except ImucalError as exc:
         sys.stderr.write(f"imucal: error: {exc}\n")
-        return 2
-    except KeyboardInterrupt:
-        sys.stderr.write("imucal: interrupted\n")
-        return 130
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt as exc:
+        sys.stderr.write("imucal: terminated; nothing was written\n" if isinstance(exc, _Terminated)
+                         else "imucal: interrupted; nothing was written\n")
+        return EXIT_INTERRUPTED
+    except MemoryError:
+        if args.debug:
+            traceback.print_exc()
+        sys.stderr.write("imucal: error: out of memory (the input is too large for this machine; "
+                         "rerun with --debug for the traceback)\n")
+        return EXIT_INTERNAL
+    except Exception as exc:  # noqa: BLE001 - the last line of defence: one line, never a traceback
+        if args.debug:
+            traceback.print_exc()
+        sys.stderr.write(f"imucal: internal error: {type(exc).__name__}: {short(str(exc), 200)} "
+                         "(rerun with --debug for the traceback)\n")
+        return EXIT_INTERNAL
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -11,11 +11,20 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import ImucalError
+from .errors import ImucalError, short
+from .inputs import max_data_bytes, read_input_bytes
 
-#: Time units accepted for the time column, with their factor to seconds.
+#: Time units accepted for the time column, with their factor to seconds ("auto": inferred).
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
+TIME_UNIT_CHOICES = ("auto", *TIME_UNITS)
 FORMATS = ("auto", "csv", "whitespace")
+#: Column roles: time, acceleration, angular rate, temperature.
+ROLES = ("t", "ax", "ay", "az", "gx", "gy", "gz", "temp")
+#: Plausible IMU sample rates [Hz]: anything outside is a wrong time unit or a wrong rate.
+MIN_RATE_HZ, MAX_RATE_HZ = 1.0, 1.0e5
+#: Largest magnitude accepted in a data column: beyond it a value is corrupt, not a reading
+#: (squares of it would overflow double precision in the fit).
+MAX_ABS_VALUE = 1.0e30
 _MAX_SCAN_LINES = 50
 
 
@@ -34,8 +43,10 @@ class DataSpec:
     delimiter: str | None = None
     skip_rows: int = 0
     sample_rate: float | None = None
-    time_unit: str = "s"
+    time_unit: str = "auto"
     unit: str = "raw"
+    #: rails of the raw readings: {"low": v, "high": v}, each a number or [x, y, z]
+    saturation: dict | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.path, (str, os.PathLike)) or not str(self.path):
@@ -44,49 +55,62 @@ class DataSpec:
         for name in ("format", "time_unit", "unit"):
             if not isinstance(getattr(self, name), str):
                 raise ImucalError(f"{name} {getattr(self, name)!r} must be text", field=f"data.{name}")
-        if self.delimiter is not None and not (isinstance(self.delimiter, str) and self.delimiter):
-            raise ImucalError(f"delimiter {self.delimiter!r} must be a non-empty string", field="data.delimiter",
+        if self.delimiter is not None and not (isinstance(self.delimiter, str) and len(self.delimiter) == 1
+                                               and self.delimiter not in "\r\n"):
+            raise ImucalError(f"delimiter {short(self.delimiter)} must be one character", field="data.delimiter",
                               fix='e.g. delimiter: ","  (omit it to detect , ; tab or spaces)')
         if self.sample_rate is not None and (isinstance(self.sample_rate, bool)
                                              or not isinstance(self.sample_rate, (int, float))):
-            raise ImucalError(f"sample rate {self.sample_rate!r} must be a positive number of Hz",
+            raise ImucalError(f"sample rate {short(self.sample_rate)} is not an IMU rate (not a number)",
                               field="data.sample_rate", fix="give the logging rate in Hz")
         if not isinstance(self.columns, Mapping):
             raise ImucalError("must map roles to columns", field="data.columns")
         for role, col in self.columns.items():
-            if not ((isinstance(col, int) and not isinstance(col, bool) and col >= 0)
-                    or (isinstance(col, str) and col)):
-                raise ImucalError(f"column {col!r} for {role!r} must be a header name or a 0-based index",
-                                  field=f"data.columns.{role}")
+            if not ((isinstance(col, int) and not isinstance(col, bool) and 0 <= col < 10000)
+                    or (isinstance(col, str) and col and len(col) <= 200)):
+                raise ImucalError(f"column {short(col)} for {short(role)} must be a header name or a "
+                                  "0-based index below 10000", field=f"data.columns.{role if isinstance(role, str) and len(role) <= 20 else short(role, 20)}")
         if self.format not in FORMATS:
             raise ImucalError(f"unknown format {self.format!r}", field="data.format",
                               fix=f"use one of {', '.join(FORMATS)}")
-        if self.time_unit not in TIME_UNITS:
-            raise ImucalError(f"unknown time unit {self.time_unit!r}", field="data.time_unit",
-                              fix=f"use one of {', '.join(TIME_UNITS)}")
+        if self.time_unit not in TIME_UNIT_CHOICES:
+            raise ImucalError(f"unknown time unit {short(self.time_unit)}", field="data.time_unit",
+                              fix=f"use one of {', '.join(TIME_UNIT_CHOICES)}")
         if self.sample_rate is not None and not (math.isfinite(self.sample_rate)
-                                                 and self.sample_rate > 0):
-            raise ImucalError(f"sample rate {self.sample_rate} must be a positive number of Hz",
-                              field="data.sample_rate", fix="give the logging rate in Hz")
-        if not isinstance(self.skip_rows, int) or isinstance(self.skip_rows, bool) or self.skip_rows < 0:
-            raise ImucalError(f"skip_rows {self.skip_rows!r} must be a non-negative integer",
+                                                 and MIN_RATE_HZ <= self.sample_rate <= MAX_RATE_HZ):
+            raise ImucalError(f"sample rate {short(self.sample_rate)} Hz is not an IMU rate",
+                              field="data.sample_rate",
+                              fix=f"give the logging rate in Hz ({MIN_RATE_HZ:g} to {MAX_RATE_HZ:g})")
+        if not isinstance(self.skip_rows, int) or isinstance(self.skip_rows, bool) or not 0 <= self.skip_rows < 10**9:
+            raise ImucalError(f"skip_rows {short(self.skip_rows)} must be a non-negative integer below 1e9",
                               field="data.skip_rows")
-        bad = set(self.columns) - {"t", "ax", "ay", "az", "temp"}
+        bad = set(self.columns) - set(ROLES)
         if bad:
-            raise ImucalError(f"unknown column role(s) {sorted(bad)}", field="data.columns",
-                              fix="map only t, ax, ay, az, temp")
+            raise ImucalError(f"unknown column role(s) {short(sorted(map(str, bad)))}", field="data.columns",
+                              fix=f"map only {', '.join(ROLES)}")
+        cols = [c for c in self.columns.values()]
+        if len(set(map(str, cols))) != len(cols):
+            raise ImucalError("two roles map to the same column", field="data.columns",
+                              fix="give each role its own column")
+        if self.saturation is not None:
+            rails(self.saturation)  # validated here, used by static detection
 
 
 @dataclass(frozen=True)
 class Recording:
     """A loaded recording: time [s], raw readings (N x 3), optional temperature [deg C]."""
 
-    t: np.ndarray
-    raw: np.ndarray
+    t: np.ndarray  #: [s], from 0
+    raw: np.ndarray  #: (N, 3) accelerometer readings [unit]
     temp: np.ndarray | None
     unit: str
     source: str
     sha256: str
+    gyro: np.ndarray | None = None  #: (N, 3) angular-rate readings when mapped (gx, gy, gz)
+    t_source: np.ndarray | None = None  #: the time column exactly as read (unit and origin kept)
+    time_unit: str = "s"  #: unit of t_source
+    time_note: str = ""  #: how the time base was obtained (given, inferred, or from the rate)
+    time_column: str = "t"  #: the time column's name in the file
 
     @property
     def n(self) -> int:
@@ -112,16 +136,12 @@ def file_sha256(path: str | os.PathLike) -> str:
 
 
 def _read_text(path: Path) -> tuple[str, str]:
-    try:
-        blob = path.read_bytes()
-    except FileNotFoundError:
-        raise ImucalError("file not found", file=str(path), field="data.path",
-                          fix="check the path (relative paths are relative to the YAML file)") from None
-    except IsADirectoryError:
-        raise ImucalError("is a directory, not a data file", file=str(path), field="data.path",
-                          fix="point data.path at the recording file") from None
-    except OSError as exc:
-        raise ImucalError(f"cannot read: {exc.strerror}", file=str(path), field="data.path") from None
+    """Text and SHA-256 of a recording: a regular file, within the size limit, not binary."""
+    blob = read_input_bytes(path, field="data.path", max_bytes=max_data_bytes(),
+                            fix="check the path (relative paths are relative to the YAML file)")
+    if b"\x00" in blob[:1 << 16]:
+        raise ImucalError("is a binary file (NUL bytes), not a text recording", file=str(path),
+                          field="data.path", fix="export the recording as CSV or whitespace-separated text")
     try:
         text = blob.decode("utf-8-sig")
     except UnicodeDecodeError:
@@ -210,7 +230,72 @@ def _lineno(lines: list[str], k: int, first: int) -> int:
 
 _DEFAULT_NAMES = {"t": ("t", "time", "timestamp"), "ax": ("ax", "acc_x", "accx", "x"),
                   "ay": ("ay", "acc_y", "accy", "y"), "az": ("az", "acc_z", "accz", "z"),
-                  "temp": ("temp", "temperature", "t_c")}
+                  "gx": ("gx", "gyro_x", "gyrx", "wx"), "gy": ("gy", "gyro_y", "gyry", "wy"),
+                  "gz": ("gz", "gyro_z", "gyrz", "wz"), "temp": ("temp", "temperature", "t_c")}
+
+
+def parse_columns(text: str, where: str = "--columns") -> dict[str, int | str]:
+    """``"t=0,ax=4,ay=5,az=6"`` (0-based indices) or ``"t=time,ax=acc_x"`` (header names)."""
+    if not isinstance(text, str) or not text.strip() or len(text) > 2000:
+        raise ImucalError("give ROLE=COLUMN pairs separated by commas", field=where,
+                          fix="e.g. --columns t=0,ax=4,ay=5,az=6")
+    out: dict[str, int | str] = {}
+    for item in text.split(","):
+        role, sep, col = (x.strip() for x in item.partition("="))
+        if not sep or not role or not col:
+            raise ImucalError(f"{short(item)} is not ROLE=COLUMN", field=where,
+                              fix="e.g. --columns t=0,ax=4,ay=5,az=6")
+        if role not in ROLES:
+            raise ImucalError(f"unknown role {short(role)}", field=where, fix=f"roles: {', '.join(ROLES)}")
+        if role in out:
+            raise ImucalError(f"role {role} given twice", field=where, fix="give each role once")
+        out[role] = int(col) if col.isdigit() and len(col) < 6 else col
+    return out
+
+
+def _no_header_layout(ncol: int, path: Path) -> dict[str, int]:
+    """Column roles of a file without header and without a mapping."""
+    if ncol == 3:
+        return {"ax": 0, "ay": 1, "az": 2}
+    if ncol == 4:
+        return {"t": 0, "ax": 1, "ay": 2, "az": 3}  # imu_tk: t x y z
+    if ncol == 5:
+        return {"t": 0, "ax": 1, "ay": 2, "az": 3, "temp": 4}  # imucal's simulate layout
+    hint = (" (imu_tk-style logs hold t gx gy gz ax ay az)" if ncol == 7 else "")
+    raise ImucalError(f"has {ncol} columns and no header: the layout is ambiguous{hint}", file=str(path),
+                      field="data.columns",
+                      fix="map the columns, e.g. --columns t=0,ax=4,ay=5,az=6 or data.columns in the YAML")
+
+
+def infer_time_unit(stamps: np.ndarray) -> tuple[str, str]:
+    """The unit (s, ms, us, ns) of time stamps and a sentence saying why.
+
+    The sample rate must be an IMU's (1 Hz to 100 kHz). Among the units that give one, epoch
+    time decides when the stamps look like it (1.7e9 s = 1.7e12 ms = ...). Fractional stamps are
+    read in the first plausible unit of s, ms, us, ns (a logger that writes fractions writes
+    seconds unless that gives no IMU rate); integer stamps (tick counters) in the unit whose rate
+    is closest to 200 Hz on a log scale. A second plausible unit is named in the note.
+    """
+    dt = float(np.median(np.diff(stamps))) if stamps.size > 1 else float("nan")
+    if not (math.isfinite(dt) and dt > 0):
+        return "s", "time unit assumed: s (too few distinct time stamps to infer it)"
+    plausible = [u for u, f in TIME_UNITS.items() if MIN_RATE_HZ <= 1.0 / (dt * f) <= MAX_RATE_HZ]
+    if not plausible:
+        return "s", ""  # refused by the caller with the rate in the message
+    t0 = abs(float(stamps[0]))
+    epoch = [u for u in plausible if 9.0e8 <= t0 * TIME_UNITS[u] <= 4.2e9]  # 1998 .. 2103
+    if epoch:
+        unit = epoch[0]
+        why = f"epoch time stamps; median step {dt:g} {unit} -> {1.0 / (dt * TIME_UNITS[unit]):.4g} Hz"
+        return unit, f"time unit inferred: {unit} ({why})"
+    if np.all(stamps[:1000] == np.round(stamps[:1000])):
+        plausible.sort(key=lambda u: abs(math.log10(1.0 / (dt * TIME_UNITS[u]) / 200.0)))
+    unit = plausible[0]
+    note = f"time unit inferred: {unit} (median step {dt:g} -> {1.0 / (dt * TIME_UNITS[unit]):.4g} Hz"
+    if len(plausible) > 1:
+        alt = plausible[1]
+        note += f"; {alt} would give {1.0 / (dt * TIME_UNITS[alt]):.4g} Hz: give --time-unit if that is right"
+    return unit, note + ")"
 
 
 def load_recording(spec: DataSpec | str | os.PathLike, base_dir: str | os.PathLike | None = None
@@ -259,7 +344,7 @@ def load_recording(spec: DataSpec | str | os.PathLike, base_dir: str | os.PathLi
         names = [t.strip().strip('"').strip("'") for t in _split(hdr_line, delim)]
         lower = [n.lower() for n in names]
         cols: dict[str, int] = {}
-        for role in ("t", "ax", "ay", "az", "temp"):
+        for role in ROLES:
             if role in spec.columns:
                 want = spec.columns[role]
                 if isinstance(want, int):
@@ -288,15 +373,7 @@ def load_recording(spec: DataSpec | str | os.PathLike, base_dir: str | os.PathLi
             raise ImucalError("column names given but the file has no header", file=str(path),
                               field="data.columns", fix="map roles to 0-based column indices")
         if not cols:
-            if ncol >= 5:
-                cols = {"t": 0, "ax": 1, "ay": 2, "az": 3, "temp": 4}
-            elif ncol == 4:
-                cols = {"t": 0, "ax": 1, "ay": 2, "az": 3}  # imu_tk: t x y z
-            elif ncol == 3:
-                cols = {"ax": 0, "ay": 1, "az": 2}
-            else:
-                raise ImucalError(f"has {ncol} numeric columns; cannot guess the layout", file=str(path),
-                                  field="data.columns", fix="map t, ax, ay, az to column indices")
+            cols = _no_header_layout(ncol, path)
         body = lines[k0:]
         body_first = first_lineno + k0
     for role in ("ax", "ay", "az"):
@@ -306,22 +383,57 @@ def load_recording(spec: DataSpec | str | os.PathLike, base_dir: str | os.PathLi
     if "t" not in cols and spec.sample_rate is None:
         raise ImucalError("no time column and no sample rate", file=str(path), field="data.sample_rate",
                           fix="add a t column or set data.sample_rate in Hz")
-    roles = [r for r in ("t", "ax", "ay", "az", "temp") if r in cols]
+    gyro_roles = [r for r in ("gx", "gy", "gz") if r in cols]
+    if gyro_roles and len(gyro_roles) != 3:
+        raise ImucalError(f"only {', '.join(gyro_roles)} of gx, gy, gz mapped", file=str(path),
+                          field="data.columns", fix="map all three gyroscope columns or none")
+    roles = [r for r in ROLES if r in cols]
     if spec.sample_rate is not None and "t" in cols and "t" not in spec.columns:
         roles.remove("t")  # an explicit rate overrides a guessed time column
     arr = _parse_block(body, body_first, delim, [cols[r] for r in roles], path)
+    big = np.abs(arr) > MAX_ABS_VALUE
+    if big.any():
+        k = int(np.flatnonzero(big.any(axis=1))[0])
+        raise ImucalError(f"line {_lineno(body, k, body_first)} holds a value beyond +-{MAX_ABS_VALUE:g} "
+                          "(corrupt)", file=str(path), field="data",
+                          fix="remove or repair the corrupt rows before calibrating")
     data = {r: arr[:, i] for i, r in enumerate(roles)}
     n = arr.shape[0]
-    if "t" in data:
-        t = data["t"] * TIME_UNITS[spec.time_unit]
-        dt = np.diff(t)
-        if n > 1 and not (dt > 0).all():
-            k = int(np.flatnonzero(dt <= 0)[0])
-            raise ImucalError(f"time is not strictly increasing at line {_lineno(body, k + 1, body_first)}",
-                              file=str(path),
-                              field="data.columns.t", fix="sort the rows by time and drop duplicates")
-        t = t - t[0]
-    else:
-        t = np.arange(n) / float(spec.sample_rate)
+    t, t_source, unit, note = _time_base(data.get("t"), spec, n, path, body, body_first)
     raw = np.column_stack([data["ax"], data["ay"], data["az"]])
-    return Recording(t=t, raw=raw, temp=data.get("temp"), unit=spec.unit, source=str(path), sha256=sha)
+    gyro = np.column_stack([data["gx"], data["gy"], data["gz"]]) if gyro_roles else None
+    tname = names[cols["t"]] if header_idx is not None and "t" in roles else "t"
+    return Recording(t=t, raw=raw, temp=data.get("temp"), unit=spec.unit, source=str(path), sha256=sha,
+                     gyro=gyro, t_source=t_source, time_unit=unit, time_note=note, time_column=tname)
+
+
+def _time_base(stamps: np.ndarray | None, spec: DataSpec, n: int, path: Path, body: list[str],
+               body_first: int) -> tuple[np.ndarray, np.ndarray | None, str, str]:
+    """(t [s] from 0, the stamps as read, their unit, a note): unit given or inferred, rate checked."""
+    if stamps is None:
+        return (np.arange(n) / float(spec.sample_rate), None, "s",
+                f"no time column: {float(spec.sample_rate):g} Hz given")
+    if n > 1:
+        d = np.diff(stamps)
+        if not (d > 0).all():
+            k = int(np.flatnonzero(~(d > 0))[0])
+            raise ImucalError(f"time is not strictly increasing at line {_lineno(body, k + 1, body_first)}",
+                              file=str(path), field="data.columns.t",
+                              fix="sort the rows by time and drop duplicates")
+    if spec.time_unit == "auto":
+        unit, note = infer_time_unit(stamps)
+    else:
+        unit, note = spec.time_unit, f"time unit given: {spec.time_unit}"
+    t = (stamps - stamps[0]) * TIME_UNITS[unit]
+    if n > 1:
+        rate = (n - 1) / float(t[-1])
+        if not MIN_RATE_HZ <= rate <= MAX_RATE_HZ:
+            likely = [u for u, f in TIME_UNITS.items()
+                      if MIN_RATE_HZ <= (n - 1) / (float(stamps[-1] - stamps[0]) * f) <= MAX_RATE_HZ]
+            fix = (f"the time column looks like {likely[0]}: give --time-unit {likely[0]} "
+                   f"(data.time_unit: {likely[0]})" if likely else
+                   "check the time column (or drop it and give --sample-rate)")
+            raise ImucalError(f"time in {unit} gives {rate:.4g} Hz, not an IMU sample rate "
+                              f"({MIN_RATE_HZ:g} Hz to {MAX_RATE_HZ:g} Hz)", file=str(path),
+                              field="data.time_unit", fix=fix)
+    return t, stamps, unit, note

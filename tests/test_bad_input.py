@@ -113,7 +113,7 @@ CALIBRATE_CASES: dict[str, Case] = {
         ("run.yaml", "fit.effects", "must be a list")),
     "YAML bad sample rate": lambda tmp, recs, good: (
         [yaml_cfg(tmp, {"data": {"path": str(good), "sample_rate": "fast"}})],
-        ("run.yaml", "data.sample_rate", "must be a positive number of Hz")),
+        ("run.yaml", "data.sample_rate", "is not an IMU rate")),
     "YAML bad column mapping": lambda tmp, recs, good: (
         [yaml_cfg(tmp, {"data": {"path": str(good), "columns": ["t", "ax"]}})],
         ("run.yaml", "data.columns", "must map roles to columns")),
@@ -149,7 +149,7 @@ CALIBRATE_CASES: dict[str, Case] = {
     "gravity and latitude options": lambda tmp, recs, good: (
         ["--data", good, "--gravity", "9.81", "--latitude", "45"], ("gravity", "either")),
     "sample rate option": lambda tmp, recs, good: (
-        ["--data", good, "--sample-rate", "-100"], ("data.sample_rate", "must be a positive number of Hz")),
+        ["--data", good, "--sample-rate", "-100"], ("data.sample_rate", "is not an IMU rate")),
     "CONFIG and --data": lambda tmp, recs, good: (
         [yaml_cfg(tmp, {"data": {"path": str(good)}}), "--data", good],
         ("arguments", "give either CONFIG or --data, not both")),
@@ -175,7 +175,7 @@ CALIBRATE_CASES: dict[str, Case] = {
     "header only": lambda tmp, recs, good: (
         ["--data", write(tmp, "r.csv", CSV_HEAD)], ("r.csv", "has no data rows")),
     "directory as file": lambda tmp, recs, good: (
-        ["--data", tmp], (str(tmp), "data.path", "is a directory, not a data file")),
+        ["--data", tmp], (str(tmp), "data.path", "is a directory, not a file")),
     "time not increasing": lambda tmp, recs, good: (
         ["--data", write(tmp, "r.csv", CSV_HEAD + "0,1,2,3\n0.02,1,2,3\n0.01,1,2,3\n")],
         ("r.csv", "data.columns.t", "time is not strictly increasing at line 4")),
