@@ -127,6 +127,28 @@ class Recording:
         return float(self.t[-1] - self.t[0]) if self.n else 0.0
 
 
+def rails(spec: object, where: str = "data.saturation") -> dict[str, np.ndarray | None]:
+    """Declared rails of the raw readings: {"low": [x, y, z] or None, "high": ...}.
+
+    YAML: ``saturation: {low: -16000, high: 16000}`` (one value for all axes, or [x, y, z]).
+    A reading at or beyond a rail is clipped (the sensor's range was exceeded).
+    """
+    if not isinstance(spec, Mapping) or not spec or set(spec) - {"low", "high"}:
+        raise ImucalError(f"{short(spec)} must map low and/or high to rail values", field=where,
+                          fix="e.g. saturation: {low: -32768, high: 32767}")
+    out: dict[str, np.ndarray | None] = {"low": None, "high": None}
+    for k, v in spec.items():
+        vals = v if isinstance(v, (list, tuple)) else [v] * 3
+        if len(vals) != 3 or not all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                                     and math.isfinite(x) and abs(x) <= MAX_ABS_VALUE for x in vals):
+            raise ImucalError(f"{k} rail {short(v)} must be a finite number or [x, y, z]", field=f"{where}.{k}",
+                              fix="give the raw value at which the sensor clips")
+        out[k] = np.array(vals, float)
+    if out["low"] is not None and out["high"] is not None and not np.all(out["low"] < out["high"]):
+        raise ImucalError("the low rail must lie below the high rail on every axis", field=where)
+    return out
+
+
 def file_sha256(path: str | os.PathLike) -> str:
     h = hashlib.sha256()
     with open(path, "rb") as f:

@@ -16,6 +16,12 @@ from .errors import ImucalError
 
 #: Batches per interval for the batch-means estimate of a mean's noise.
 _BATCHES = 8
+#: Automatic saturation test: an interval's axis is clipped when at least this fraction of its
+#: samples sit exactly at the recording's extreme value of that axis ...
+SATURATION_FRACTION = 0.2
+#: ... and its scatter on that axis is below this fraction of the axis's median scatter over the
+#: intervals (a rail flattens the noise; a genuine extreme only appears in the noise's tail).
+SATURATION_STD_RATIO = 0.75
 
 
 @dataclass(frozen=True)
@@ -157,9 +163,57 @@ def _quantum(x: np.ndarray) -> float:
     return 0.0
 
 
+def saturation(raw: np.ndarray, start: np.ndarray, end: np.ndarray, std: np.ndarray,
+               declared: dict | None = None) -> tuple[np.ndarray, list[dict], dict]:
+    """Intervals with a clipped axis: (keep mask, one record per drop, the rails per axis).
+
+    Declared rails (``data.saturation``): any sample at or beyond one clips its interval.
+    Otherwise, per axis, the recording's extreme values are suspect rails, and an interval is
+    clipped on that axis when a large share of its samples sit exactly on one while its scatter
+    there is flattened (SATURATION_FRACTION, SATURATION_STD_RATIO).
+    """
+    k = start.size
+    keep = np.ones(k, bool)
+    drops: list[dict] = []
+    found: dict = {}
+    if k == 0:
+        return keep, drops, found
+    med = np.median(std, axis=0)
+    for j, axis in enumerate("xyz"):
+        col = raw[:, j]
+        rails_j = []
+        if declared is not None:
+            for side in ("low", "high"):
+                if declared.get(side) is not None:
+                    rails_j.append((side, float(declared[side][j]), "declared"))
+        else:
+            rails_j = [("low", float(col.min()), "detected"), ("high", float(col.max()), "detected")]
+        for side, rail, how in rails_j:
+            for i, (a, b) in enumerate(zip(start, end)):
+                seg = col[a:b]
+                if how == "declared":
+                    hit = seg <= rail if side == "low" else seg >= rail
+                    clipped = bool(hit.any())
+                else:
+                    frac = float(np.mean(seg == rail))
+                    clipped = frac >= SATURATION_FRACTION and std[i, j] <= SATURATION_STD_RATIO * med[j]
+                if clipped:
+                    found.setdefault(axis, {"low": None, "high": None, "source": how})[side] = rail
+                    if keep[i]:
+                        drops.append({"interval": i, "axis": axis, "rail": rail, "side": side,
+                                      "reason": f"axis {axis} at its {side} rail {rail:g} ({how})"})
+                    keep[i] = False
+    return keep, drops, found
+
+
 def detect_static(t: np.ndarray, raw: np.ndarray, settings: StaticSettings = StaticSettings(),
-                  temp: np.ndarray | None = None, source: str | None = None) -> Intervals:
-    """Find the intervals in which the sensor is still."""
+                  temp: np.ndarray | None = None, source: str | None = None,
+                  rails: dict | None = None) -> Intervals:
+    """Find the intervals in which the sensor is still; drop those with a clipped axis.
+
+    ``rails``: declared rails (imucal.data.rails); None detects clipping from the data.
+    Dropped intervals are listed in ``meta["dropped"]`` (t_start, t_end, axis, rail, reason).
+    """
     n = raw.shape[0]
     if n < 3:
         raise ImucalError(f"only {n} samples", file=source, field="data",
@@ -202,9 +256,17 @@ def detect_static(t: np.ndarray, raw: np.ndarray, settings: StaticSettings = Sta
     var_mean = std**2 / nn * inflation
     if q > 0:
         var_mean = np.maximum(var_mean, q**2 / 12 / nn)
-    return Intervals(start=start, end=end, t_start=t[start] if k else np.empty(0),
-                     t_end=t[end - 1] if k else np.empty(0), mean=mean, std=std,
-                     mean_std=np.sqrt(var_mean),
-                     t_mid=np.array([t[a:b].mean() for a, b in zip(start, end)]),
-                     temp=None if temp is None else np.array([temp[a:b].mean() for a, b in zip(start, end)]),
-                     threshold=thr, noise_inflation=inflation, window=settings.window)
+    iv = Intervals(start=start, end=end, t_start=t[start] if k else np.empty(0),
+                   t_end=t[end - 1] if k else np.empty(0), mean=mean, std=std,
+                   mean_std=np.sqrt(var_mean),
+                   t_mid=np.array([t[a:b].mean() for a, b in zip(start, end)]),
+                   temp=None if temp is None else np.array([temp[a:b].mean() for a, b in zip(start, end)]),
+                   threshold=thr, noise_inflation=inflation, window=settings.window)
+    keep, drops, found = saturation(raw, start, end, std, rails)
+    for d in drops:
+        i = d.pop("interval")
+        d["t_start"], d["t_end"] = float(iv.t_start[i]), float(iv.t_end[i])
+    if drops:
+        iv = iv.subset(np.flatnonzero(keep))
+    iv.meta.update({"dropped": drops, "saturation": found})
+    return iv
