@@ -16,20 +16,12 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
+from . import ipopt
 from .errors import ImucalError
 from .model import SensorModel
 from .parameters import Parameters
 
-#: Maps from IPOPT's return_status to a sentence for the report.
-_STATUS_WORDS = {
-    "Solve_Succeeded": "converged (IPOPT: optimal solution found)",
-    "Solved_To_Acceptable_Level": "converged to an acceptable level (IPOPT)",
-    "Maximum_Iterations_Exceeded": "did not converge: maximum iterations exceeded",
-    "Infeasible_Problem_Detected": "failed: infeasible problem",
-    "Restoration_Failed": "failed: restoration phase failed",
-    "Search_Direction_Becomes_Too_Small": "converged (IPOPT: step below machine precision at the optimum)",
-}
-_CONVERGED = ("Solve_Succeeded", "Solved_To_Acceptable_Level", "Search_Direction_Becomes_Too_Small")
+_STATUS_WORDS, _CONVERGED = ipopt.STATUS_WORDS, ipopt.CONVERGED
 
 
 @dataclass(frozen=True)
@@ -114,10 +106,7 @@ def _solver(model: SensorModel, n: int, free: tuple[str, ...]) -> tuple[ca.Funct
     obj = fsum(raw, cov, w, p, g)
     P = ca.vertcat(ca.vec(raw), ca.vec(cov), ca.vec(w), g, pfix, off, step)
     nlp = {"x": x, "p": P, "f": obj}
-    opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
-            "ipopt.tol": 1e-8, "ipopt.acceptable_tol": 1e-6,
-            "ipopt.acceptable_iter": 3, "ipopt.max_iter": 300}
-    solver = ca.nlpsol("calib", "ipopt", nlp, opts)
+    solver = ca.nlpsol("calib", "ipopt", nlp, ipopt.OPTIONS)
     # Residuals and their Jacobian w.r.t. the free (unscaled) parameters, for the covariance.
     pf = ca.SX.sym("pf", nf)
     pfix_s = ca.SX.sym("pfix", len(names))

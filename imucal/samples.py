@@ -17,6 +17,7 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
+from . import ipopt
 from .model import tbar
 
 
@@ -166,9 +167,7 @@ def solve_samples(raw: np.ndarray, w: np.ndarray, gravity: float, pfix: np.ndarr
     obj = _Objective(res, w, pfix, free_idx, off, scale)
     x = ca.MX.sym("x", len(free_idx))
     solver = ca.nlpsol("calib_samples", "ipopt", {"x": x, "f": obj(x)},
-                       {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
-                        "ipopt.tol": 1e-9,
-                        "ipopt.acceptable_tol": 1e-6, "ipopt.acceptable_iter": 3, "ipopt.max_iter": 200})
+                       ipopt.OPTIONS)
     sol = solver(x0=x0, lbx=lb, ubx=ub)
     stats = solver.stats()
     del solver  # before the callbacks it points to
