@@ -19,7 +19,7 @@ import numpy as np
 from . import ipopt
 from .errors import ImucalError
 from .model import SensorModel
-from .parameters import Parameters
+from .parameters import Parameters, model_label
 
 _STATUS_WORDS, _CONVERGED = ipopt.STATUS_WORDS, ipopt.CONVERGED
 
@@ -240,13 +240,14 @@ def fit(data: FitData, params: Parameters, model: SensorModel, gravity: float,
     with np.errstate(divide="ignore", invalid="ignore"):
         corr = cov / np.outer(sd, sd)
     std = {nm: float("nan") for nm in names}
-    std.update({nm: float(v) for nm, v in zip(free, sd)})
+    if dof > 0 or data.mode != "means":  # no residual left to scale by: std not estimable
+        std.update({nm: float(v) for nm, v in zip(free, sd)})
     at_bound = {nm: b for nm in free if (b := fitted[nm].at_bound()) is not None}
     success = status in _CONVERGED
     return FitResult(params=fitted, initial=params, std=std, covariance=cov, correlation=corr,
                      free_names=free, gravity=gravity, mode=data.mode, residuals=r, sigma=sigma,
                      chi2=chi2, dof=dof, status=status, success=success, iterations=iters,
-                     solve_time=solve_time, model_name=model.name, at_bound=at_bound)
+                     solve_time=solve_time, model_name=model_label(model.name, params), at_bound=at_bound)
 
 
 def jacobian_rows(data: FitData, params: Parameters, model: SensorModel, gravity: float,

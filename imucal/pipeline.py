@@ -8,7 +8,9 @@ import numpy as np
 
 from .calibration import Calibration, now_utc
 from .config import RunConfig
-from .data import Recording, load_recording
+import math
+
+from .data import Recording, load_recording, rails
 from .errors import ImucalError
 from .fit import FitData, FitResult, fit, jacobian_rows
 from .initial import InitialGuess, ellipsoid_guess
@@ -111,11 +113,64 @@ def fit_data(model: SensorModel, intervals: Intervals, recording: Recording, mod
                    raw_var=intervals.std[group] ** 2, group=group, mode="samples")
 
 
+#: Reduced chi-square above which a fit is refused, not reported: no sensor model is that wrong.
+ABSURD_REDCHI = 1.0e4
+#: A fit whose chi-square p-value is below POOR_FIT_P and reduced chi-square above POOR_FIT_REDCHI
+#: is flagged: the residuals exceed the noise (an effect the model misses, or excess noise).
+POOR_FIT_P, POOR_FIT_REDCHI = 1.0e-3, 2.0
+
+
+def chi2_sf(x: float, dof: int) -> float:
+    """P(chi2_dof > x), Wilson-Hilferty (ample for a 1e-3 test at dof >= 1)."""
+    if dof <= 0 or not math.isfinite(x):
+        return float("nan")
+    k = float(dof)
+    z = ((x / k) ** (1 / 3) - (1 - 2 / (9 * k))) / math.sqrt(2 / (9 * k))
+    return 0.5 * math.erfc(z / math.sqrt(2))
+
+
+def _axes(dropped: list[dict]) -> str:
+    return "axis " + ", ".join(sorted({d["axis"] for d in dropped}))
+
+
+def discover_command(config: RunConfig, rec: Recording) -> str:
+    """The command that investigates a poor fit of this run."""
+    cmd = f"imucal discover --config {config.source}" if config.source else f"imucal discover --data {rec.source}"
+    g = config.gravity
+    if g.value is not None:
+        cmd += f" --gravity {g.value:g}"
+    elif g.latitude is not None:
+        cmd += f" --latitude {g.latitude:g} --height {g.height:g}"
+    return cmd
+
+
+def fit_warnings(res: FitResult, config: RunConfig, rec: Recording, dropped: list[dict]) -> list[str]:
+    """What the user must know about this fit, one sentence each (printed, and kept in the files)."""
+    out = []
+    if dropped:
+        out.append(f"{len(dropped)} static interval(s) dropped because an axis was clipped "
+                   f"({_axes(dropped)}); see the report")
+    if res.dof <= 0 and res.mode == "means":
+        out.append("0 degrees of freedom: the standard errors cannot be estimated from the residuals "
+                   "(reported as n/a); fit samples (--mode samples) or hold more orientations")
+    elif res.dof > 0 and res.redchi > POOR_FIT_REDCHI and chi2_sf(res.chi2, res.dof) < POOR_FIT_P:
+        out.append(f"reduced chi-square {res.redchi:.3g} ({res.dof} dof, p < {POOR_FIT_P:g}): the residuals "
+                   "exceed the noise, so the model misses an effect or the noise is underestimated; "
+                   f"investigate with: {discover_command(config, rec)}")
+    return out
+
+
 def calibrate(config: RunConfig) -> CalibrationRun:
     """Run the whole calibration described by ``config``."""
     src = config.source
     rec = load_recording(config.data, config.base_dir)
-    iv = detect_static(rec.t, rec.raw, config.static, rec.temp, source=rec.source)
+    declared = rails(config.data.saturation) if config.data.saturation is not None else None
+    iv = detect_static(rec.t, rec.raw, config.static, rec.temp, source=rec.source, rails=declared)
+    dropped = iv.meta.get("dropped", [])
+    if dropped and iv.n < 2:
+        raise ImucalError(f"{len(dropped)} static interval(s) dropped because an axis was clipped "
+                          f"({_axes(dropped)}), {iv.n} left", file=rec.source, field="intervals",
+                          fix="record again within the sensor's range (or widen its range setting)")
     if iv.n == 0:
         raise ImucalError("no static intervals found", file=rec.source, field="static",
                           fix="hold the sensor still for longer than static.min_duration in each orientation, "
@@ -141,6 +196,13 @@ def calibrate(config: RunConfig) -> CalibrationRun:
     obs = analyse(dirs, J, params.free_names, Jw, thresholds(params.free_names, config.fit.angle_tolerance))
     require_observable(obs, params.free_names, rec.source)
     res = fit(data, params, model, gravity, source=rec.source, weights=config.fit.weights)
+    if res.dof > 0 and res.redchi > ABSURD_REDCHI:
+        held = [n for n in params.names if params[n].fixed]
+        rms = float(np.sqrt(np.mean(res.residuals**2)))
+        raise ImucalError(f"reduced chi-square {res.redchi:.3g} (RMS |a|-g {rms:.3g} m/s^2): the model cannot "
+                          "describe these data, refused", file=rec.source, field="fit",
+                          fix=(f"free the held parameters ({', '.join(held)}); " if held else "")
+                          + "check that the log holds still poses of one sensor and the data columns")
     if res.mode != "means":  # report residuals on interval means too
         rm = jacobian_rows(mdata, res.params, model, gravity, residuals=True)
     else:
@@ -150,10 +212,13 @@ def calibrate(config: RunConfig) -> CalibrationRun:
         "rms_residual": float(np.sqrt(np.mean(rm**2))), "chi2": res.chi2, "dof": res.dof,
         "redchi": res.redchi, "n_intervals": iv.n, "n_distinct_orientations": obs.n_distinct,
         "gravity_source": gsource,
+        "warnings": fit_warnings(res, config, rec, dropped),
     }
     cal = Calibration(params=res.params, std=res.std, gravity=gravity, raw_unit=config.data.unit,
                       effects=tuple((e.name, e.axes) for e in model.effects), fit=cal_fit,
-                      data={"file": Path(rec.source).name, "sha256": rec.sha256, "samples": rec.n},
+                      data={"file": Path(rec.source).name, "sha256": rec.sha256, "samples": rec.n,
+                            "time": rec.time_note,
+                            "dropped_intervals": [dict(d) for d in dropped]},
                       created=now_utc())
     mask_rows = np.flatnonzero(iv.sample_mask(rec.n))
     covs = {c: covariates_for(model, recording=rec, rows=mask_rows)[:, i] for i, c in enumerate(model.covariates)}

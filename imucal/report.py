@@ -32,6 +32,8 @@ def fit_report(run: CalibrationRun, correl_min: float = CORREL_MIN) -> str:
     L.append(f"    data               = {rec.source} ({rec.n} samples, {rec.duration:.1f} s, "
              f"{rec.sample_rate:.4g} Hz, unit {cal.raw_unit})")
     L.append(f"    sha256             = {rec.sha256}")
+    if rec.time_note:
+        L.append(f"    time               = {rec.time_note}")
     L.append(f"    gravity            = {cal.gravity:.6f} m/s^2 ({run.gravity_source})")
     L.append("[[Fit Statistics]]")
     L.append(f"    solver             = IPOPT: {res.status_words}")
@@ -52,6 +54,8 @@ def fit_report(run: CalibrationRun, correl_min: float = CORREL_MIN) -> str:
         L.append("    WARNING            = poorly determined by these poses: "
                  + ", ".join(f"{n} (predicted std {run.observability.predicted_z[n]:.2g} x scale)"
                              for n in run.observability.poorly_determined))
+    for wtext in cal.fit.get("warnings", []):
+        L.append(f"    WARNING            = {wtext}")
     L.append("[[Variables]]")
     w = max(len(n) for n in res.params)
     for n, p in res.params.items():
@@ -62,8 +66,8 @@ def fit_report(run: CalibrationRun, correl_min: float = CORREL_MIN) -> str:
             continue
         pct = abs(sd / p.value) * 100 if p.value else float("nan")
         flag = f"  (at {res.at_bound[n]} bound)" if n in res.at_bound else ""
-        L.append(f"    {n:<{w}}: {_fmt(p.value)} +/- {sd:.4g} ({pct:.3g}%) {p.unit} "
-                 f"(init = {_fmt(init)}){flag}")
+        err = f"+/- {sd:.4g} ({pct:.3g}%)" if math.isfinite(sd) else "+/- n/a (not estimable: 0 dof)"
+        L.append(f"    {n:<{w}}: {_fmt(p.value)} {err} {p.unit} (init = {_fmt(init)}){flag}")
     if any(n in res.params and n in ("phi", "psi", "theta") for n in res.free_names):
         L.append("    angles in degrees: " + ", ".join(
             f"{n} = {math.degrees(res.params[n].value):.4f}" for n in ("phi", "psi", "theta")))
@@ -81,8 +85,10 @@ def fit_report(run: CalibrationRun, correl_min: float = CORREL_MIN) -> str:
     L.append("[[Apply map]]  a = A raw + c  (Theorem; A lower triangular, output in m/s^2)")
     for i in range(3):
         L.append("    " + " ".join(f"{v:+.9e}" for v in A[i]) + f"   | {c[i]:+.9e}")
-    L.append("[[Static intervals]]")
+    L.append(f"[[Static intervals]]  times in s, means and std in {cal.raw_unit}, directions unit vectors")
     L.append(iv.table(run.directions))
+    for d in cal.data.get("dropped_intervals", []):
+        L.append(f"    dropped {d['t_start']:.2f}..{d['t_end']:.2f} s: {d['reason']}")
     L.append("[[Residuals per interval]]  |a| - g [m/s^2], sigma from the interval's own scatter")
     r = res.residuals if res.mode == "means" else None
     if r is not None:

@@ -80,14 +80,16 @@ def test_loads_back_losslessly(saved):
 def test_fixed_parameters_round_trip(tmp_path, counts_recording):
     from conftest import calibrate_file
 
-    run = calibrate_file(counts_recording.path, fit={"fix": ["phi", "psi", "theta"]})
+    truth = counts_recording.truth  # held at the true angles: a fit, not a refused misfit
+    run = calibrate_file(counts_recording.path, fit={"fix": ["phi", "psi", "theta"],
+                                                     "initial": {a: truth[a] for a in ("phi", "psi", "theta")}})
     path = tmp_path / "c.yaml"
     run.calibration.save(path)
     d = yaml.safe_load(path.read_text())
     assert d["parameters"]["phi"]["fixed"] is True and d["parameters"]["phi"]["std"] is None
     back = load_calibration(path)
     assert back.params["phi"].fixed and math.isnan(back.std["phi"])
-    assert back.params["phi"].value == math.pi / 2
+    assert back.params["phi"].value == truth["phi"]
     assert math.isinf(back.params["s1"].lower) and back.params["s1"].lower < 0
 
 

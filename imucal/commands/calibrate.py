@@ -87,6 +87,7 @@ def summary(run) -> dict:
         "matrix": cal.linear_map()[0].tolist(),
         "offset": cal.linear_map()[1].tolist(),
         "data": dict(cal.data),
+        "warnings": list(cal.fit.get("warnings", [])),
     }
 
 
@@ -120,6 +121,10 @@ def run(args: argparse.Namespace) -> int:
                 o.call(out / name, lambda p, fn=fn: fn(result, p))
         if args.json:
             o.json(args.json, summary(result))
+    import sys
+
+    for w in result.calibration.fit.get("warnings", []):
+        sys.stderr.write(f"imucal: warning: {w}\n")
     if not args.quiet:
         print(text.split("[[Static intervals]]")[0].rstrip())
     print(f"wrote {out / 'calibration.yaml'}, {out / 'report.txt'}"
