@@ -4,22 +4,17 @@ from __future__ import annotations
 import argparse
 import math
 
+from . import options
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("calibrate", help="fit the 9-parameter model to a static multi-pose recording",
                        description="Fit shifts, scales and axis angles (Nakov & Ivanov) to a recording. "
                                    "Writes DIR/calibration.yaml, DIR/report.txt and figures.")
     p.add_argument("config", nargs="?", help="YAML run file (see configs/)")
-    p.add_argument("--data", help="recording to calibrate with default settings (instead of CONFIG)")
-    p.add_argument("--gravity", type=float, help="local gravity [m/s^2] (default: config, else 9.80665)")
-    p.add_argument("--latitude", type=float, help="latitude [deg] for WGS84 normal gravity")
-    p.add_argument("--height", type=float, default=0.0, help="height [m] for WGS84 normal gravity")
-    p.add_argument("--sample-rate", type=float, help="sample rate [Hz] when the file has no time column")
-    p.add_argument("--unit", help="unit of the raw readings (label only, e.g. raw or m/s^2)")
-    p.add_argument("--fix-angles", action="store_true", help="hold the angles at 90 deg (6-parameter model)")
-    p.add_argument("--mode", choices=("means", "samples"), help="fit interval means (default) or samples")
-    p.add_argument("--weights", choices=("noise", "uniform"),
-                   help="row weights: noise (1/sigma^2, default) or uniform (as imu_tk)")
+    options.add_data_options(p)
+    options.add_gravity_options(p)
+    options.add_model_options(p)
     p.add_argument("--out", help="output directory (default: config output.dir, else ./out)")
     p.add_argument("--json", help="also write a machine-readable summary to this file")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
@@ -28,9 +23,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _config(args: argparse.Namespace):
-    from ..config import config_from_dict, load_config
     from ..errors import ImucalError
-    import dataclasses
 
     if args.config and args.data:
         raise ImucalError("give either CONFIG or --data, not both", field="arguments",
@@ -38,25 +31,7 @@ def _config(args: argparse.Namespace):
     if not args.config and not args.data:
         raise ImucalError("nothing to calibrate", field="arguments",
                           fix="give a YAML run file or --data RECORDING")
-    if args.config:
-        cfg = load_config(args.config)
-    else:
-        data = {"path": args.data}
-        cfg = config_from_dict({"data": data}, None)
-    data = cfg.data
-    if args.sample_rate is not None or args.unit is not None:
-        data = dataclasses.replace(data, **{k: v for k, v in (("sample_rate", args.sample_rate),
-                                                            ("unit", args.unit)) if v is not None})
-    grav = cfg.gravity
-    if args.gravity is not None or args.latitude is not None:
-        from ..config import GravitySpec
-
-        grav = GravitySpec(value=args.gravity, latitude=args.latitude, height=args.height)
-    fit = cfg.fit
-    if args.fix_angles or args.mode or args.weights:
-        fit = dataclasses.replace(fit, fix=tuple(sorted(set(fit.fix) | ({"phi", "psi", "theta"} if args.fix_angles else set()))),
-                                  mode=args.mode or fit.mode, weights=args.weights or fit.weights)
-    return dataclasses.replace(cfg, data=data, gravity=grav, fit=fit)
+    return options.run_config(args, args.config)
 
 
 def summary(run) -> dict:
@@ -94,7 +69,7 @@ def summary(run) -> dict:
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from ..output import OutputSet, check_destination
+    from ..output import OutputSet, check_outputs
     from ..pipeline import calibrate
     from ..report import fit_report
 
@@ -102,21 +77,22 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out or cfg.output.dir)
     if args.out is None and cfg.source:
         out = cfg.base_dir / cfg.output.dir if not Path(cfg.output.dir).is_absolute() else out
-    check_destination(out / "calibration.yaml")  # fail before the work, not after it
-    if args.json:
-        check_destination(args.json)
     import os
 
+    from ..figures import FIGURES
+
     out = Path(os.path.normpath(out))
+    figures = cfg.output.figures and not args.no_figures
+    inputs = [args.config, options.data_path(cfg)]
+    outputs = [out / "calibration.yaml", out / "report.txt", args.json,
+               *([out / n for n in FIGURES] if figures else [])]
+    check_outputs(inputs, outputs)  # fail before the work, not after it
     result = calibrate(cfg)
     text = fit_report(result)
-    figures = cfg.output.figures and not args.no_figures
-    with OutputSet() as o:
+    with OutputSet(inputs) as o:
         o.call(out / "calibration.yaml", result.calibration.save)
         o.text(out / "report.txt", text)
         if figures:
-            from ..figures import FIGURES
-
             for name, fn in FIGURES.items():
                 o.call(out / name, lambda p, fn=fn: fn(result, p))
         if args.json:

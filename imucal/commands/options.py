@@ -1,0 +1,88 @@
+"""One option set per concern, shared by every command that reads a recording.
+
+data (the recording and how to read it), gravity (local g), model (which parameters and how the
+fit weighs the data), output. ``run_config(args)`` turns them, with an optional YAML run file,
+into the RunConfig the library takes: every given option is used or refused.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+from pathlib import Path
+
+from ..config import GravitySpec, RunConfig, config_from_dict, load_config
+from ..data import TIME_UNIT_CHOICES, parse_columns
+from ..errors import ImucalError
+
+
+def add_data_options(p: argparse.ArgumentParser, data_required: bool = False) -> None:
+    g = p.add_argument_group("data")
+    g.add_argument("--data", required=data_required, metavar="FILE",
+                   help="recording (CSV with header, or whitespace text: t x y z)")
+    g.add_argument("--columns", metavar="MAP",
+                   help="column roles, 0-based indices or header names: t=0,ax=4,ay=5,az=6 "
+                        "(roles t, ax, ay, az, gx, gy, gz, temp)")
+    g.add_argument("--time-unit", choices=TIME_UNIT_CHOICES,
+                   help="unit of the time column (default auto: inferred and reported)")
+    g.add_argument("--sample-rate", type=float, help="sample rate [Hz] when the file has no time column")
+    g.add_argument("--unit", help="unit of the raw readings (label only, e.g. raw or m/s^2)")
+
+
+def add_gravity_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("gravity")
+    g.add_argument("--gravity", type=float, help="local gravity [m/s^2] (default: config, else 9.80665)")
+    g.add_argument("--latitude", type=float, help="latitude [deg] for WGS84 normal gravity")
+    g.add_argument("--height", type=float, help="height above the ellipsoid [m] (with --latitude)")
+
+
+def add_model_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("model")
+    g.add_argument("--fix-angles", action="store_true", help="hold the angles at 90 deg (6-parameter model)")
+    g.add_argument("--mode", choices=("means", "samples"), help="fit interval means (default) or samples")
+    g.add_argument("--weights", choices=("noise", "uniform"),
+                   help="row weights: noise (1/sigma^2, default) or uniform (as imu_tk)")
+
+
+def _gravity(args: argparse.Namespace, cfg: RunConfig) -> GravitySpec:
+    if args.height is not None and args.latitude is None:
+        raise ImucalError("--height is used only with --latitude (WGS84 normal gravity)", field="--height",
+                          fix="add --latitude DEG, or give --gravity G instead")
+    if args.gravity is None and args.latitude is None:
+        return cfg.gravity
+    if args.gravity is not None and args.latitude is not None:
+        raise ImucalError("give either --gravity or --latitude, not both", field="--gravity",
+                          fix="--gravity G, or --latitude DEG [--height M]")
+    return GravitySpec(value=args.gravity, latitude=args.latitude,
+                       height=0.0 if args.height is None else args.height)
+
+
+def run_config(args: argparse.Namespace, config: str | None = None, data_override: bool = True) -> RunConfig:
+    """The RunConfig from a YAML file (optional) and the command's options."""
+    if config:
+        cfg = load_config(config)
+        if args.data and data_override:
+            cfg = dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, path=str(Path(args.data).resolve())))
+    elif args.data:
+        cfg = config_from_dict({"data": {"path": args.data}}, None)
+    else:
+        raise ImucalError("nothing to read", field="arguments", fix="give --data RECORDING or a YAML run file")
+    over = {}
+    if getattr(args, "columns", None):
+        over["columns"] = parse_columns(args.columns)
+    for opt, key in (("time_unit", "time_unit"), ("sample_rate", "sample_rate"), ("unit", "unit")):
+        if getattr(args, opt, None) is not None:
+            over[key] = getattr(args, opt)
+    data = dataclasses.replace(cfg.data, **over) if over else cfg.data
+    fit = cfg.fit
+    if getattr(args, "fix_angles", False) or getattr(args, "mode", None) or getattr(args, "weights", None):
+        fix = set(fit.fix) | ({"phi", "psi", "theta"} if getattr(args, "fix_angles", False) else set())
+        fit = dataclasses.replace(fit, fix=tuple(sorted(fix)), mode=args.mode or fit.mode,
+                                  weights=args.weights or fit.weights)
+    grav = _gravity(args, cfg) if hasattr(args, "gravity") else cfg.gravity
+    return dataclasses.replace(cfg, data=data, gravity=grav, fit=fit)
+
+
+def data_path(cfg: RunConfig) -> Path:
+    """The recording's path as the loader resolves it (relative to the YAML file)."""
+    p = Path(cfg.data.path)
+    return p if p.is_absolute() or cfg.base_dir is None else cfg.base_dir / p
