@@ -309,7 +309,7 @@ def _check_model_name(model: Any, cal: Calibration, path: str) -> None:
         names = {cal.model_name, model_label(cal.model_name, cal.params)}
     except ImucalError as exc:
         raise ImucalError(exc.message, file=path, field=exc.field or "effects", fix=exc.fix) from None
-    if model not in names:
+    if not isinstance(model, str) or model not in names:
         raise ImucalError(f"model {short(model)} is not this file's model {short(sorted(names))}", file=path,
                           field="model", fix="regenerate the file with `imucal calibrate`")
 
