@@ -615,6 +615,29 @@ def test_example_builds_with_its_makefile(cases, work, prefix):
     assert not np.allclose(cases["counts"].cal.apply(np.array([[1.7e9, 100.0, -200.0]]))[0], ref[0])
 
 
+def test_example_feeds_temp_column_to_a_temperature_calibration(effect_case, work):
+    """With a temperature effect the example reads temp by name from imucal's layout."""
+    if shutil.which("make") is None:
+        pytest.skip("make not found")
+    gen, out = work / "make_eff" / "gen", work / "make_eff" / "build"
+    write_c(effect_case, gen, prefix="eff_t", precision="double")
+    res = subprocess.run(["make", "-C", str(EXAMPLE), f"GEN={gen}", f"OUT={out}", "PREFIX=eff_t"],
+                         capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    raw = np.array([[100.0, -200.0, 16000.0], [-15000.0, 300.0, 20.0]])
+    temp = np.array([-10.0, 45.0])
+    ref = effect_case.apply(raw, {"temp": temp})
+    text = "t,ax,ay,az,temp\n" + "".join(f"{i},{x:g},{y:g},{z:g},{tc:g}\n"
+                                          for i, ((x, y, z), tc) in enumerate(zip(raw, temp)))
+    res = subprocess.run([str(out / "eff_t_example")], input=text, capture_output=True, text=True, timeout=30)
+    assert res.returncode == 0, res.stderr
+    got = np.array([[float(x) for x in ln.split(",")[1:]] for ln in res.stdout.splitlines()[1:]])
+    assert rel(got - ref, ref).max() < DOUBLE_REL_BOUND
+    res = subprocess.run([str(out / "eff_t_example")], input="t,ax,ay,az\n0,1,2,3\n", capture_output=True,
+                         text=True, timeout=30)
+    assert res.returncode == 1 and "the calibration needs a temp column [degC]" in res.stderr
+
+
 def test_example_refuses_a_header_without_axes(example_asan):
     _, exe = example_asan
     res = subprocess.run([str(exe)], input="t,gx,gy,gz\n1,2,3,4\n", capture_output=True, text=True, timeout=30)

@@ -7,7 +7,8 @@
  *          -o NAME_example example.c gen/NAME.c -lm                (default NAME: imucal)
  *   ./NAME_example < raw.csv > acc.csv
  *       the calibration baked into gen/NAME.c (NAME_apply, or NAME_apply_cov when the
- *       calibration has effects: temp from the temp column, time from the t column)
+ *       calibration has effects: temp [degC] from the temp column, time [s] from the t column,
+ *       counted from the first sample)
  *   ./NAME_example s1 s2 s3 b1 b2 b3 phi psi theta < raw.csv > acc.csv
  *       run-time parameters, as firmware would read them from flash (NAME_prepare and
  *       NAME_apply_coeffs; base model only)
@@ -101,6 +102,10 @@ int main(int argc, char **argv)
   long lineno = 0;
   int col[N_ROLES] = {-1, -1, -1, -1, -1};
   int have_layout = 0, r;
+#if N_COV > 0 && MACRO(_COV_TIME) >= 0
+  double t0 = 0.0;
+  int have_t0 = 0;
+#endif
   int baked = argc == 1;
   const char *fmt = sizeof(real) == sizeof(float) ? "%.9g,%.9g,%.9g\n" : "%.17g,%.17g,%.17g\n";
   FN(_coeffs) coeffs;
@@ -176,7 +181,8 @@ int main(int argc, char **argv)
         fprintf(stderr, "%s: the calibration needs a t column [s]\n", argv[0]);
         return 1;
       }
-      cov[MACRO(_COV_TIME)] = (real)v[COL_T];
+      if (!have_t0) t0 = v[COL_T], have_t0 = 1;
+      cov[MACRO(_COV_TIME)] = (real)(v[COL_T] - t0); /* time since the first sample [s] */
 #endif
       FN(_apply_cov)(raw, cov, acc);
 #else
