@@ -167,8 +167,11 @@ def _num(x: Any, path: str, field_: str) -> float:
     if x is None:
         return float("nan")
     if isinstance(x, bool) or not isinstance(x, (int, float)):
-        raise ImucalError(f"{x!r} is not a number", file=path, field=field_)
-    return float(x)
+        raise ImucalError(f"{short(x)} is not a number", file=path, field=field_)
+    try:
+        return float(x)
+    except OverflowError:  # an integer beyond the float range
+        raise ImucalError(f"{short(x)} is too large for a float", file=path, field=field_) from None
 
 
 def from_dict(d: Mapping[str, Any], path: str = "<calibration>") -> Calibration:

@@ -118,6 +118,8 @@ def test_unknown_version_is_refused(saved, tmp_path, version):
     (lambda d: d["parameters"].pop("psi"), "parameters.psi", "missing field 'parameters.psi'"),
     (lambda d: d["parameters"]["b2"].update(value=-3.0), "parameters.b2.value", "scale b2 = -3.0 must be positive"),
     (lambda d: d["parameters"]["b2"].update(value="big"), "parameters.b2.value", "'big' is not a number"),
+    (lambda d: d["parameters"]["s1"].update(value=10**400), "parameters.s1.value", "is too large for a float"),
+    (lambda d: d.update(gravity=-(10**309)), "gravity", "is too large for a float"),
     (lambda d: d["parameters"]["phi"].update(value=4.0), "parameters.phi.value", r"angle phi = 4.0 rad is outside"),
     (lambda d: [d["parameters"][a].update(value=v) for a, v in (("phi", 0.3), ("psi", 0.3), ("theta", 2.5))],
      "parameters",
