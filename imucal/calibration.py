@@ -9,6 +9,7 @@ from __future__ import annotations
 import datetime as _dt
 import math
 import os
+import re
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
@@ -17,11 +18,19 @@ import yaml
 
 from . import __version__
 from .constants import SI_ACCEL_UNIT
-from .errors import ImucalError
-from .parameters import ANGLE_NAMES, BASE_NAMES, Parameter, Parameters
+from .errors import ImucalError, short
+from .parameters import ANGLE_NAMES, BASE_NAMES, Parameter, Parameters, model_label
 
 FORMAT = "imucal-calibration"
 FORMAT_VERSION = 1
+#: Relative disagreement between apply.matrix/offset and the parameters' map that counts as an
+#: edit rather than round-off (the file stores floats with repr, so a true file agrees exactly).
+DERIVED_RTOL = 1e-9
+#: Text fields that reach generated C: what each may look like (validated on load and in codegen).
+UNIT_PATTERN = re.compile(r"[A-Za-z0-9^.%()/ -]{0,40}\Z")
+VERSION_PATTERN = re.compile(r"[0-9A-Za-z][0-9A-Za-z.+_-]{0,39}\Z")
+NAME_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,39}\Z")
+SHA256_PATTERN = re.compile(r"[0-9a-f]{64}\Z")
 OUTPUT_FRAME = ("orthonormal frame f of the Theorem: f1 along sensor axis x, f2 in the plane of "
                 "axes x and y, f3 = f1 x f2")
 
@@ -117,16 +126,16 @@ class Calibration:
         return {
             "format": FORMAT,
             "format_version": FORMAT_VERSION,
-            "model": self.model_name,
+            "model": model_label(self.model_name, self.params),
             "effects": [{"name": n, "axes": ["xyz"[a] for a in ax]} for n, ax in self.effects],
             "units": {"input": self.raw_unit, "output": SI_ACCEL_UNIT, "angles": "rad",
-                      "time": "s", "temperature": "degC"},
+                      "time": "s", "temperature": "degC", "gravity": SI_ACCEL_UNIT},
             "output_frame": OUTPUT_FRAME,
             "gravity": float(self.gravity),
             "parameters": {
                 n: {"value": float(p.value), "std": _f(self.std.get(n, float("nan"))), "unit": p.unit,
                     "lower": _f(p.lower), "upper": _f(p.upper), "fixed": bool(p.fixed),
-                    "scale": float(p.scale)}
+                    "solver_scale": float(p.scale)}  # IPOPT's scaling magnitude, not b1..b3
                 for n, p in self.params.items()},
             "apply": {"matrix": A.tolist(), "offset": c.tolist(),
                       "equation": "a = matrix @ raw + offset (matrix lower triangular)"},
@@ -158,8 +167,11 @@ def _num(x: Any, path: str, field_: str) -> float:
     if x is None:
         return float("nan")
     if isinstance(x, bool) or not isinstance(x, (int, float)):
-        raise ImucalError(f"{x!r} is not a number", file=path, field=field_)
-    return float(x)
+        raise ImucalError(f"{short(x)} is not a number", file=path, field=field_)
+    try:
+        return float(x)
+    except OverflowError:  # an integer beyond the float range
+        raise ImucalError(f"{short(x)} is too large for a float", file=path, field=field_) from None
 
 
 def from_dict(d: Mapping[str, Any], path: str = "<calibration>") -> Calibration:
@@ -201,7 +213,11 @@ def from_dict(d: Mapping[str, Any], path: str = "<calibration>") -> Calibration:
             raise ImucalError("value is not finite", file=path, field=where + "value")
         lo = _num(e.get("lower", -math.inf), path, where + "lower")
         hi = _num(e.get("upper", math.inf), path, where + "upper")
-        scale = _num(e.get("scale", 1.0), path, where + "scale")
+        if "solver_scale" in e and "scale" in e:
+            raise ImucalError("has both solver_scale and its old name scale", file=path, field=where + "scale",
+                              fix="keep only solver_scale")
+        key = "scale" if "scale" in e else "solver_scale"  # "scale" in files before the rename
+        scale = _num(e.get(key, 1.0), path, where + key)
         fixed = e.get("fixed", False)
         if not isinstance(fixed, bool):
             raise ImucalError(f"{fixed!r} is not true or false", file=path, field=where + "fixed")
@@ -210,7 +226,8 @@ def from_dict(d: Mapping[str, Any], path: str = "<calibration>") -> Calibration:
                                    upper=math.inf if math.isnan(hi) else hi, unit=str(e.get("unit", "")),
                                    fixed=fixed, scale=scale))
         except ImucalError as exc:
-            raise ImucalError(exc.message, file=path, field=exc.field, fix=exc.fix) from None
+            field_ = where + key if exc.field and exc.field.endswith(".scale") else exc.field
+            raise ImucalError(exc.message, file=path, field=field_, fix=exc.fix) from None
         std[n] = _num(e.get("std"), path, where + "std")
     params = Parameters(plist)
     validate_parameters(params, path)
@@ -219,10 +236,18 @@ def from_dict(d: Mapping[str, Any], path: str = "<calibration>") -> Calibration:
         raise ImucalError(f"gravity {g} must be positive", file=path, field="gravity")
     units = _section(d, "units", path, Mapping)
     sw = _section(d, "software", path, Mapping)
-    cal = Calibration(params=params, std=std, gravity=g, raw_unit=str(units.get("input", "raw")),
+    if units.get("gravity", SI_ACCEL_UNIT) != SI_ACCEL_UNIT:
+        raise ImucalError(f"gravity unit {short(units.get('gravity'))} is not {SI_ACCEL_UNIT}", file=path,
+                          field="units.gravity", fix=f"give gravity in {SI_ACCEL_UNIT}")
+    created = d.get("created", "")
+    if isinstance(created, _dt.datetime):  # YAML reads an unquoted timestamp as a datetime
+        created = created.isoformat()
+    cal = Calibration(params=params, std=std, gravity=g, raw_unit=_text(units.get("input", "raw"), path, "units.input"),
                       effects=tuple(effects), fit=dict(_section(d, "fit", path, Mapping)),
                       data=dict(_section(d, "data", path, Mapping)),
-                      created=str(d.get("created", "")), software_version=str(sw.get("version", "")))
+                      created=_text(created, path, "created"),
+                      software_version=_text(sw.get("version", ""), path, "software.version"))
+    check_text_fields(cal, path)
     if effects:  # the parameters must be exactly the model's (base + each effect's)
         try:
             model_names = cal.model.names
@@ -233,9 +258,91 @@ def from_dict(d: Mapping[str, Any], path: str = "<calibration>") -> Calibration:
                               file=path, field="parameters", fix="regenerate the file with `imucal calibrate`")
     elif len(params) != len(BASE_NAMES):
         extra = [n for n in params.names if n not in BASE_NAMES]
-        raise ImucalError(f"parameter(s) {extra} belong to no effect of this calibration", file=path,
+        raise ImucalError(f"parameter(s) {short(extra)} belong to no effect of this calibration", file=path,
                           field="parameters", fix="regenerate the file with `imucal calibrate`")
+    _check_model_name(d.get("model"), cal, path)
+    _check_derived(d.get("apply"), cal, path)
     return cal
+
+
+def _text(x: Any, path: str, field_: str) -> str:
+    if not isinstance(x, str):
+        raise ImucalError(f"{short(x)} is not text", file=path, field=field_,
+                          fix="regenerate the file with `imucal calibrate`")
+    return x
+
+
+def check_text_fields(cal: Calibration, path: str = "<calibration>") -> None:
+    """Refuse text that does not look like what it claims to be (dates as ISO 8601 dates, units,
+    versions, names, SHA-256 digests). These fields reach generated C and reports."""
+    def bad(field_: str, value: Any, what: str, fix: str) -> ImucalError:
+        return ImucalError(f"{short(value)} is not {what}", file=path, field=field_, fix=fix)
+
+    regen = "regenerate the file with `imucal calibrate`"
+    if cal.created:
+        try:
+            _dt.datetime.fromisoformat(cal.created)
+        except (TypeError, ValueError):
+            raise bad("created", cal.created, "an ISO 8601 date", "write e.g. 2024-05-01T12:00:00+00:00") from None
+    if cal.software_version and not VERSION_PATTERN.match(cal.software_version):
+        raise bad("software.version", cal.software_version, "a version number", regen)
+    if not UNIT_PATTERN.match(cal.raw_unit) or "//" in cal.raw_unit:
+        raise bad("units.input", cal.raw_unit, "a unit (letters, digits, ^ . % ( ) / - space; at most 40)", "write e.g. counts")
+    for n, p in cal.params.items():
+        if not NAME_PATTERN.match(n):
+            raise bad("parameters", n, "a parameter name", regen)
+        if not UNIT_PATTERN.match(p.unit) or "//" in p.unit:
+            raise bad(f"parameters.{n}.unit", p.unit, "a unit", regen)
+    for name, _ in cal.effects:
+        if not NAME_PATTERN.match(name):
+            raise bad("effects", name, "an effect name", regen)
+    sha = (cal.data or {}).get("sha256")
+    if sha is not None and not (isinstance(sha, str) and SHA256_PATTERN.match(sha)):
+        raise bad("data.sha256", sha, "a SHA-256 digest (64 hex digits)", regen)
+    name = (cal.data or {}).get("file")
+    if name is not None and not isinstance(name, str):
+        raise bad("data.file", name, "a file name", regen)
+
+
+def _check_model_name(model: Any, cal: Calibration, path: str) -> None:
+    """``model:`` must name this model: the label (nakov-ivanov-6 ...) or the plain model name."""
+    if model is None:
+        return
+    try:
+        names = {cal.model_name, model_label(cal.model_name, cal.params)}
+    except ImucalError as exc:
+        raise ImucalError(exc.message, file=path, field=exc.field or "effects", fix=exc.fix) from None
+    if not isinstance(model, str) or model not in names:
+        raise ImucalError(f"model {short(model)} is not this file's model {short(sorted(names))}", file=path,
+                          field="model", fix="regenerate the file with `imucal calibrate`")
+
+
+def _check_derived(apply: Any, cal: Calibration, path: str) -> None:
+    """apply.matrix / apply.offset are derived from the parameters: an edit of either is refused
+    (the parameters are what imucal applies, so a disagreement means the file was altered)."""
+    if apply is None:
+        return
+    fix = "do not edit apply.matrix or apply.offset; regenerate the file with `imucal calibrate`"
+    if not isinstance(apply, Mapping):
+        raise ImucalError("must be a mapping", file=path, field="apply", fix=fix)
+    A, c = cal.linear_map()
+    for key, want in (("matrix", A), ("offset", c)):
+        got = apply.get(key)
+        if got is None:
+            continue
+        try:
+            arr = np.array(got, dtype=float)
+        except (TypeError, ValueError, OverflowError):
+            arr = None
+        if arr is None or arr.shape != want.shape:
+            raise ImucalError(f"is not a {'3x3 matrix' if key == 'matrix' else '3-vector'} of numbers",
+                              file=path, field=f"apply.{key}", fix=fix)
+        # offset = -matrix @ s: its round-off scales with |matrix| |s|, not with |offset|
+        ref = np.abs(A).max() if key == "matrix" else (np.abs(A) @ np.abs(cal.values[0:3])).max()
+        dev = np.abs(arr - want).max() if np.all(np.isfinite(arr)) else math.inf
+        if not dev <= DERIVED_RTOL * ref:
+            raise ImucalError(f"disagrees with the parameters (max difference {dev:.3g}, relative "
+                              f"{dev / ref if ref else math.inf:.3g})", file=path, field=f"apply.{key}", fix=fix)
 
 
 def _section(d: Mapping, key: str, path: str, kind: type) -> Any:

@@ -24,6 +24,7 @@ refuses any statement it does not recognise, so a branch or a call cannot slip i
 """
 from __future__ import annotations
 
+import datetime as dt
 import hashlib
 import math
 import os
@@ -37,10 +38,10 @@ import casadi as ca
 import numpy as np
 
 from . import __version__
-from .calibration import OUTPUT_FRAME, Calibration
+from .calibration import OUTPUT_FRAME, Calibration, check_text_fields
 from .constants import SI_ACCEL_UNIT
-from .errors import ImucalError
-from .parameters import BASE_NAMES
+from .errors import ImucalError, short
+from .parameters import BASE_NAMES, model_label
 
 PRECISIONS = ("float", "double")
 DEFAULT_PREFIX = "imucal"
@@ -342,8 +343,73 @@ def _sha256(path: str | os.PathLike) -> str:
         raise ImucalError(f"cannot read: {exc.strerror}", file=str(path), field="calibration") from None
 
 
-def _fmt(x: float, spec: str = ".6g") -> str:
-    return format(float(x), spec) if x is not None and math.isfinite(float(x)) else "n/a"
+def _fmt(x: object, spec: str = ".6g") -> str:
+    """A number for a comment; anything else (text from a file, None, inf) is "n/a"."""
+    if isinstance(x, bool) or not isinstance(x, (int, float, np.floating, np.integer)):
+        return "n/a"
+    try:
+        v = float(x)
+    except OverflowError:
+        return "n/a"
+    return format(v, spec) if math.isfinite(v) else "n/a"
+
+
+#: What may never appear in a generated comment: comment delimiters, trigraphs (??/ is a
+#: backslash, so ??/ + newline splices lines), and a backslash (line splice).
+_COMMENT_BREAKERS = ("*/", "/*", "//", "??")
+#: Longest free text pasted into a comment (a file name, say).
+MAX_COMMENT_TEXT = 120
+
+
+def comment_text(value: object, max_len: int = MAX_COMMENT_TEXT) -> str:
+    """``value`` as text that is safe inside a C block comment on one line.
+
+    Printable ASCII only (control characters, newlines, NUL, unicode line separators and any
+    other non-ASCII become _), no backslash, no comment delimiter, no trigraph, at most
+    ``max_len`` characters; never ending in / * ? (which could join the text that follows).
+    """
+    text = "".join(ch if " " <= ch <= "~" and ch != "\\" else "_" for ch in str(value)[: max_len * 4])
+    if len(text) > max_len:
+        text = text[: max_len - 3] + "..."
+    for bad in _COMMENT_BREAKERS:  # replacing the second character cannot form a new pair
+        while bad in text:
+            text = text.replace(bad, bad[0] + "_")
+    return text[:-1] + "_" if text[-1:] in ("/", "*", "?") else text
+
+
+_PLAIN_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._+-]{0,99}\Z")
+
+
+def plain_name(name: object) -> str:
+    """A file name for a comment: shown only when it is plain (letters, digits, . _ + -), so no
+    text of a crafted name reaches the C; the SHA-256 beside it identifies the file anyway."""
+    if isinstance(name, str) and _PLAIN_NAME.match(name):
+        return name
+    return "(name not shown: not only letters, digits, . _ + -)"
+
+
+def _iso_date(created: str) -> str:
+    """The creation date, re-printed from its parsed value (so only a date reaches the C)."""
+    if not created:
+        return "unknown"
+    try:
+        return dt.datetime.fromisoformat(created).isoformat()
+    except (TypeError, ValueError):
+        raise ImucalError(f"{short(created)} is not an ISO 8601 date", field="created",
+                          fix="write e.g. 2024-05-01T12:00:00+00:00") from None
+
+
+def _check_generated(text: str, name: str) -> None:
+    """Last line of defence: the generated file is printable ASCII with balanced comments."""
+    if any(not (" " <= ch <= "~" or ch == "\n") for ch in text) or "\\" in text or "??" in text:
+        raise RuntimeError(f"codegen: {name} would contain a control character, backslash or trigraph")
+    if text.count("/*") != text.count("*/") or "//" in text:
+        raise RuntimeError(f"codegen: {name} would contain unbalanced comments")
+    depth = 0
+    for m in re.finditer(r"/\*|\*/", text):
+        depth += 1 if m.group() == "/*" else -1
+        if depth not in (0, 1):
+            raise RuntimeError(f"codegen: {name} would contain nested comments")
 
 
 def generate_c(cal: Calibration, prefix: str = DEFAULT_PREFIX, precision: str = "float",
@@ -352,6 +418,7 @@ def generate_c(cal: Calibration, prefix: str = DEFAULT_PREFIX, precision: str = 
     (its name and SHA-256 go into the header). Deterministic: same input, same bytes."""
     check_prefix(prefix)
     check_precision(precision)
+    check_text_fields(cal, str(source) if source is not None else "<calibration>")
     real = precision
     effects = tuple(n for n, _ in cal.effects)
     model = _model(cal) if effects else None
@@ -373,9 +440,12 @@ def generate_c(cal: Calibration, prefix: str = DEFAULT_PREFIX, precision: str = 
         k_cov = kernel(apply_cov_function(cal), [raw_in, [f"cov[{i}]" for i in range(len(covs))]],
                        acc_out, precision)
     ctx = _Context(cal, prefix, real, source, effects, covs,
-                   model.name if model is not None else "nakov-ivanov-9")
-    return GeneratedC(prefix, precision, _header(ctx, k_apply, k_cov),
-                      _source(ctx, k_prep, k_coef, k_apply, k_cov),
+                   model_label(model.name if model is not None else "nakov-ivanov-9", cal.params))
+    header = _header(ctx, k_apply, k_cov)
+    src = _source(ctx, k_prep, k_coef, k_apply, k_cov)
+    _check_generated(header, f"{prefix}.h")
+    _check_generated(src, f"{prefix}.c")
+    return GeneratedC(prefix, precision, header, src,
                       k_apply.ops if k_apply else None, k_coef.ops, k_cov.ops if k_cov else None)
 
 
@@ -419,7 +489,8 @@ def _header(c: _Context, k_apply: Kernel | None, k_cov: Kernel | None) -> str:
     v = cal.params.value_dict()
     std = cal.std
     A, _ = cal.linear_map()
-    src_line = (f"{Path(c.source).name} (sha256 {_sha256(c.source)})" if c.source is not None
+    t = comment_text  # every text that came from a file or the command line goes through t()
+    src_line = (f"{plain_name(Path(c.source).name)} (sha256 {_sha256(c.source)})" if c.source is not None
                 else "(in-memory calibration, no file)")
     data = cal.data or {}
     fitd = cal.fit or {}
@@ -434,13 +505,13 @@ def _header(c: _Context, k_apply: Kernel | None, k_cov: Kernel | None) -> str:
         " *",
         " * Provenance",
         f" *   calibration file: {src_line}",
-        f" *   calibration created: {cal.created or 'unknown'}, by imucal {cal.software_version or 'unknown'}",
-        f" *   recording: {data.get('file', 'unknown')} (sha256 {data.get('sha256', 'unknown')})",
-        f" *   model: {c.model_name}; local gravity used in the fit: {g!r} {SI_ACCEL_UNIT}",
+        f" *   calibration created: {t(_iso_date(cal.created))}, by imucal {t(cal.software_version or 'unknown')}",
+        f" *   recording: {plain_name(data.get('file', 'unknown'))} (sha256 {t(data.get('sha256', 'unknown'), 64)})",
+        f" *   model: {t(c.model_name)}; local gravity used in the fit: {_fmt(g, '.17g')} {SI_ACCEL_UNIT}",
         " *",
         " * Model (Nakov & Ivanov, Theorem): a = E^-T diag(1/b) (raw - s) = L (raw - s)",
-        f" *   s1 s2 s3  shifts [{cal.raw_unit}] = " + ", ".join(_fmt(v[f's{i}'], '.10g') for i in (1, 2, 3)),
-        f" *   b1 b2 b3  scales [{cal.raw_unit} per {SI_ACCEL_UNIT}] = "
+        f" *   s1 s2 s3  shifts [{t(cal.raw_unit)}] = " + ", ".join(_fmt(v[f's{i}'], '.10g') for i in (1, 2, 3)),
+        f" *   b1 b2 b3  scales [{t(cal.raw_unit)} per {SI_ACCEL_UNIT}] = "
         + ", ".join(_fmt(v[f'b{i}'], '.10g') for i in (1, 2, 3)),
         " *   phi psi theta  angles between axes xy, xz, yz [rad] = "
         + ", ".join(_fmt(v[a], '.10g') for a in ('phi', 'psi', 'theta'))
@@ -450,11 +521,11 @@ def _header(c: _Context, k_apply: Kernel | None, k_cov: Kernel | None) -> str:
         + ", ".join(_fmt(A[i, j], '.9g') for i in range(3) for j in range(i + 1)),
     ]
     if c.effects:
-        lines += [f" *   effects: {', '.join(c.effects)}; their parameters: "
-                  + ", ".join(f"{n} = {_fmt(v[n], '.9g')} [{cal.params[n].unit}]" for n in extra)]
+        lines += [f" *   effects: {t(', '.join(c.effects))}; their parameters: "
+                  + ", ".join(f"{t(n)} = {_fmt(v[n], '.9g')} [{t(cal.params[n].unit)}]" for n in extra)]
     lines += [
         " *",
-        f" * Units: raw readings in [{cal.raw_unit}] (the recording's unit); acc in [{SI_ACCEL_UNIT}].",
+        f" * Units: raw readings in [{t(cal.raw_unit)}] (the recording's unit); acc in [{SI_ACCEL_UNIT}].",
         *textwrap.wrap(f"Frame of acc: the {OUTPUT_FRAME} (right-handed), not the sensor's skewed "
                        "axes.", 94, initial_indent=" * ", subsequent_indent=" *   "),
         " *",
@@ -498,8 +569,8 @@ def _header(c: _Context, k_apply: Kernel | None, k_cov: Kernel | None) -> str:
            f"/* Coefficients of a = L (raw - s) for {p}_apply_coeffs; fill with {p}_prepare. */",
            "typedef struct {",
            f"  {real} l[6]; /* L = E^-T diag(1/b), row-major lower triangle l11 l21 l22 l31 l32 l33 "
-           f"[{SI_ACCEL_UNIT} per {cal.raw_unit}] */",
-           f"  {real} s[3]; /* shifts s1 s2 s3 [{cal.raw_unit}] */",
+           f"[{SI_ACCEL_UNIT} per {comment_text(cal.raw_unit)}] */",
+           f"  {real} s[3]; /* shifts s1 s2 s3 [{comment_text(cal.raw_unit)}] */",
            f"}} {p}_coeffs;", ""]
     if not c.effects:
         vals = ", ".join(c.lit(x) for x in cal.values[0:9])
@@ -507,26 +578,30 @@ def _header(c: _Context, k_apply: Kernel | None, k_cov: Kernel | None) -> str:
             f"/* This calibration's parameters s1 s2 s3 b1 b2 b3 phi psi theta, as {p}_prepare takes them. */",
             f"#define {P}_PARAMS {{{vals}}}", ""]
     if not c.covariates:
+        out += [f"#define {P}_N_COV 0 /* no covariates: {p}_apply takes raw only */", ""]
         what = ("this calibration baked in" if not c.effects else
-                f"this calibration baked in, effects ({', '.join(c.effects)}) included")
+                f"this calibration baked in, effects ({comment_text(', '.join(c.effects))}) included")
         out += [
-            f"/* acc = calibrated acceleration [{SI_ACCEL_UNIT}, frame f] from raw [{cal.raw_unit}],",
+            f"/* acc = calibrated acceleration [{SI_ACCEL_UNIT}, frame f] from raw [{comment_text(cal.raw_unit)}],",
             f" * {what}. acc may alias raw. */",
             f"void {p}_apply(const {real} raw[3], {real} acc[3]);", "",
             f"/* {p}_apply over n samples stored as x y z x y z ... (a {real}[n][3] array). */",
             f"void {p}_apply_batch(const {real} *raw, {real} *acc, size_t n);", ""]
     else:
-        cov_doc = ", ".join(f"cov[{i}] = {n} [{COVARIATE_UNITS.get(n, 'see the effect documentation')}]"
+        cov_doc = ", ".join(f"cov[{i}] = {comment_text(n)} [{COVARIATE_UNITS.get(n, 'see the effect documentation')}]"
                             for i, n in enumerate(c.covariates))
         out += [
-            f"/* This calibration has effects ({', '.join(c.effects)}): its map depends on covariates,",
+            f"/* This calibration has effects ({comment_text(', '.join(c.effects))}): its map depends on covariates,",
             f" * so there is no {p}_apply. Covariates: {cov_doc}. */",
             f"#define {P}_N_COV {len(c.covariates)}", "",
-            f"/* acc = calibrated acceleration [{SI_ACCEL_UNIT}, frame f] from raw [{cal.raw_unit}] and the",
+            f"/* acc = calibrated acceleration [{SI_ACCEL_UNIT}, frame f] from raw [{comment_text(cal.raw_unit)}] and the",
             " * covariates, this calibration baked in, effects included. acc may alias raw. */",
             f"void {p}_apply_cov(const {real} raw[3], const {real} cov[{P}_N_COV], {real} acc[3]);", "",
             f"/* {p}_apply_cov over n samples: raw as x y z x y z ..., cov as n rows of {P}_N_COV. */",
             f"void {p}_apply_cov_batch(const {real} *raw, const {real} *cov, {real} *acc, size_t n);", ""]
+    out += [f"/* Index of each known covariate in cov, or -1 when this calibration does not use it. */",
+            *(f"#define {P}_COV_{n.upper()} {c.covariates.index(n) if n in c.covariates else -1}"
+              f" /* {n} [{u}] */" for n, u in COVARIATE_UNITS.items()), ""]
     out += [
         f"/* Coefficients from the nine base-model parameters s1 s2 s3 [raw] b1 b2 b3 [raw per {SI_ACCEL_UNIT}]",
         " * phi psi theta [rad] (the calibration file's order), e.g. read from flash at start-up.",
@@ -552,7 +627,7 @@ def _source(c: _Context, k_prep: Kernel, k_coef: Kernel, k_apply: Kernel | None,
         return f"  const {real} {used};" if used else "  (void)raw;"
 
     what = ("Theorem: a = L (raw - s) with this calibration's L and s" if not c.effects else
-            f"The model with effects ({', '.join(c.effects)}), parameters substituted")
+            f"The model with effects ({comment_text(', '.join(c.effects))}), parameters substituted")
     out = [f"/* {p}.c: generated by imucal {__version__} with CasADi {ca.__version__}; see {p}.h. "
            "Do not edit. */",
            f'#include "{p}.h"', "", "#include <math.h> /* " + ", ".join(

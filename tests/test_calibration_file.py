@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -29,12 +30,14 @@ def test_file_describes_itself(saved, counts_recording):
     assert d["format_version"] == FORMAT_VERSION
     assert d["model"] == "nakov-ivanov-9"
     assert d["units"]["input"] == "raw" and d["units"]["output"] == SI_ACCEL_UNIT == "m/s^2"
+    assert d["units"]["gravity"] == "m/s^2"
     assert d["units"]["angles"] == "rad"
     assert "orthonormal" in d["output_frame"]
     assert d["gravity"] == pytest.approx(9.80665)
     for n in BASE_NAMES:
         e = d["parameters"][n]
-        assert set(e) >= {"value", "std", "unit", "lower", "upper", "fixed"}
+        assert set(e) >= {"value", "std", "unit", "lower", "upper", "fixed", "solver_scale"}
+        assert "scale" not in e  # the solver's scaling magnitude is not a scale factor b1..b3
         assert e["std"] > 0 and e["fixed"] is False
     assert d["parameters"]["phi"]["unit"] == "rad"
     assert d["parameters"]["b1"]["unit"] == "raw/(m/s^2)"
@@ -117,12 +120,32 @@ def test_unknown_version_is_refused(saved, tmp_path, version):
     (lambda d: d["parameters"].pop("psi"), "parameters.psi", "missing field 'parameters.psi'"),
     (lambda d: d["parameters"]["b2"].update(value=-3.0), "parameters.b2.value", "scale b2 = -3.0 must be positive"),
     (lambda d: d["parameters"]["b2"].update(value="big"), "parameters.b2.value", "'big' is not a number"),
+    (lambda d: d["parameters"]["s1"].update(value=10**400), "parameters.s1.value", "is too large for a float"),
+    (lambda d: d.update(gravity=-(10**309)), "gravity", "is too large for a float"),
     (lambda d: d["parameters"]["phi"].update(value=4.0), "parameters.phi.value", r"angle phi = 4.0 rad is outside"),
     (lambda d: [d["parameters"][a].update(value=v) for a, v in (("phi", 0.3), ("psi", 0.3), ("theta", 2.5))],
      "parameters",
      "give no valid frame"),
     (lambda d: d["parameters"]["s1"].update(value=float("nan")), "parameters.s1.value", "value is not finite"),
-    (lambda d: d["parameters"]["s1"].update(scale=-1.0), "parameters.s1.scale", "scale must be positive"),
+    (lambda d: d["parameters"]["s1"].update(solver_scale=-1.0), "parameters.s1.solver_scale", "scale must be positive"),
+    (lambda d: d["parameters"]["s1"].update(scale=2.0), "parameters.s1.scale", "has both solver_scale and its old name"),
+    (lambda d: d["apply"]["matrix"][1].__setitem__(1, d["apply"]["matrix"][1][1] * (1 + 1e-6)), "apply.matrix",
+     "disagrees with the parameters"),
+    (lambda d: d["apply"]["offset"].__setitem__(2, d["apply"]["offset"][2] + 0.05), "apply.offset",
+     "disagrees with the parameters"),
+    (lambda d: d["apply"].update(matrix=[[1, 2], [3, 4]]), "apply.matrix", "is not a 3x3 matrix"),
+    (lambda d: d["apply"].update(offset="zero"), "apply.offset", "is not a 3-vector"),
+    (lambda d: d.update(apply=[1]), "apply", "must be a mapping"),
+    (lambda d: d.update(model="nakov-ivanov-6"), "model", "is not this file's model"),
+    (lambda d: d.update(created="2024 */ int x; /*"), "created", "is not an ISO 8601 date"),
+    (lambda d: d.update(created=20240101), "created", "is not text"),
+    (lambda d: d["software"].update(version="1.0 */ evil"), "software.version", "is not a version number"),
+    (lambda d: d["units"].update(input="g */ int x; /*"), "units.input", "is not a unit"),
+    (lambda d: d["units"].update(input="m//s"), "units.input", "is not a unit"),
+    (lambda d: d["units"].update(gravity="ft/s^2"), "units.gravity", r"gravity unit 'ft/s\^2' is not m/s\^2"),
+    (lambda d: d["parameters"]["b1"].update(unit="x\n/* y"), "parameters.b1.unit", "is not a unit"),
+    (lambda d: d["data"].update(sha256="abc"), "data.sha256", "is not a SHA-256 digest"),
+    (lambda d: d["data"].update(file=["a"]), "data.file", "is not a file name"),
     (lambda d: d["parameters"]["s1"].update(fixed="yes"), "parameters.s1.fixed", "'yes' is not true or false"),
     (lambda d: d["parameters"].update(q1={"value": 1.0}), "parameters", r"parameter\(s\) \['q1'\] belong to no effect"),
     (lambda d: d.update(gravity=-9.8), "gravity", "gravity -9.8 must be positive"),
@@ -185,3 +208,50 @@ def test_save_is_atomic(saved, tmp_path, monkeypatch):
     with pytest.raises(RuntimeError):
         cal.save(tmp_path / "c.yaml")
     assert list(tmp_path.iterdir()) == []
+
+
+# --- files written before the solver_scale rename and the model label ---------------------------
+OLD = Path(__file__).parent / "data"
+
+
+@pytest.mark.parametrize("name, fixed", [("calibration_v1_before_rename.yaml", False),
+                                         ("calibration_v1_fixed_angles_before_rename.yaml", True)])
+def test_files_written_before_the_rename_still_load(name, fixed):
+    """Written by `imucal calibrate` (main, commit e33bd3e) on the shipped Xsens recording, with
+    `scale:` per parameter and `model: nakov-ivanov-9` even for the 6-parameter fit."""
+    path = OLD / name
+    d = yaml.safe_load(path.read_text())
+    assert "scale" in d["parameters"]["s1"] and d["model"] == "nakov-ivanov-9"
+    cal = load_calibration(path)
+    assert cal.params["s1"].scale == d["parameters"]["s1"]["scale"]
+    assert all(cal.params[a].fixed == fixed for a in ("phi", "psi", "theta"))
+    A, c = cal.linear_map()
+    np.testing.assert_array_equal(A, np.array(d["apply"]["matrix"]))
+    # saved again: the new names, and the same calibration back
+    new = cal.to_dict()
+    assert new["model"] == ("nakov-ivanov-6" if fixed else "nakov-ivanov-9")
+    assert "solver_scale" in new["parameters"]["s1"] and "scale" not in new["parameters"]["s1"]
+    assert new["units"]["gravity"] == "m/s^2"
+    back = from_dict(new)
+    np.testing.assert_array_equal(back.values, cal.values)
+
+
+def test_derived_values_within_round_off_load(saved, tmp_path):
+    d = _dict(saved)
+    d["apply"]["matrix"][0][0] *= 1 + 1e-12
+    d["apply"]["offset"][0] *= 1 + 1e-12
+    p = tmp_path / "roundoff.yaml"
+    p.write_text(yaml.safe_dump(d))
+    load_calibration(p)
+
+
+def test_edited_matrix_is_refused_through_the_cli(saved, tmp_path, run_cli, unchanged):
+    d = _dict(saved)
+    d["apply"]["offset"][0] += 1.0
+    p = tmp_path / "edited.yaml"
+    p.write_text(yaml.safe_dump(d))
+    with unchanged(tmp_path):
+        code, out, err = run_cli(["codegen", str(p), "--out", str(tmp_path / "gen")])
+    assert code == 2
+    assert err.strip().count("\n") == 0
+    assert "apply.offset: disagrees with the parameters" in err and "do not edit apply.matrix" in err

@@ -579,19 +579,71 @@ def test_example_refuses_bad_lines_and_bad_parameters(example_asan):
     assert res.returncode == 2 and "imucal_prepare returned 1" in res.stderr
 
 
-def test_example_builds_with_its_makefile(cases, work):
+@pytest.mark.parametrize("prefix", ["imucal", "acc_board7"])
+def test_example_builds_with_its_makefile(cases, work, prefix):
+    """Any --prefix (PREFIX=), an output folder that does not exist yet (OUT=, created), and
+    imucal's own CSV layout: header t,ax,ay,az with t first; t is passed through as it was."""
     make = shutil.which("make")
     if make is None:
         pytest.skip("make not found")
-    d = work / "make"
-    write_c(cases["counts"].cal, d, precision="double")
-    res = subprocess.run([make, "-C", str(EXAMPLE), f"GEN={d}", f"OUT={d}"], capture_output=True, text=True)
+    gen = work / f"make_{prefix}" / "gen"
+    out = work / f"make_{prefix}" / "build" / "deeper"
+    write_c(cases["counts"].cal, gen, prefix=prefix, precision="double")
+    assert not out.exists()
+    res = subprocess.run([make, "-C", str(EXAMPLE), f"GEN={gen}", f"OUT={out}", f"PREFIX={prefix}"],
+                         capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
-    out = subprocess.run([str(d / "imucal_example")], input="100,-200,16000\n", capture_output=True,
+    exe = out / f"{prefix}_example"
+    raw = np.array([[100.0, -200.0, 16000.0], [-15000.0, 300.0, 20.0]])
+    ref = cases["counts"].cal.apply(raw)
+    t = ["1700000000.123", "1700000000.133"]
+    layouts = {  # imucal's CSV (as apply and simulate write it), other orders, no header
+        "t,ax,ay,az\n": [f"{t[i]},{x:g},{y:g},{z:g}" for i, (x, y, z) in enumerate(raw)],
+        "az;temp;ay;t;ax\n": [f"{z:g};25;{y:g};{t[i]};{x:g}" for i, (x, y, z) in enumerate(raw)],
+        "": [f"{t[i]} {x:g} {y:g} {z:g}" for i, (x, y, z) in enumerate(raw)],
+    }
+    for header, rows in layouts.items():
+        res = subprocess.run([str(exe)], input=header + "\n".join(rows) + "\n", capture_output=True,
+                             text=True, timeout=30)
+        assert res.returncode == 0, res.stderr
+        lines = res.stdout.splitlines()
+        assert lines[0] == "t,ax,ay,az"
+        assert [ln.split(",")[0] for ln in lines[1:]] == t  # time kept as it was
+        got = np.array([[float(x) for x in ln.split(",")[1:]] for ln in lines[1:]])
+        assert rel(got - ref, ref).max() < DOUBLE_REL_BOUND
+    # the first three columns would be t, ax, ay: a different answer, which the example must not give
+    assert not np.allclose(cases["counts"].cal.apply(np.array([[1.7e9, 100.0, -200.0]]))[0], ref[0])
+
+
+def test_example_feeds_temp_column_to_a_temperature_calibration(effect_case, work):
+    """With a temperature effect the example reads temp by name from imucal's layout."""
+    if shutil.which("make") is None:
+        pytest.skip("make not found")
+    gen, out = work / "make_eff" / "gen", work / "make_eff" / "build"
+    write_c(effect_case, gen, prefix="eff_t", precision="double")
+    res = subprocess.run(["make", "-C", str(EXAMPLE), f"GEN={gen}", f"OUT={out}", "PREFIX=eff_t"],
+                         capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    raw = np.array([[100.0, -200.0, 16000.0], [-15000.0, 300.0, 20.0]])
+    temp = np.array([-10.0, 45.0])
+    ref = effect_case.apply(raw, {"temp": temp})
+    text = "t,ax,ay,az,temp\n" + "".join(f"{i},{x:g},{y:g},{z:g},{tc:g}\n"
+                                          for i, ((x, y, z), tc) in enumerate(zip(raw, temp)))
+    res = subprocess.run([str(out / "eff_t_example")], input=text, capture_output=True, text=True, timeout=30)
+    assert res.returncode == 0, res.stderr
+    got = np.array([[float(x) for x in ln.split(",")[1:]] for ln in res.stdout.splitlines()[1:]])
+    assert rel(got - ref, ref).max() < DOUBLE_REL_BOUND
+    res = subprocess.run([str(out / "eff_t_example")], input="t,ax,ay,az\n0,1,2,3\n", capture_output=True,
                          text=True, timeout=30)
-    got = np.array([float(x) for x in out.stdout.splitlines()[1].split(",")])
-    ref = cases["counts"].cal.apply(np.array([[100.0, -200.0, 16000.0]]))[0]
-    assert rel((got - ref)[None], ref[None]).max() < DOUBLE_REL_BOUND
+    assert res.returncode == 1 and "the calibration needs a temp column [degC]" in res.stderr
+
+
+def test_example_refuses_a_header_without_axes(example_asan):
+    _, exe = example_asan
+    res = subprocess.run([str(exe)], input="t,gx,gy,gz\n1,2,3,4\n", capture_output=True, text=True, timeout=30)
+    assert res.returncode == 1 and "line 1: header names no ax, ay, az columns" in res.stderr
+    res = subprocess.run([str(exe)], input="t,ax,ay,az\n1,2,x,4\n", capture_output=True, text=True, timeout=30)
+    assert res.returncode == 1 and "line 2: expected a number in column 3" in res.stderr
 
 
 def test_header_compiles_as_cpp(cases, work):
