@@ -77,10 +77,11 @@ class DriftReport:
 
 
 def table_times(duration: float) -> tuple[float, ...]:
-    if not (math.isfinite(duration) and duration > 0):
-        raise ImucalError(f"duration {duration:g} s must be positive", field="duration",
+    """The table's times [s]: the standard ones up to ``duration``, and ``duration`` itself."""
+    if not (math.isfinite(duration) and 0 < duration <= 1e7):
+        raise ImucalError(f"duration {duration:g} s must be positive (at most 1e7 s)", field="duration",
                           fix="give the dead-reckoning time in seconds, e.g. 60")
-    return tuple(sorted(set(TABLE_TIMES) | {float(duration)}))
+    return tuple(sorted({t for t in TABLE_TIMES if t <= duration} | {float(duration)}))
 
 
 def sphere_directions(n: int = DIRECTIONS) -> np.ndarray:

@@ -105,7 +105,7 @@ def test_cli_drift_calibration_and_duration(tmp_path, capsys):
     assert main(["drift", "--calibration", str(tmp_path / "cal.yaml"), "--duration", "30",
                  "--json", str(out)]) == 0
     d = json.loads(out.read_text())
-    assert d["times"] == [1.0, 5.0, 10.0, 30.0, 60.0]
+    assert d["times"] == [1.0, 5.0, 10.0, 30.0]  # no column beyond the duration asked
     assert [c["name"] for c in d["cases"]] == ["worst case", "raw", "angles ignored", "calibrated"]
     assert d["gravity"] == 9.80665
 
@@ -138,3 +138,8 @@ def test_worst_case_row_uses_problem_1():
     e = max_abs_error(AngleBox.from_tolerance(0.02), STANDARD_GRAVITY).value
     lam = np.linalg.eigvalsh(gram_np([math.pi / 2 * 1.02] * 3))[0]
     assert e == pytest.approx(STANDARD_GRAVITY * (1 - math.sqrt(lam)), rel=1e-12)
+
+
+def test_cli_drift_table_stops_at_the_duration(run_cli):
+    code, out, _ = run_cli(["drift", "--duration", "10"])
+    assert code == 0 and "p(10 s)" in out and "p(60 s)" not in out

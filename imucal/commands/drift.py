@@ -33,10 +33,11 @@ def run(args: argparse.Namespace) -> int:
     from ..constants import DEFAULT_ANGLE_TOL, STANDARD_GRAVITY
     from ..drift import DriftCase, DriftReport, calibration_cases, plot_drift, table_times
     from ..errors import ImucalError
-    from ..output import OutputSet
+    from ..output import OutputSet, check_outputs
     from ..worst_case import AngleBox, CertificateError, max_abs_error
 
     times = table_times(args.duration)
+    check_outputs([args.calibration, args.recording], [args.json, args.plot])
     if args.recording and not args.calibration:
         raise ImucalError("--recording needs --calibration", field="recording",
                           fix="pass the calibration to evaluate on the recording")
@@ -76,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
     print(rep.table())
     for c in cases:
         print(f"  {c.name}: {c.statistic}" + (f" (max {c.error_max:.4g} m/s^2)" if c.error_max else ""))
-    with OutputSet() as o:
+    with OutputSet([args.calibration, args.recording]) as o:
         if args.json:
             o.json(args.json, rep.to_dict())
         if args.plot:

@@ -35,10 +35,12 @@ def add_gravity_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--height", type=float, help="height above the ellipsoid [m] (with --latitude)")
 
 
-def add_model_options(p: argparse.ArgumentParser) -> None:
+def add_model_options(p: argparse.ArgumentParser, mode: bool = True) -> None:
+    """--fix-angles, --weights and (where the command can fit samples) --mode."""
     g = p.add_argument_group("model")
     g.add_argument("--fix-angles", action="store_true", help="hold the angles at 90 deg (6-parameter model)")
-    g.add_argument("--mode", choices=("means", "samples"), help="fit interval means (default) or samples")
+    if mode:
+        g.add_argument("--mode", choices=("means", "samples"), help="fit interval means (default) or samples")
     g.add_argument("--weights", choices=("noise", "uniform"),
                    help="row weights: noise (1/sigma^2, default) or uniform (as imu_tk)")
 
@@ -74,10 +76,11 @@ def run_config(args: argparse.Namespace, config: str | None = None, data_overrid
             over[key] = getattr(args, opt)
     data = dataclasses.replace(cfg.data, **over) if over else cfg.data
     fit = cfg.fit
-    if getattr(args, "fix_angles", False) or getattr(args, "mode", None) or getattr(args, "weights", None):
+    mode, weights = getattr(args, "mode", None), getattr(args, "weights", None)
+    if getattr(args, "fix_angles", False) or mode or weights:
         fix = set(fit.fix) | ({"phi", "psi", "theta"} if getattr(args, "fix_angles", False) else set())
-        fit = dataclasses.replace(fit, fix=tuple(sorted(fix)), mode=args.mode or fit.mode,
-                                  weights=args.weights or fit.weights)
+        fit = dataclasses.replace(fit, fix=tuple(sorted(fix)), mode=mode or fit.mode,
+                                  weights=weights or fit.weights)
     grav = _gravity(args, cfg) if hasattr(args, "gravity") else cfg.gravity
     return dataclasses.replace(cfg, data=data, gravity=grav, fit=fit)
 
