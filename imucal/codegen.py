@@ -460,7 +460,8 @@ def write_c(cal: Calibration, out_dir: str | os.PathLike, prefix: str = DEFAULT_
         raise ImucalError("is not a directory", file=str(out), field="--out",
                           fix="give a directory for the .h and .c files")
     paths = [out / name for name in gen.files]
-    with OutputSet() as o:
+    inputs = [source] if source is not None else []
+    with OutputSet(inputs) as o:  # the calibration it was read from is never overwritten
         for path, text in zip(paths, gen.files.values()):
             o.text(path, text)
     return paths

@@ -164,6 +164,22 @@ class _Rows:
         return _row_eval(self.rows, self.data, pfree, self.pfix, self.g)
 
 
+def unscaled_covariance(Jw: np.ndarray, rcond: float = 1e-12) -> np.ndarray:
+    """(Jw^T Jw)^-1 by the SVD of the column-equilibrated Jacobian.
+
+    Columns are divided by their norms first, so the result does not depend on the units of
+    the parameters (a shift in counts x 1e12 and an angle in rad differ by 1e15 in scale, and a
+    cut relative to the largest singular value would drop the small columns). Directions the
+    data do not determine (relative singular value below ``rcond``) get zero variance here and
+    are named by imucal.observability before any fit.
+    """
+    c = np.linalg.norm(Jw, axis=0)
+    c = np.where(c > 0, c, 1.0)
+    _, sv, Vt = np.linalg.svd(Jw / c, full_matrices=False)
+    inv = np.where(sv > sv.max(initial=0) * rcond, 1.0 / np.maximum(sv, 1e-300) ** 2, 0.0)
+    return ((Vt.T * inv) @ Vt) / np.outer(c, c)
+
+
 def _step_scale(Jw: np.ndarray, scale: np.ndarray) -> np.ndarray:
     """Predicted standard error of each free parameter: the solver's unit (x = (p - p0)/d).
 
@@ -171,7 +187,7 @@ def _step_scale(Jw: np.ndarray, scale: np.ndarray) -> np.ndarray:
     tolerances mean "a tiny fraction of a standard error" for every parameter alike.
     """
     with np.errstate(invalid="ignore"):
-        d = np.sqrt(np.clip(np.diag(np.linalg.pinv(Jw.T @ Jw)), 0, None))
+        d = np.sqrt(np.clip(np.diag(unscaled_covariance(Jw)), 0, None))
     d = np.where(np.isfinite(d) & (d > 0), d, scale)
     return np.clip(d, 1e-9 * scale, scale)
 
@@ -233,9 +249,7 @@ def fit(data: FitData, params: Parameters, model: SensorModel, gravity: float,
     # Covariance from the Jacobian at the solution (via its SVD, symmetric by construction),
     # scaled by the residual variance as lmfit's scale_covar does: (J^T W J)^-1 chi2/dof.
     # With no degrees of freedom left, the noise-only covariance (J^T W J)^-1.
-    _, sv, Vt = np.linalg.svd(Jw, full_matrices=False)
-    inv = np.where(sv > sv.max(initial=0) * 1e-12, 1.0 / np.maximum(sv, 1e-300) ** 2, 0.0)
-    cov = (Vt.T * inv) @ Vt * (redchi if dof > 0 else 1.0)
+    cov = unscaled_covariance(Jw) * (redchi if dof > 0 else 1.0)
     sd = np.sqrt(np.clip(np.diag(cov), 0, None))
     with np.errstate(divide="ignore", invalid="ignore"):
         corr = cov / np.outer(sd, sd)

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import ImucalError
+from .fit import unscaled_covariance
 from .parameters import ANGLE_NAMES
 
 #: Two interval directions closer than this are the same pose [deg].
@@ -110,7 +111,7 @@ def analyse(directions: np.ndarray, jac_rows: np.ndarray, free_names: tuple[str,
             load = np.sqrt((V[:, bad] ** 2).sum(axis=1))
             und += [free_names[j] for j in range(nf) if load[j] > 0.5 and free_names[j] not in und]
         with np.errstate(invalid="ignore"):
-            zt = np.sqrt(np.clip(np.diag(np.linalg.pinv(Jt.T @ Jt)), 0, None))
+            zt = np.sqrt(np.clip(np.diag(unscaled_covariance(Jt)), 0, None))
         z = {n: float(v * l) for n, v, l in zip(free_names, zt, lim)}  # std / scale
         poor = [n for n, v in zip(free_names, zt) if v > POOR_FRACTION and n not in und]
     return Observability(n_distinct, labels, svf, tuple(sorted(und, key=free_names.index)), z, tuple(poor))

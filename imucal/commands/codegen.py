@@ -23,7 +23,14 @@ def run(args: argparse.Namespace) -> int:
     from ..calibration import load_calibration
     from ..codegen import check_prefix, write_c
 
+    from pathlib import Path
+
+    from ..output import check_outputs
+
     check_prefix(args.prefix)  # before reading anything: a bad prefix is refused outright
+    out = Path(args.out)
+    if out.is_dir() or not out.exists():  # a file here is refused by write_c, naming --out
+        check_outputs([args.calibration], [out / f"{args.prefix}.h", out / f"{args.prefix}.c"])
     cal = load_calibration(args.calibration)
     paths = write_c(cal, args.out, prefix=args.prefix, precision=args.precision, source=args.calibration)
     print(f"wrote {', '.join(str(p) for p in paths)} ({args.precision})")
