@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import ImucalError, short
-from .inputs import max_data_bytes, read_input_bytes
+from .inputs import max_data_bytes, open_regular
 
 #: Time units accepted for the time column, with their factor to seconds ("auto": inferred).
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
@@ -159,11 +159,17 @@ def file_sha256(path: str | os.PathLike) -> str:
 
 def _read_text(path: Path) -> tuple[str, str]:
     """Text and SHA-256 of a recording: a regular file, within the size limit, not binary."""
-    blob = read_input_bytes(path, field="data.path", max_bytes=max_data_bytes(),
-                            fix="check the path (relative paths are relative to the YAML file)")
-    if b"\x00" in blob[:1 << 16]:
-        raise ImucalError("is a binary file (NUL bytes), not a text recording", file=str(path),
-                          field="data.path", fix="export the recording as CSV or whitespace-separated text")
+    fd, _ = open_regular(path, field="data.path", max_bytes=max_data_bytes(),
+                         fix="check the path (relative paths are relative to the YAML file)")
+    try:
+        with os.fdopen(fd, "rb") as f:
+            head = f.read(1 << 16)  # a sparse or binary file is refused before it is read whole
+            if b"\x00" in head:
+                raise ImucalError("is a binary file (NUL bytes), not a text recording", file=str(path),
+                                  field="data.path", fix="export the recording as CSV or whitespace-separated text")
+            blob = head + f.read()
+    except OSError as exc:
+        raise ImucalError(f"cannot read: {exc.strerror or exc}", file=str(path), field="data.path") from None
     try:
         text = blob.decode("utf-8-sig")
     except UnicodeDecodeError:

@@ -245,6 +245,27 @@ class OutputSet:
         if tmp.exists():
             os.chmod(tmp, 0o666 & ~_umask())
 
+    def _publish(self) -> None:
+        """Move every staged file into place; on any failure put back what was there before."""
+        done: list[tuple[Path, Path | None]] = []
+        try:
+            for tmp, dest in self._staged:
+                backup = None
+                if dest.exists():
+                    backup = tmp.with_name(f".previous-{tmp.name}")
+                    os.replace(dest, backup)
+                done.append((dest, backup))
+                os.replace(tmp, dest)
+        except OSError as err:
+            failed = dest
+            for placed, backup in reversed(done):
+                with contextlib.suppress(OSError):
+                    if backup is not None:
+                        os.replace(backup, placed)
+                    elif placed.exists():
+                        os.unlink(placed)
+            raise _write_error(failed, err) from None
+
     def __enter__(self) -> "OutputSet":
         return self
 
@@ -254,11 +275,7 @@ class OutputSet:
             if exc_type is None:
                 with _locked(self._tmpdirs):  # whole sets, one run after the other
                     check_outputs(self._inputs, [d for _, d in self._staged])  # nothing changed meanwhile
-                    for tmp, dest in self._staged:
-                        try:
-                            os.replace(tmp, dest)
-                        except OSError as err:
-                            raise _write_error(dest, err) from None
+                    self._publish()
                 published = True
         finally:
             for d in self._tmpdirs.values():
