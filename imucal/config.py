@@ -14,7 +14,7 @@ from typing import Any, Mapping
 
 from .constants import DEFAULT_ANGLE_TOL
 from .data import DataSpec
-from .errors import ImucalError
+from .errors import ImucalError, short
 from .gravity import normal_gravity
 from .parameters import BASE_NAMES
 from .static import StaticSettings
@@ -43,6 +43,9 @@ class GravitySpec:
             if (v is not None or name == "height") and not _is_real(v):
                 raise ImucalError(f"{name} {v!r} is not a number", field=f"gravity.{name}",
                                   fix="latitude in degrees, height in metres")
+        if self.latitude is None and self.height != 0.0:
+            raise ImucalError(f"height {short(self.height)} m is used only with a latitude", field="gravity.height",
+                              fix="add gravity.latitude (WGS84 normal gravity), or give gravity.value")
         if self.latitude is not None:
             normal_gravity(self.latitude, self.height)  # range checks, at load time
 
@@ -150,6 +153,24 @@ def _fill(cls: type, raw: Any, where: str, path: str | None) -> Any:
         raise ImucalError(f"bad values: {exc}", file=path, field=where.rstrip(".")) from None
 
 
+def _fix_list(fx: Any, path: str | None) -> tuple[tuple[str, ...], dict[str, float]]:
+    """fit.fix as a name, a list of names, or a mapping name -> value held."""
+    if fx is None:
+        return (), {}
+    if isinstance(fx, str):
+        return (fx,), {}
+    if isinstance(fx, list) and all(isinstance(n, str) for n in fx):
+        return tuple(fx), {}
+    if isinstance(fx, Mapping) and all(isinstance(n, str) for n in fx):
+        for n, v in fx.items():
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ImucalError(f"value {short(v)} to hold {n} at is not a finite number", file=path,
+                                  field=f"fit.fix.{n}", fix="e.g. fix: {phi: 1.5708} or fix: [phi]")
+        return tuple(fx), {n: float(v) for n, v in fx.items()}
+    raise ImucalError(f"{short(fx)} is not a parameter name, a list of names or a mapping of names to values",
+                      file=path, field="fit.fix", fix="e.g. fix: [phi, psi, theta] or fix: {s1: 0.0}")
+
+
 def config_from_dict(d: Any, path: str | None = None) -> RunConfig:
     if not isinstance(d, Mapping):
         raise ImucalError("top level must be a mapping with a data: section", file=path, field="top level",
@@ -171,8 +192,14 @@ def config_from_dict(d: Any, path: str | None = None) -> RunConfig:
     if isinstance(fitraw, Mapping):
         fitraw = dict(fitraw)
         if "fix" in fitraw:
-            fx = fitraw["fix"]
-            fitraw["fix"] = tuple([fx] if isinstance(fx, str) else (fx or ()))
+            fitraw["fix"], held = _fix_list(fitraw["fix"], path)
+            if held:  # fix: {phi: 1.5708}: held AT the given value
+                init = dict(fitraw.get("initial") or {})
+                clash = [n for n in held if n in init and init[n] != held[n]]
+                if clash:
+                    raise ImucalError(f"{clash[0]} is given in fit.fix and fit.initial with different values",
+                                      file=path, field=f"fit.fix.{clash[0]}", fix="give the value once")
+                fitraw["initial"] = {**init, **held}
         if "initial" in fitraw and not isinstance(fitraw["initial"], Mapping):
             raise ImucalError("must map parameter names to values", file=path, field="fit.initial")
         if "effects" in fitraw:

@@ -16,6 +16,7 @@ from .fit import FitData, FitResult, fit, jacobian_rows
 from .initial import InitialGuess, ellipsoid_guess
 from .model import SensorModel, build_model
 from .observability import Observability, analyse, distinct_directions, require_observable, thresholds
+from .constants import RIGHT_ANGLE
 from .parameters import ANGLE_NAMES, Parameters, base_parameters
 from .static import Intervals, detect_static
 
@@ -93,6 +94,17 @@ def make_parameters(guess: InitialGuess, config: RunConfig, gravity: float, mode
                     raw_unit: str) -> Parameters:
     fs = config.fit
     init = dict(fs.initial)
+    lo, hi = RIGHT_ANGLE * (1 - fs.angle_tolerance), RIGHT_ANGLE * (1 + fs.angle_tolerance)
+    for a in ANGLE_NAMES:  # a given angle is used as given, never clipped into its bounds
+        if a in init and not lo <= init[a] <= hi:
+            where = "fit.fix" if a in fs.fix else "fit.initial"
+            raise ImucalError(f"{a} = {init[a]:g} rad is outside its bounds [{lo:.6g}, {hi:.6g}] rad",
+                              file=config.source, field=f"{where}.{a}",
+                              fix="give the angle in radians near pi/2 = 1.5708 (or widen fit.angle_tolerance)")
+    for i in (1, 2, 3):
+        if f"b{i}" in init and not init[f"b{i}"] > 0:
+            raise ImucalError(f"b{i} = {init[f'b{i}']:g} must be positive", file=config.source,
+                              field=f"fit.initial.b{i}", fix="give the scale in raw units per m/s^2")
     angles0 = [init.get(a, np.pi / 2 if a in fs.fix else guess.angles[i]) for i, a in enumerate(ANGLE_NAMES)]
     s0 = [init.get(f"s{i+1}", guess.s[i]) for i in range(3)]
     b0 = [init.get(f"b{i+1}", guess.b[i]) for i in range(3)]

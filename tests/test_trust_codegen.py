@@ -143,10 +143,13 @@ def test_library_refuses_payload_in_memory(payload):
 def test_fit_values_that_are_text_print_as_na(tmp_path):
     d = _dict()
     d["fit"]["rms_residual"] = PWN
-    d["fit"]["rms_residual_samples"] = 10**400
+    d["fit"]["rms_residual_samples"] = "1e999 */"
     gen = generate_c(load_calibration(_write(tmp_path / "c.yaml", d)))
     _assert_clean(gen.files)
     assert "static interval means n/a m/s^2, on static samples n/a m/s^2" in gen.header
+    d["fit"]["rms_residual_samples"] = 10**400  # no float holds it: refused when read
+    with pytest.raises(ImucalError, match="fit.rms_residual_samples: integer is too large for a float"):
+        load_calibration(_write(tmp_path / "c.yaml", d))
 
 
 @given(st.text(max_size=400))
