@@ -14,6 +14,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from .errors import ImucalError
+from .limits import MAX_MAP_SAMPLES, check_count, check_seed
 from .worst_case import ANGLE_NAMES, AngleBox, gram_np
 
 #: The paper's Fig. 3/4 setting: angles of the authors' sensor, box [-20, 20]^3 m/s^2.
@@ -116,8 +117,8 @@ def compute_error_map(angles: Sequence[float] = PAPER_ANGLES, range_ms2: float =
     if not (math.isfinite(range_ms2) and range_ms2 > 0):
         raise ImucalError(f"range {range_ms2:g} must be positive", field="range",
                           fix="give the half-width of the box in m/s^2, e.g. 20")
-    if not (isinstance(samples, int) and samples >= 1000):
-        raise ImucalError(f"samples {samples} must be an integer >= 1000", field="samples")
+    check_count(samples, "samples", 1000, MAX_MAP_SAMPLES)
+    check_seed(seed)
     if not all(0 < lv < 1 for lv in levels):
         raise ImucalError(f"levels {list(levels)} must be fractions in (0, 1)", field="levels",
                           fix="e.g. 0.014 0.016 for 1.4 % and 1.6 %")

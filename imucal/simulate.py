@@ -13,7 +13,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .constants import RIGHT_ANGLE, STANDARD_GRAVITY
-from .errors import ImucalError
+from .errors import ImucalError, short
+from .limits import MAX_SIM_SAMPLES, check_seed
 
 
 def frame_matrix(angles: np.ndarray) -> np.ndarray:
@@ -110,8 +111,17 @@ class PosePlan:
         d = np.asarray(self.directions, float)
         if d.ndim != 2 or d.shape[1] != 3 or d.shape[0] < 1:
             raise ImucalError("directions must be an (n, 3) array", field="plan.directions")
-        if self.hold <= 0 or self.transition <= 0 or self.rate <= 0:
-            raise ImucalError("hold, transition and rate must be positive", field="plan")
+        vals = (self.hold, self.transition, self.rate, self.initial_hold)
+        if not all(np.isfinite(vals)) or self.hold <= 0 or self.transition <= 0 or self.rate <= 0 \
+                or self.initial_hold < 0:
+            raise ImucalError("hold, transition and rate must be positive and finite", field="plan")
+        if not 1.0 <= self.rate <= 1.0e5:
+            raise ImucalError(f"rate {short(self.rate)} Hz is not an IMU sample rate", field="plan.rate",
+                              fix="give 1 to 100000 Hz")
+        n = (d.shape[0] * (self.hold + self.transition) + self.initial_hold) * self.rate
+        if n > MAX_SIM_SAMPLES:
+            raise ImucalError(f"the plan makes {n:.3g} samples, above the limit of {MAX_SIM_SAMPLES:g}",
+                              field="plan", fix="shorten the holds or lower the rate")
 
 
 @dataclass(frozen=True)
@@ -157,7 +167,7 @@ def _slerp(u: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
 def simulate(sensor: SensorSpec, plan: PosePlan, gravity: float = STANDARD_GRAVITY, seed: int = 0,
              temperature: "TemperatureProfile | None" = None) -> Simulation:
     """Simulate a multi-pose recording; reproducible for a given seed."""
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(check_seed(seed))
     dirs = np.asarray(plan.directions, float)
     dirs = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
     nh, nt = int(round(plan.hold * plan.rate)), int(round(plan.transition * plan.rate))

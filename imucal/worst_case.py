@@ -24,6 +24,7 @@ import numpy as np
 
 from .constants import DEFAULT_ANGLE_TOL, RIGHT_ANGLE, STANDARD_GRAVITY
 from .errors import ImucalError
+from .limits import MAX_STARTS, check_count, check_seed
 
 #: Smallest eigenvalue of G accepted anywhere in an angle box: below it the frame is (nearly)
 #: degenerate (axes close to coplanar; E^-T amplifies by 1/sqrt(lambda_min) >= 10).
@@ -318,8 +319,7 @@ def _canonical(m: np.ndarray, ang: np.ndarray, box: AngleBox) -> tuple[tuple, tu
 def _check_run(gravity: float, starts: int) -> None:
     if not (math.isfinite(gravity) and gravity > 0):
         raise ImucalError(f"gravity {gravity} must be positive", field="gravity", fix="e.g. 9.80665 m/s^2")
-    if not (isinstance(starts, int) and starts >= 1):
-        raise ImucalError(f"starts {starts} must be a positive integer", field="starts")
+    check_count(starts, "starts", 1, MAX_STARTS)
 
 
 def _angle_starts(rng: np.random.Generator, box: AngleBox, n: int) -> np.ndarray:
@@ -430,6 +430,7 @@ def analyse(box: AngleBox, gravity: float = STANDARD_GRAVITY, range_g: float = 1
             source: dict[str, Any] | None = None) -> WorstCase:
     """Solve and certify everything ``imucal worst-case`` reports."""
     _check_run(gravity, starts)
+    check_seed(seed)
     if not (math.isfinite(range_g) and range_g > 0):
         raise ImucalError(f"range {range_g:g} g must be positive", field="range-g",
                           fix="give the sensor's full scale in g, e.g. 4, 8 or 16")

@@ -125,6 +125,9 @@ def run(args: argparse.Namespace) -> int:
     from ..errors import ImucalError
     from ..output import write_json_atomic
 
+    from ..limits import check_seed
+
+    check_seed(args.seed, "--seed")
     free = SIX_NAMES if args.fix_angles else BASE_NAMES
     noise = DEFAULT_NOISE if args.noise is None else args.noise
     given = [x for x in (args.n is not None, bool(args.evaluate), bool(args.scheme)) if x]
