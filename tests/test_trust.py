@@ -486,3 +486,62 @@ def test_apply_reuses_a_run_files_data_section(run_cli, tmp_path):
     r = run_cli(["apply", tmp_path / "c" / "calibration.yaml", "--config", cfg, "--out", tmp_path / "a.csv"])
     assert r.code == 0, r.err
     assert len((tmp_path / "a.csv").read_text().splitlines()) == 51176
+
+
+# --- every input used or refused; bounded resources ------------------------------------------------
+BOMB = "".join(f"{c}: &{c} [" + ",".join([f"*{p}"] * 9) + "]\n" for p, c in zip("abcdefgh", "bcdefghi"))
+
+
+@pytest.mark.parametrize("text, field, msg", [
+    ("data: {path: a.csv}\ndata: {path: b.csv}\n", "config", "duplicate key 'data' at line 2"),
+    ("a: &a [x, x, x, x, x, x, x, x, x]\n" + BOMB + "data: {path: *i}\n", "config",
+     "more than 10 aliases (an alias bomb?)"),
+    ("data: {path: a.csv, skip_rows: " + "9" * 400 + "}\n", "data.skip_rows", "integer is too large for a float"),
+    ("data: {path: a.csv}\ngravity: {height: 300}\n", "gravity.height", "is used only with a latitude"),
+    ("data: {path: a.csv}\nfit: {fix: 5}\n", "fit.fix", "is not a parameter name, a list of names or a mapping"),
+    ("data: {path: a.csv}\nfit: {fix: {phi: .nan}}\n", "fit.fix.phi", "is not a finite number"),
+    ("data: {path: a.csv, delimiter: ';;'}\n", "data.delimiter", "must be one character"),
+])
+def test_bad_run_files_are_refused_in_one_line(run_cli, tmp_path, unchanged, text, field, msg):
+    cfg = tmp_path / "run.yaml"
+    cfg.write_text(text)
+    with unchanged():
+        r = run_cli(["calibrate", cfg])
+    assert r.code == 2
+    one_line_error(r.err, field, msg)
+    assert len(r.err) < 400
+
+
+def test_fix_mapping_holds_the_parameter_at_the_value(tmp_path):
+    run = calibrate_file(real_file(*XSENS), gravity={"value": 9.81744}, fit={"fix": {"phi": 1.58}})
+    assert run.result.params["phi"].value == 1.58 and run.result.params["phi"].fixed
+    assert run.result.model_name == "nakov-ivanov-9 (phi held fixed)"
+    with pytest.raises(ImucalError, match=r"fit.fix.phi: phi = 1 rad is outside its bounds"):
+        calibrate_file(real_file(*XSENS), fit={"fix": {"phi": 1}})
+
+
+@pytest.mark.parametrize("args, field, msg", [
+    (["worst-case", "--seed", "-1"], "seed", "must be an integer from 0 to"),
+    (["worst-case", "--starts", "100000000"], "starts", "must be an integer from 1 to 10000"),
+    (["error-map", "--angles", "1.5", "1.5", "1.5", "--samples", "10000000000", "--out", "em"], "samples",
+     "must be an integer from 1000 to 20000000"),
+    (["plan-poses", "--n", "12", "--seed", "-1"], "--seed", "must be an integer from 0 to"),
+    (["drift", "--duration", "1e300"], "duration", "must be positive (at most 1e7 s)"),
+])
+def test_resource_bombs_are_refused_before_allocating(run_cli, tmp_path, unchanged, monkeypatch, args, field, msg):
+    monkeypatch.chdir(tmp_path)
+    with unchanged():
+        r = run_cli(args)
+    assert r.code == 2
+    one_line_error(r.err, field, msg)
+
+
+@pytest.mark.parametrize("plan, msg", [("{rate: 1.0e+9}", "is not an IMU sample rate"),
+                                       ("{hold: 1.0e+8}", "samples, above the limit of 5e+07")])
+def test_simulation_size_is_bounded(run_cli, tmp_path, unchanged, plan, msg):
+    cfg = tmp_path / "sim.yaml"
+    cfg.write_text(f"plan: {plan}\n")
+    with unchanged():
+        r = run_cli(["simulate", cfg, "--out", tmp_path / "s.csv"])
+    assert r.code == 2
+    one_line_error(r.err, "sim.yaml", msg)
