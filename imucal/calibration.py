@@ -19,6 +19,7 @@ import yaml
 from . import __version__
 from .constants import SI_ACCEL_UNIT
 from .errors import ImucalError, short
+from .model import gram_det_np
 from .parameters import ANGLE_NAMES, BASE_NAMES, Parameter, Parameters, model_label
 
 FORMAT = "imucal-calibration"
@@ -367,8 +368,7 @@ def validate_parameters(params: Parameters, path: str = "<calibration>") -> None
         if not 0 < v < math.pi:
             raise ImucalError(f"angle {a} = {v} rad is outside (0, pi)", file=path,
                               field=f"parameters.{a}.value")
-    cphi, cpsi, cth = (math.cos(v) for v in ang)
-    det = 1 - cphi**2 - cpsi**2 - cth**2 + 2 * cphi * cpsi * cth
+    det = float(gram_det_np(ang))  # Eq. (eq:12), from the CasADi model
     if not det > 1e-12:
         raise ImucalError("the angles phi, psi, theta give no valid frame (Gram determinant <= 0)",
                           file=path, field="parameters", fix="check the angles; they must be near pi/2")

@@ -82,12 +82,11 @@ def _triangular(l: Sequence) -> ca.SX:
 
 def prepare_function() -> ca.Function:
     """params[9] -> (coeffs[9] = l[6], s[3]; Gram determinant), from the model's linear map."""
-    from .model import build_model
+    from .model import build_model, gram_det
 
     p = ca.SX.sym("p", len(BASE_NAMES))
     A, _ = build_model().linear_map(p)  # Theorem: A = E^-T diag(1/b), lower triangular
-    cphi, cpsi, cth = ca.cos(p[6]), ca.cos(p[7]), ca.cos(p[8])
-    det = 1 - cphi**2 - cpsi**2 - cth**2 + 2 * cphi * cpsi * cth  # det G, Eq. (eq:12) / (eq:125)
+    det = gram_det(p[6], p[7], p[8])  # det G, Eq. (eq:12), from the model
     coeffs, det = ca.cse([ca.vertcat(*_lower(A), p[0:3]), det])
     return ca.Function("prepare", [p], [coeffs, det], ["params"], ["coeffs", "det"])
 

@@ -14,20 +14,15 @@ import numpy as np
 
 from .constants import RIGHT_ANGLE, STANDARD_GRAVITY
 from .errors import ImucalError, short
+from .model import frame_np, gram_det_np
 from .limits import MAX_SIM_SAMPLES, check_seed
 
 
 def frame_matrix(angles: np.ndarray) -> np.ndarray:
-    """E (columns e_i in frame f), Eq. (eq:125), numerically."""
-    phi, psi, th = angles
-    cphi, cpsi, cth = np.cos([phi, psi, th])
-    sphi = np.sin(phi)
-    cxi = (cth - cphi * cpsi) / sphi
-    det = 1 - cphi**2 - cpsi**2 - cth**2 + 2 * cphi * cpsi * cth
-    if not det > 0:
+    """E (columns e_i in frame f), Eq. (eq:125), evaluated from the CasADi model (imucal.model)."""
+    if not gram_det_np(angles) > 0:
         raise ImucalError("the angles give no valid frame (Gram determinant <= 0)", field="sensor.angles")
-    ceta = np.sqrt(det) / sphi
-    return np.array([[1, cphi, cpsi], [0, sphi, cxi], [0, 0, ceta]])
+    return frame_np(angles)
 
 
 @dataclass(frozen=True)

@@ -24,6 +24,7 @@ import numpy as np
 
 from .constants import DEFAULT_ANGLE_TOL, RIGHT_ANGLE, STANDARD_GRAVITY
 from .errors import ImucalError
+from .model import gram_np, tbar
 from .limits import MAX_STARTS, check_count, check_seed
 
 #: Smallest eigenvalue of G accepted anywhere in an angle box: below it the frame is (nearly)
@@ -45,14 +46,6 @@ _CONVERGED = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 class CertificateError(RuntimeError):
     """An NLP answer that disagrees with its certificate: an error, never a warning."""
 
-
-def gram_np(angles: Sequence[float]) -> np.ndarray:
-    """G of Eq. (eq:12) for angles (phi, psi, theta) [rad]; stacks over leading axes."""
-    c = np.cos(np.asarray(angles, float))
-    one = np.ones(c.shape[:-1])
-    return np.stack([np.stack([one, c[..., 0], c[..., 1]], -1),
-                     np.stack([c[..., 0], one, c[..., 2]], -1),
-                     np.stack([c[..., 1], c[..., 2], one], -1)], -2)
 
 
 def max_tolerance() -> float:
@@ -232,8 +225,6 @@ def _linearised_frame(ang):
 def _problem(kind: str):
     """Build one NLP once: variables x (scaled m) and u (angles = mid + half * u, u in [-1, 1])."""
     import casadi as ca
-
-    from .model import tbar
 
     x, u, p = ca.SX.sym("x", 3), ca.SX.sym("u", 3), ca.SX.sym("p", 7)
     ang = p[:3] + p[3:6] * u  # p = [mid(3), half(3), objective scale]
