@@ -1,0 +1,113 @@
+"""Issue 10: each piece of maths is written once, in CasADi; everything else is generated from it
+or pinned to it here.
+
+- The Gram determinant is written once in the package (a source scan).
+- The closed forms kept for speed (design sensitivities, the samples-mode gradient) equal the
+  Jacobian CasADi derives from the model's residual.
+- The effect terms are checked against an independent forward model written in this test from
+  the published formulas (not the fit's or the simulator's code), in both directions: the
+  simulator produces it, and the fit's model inverts it.
+"""
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from imucal.design import DesignSensor, sensitivity
+from imucal.effects import REFERENCE_TEMPERATURE, make_effect
+from imucal.model import build_model, frame_np, gram_det_np, gram_np
+from imucal.samples import SampleResiduals
+from imucal.simulate import SensorSpec
+
+PKG = Path(__file__).resolve().parents[1] / "imucal"
+ANGLES = np.array([1.53938, 1.60221, 1.58])
+G0 = 9.80665
+
+
+def test_the_gram_determinant_is_written_once():
+    pat = re.compile(r"1\s*-\s*\w+\s*\*\*\s*2\s*-\s*\w+\s*\*\*\s*2\s*-\s*\w+\s*\*\*\s*2")
+    hits = [(p.name, i + 1) for p in PKG.rglob("*.py") for i, line in enumerate(p.read_text().splitlines())
+            if pat.search(line) and not line.lstrip().startswith(("#", '"', "det G ="))]
+    assert [h[0] for h in hits] == ["model.py"], hits
+
+
+def test_generated_geometry_is_the_papers():
+    c = np.cos(ANGLES)
+    G = np.array([[1, c[0], c[1]], [c[0], 1, c[2]], [c[1], c[2], 1]])
+    np.testing.assert_allclose(gram_np(ANGLES), G, atol=1e-15)
+    assert gram_det_np(ANGLES) == pytest.approx(np.linalg.det(G), rel=1e-12)
+    E = frame_np(ANGLES)
+    np.testing.assert_allclose(E.T @ E, G, atol=1e-14)  # the columns are the unit axes
+    assert np.allclose(np.tril(E, -1), 0)
+
+
+def _casadi_jacobian(raw: np.ndarray, p: np.ndarray, g: float) -> np.ndarray:
+    model = build_model()
+    rs, ps = ca.SX.sym("raw", 3), ca.SX.sym("p", 9)
+    r = model.residual(rs, ca.SX(0, 1), ps, g)
+    J = ca.Function("J", [rs, ps], [ca.jacobian(r, ps)])
+    return np.vstack([np.asarray(J(x, p)).ravel() for x in raw])
+
+
+def test_design_sensitivities_equal_the_models_jacobian():
+    rng = np.random.default_rng(1)
+    u = rng.normal(size=(12, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    sensor = DesignSensor(s=(0.3, -0.1, 0.2), b=(1.02, 0.98, 1.01), angles=tuple(ANGLES))
+    raw = np.asarray(sensor.s) + np.asarray(sensor.b) * (G0 * u @ frame_np(ANGLES))  # at the truth
+    p = np.array([*sensor.s, *sensor.b, *ANGLES])
+    np.testing.assert_allclose(sensitivity(u, sensor, G0), _casadi_jacobian(raw, p, G0), rtol=1e-9, atol=1e-12)
+
+
+def test_samples_mode_gradient_equals_the_models_jacobian():
+    rng = np.random.default_rng(2)
+    raw = rng.normal(size=(20, 3)) * 5 + 1.0
+    p = np.array([0.3, -0.1, 0.2, 1.02, 0.98, 1.01, *ANGLES])
+    r, J = SampleResiduals(raw, G0).residuals(p, jac=True)
+    np.testing.assert_allclose(J, _casadi_jacobian(raw, p, G0), rtol=1e-9, atol=1e-12)
+
+
+# --- effects against an independent forward model (the formulas of imucal/effects.py's table) ---------
+def forward(name: str, s, b, m, t, T, k):
+    """raw = s + b m with each effect's published term; written here, not imported."""
+    dT = T - REFERENCE_TEMPERATURE
+    return {
+        "bias_temperature": s + k * dT[:, None] + b * m,
+        "scale_temperature": s + b * (1 + k * dT[:, None]) * m,
+        "bias_drift": s + k * t[:, None] + b * m,
+        "scale_drift": s + b * (1 + k * t[:, None]) * m,
+        "scale_nonlinearity": s + b * (m + k * m**2),
+    }[name]
+
+
+COEFF = {"bias_temperature": [0.02, -0.01, 0.015], "scale_temperature": [2e-4, -1e-4, 3e-4],
+         "bias_drift": [1e-3, -2e-3, 5e-4], "scale_drift": [1e-5, -2e-5, 3e-5],
+         "scale_nonlinearity": [2e-3, -1e-3, 1.5e-3]}
+
+
+@pytest.mark.parametrize("name", sorted(COEFF))
+def test_effects_match_an_independent_forward_model(name):
+    rng = np.random.default_rng(3)
+    n = 50
+    s, b = np.array([0.3, -0.1, 0.2]), np.array([1.02, 0.98, 1.01])
+    m = rng.normal(size=(n, 3)) * 6
+    t = np.linspace(0, 300, n)
+    T = np.linspace(15, 40, n)
+    k = np.array(COEFF[name])
+    want = forward(name, s, b, m, t, T, k)
+    coeffs = {f"{name}_{a}": float(v) for a, v in zip("xyz", k)}
+    sensor = SensorSpec(s=tuple(s), b=tuple(b), angles=tuple(ANGLES), effects={name: coeffs})
+    np.testing.assert_allclose(sensor.forward(m, t, T), want, rtol=1e-12, atol=1e-12)  # the simulator
+    model = build_model([make_effect(name, (0, 1, 2))])
+    values = {**sensor.values(), f"{name}_tref": REFERENCE_TEMPERATURE}
+    p = np.array([values[nm] for nm in model.names])
+    cov = {"temp": T, "time": t}
+    C = np.vstack([cov[c] for c in model.covariates]) if model.covariates else np.zeros((0, n))
+    got = np.asarray(model.measured.map(n)(want.T, C, p)).T  # the fit's model inverts it
+    np.testing.assert_allclose(got, m, rtol=1e-10, atol=1e-10)
+    assert not math.isclose(float(np.abs(want - (s + b * m)).max()), 0.0)  # the effect is really there
