@@ -95,8 +95,10 @@ class Calibration:
     def apply(self, raw: np.ndarray, covariates: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
         """Calibrated acceleration [m/s^2] in the Theorem's orthonormal frame, one row per sample."""
         raw = np.asarray(raw, float)
+        if raw.shape == (3,):  # one sample
+            return self.apply(raw[None, :], covariates)[0]
         if raw.ndim != 2 or raw.shape[1] != 3:
-            raise ImucalError(f"raw data must have shape (N, 3), got {raw.shape}", field="raw")
+            raise ImucalError(f"raw data must have shape (N, 3) or (3,), got {raw.shape}", field="raw")
         if not self.effects:
             A, c = self.linear_map()
             out = (A @ raw.T).T  # one BLAS call; half the peak memory of raw @ A.T + c
@@ -122,6 +124,11 @@ class Calibration:
         return generate_c(self, prefix=prefix, precision=precision)
 
     # --- files -------------------------------------------------------------------------------
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "Calibration":
+        """Read a calibration file written by :meth:`save` (refuses unknown versions)."""
+        return load_calibration(path)
+
     def to_dict(self) -> dict[str, Any]:
         A, c = self.linear_map()
         return {

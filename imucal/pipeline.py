@@ -147,7 +147,8 @@ def _axes(dropped: list[dict]) -> str:
 
 def discover_command(config: RunConfig, rec: Recording) -> str:
     """The command that investigates a poor fit of this run."""
-    cmd = f"imucal discover --config {config.source}" if config.source else f"imucal discover --data {rec.source}"
+    data = rec.source if not rec.source.startswith("<") else "FILE (the arrays saved as CSV)"
+    cmd = f"imucal discover --config {config.source}" if config.source else f"imucal discover --data {data}"
     g = config.gravity
     if g.value is not None:
         cmd += f" --gravity {g.value:g}"
@@ -172,10 +173,11 @@ def fit_warnings(res: FitResult, config: RunConfig, rec: Recording, dropped: lis
     return out
 
 
-def calibrate(config: RunConfig) -> CalibrationRun:
-    """Run the whole calibration described by ``config``."""
+def calibrate(config: RunConfig, recording: Recording | None = None) -> CalibrationRun:
+    """Run the whole calibration described by ``config`` (on ``recording`` when given, else on
+    the file ``config.data`` names)."""
     src = config.source
-    rec = load_recording(config.data, config.base_dir)
+    rec = recording if recording is not None else load_recording(config.data, config.base_dir)
     declared = rails(config.data.saturation) if config.data.saturation is not None else None
     iv = detect_static(rec.t, rec.raw, config.static, rec.temp, source=rec.source, rails=declared)
     dropped = iv.meta.get("dropped", [])

@@ -95,3 +95,35 @@ def fit_report(run: CalibrationRun, correl_min: float = CORREL_MIN) -> str:
         for k in range(iv.n):
             L.append(f"    {k:3d} {r[k]:+.6f} +/- {res.sigma[k]:.6f}  ({r[k] / res.sigma[k]:+.2f} sigma)")
     return "\n".join(L) + "\n"
+
+
+def summary(run: CalibrationRun) -> dict:
+    """The machine-readable summary (the CLI's --json), built from a run."""
+    res, cal = run.result, run.calibration
+    v, sd = res.params, res.std
+
+    def nz(x: float):
+        return None if not math.isfinite(x) else float(x)
+
+    return {
+        "status": "ok" if res.success else "failed",
+        "solver_status": res.status,
+        "model": res.model_name,
+        "params": {"s": [v[f"s{i}"].value for i in (1, 2, 3)], "b": [v[f"b{i}"].value for i in (1, 2, 3)],
+                   "phi": v["phi"].value, "psi": v["psi"].value, "theta": v["theta"].value},
+        "std": {"s": [nz(sd[f"s{i}"]) for i in (1, 2, 3)], "b": [nz(sd[f"b{i}"]) for i in (1, 2, 3)],
+                "phi": nz(sd["phi"]), "psi": nz(sd["psi"]), "theta": nz(sd["theta"])},
+        "effects": [{"name": n, "axes": ["xyz"[a] for a in ax],
+                     "coefficients": {k: v[k].value for k in v if k.startswith(n)}} for n, ax in cal.effects],
+        "rms_residual": cal.fit["rms_residual"],
+        "rms_residual_samples": cal.fit["rms_residual_samples"],
+        "chi2": res.chi2, "dof": res.dof, "redchi": nz(res.redchi),
+        "n_intervals": run.intervals.n,
+        "n_distinct_orientations": run.observability.n_distinct,
+        "gravity": cal.gravity,
+        "raw_unit": cal.raw_unit,
+        "matrix": cal.linear_map()[0].tolist(),
+        "offset": cal.linear_map()[1].tolist(),
+        "data": dict(cal.data),
+        "warnings": list(cal.fit.get("warnings", [])),
+    }

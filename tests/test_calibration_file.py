@@ -192,7 +192,7 @@ def test_from_dict_of_to_dict_is_identity(saved):
 
 def test_apply_checks_its_input(saved):
     cal, _ = saved
-    with pytest.raises(ImucalError, match=r"raw data must have shape \(N, 3\), got \(4,\)"):
+    with pytest.raises(ImucalError, match=r"raw data must have shape \(N, 3\) or \(3,\), got \(4,\)"):
         cal.apply(np.zeros(4))
 
 

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import argparse
-import math
 
 from . import options
 
@@ -34,44 +33,12 @@ def _config(args: argparse.Namespace):
     return options.run_config(args, args.config)
 
 
-def summary(run) -> dict:
-    """The machine-readable summary (--json)."""
-    res, cal = run.result, run.calibration
-    v, sd = res.params, res.std
-
-    def nz(x: float):
-        return None if not math.isfinite(x) else float(x)
-
-    return {
-        "status": "ok" if res.success else "failed",
-        "solver_status": res.status,
-        "model": res.model_name,
-        "params": {"s": [v[f"s{i}"].value for i in (1, 2, 3)], "b": [v[f"b{i}"].value for i in (1, 2, 3)],
-                   "phi": v["phi"].value, "psi": v["psi"].value, "theta": v["theta"].value},
-        "std": {"s": [nz(sd[f"s{i}"]) for i in (1, 2, 3)], "b": [nz(sd[f"b{i}"]) for i in (1, 2, 3)],
-                "phi": nz(sd["phi"]), "psi": nz(sd["psi"]), "theta": nz(sd["theta"])},
-        "effects": [{"name": n, "axes": ["xyz"[a] for a in ax],
-                     "coefficients": {k: v[k].value for k in v if k.startswith(n)}} for n, ax in cal.effects],
-        "rms_residual": cal.fit["rms_residual"],
-        "rms_residual_samples": cal.fit["rms_residual_samples"],
-        "chi2": res.chi2, "dof": res.dof, "redchi": nz(res.redchi),
-        "n_intervals": run.intervals.n,
-        "n_distinct_orientations": run.observability.n_distinct,
-        "gravity": cal.gravity,
-        "raw_unit": cal.raw_unit,
-        "matrix": cal.linear_map()[0].tolist(),
-        "offset": cal.linear_map()[1].tolist(),
-        "data": dict(cal.data),
-        "warnings": list(cal.fit.get("warnings", [])),
-    }
-
-
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from ..output import OutputSet, check_outputs
     from ..pipeline import calibrate
-    from ..report import fit_report
+    from ..report import fit_report, summary
 
     cfg = _config(args)
     out = Path(args.out or cfg.output.dir)
