@@ -99,20 +99,23 @@ def _search_scale(cost_fn: ca.Function, nx: int, pack) -> float:
 def _require_observable(J: np.ndarray, names: tuple[str, ...], min_deg: float, source: str | None) -> None:
     """Refuse, naming the axis, when the motions hardly move gravity about some gyro axis."""
     info = J.T @ J
-    inv = np.linalg.inv(info + 1e-12 * np.eye(info.shape[0]) * max(np.trace(info), 1e-300))
-    for k in range(3):
-        eff = np.degrees(1.0 / np.sqrt(inv[k, k]))
-        if not eff >= min_deg:
+    lam, V = np.linalg.eigh(info)
+    null = lam <= 1e-9 * max(lam[-1], 1e-300)
+    weak = [int(np.argmax(np.abs(V[0:3, i]))) for i in np.flatnonzero(null) if np.abs(V[0:3, i]).max() > 0.1]
+    if null.any() and not weak:
+        raise ImucalError("the gyro misalignment is not determined by these motions", file=source,
+                          field="gyro.misalignment", fix="rotate about all three axes, each in several poses")
+    eff = np.zeros(3)
+    if not null.any():
+        eff = np.degrees(1.0 / np.sqrt(np.diag(np.linalg.inv(info))[0:3]))
+    for k in (weak or [int(np.argmin(eff))]):
+        if weak or not eff[k] >= min_deg:
             a = AXES[k]
             raise ImucalError(
                 f"the gyro {a} scale is not determined: the motions turn the gravity direction about the "
-                f"{a} axis by an effective {eff:.3g} deg (need at least {min_deg:g} deg)", file=source,
+                f"{a} axis by an effective {eff[k]:.3g} deg (need at least {min_deg:g} deg)", file=source,
                 field="gyro.scale", fix=f"add rotations about the {a} axis between still poses, with the {a} axis "
                                        f"horizontal (e.g. 90 deg turns about {a})")
-    s = np.linalg.svd(info, compute_uv=False)
-    if s[-1] <= 1e-10 * s[0]:
-        raise ImucalError("the gyro misalignment is not determined by these motions", file=source,
-                          field="gyro.misalignment", fix="rotate about all three axes, each in several poses")
 
 
 def fit_gyro(data: GyroData, options: GyroOptions = GyroOptions(), segments: np.ndarray | None = None) -> GyroResult:
