@@ -1,0 +1,105 @@
+"""The gyroscope model, written once in CasADi.
+
+Forward (what the sensor reports):  raw_g = s_g + B_g (M_g omega + G_s a)
+Inverse (what ``apply`` computes):  omega = M_g^-1 (B_g^-1 (raw_g - s_g) - G_s a)
+
+s_g  bias [raw]; B_g = diag(scale) [raw per rad/s]; M_g maps the rate in the accelerometer's
+orthonormal output frame to the gyro's sensitive axes, unit diagonal and six free off-diagonal
+entries (the diagonal is carried by B_g: a general 3x3 M_g with a free diagonal would duplicate
+the scale, so only 9 = 3 + 6 entries of B_g M_g are identifiable); G_s the g-sensitivity
+[(rad/s) per (m/s^2)], a the calibrated specific force [m/s^2] in the accelerometer's frame.
+
+The attitude over a motion segment is integrated with imu_tk's quaternion RK4 step (Tedaldi 2014,
+rate sampled at both ends and linearly interpolated at the midpoint), normalised after each step.
+"""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+#: names of M_g's free entries: m_ij is row i (gyro axis), column j (frame axis)
+MIS_NAMES = ("m_xy", "m_xz", "m_yx", "m_yz", "m_zx", "m_zy")
+_MIS_INDEX = ((0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1))
+AXES = "xyz"
+
+
+def misalignment_matrix(m: "ca.SX | ca.MX | np.ndarray") -> "ca.SX | ca.MX | np.ndarray":
+    """M_g from its six off-diagonal entries (unit diagonal)."""
+    if isinstance(m, np.ndarray):
+        M = np.eye(3)
+        for k, (i, j) in enumerate(_MIS_INDEX):
+            M[i, j] = m[k]
+        return M
+    M = type(m).eye(3)
+    for k, (i, j) in enumerate(_MIS_INDEX):
+        M[i, j] = m[k]
+    return M
+
+
+def misalignment_entries(M: np.ndarray) -> np.ndarray:
+    """The six off-diagonal entries of a unit-diagonal M_g (inverse of ``misalignment_matrix``)."""
+    return np.array([M[i, j] for i, j in _MIS_INDEX])
+
+
+def rate_map(scale, mis, gsens=None):
+    """Return (C, D) with omega = C (raw - s_g) - D a: C = M_g^-1 B_g^-1, D = M_g^-1 G_s."""
+    M = misalignment_matrix(mis)
+    if isinstance(M, np.ndarray):
+        Minv = np.linalg.inv(M)
+        C = Minv @ np.diag(1.0 / np.asarray(scale))
+        D = np.zeros((3, 3)) if gsens is None else Minv @ np.asarray(gsens)
+        return C, D
+    Minv = ca.inv(M)
+    C = ca.mtimes(Minv, ca.diag(1.0 / scale))
+    D = ca.DM.zeros(3, 3) if gsens is None else ca.mtimes(Minv, gsens)
+    return C, D
+
+
+def apply_rate(raw: np.ndarray, bias: np.ndarray, scale: np.ndarray, mis: np.ndarray,
+               gsens: np.ndarray | None = None, acc: np.ndarray | None = None) -> np.ndarray:
+    """Calibrated angular rate [rad/s] of raw samples (N x 3); ``acc`` [m/s^2] when G_s is set."""
+    C, D = rate_map(np.asarray(scale, float), np.asarray(mis, float), gsens)
+    w = (np.atleast_2d(raw) - bias) @ C.T
+    if gsens is not None:
+        w = w - np.atleast_2d(acc) @ D.T
+    return w
+
+
+def _omega_matrix(w):
+    """4x4 matrix of q' = 0.5 Omega(w) q for q = (w, x, y, z) and a body rate w (imu_tk's order)."""
+    return ca.vertcat(ca.horzcat(0, -w[0], -w[1], -w[2]),
+                      ca.horzcat(w[0], 0, w[2], -w[1]),
+                      ca.horzcat(w[1], -w[2], 0, w[0]),
+                      ca.horzcat(w[2], w[1], -w[0], 0))
+
+
+def rk4_step() -> ca.Function:
+    """One quaternion RK4 step (q, [w0; w1; dt; reset]) -> q; reset = 1 restarts from identity."""
+    q0 = ca.SX.sym("q0", 4)
+    u = ca.SX.sym("u", 8)
+    w0, w1, dt, reset = u[0:3], u[3:6], u[6], u[7]
+    q = reset * ca.DM([1, 0, 0, 0]) + (1 - reset) * q0  # branch-free restart at a segment's first step
+    wm = 0.5 * (w0 + w1)
+    k1 = 0.5 * ca.mtimes(_omega_matrix(w0), q)
+    k2 = 0.5 * ca.mtimes(_omega_matrix(wm), q + 0.5 * dt * k1)
+    k3 = 0.5 * ca.mtimes(_omega_matrix(wm), q + 0.5 * dt * k2)
+    k4 = 0.5 * ca.mtimes(_omega_matrix(w1), q + dt * k3)
+    qn = q + dt * (k1 + 2 * k2 + 2 * k3 + k4) / 6
+    return ca.Function("gyro_rk4", [q0, u], [qn / ca.norm_2(qn)])
+
+
+def quat_to_rot(q):
+    """Rotation matrix (body to start frame) of a unit quaternion q = (w, x, y, z)."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    return ca.vertcat(
+        ca.horzcat(1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)),
+        ca.horzcat(2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)),
+        ca.horzcat(2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)))
+
+
+def direction_residual() -> ca.Function:
+    """imu_tk's MultiPosGyroResidual: R^T u0 - u1 (gravity at the start, carried to the end)."""
+    q = ca.SX.sym("q", 4)
+    u0 = ca.SX.sym("u0", 3)
+    u1 = ca.SX.sym("u1", 3)
+    return ca.Function("gyro_dir_res", [q, u0, u1], [ca.mtimes(quat_to_rot(q).T, u0) - u1])

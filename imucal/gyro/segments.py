@@ -1,0 +1,122 @@
+"""The data of a gyro fit: one time base, static intervals, and the motion segments between them."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import ImucalError
+
+
+@dataclass(frozen=True)
+class GyroData:
+    """Gyro and calibrated accelerometer samples on one time base, with the static intervals.
+
+    ``acc`` is the calibrated specific force [m/s^2] in the accelerometer's orthonormal output
+    frame; it gives the gravity direction of each static interval and feeds the g-sensitivity.
+    """
+
+    t: np.ndarray  #: (N,) [s]
+    gyro: np.ndarray  #: (N, 3) gyro readings [``unit``]
+    acc: np.ndarray  #: (N, 3) calibrated acceleration [m/s^2]
+    start: np.ndarray  #: first sample index of each static interval
+    end: np.ndarray  #: one past the last sample index of each static interval
+    unit: str = "raw"  #: gyro unit: raw, rad/s or deg/s
+    source: str | None = None
+
+    def __post_init__(self) -> None:
+        n = self.t.shape[0]
+        if self.gyro.shape != (n, 3) or self.acc.shape != (n, 3):
+            raise ImucalError(f"gyro {self.gyro.shape} and acc {self.acc.shape} must both be ({n}, 3)",
+                              file=self.source, field="gyro", fix="give both sensors on one time base")
+        if self.start.size < 2:
+            raise ImucalError("a gyro fit needs at least two static intervals with a motion between them",
+                              file=self.source, field="intervals",
+                              fix="record several still poses with rotations between them")
+
+    @property
+    def n_intervals(self) -> int:
+        return int(self.start.size)
+
+    def static_means(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Per static interval: gyro mean, its standard error, acceleration mean and its standard error."""
+        g, gs, a, as_ = [], [], [], []
+        for i0, i1 in zip(self.start, self.end):
+            n = i1 - i0
+            g.append(self.gyro[i0:i1].mean(0))
+            gs.append(self.gyro[i0:i1].std(0, ddof=1) / np.sqrt(n))
+            a.append(self.acc[i0:i1].mean(0))
+            as_.append(self.acc[i0:i1].std(0, ddof=1) / np.sqrt(n))
+        return np.array(g), np.array(gs), np.array(a), np.array(as_)
+
+    def static_rate_noise(self) -> np.ndarray:
+        """Within-interval standard deviation of the gyro readings, pooled over intervals [``unit``]."""
+        dev = np.concatenate([self.gyro[i0:i1] - self.gyro[i0:i1].mean(0) for i0, i1 in zip(self.start, self.end)])
+        return dev.std(0)
+
+
+@dataclass(frozen=True)
+class Segments:
+    """Motion segments k: from the last sample of static interval k to the first of interval k+1."""
+
+    first: np.ndarray  #: first sample index of each segment
+    last: np.ndarray  #: last sample index of each segment
+    u0: np.ndarray  #: (n, 3) gravity direction at the start (unit, accelerometer frame)
+    u1: np.ndarray  #: (n, 3) gravity direction at the end
+    sigma_u: np.ndarray  #: (n,) standard error of one component of u0 - u1 from the static means [rad]
+    index: np.ndarray  #: segment numbers (k: between intervals k and k+1)
+
+    @property
+    def n(self) -> int:
+        return int(self.first.size)
+
+    @property
+    def lengths(self) -> tuple[int, ...]:
+        """Number of integration steps per segment: the shape of the NLP."""
+        return tuple(int(v) for v in self.last - self.first)
+
+    def subset(self, keep: np.ndarray) -> "Segments":
+        return Segments(self.first[keep], self.last[keep], self.u0[keep], self.u1[keep], self.sigma_u[keep],
+                        self.index[keep])
+
+
+def motion_segments(data: GyroData) -> Segments:
+    """All motion segments between consecutive static intervals, with the measured gravity directions."""
+    _, _, a, a_se = data.static_means()
+    norm = np.linalg.norm(a, axis=1)
+    u = a / norm[:, None]
+    sig = np.sqrt(np.mean(a_se**2, axis=1)) / norm  # one component of a direction's error [rad]
+    first = data.end[:-1] - 1
+    last = data.start[1:]
+    if np.any(last <= first):
+        raise ImucalError("static intervals overlap or are out of order", file=data.source, field="intervals",
+                          fix="give intervals sorted by time and disjoint")
+    k = np.arange(first.size)
+    return Segments(first, last, u[:-1], u[1:], np.sqrt(sig[:-1] ** 2 + sig[1:] ** 2), k)
+
+
+def interpolate(t_target: np.ndarray, t_src: np.ndarray, x_src: np.ndarray) -> np.ndarray:
+    """Linear interpolation of (N, 3) samples onto another time base (a gyro at another rate)."""
+    if np.any(np.diff(t_src) <= 0):
+        raise ImucalError("time stamps must increase strictly", field="t", fix="sort the samples by time")
+    if t_target[0] < t_src[0] or t_target[-1] > t_src[-1]:
+        raise ImucalError("the other sensor does not cover the whole time span", field="t",
+                          fix="trim the recording to the time both sensors were sampled")
+    return np.column_stack([np.interp(t_target, t_src, x_src[:, j]) for j in range(x_src.shape[1])])
+
+
+def gyro_data_from_run(run, gyro_t: np.ndarray, gyro_raw: np.ndarray, unit: str = "raw",
+                       acc_t0: float | None = None) -> GyroData:
+    """GyroData from an accelerometer ``CalibrationRun`` and the gyro channel.
+
+    The loader starts the accelerometer's time at 0; ``acc_t0`` is its first time stamp in the
+    gyro's clock (default: the gyro's first time stamp). A gyro with as many samples as the
+    accelerometer is taken sample by sample (same time stamps); otherwise it is interpolated.
+    """
+    t = run.recording.t
+    acc = run.calibration.apply(run.recording.raw)
+    g = np.asarray(gyro_raw, float)
+    if g.shape[0] != t.shape[0]:
+        g = interpolate(t, np.asarray(gyro_t, float) - (gyro_t[0] if acc_t0 is None else acc_t0), g)
+    return GyroData(t=t, gyro=g, acc=acc, start=run.intervals.start, end=run.intervals.end, unit=unit,
+                    source=run.recording.source)
