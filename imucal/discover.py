@@ -43,6 +43,7 @@ import numpy as np
 from .config import EffectSpec, RunConfig
 from .effects import (AXIS_NAMES, EFFECTS, MIN_DOF, MIN_TEMPERATURE_SPREAD, AxisEffect, make_effect,
                       prepare_parameters, reference_values, temperature_spread)
+from .stats import chi2_sf
 from .errors import ImucalError
 from .fit import FitData, FitResult, fit, jacobian_rows
 from .model import build_model
@@ -84,28 +85,6 @@ class DiscoverSettings:
 
 
 # --- statistics (no scipy) -------------------------------------------------------------------
-def chi2_sf(x: float, k: int) -> float:
-    """P(chi-square(k) > x) for integer k >= 1, in closed form (log-space sums)."""
-    if k < 1:
-        raise ValueError("k must be >= 1")
-    if not x > 0:
-        return 1.0
-    if not math.isfinite(x):
-        return 0.0
-    h = x / 2.0
-    if k % 2 == 0:
-        logs = [-h + j * math.log(h) - math.lgamma(j + 1) for j in range(k // 2)]
-        head = 0.0
-    else:
-        logs = [-h + (j - 0.5) * math.log(h) - math.lgamma(j + 0.5) for j in range(1, (k - 1) // 2 + 1)]
-        head = math.erfc(math.sqrt(h))
-    if logs:
-        m = max(logs)
-        head += math.exp(m) * sum(math.exp(v - m) for v in logs)
-    return min(1.0, head)
-
-
-# --- results ---------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Candidate:
     """One candidate of one round: an effect on an axis subset, merged into the current model."""

@@ -13,7 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .discover import Discovery, chi2_sf
+from .discover import Discovery
+from .stats import chi2_sf
 from .effects import AXIS_NAMES
 
 

@@ -19,6 +19,7 @@ from .observability import Observability, analyse, distinct_directions, require_
 from .constants import RIGHT_ANGLE
 from .parameters import ANGLE_NAMES, Parameters, base_parameters
 from .static import Intervals, detect_static
+from .stats import chi2_sf
 
 
 @dataclass(frozen=True)
@@ -130,15 +131,6 @@ ABSURD_REDCHI = 1.0e4
 #: A fit whose chi-square p-value is below POOR_FIT_P and reduced chi-square above POOR_FIT_REDCHI
 #: is flagged: the residuals exceed the noise (an effect the model misses, or excess noise).
 POOR_FIT_P, POOR_FIT_REDCHI = 1.0e-3, 2.0
-
-
-def chi2_sf(x: float, dof: int) -> float:
-    """P(chi2_dof > x), Wilson-Hilferty (ample for a 1e-3 test at dof >= 1)."""
-    if dof <= 0 or not math.isfinite(x):
-        return float("nan")
-    k = float(dof)
-    z = ((x / k) ** (1 / 3) - (1 - 2 / (9 * k))) / math.sqrt(2 / (9 * k))
-    return 0.5 * math.erfc(z / math.sqrt(2))
 
 
 def _axes(dropped: list[dict]) -> str:
