@@ -41,6 +41,7 @@ from . import __version__
 from .calibration import OUTPUT_FRAME, Calibration, check_text_fields
 from .constants import SI_ACCEL_UNIT
 from .errors import ImucalError, short
+from .inputs import read_input_bytes
 from .parameters import BASE_NAMES, model_label
 
 PRECISIONS = ("float", "double")
@@ -336,10 +337,7 @@ def check_precision(precision: str) -> str:
 
 
 def _sha256(path: str | os.PathLike) -> str:
-    try:
-        return hashlib.sha256(Path(path).read_bytes()).hexdigest()
-    except OSError as exc:
-        raise ImucalError(f"cannot read: {exc.strerror}", file=str(path), field="calibration") from None
+    return hashlib.sha256(read_input_bytes(path, field="calibration")).hexdigest()
 
 
 def _fmt(x: object, spec: str = ".6g") -> str:

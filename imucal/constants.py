@@ -23,5 +23,9 @@ RIGHT_ANGLE = math.pi / 2
 #: Default relative tolerance on the axis angles: 90 deg +- 2 % (paper, Section 1).
 DEFAULT_ANGLE_TOL = 0.02
 
+#: Time units of a time column, with their factor to seconds ("auto": inferred from the stamps).
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
+TIME_UNIT_CHOICES = ("auto", *TIME_UNITS)
+
 #: SI unit of the calibrated output.
 SI_ACCEL_UNIT = "m/s^2"

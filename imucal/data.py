@@ -11,12 +11,10 @@ from pathlib import Path
 
 import numpy as np
 
+from .constants import TIME_UNIT_CHOICES, TIME_UNITS
 from .errors import ImucalError, short
 from .inputs import max_data_bytes, open_regular
 
-#: Time units accepted for the time column, with their factor to seconds ("auto": inferred).
-TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
-TIME_UNIT_CHOICES = ("auto", *TIME_UNITS)
 FORMATS = ("auto", "csv", "whitespace")
 #: Column roles: time, acceleration, angular rate, temperature.
 ROLES = ("t", "ax", "ay", "az", "gx", "gy", "gz", "temp")
@@ -147,14 +145,6 @@ def rails(spec: object, where: str = "data.saturation") -> dict[str, np.ndarray 
     if out["low"] is not None and out["high"] is not None and not np.all(out["low"] < out["high"]):
         raise ImucalError("the low rail must lie below the high rail on every axis", field=where)
     return out
-
-
-def file_sha256(path: str | os.PathLike) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 def _read_text(path: Path) -> tuple[str, str]:

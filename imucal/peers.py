@@ -8,12 +8,15 @@ the nine parameters unchanged.
 """
 from __future__ import annotations
 
+import io
+
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from .errors import ImucalError
+from .inputs import read_input_text
 
 
 @dataclass(frozen=True)
@@ -41,7 +44,7 @@ class AffineCalibration:
 def read_imutk_calib(path: str | Path) -> AffineCalibration:
     """imu_tk's .calib text: T (3x3), blank, K (3x3), blank, b (3 lines); a = T K (raw - b)."""
     try:
-        nums = [float(x) for x in Path(path).read_text().split()]
+        nums = [float(x) for x in read_input_text(path, field='imu_tk calib').split()]
     except (OSError, ValueError) as exc:
         raise ImucalError(f"cannot read imu_tk calibration: {exc}", file=str(path), field="calib") from None
     if len(nums) != 21:
@@ -55,7 +58,7 @@ def read_tomisuarez_params(path: str | Path) -> AffineCalibration:
     """tomisuarez2/ImuCalibration params_acc.csv: a_yz, a_zy, a_zx [rad], K (3) [m/s^2 per count],
     b (3) [counts]; a = T K (raw + b) with T = [[1, -a_yz, a_zy], [0, 1, -a_zx], [0, 0, 1]]."""
     try:
-        v = np.loadtxt(path, delimiter=",").ravel()
+        v = np.loadtxt(io.StringIO(read_input_text(path, field="params")), delimiter=",").ravel()
     except (OSError, ValueError) as exc:
         raise ImucalError(f"cannot read: {exc}", file=str(path), field="params") from None
     if v.size != 9:
@@ -70,7 +73,7 @@ def read_madlab_calibration(path: str | Path) -> AffineCalibration:
     import json
 
     try:
-        d = json.loads(Path(path).read_text())
+        d = json.loads(read_input_text(path, field='calibration'))
         K, R, b = (np.asarray(d[k], float) for k in ("K_a", "R_a", "b_a"))
     except (OSError, ValueError, KeyError) as exc:
         raise ImucalError(f"cannot read mad-lab-fau calibration: {exc}", file=str(path), field="K_a/R_a/b_a") from None

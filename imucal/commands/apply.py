@@ -2,9 +2,6 @@
 from __future__ import annotations
 
 import argparse
-import io
-
-import numpy as np
 
 from . import options
 
@@ -21,9 +18,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=run)
 
 
-def _time_column(rec) -> tuple[np.ndarray, str]:
+def _time_column(rec) -> tuple:
     """(values, printf format): the input's stamps as read (unit and origin kept, integers kept
     integers), or seconds from the first sample when the file had no time column."""
+    import numpy as np
+
     if rec.t_source is None:
         return rec.t, "%.9g"
     ts = rec.t_source
@@ -32,6 +31,10 @@ def _time_column(rec) -> tuple[np.ndarray, str]:
 
 
 def run(args: argparse.Namespace) -> int:
+    import io
+
+    import numpy as np
+
     from ..calibration import load_calibration
     from ..data import load_recording
     from ..errors import ImucalError

@@ -3,16 +3,22 @@
 data (the recording and how to read it), gravity (local g), model (which parameters and how the
 fit weighs the data), output. ``run_config(args)`` turns them, with an optional YAML run file,
 into the RunConfig the library takes: every given option is used or refused.
+
+Parsing stays light: the library (numpy, CasADi) is imported when a command runs, not when the
+parser is built, so `imucal --help` and `--version` start in about 0.1 s.
 """
 from __future__ import annotations
 
 import argparse
 import dataclasses
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from ..config import GravitySpec, RunConfig, config_from_dict, load_config
-from ..data import TIME_UNIT_CHOICES, parse_columns
+from ..constants import TIME_UNIT_CHOICES
 from ..errors import ImucalError
+
+if TYPE_CHECKING:
+    from ..config import GravitySpec, RunConfig
 
 
 def add_data_options(p: argparse.ArgumentParser, data_required: bool = False) -> None:
@@ -46,6 +52,8 @@ def add_model_options(p: argparse.ArgumentParser, mode: bool = True) -> None:
 
 
 def _gravity(args: argparse.Namespace, cfg: RunConfig) -> GravitySpec:
+    from ..config import GravitySpec
+
     if args.height is not None and args.latitude is None:
         raise ImucalError("--height is used only with --latitude (WGS84 normal gravity)", field="--height",
                           fix="add --latitude DEG, or give --gravity G instead")
@@ -60,6 +68,9 @@ def _gravity(args: argparse.Namespace, cfg: RunConfig) -> GravitySpec:
 
 def run_config(args: argparse.Namespace, config: str | None = None, data_override: bool = True) -> RunConfig:
     """The RunConfig from a YAML file (optional) and the command's options."""
+    from ..config import config_from_dict, load_config
+    from ..data import parse_columns
+
     if config:
         cfg = load_config(config)
         if args.data and data_override:

@@ -35,15 +35,14 @@ def _read_plan(path: str):
 
     import numpy as np
 
-    from ..errors import ImucalError
+    from ..errors import ImucalError, short
+    from ..inputs import read_input_text
 
+    text = read_input_text(path, field="evaluate", fix="give a JSON plan with 'poses'")
     try:
-        with open(path, encoding="utf-8") as f:
-            obj = json.load(f)
-    except FileNotFoundError:
-        raise ImucalError("file not found", file=path, field="evaluate", fix="give a JSON plan with 'poses'") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ImucalError(f"is not readable JSON: {exc}", file=path, field="evaluate") from None
+        obj = json.loads(text)
+    except (json.JSONDecodeError, RecursionError, ValueError) as exc:
+        raise ImucalError(f"is not readable JSON: {short(str(exc), 80)}", file=path, field="evaluate") from None
     if isinstance(obj, dict):
         fmt = obj.get("format", "imucal-pose-plan")
         if fmt != "imucal-pose-plan":
