@@ -318,12 +318,21 @@ def work(tmp_path, si_recording):
      "would overwrite the input"),
     (["codegen", "cal/x.c", "--out", "cal", "--prefix", "x"], "would overwrite the input"),
     (["discover", "--data", "rec.csv", "--json", "rec.csv"], "would overwrite the input"),
+    (["simulate", "sim.yaml", "--out", "sim.yaml"], "would overwrite the input"),
+    (["simulate", "sim.yaml", "--out", "s.csv", "--truth", "s.csv"], "is also the output"),
+    (["worst-case", "--calibration", "cal/calibration.yaml", "--json", "cal/calibration.yaml"],
+     "would overwrite the input"),
+    (["plan-poses", "--evaluate", "plan.json", "--json", "plan.json"], "would overwrite the input"),
+    (["drift", "--calibration", "cal/calibration.yaml", "--json", "cal/calibration.yaml"],
+     "would overwrite the input"),
 ])
 def test_outputs_never_overwrite_inputs(run_cli, work, unchanged, monkeypatch, args, culprit):
     monkeypatch.chdir(work)
     (work / "report.txt").write_bytes((work / "rec.csv").read_bytes())
     (work / "cal" / "x.c").write_bytes((work / "cal" / "calibration.yaml").read_bytes())
     (work / "calibration.yaml").write_text(yaml.safe_dump({"data": {"path": "rec.csv"}, "output": {"dir": "."}}))
+    (work / "sim.yaml").write_text("seed: 1\n")
+    (work / "plan.json").write_text(json.dumps({"poses": [[0, 0, 1], [1, 0, 0], [0, 1, 0]]}))
     with unchanged(work):
         r = run_cli(args)
     assert r.code == 2
@@ -548,3 +557,18 @@ def test_simulation_size_is_bounded(run_cli, tmp_path, unchanged, plan, msg):
         r = run_cli(["simulate", cfg, "--out", tmp_path / "s.csv"])
     assert r.code == 2
     one_line_error(r.err, "sim.yaml", msg)
+
+
+def test_a_device_node_is_never_replaced(run_cli, work):
+    """`--out /dev/null` as root replaced the device node; a node of our own stands in for it."""
+    import stat as st
+
+    node = work / "null"
+    try:
+        os.mknod(node, 0o666 | st.S_IFCHR, os.makedev(1, 3))
+    except PermissionError:
+        pytest.skip("mknod needs root")
+    r = run_cli(["apply", work / "cal" / "calibration.yaml", "--data", work / "rec.csv", "--out", node])
+    assert r.code == 2
+    one_line_error(r.err, str(node), "output", "is a device: only regular files are replaced")
+    assert st.S_ISCHR(node.stat().st_mode)

@@ -122,11 +122,12 @@ def run(args: argparse.Namespace) -> int:
     from ..design import (BASE_NAMES, DEFAULT_NOISE, SIX_NAMES, compare, evaluate, optimal_design,
                           scheme_directions)
     from ..errors import ImucalError
-    from ..output import write_json_atomic
+    from ..output import check_outputs, write_json_atomic
 
     from ..limits import check_seed
 
     check_seed(args.seed, "--seed")
+    check_outputs([args.evaluate], [args.json])
     free = SIX_NAMES if args.fix_angles else BASE_NAMES
     noise = DEFAULT_NOISE if args.noise is None else args.noise
     given = [x for x in (args.n is not None, bool(args.evaluate), bool(args.scheme)) if x]

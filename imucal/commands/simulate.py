@@ -21,16 +21,17 @@ def run(args: argparse.Namespace) -> int:
     import dataclasses
 
     from ..errors import ImucalError
-    from ..output import OutputSet
+    from ..output import OutputSet, check_outputs
     from ..simulate import load_simulation_config
 
+    check_outputs([args.config], [args.out, args.truth])
     cfg = load_simulation_config(args.config)
     if args.seed is not None:
         if args.seed < 0:
             raise ImucalError(f"seed {args.seed} must be non-negative", field="--seed")
         cfg = dataclasses.replace(cfg, seed=args.seed)
     sim = cfg.run()
-    with OutputSet() as o:
+    with OutputSet([args.config]) as o:
         o.text(args.out, sim.to_csv_text())
         if args.truth:
             o.json(args.truth, {

@@ -57,9 +57,10 @@ def report(wc) -> str:
 def run(args: argparse.Namespace) -> int:
     from ..constants import DEFAULT_ANGLE_TOL, STANDARD_GRAVITY
     from ..errors import ImucalError
-    from ..output import write_json_atomic
+    from ..output import check_outputs, write_json_atomic
     from ..worst_case import AngleBox, CertificateError, analyse
 
+    check_outputs([args.calibration], [args.json])
     gravity = args.gravity
     source: dict = {}
     if args.calibration:
