@@ -14,6 +14,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     options.add_data_options(p)
     options.add_gravity_options(p)
     options.add_model_options(p)
+    p.add_argument("--gyro-data", metavar="FILE",
+                   help="gyroscope recording on the accelerometer's time base (imu_tk: t x y z); "
+                        "gyro columns gx, gy, gz in --data are used without it")
     p.add_argument("--out", help="output directory (default: config output.dir, else ./out)")
     p.add_argument("--json", help="also write a machine-readable summary to this file")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
@@ -38,6 +41,9 @@ def run(args: argparse.Namespace) -> int:
 
     from ..output import OutputSet, check_outputs
     from ..pipeline import calibrate
+    import yaml
+
+    from ..gyro.run import calibrate_gyro
     from ..report import fit_report, summary
 
     cfg = _config(args)
@@ -50,26 +56,36 @@ def run(args: argparse.Namespace) -> int:
 
     out = Path(os.path.normpath(out))
     figures = cfg.output.figures and not args.no_figures
-    inputs = [args.config, options.data_path(cfg)]
-    outputs = [out / "calibration.yaml", out / "report.txt", args.json,
+    inputs = [args.config, options.data_path(cfg), args.gyro_data]
+    outputs = [out / "calibration.yaml", out / "report.txt", out / "gyro.yaml", args.json,
                *([out / n for n in FIGURES] if figures else [])]
     check_outputs(inputs, outputs)  # fail before the work, not after it
     result = calibrate(cfg)
     text = fit_report(result)
+    gyro = calibrate_gyro(result, args.gyro_data)  # None when the recording has no gyroscope
+    js = summary(result)
+    if gyro is not None:
+        text += "[[Gyroscope]]  (provisional: apply and codegen do not use it yet)\n" + gyro.report() + "\n"
+        js["gyro"] = gyro.to_dict()
     with OutputSet(inputs) as o:
         o.call(out / "calibration.yaml", result.calibration.save)
         o.text(out / "report.txt", text)
         if figures:
             for name, fn in FIGURES.items():
                 o.call(out / name, lambda p, fn=fn: fn(result, p))
+        if gyro is not None:
+            o.text(out / "gyro.yaml", yaml.safe_dump({"format": "imucal-gyro-calibration", "format_version": 0,
+                                                      **gyro.to_dict()}, sort_keys=False))
         if args.json:
-            o.json(args.json, summary(result))
+            o.json(args.json, js)
     import sys
 
     for w in result.calibration.fit.get("warnings", []):
         sys.stderr.write(f"imucal: warning: {w}\n")
     if not args.quiet:
         print(text.split("[[Static intervals]]")[0].rstrip())
-    print(f"wrote {out / 'calibration.yaml'}, {out / 'report.txt'}"
+    if gyro is not None and not args.quiet:
+        print(gyro.report())
+    print(f"wrote {out / 'calibration.yaml'}, {out / 'report.txt'}" + (f", {out / 'gyro.yaml'}" if gyro else "")
           + (", figures" if figures else "") + (f", {args.json}" if args.json else ""))
     return 0 if result.result.success else 1

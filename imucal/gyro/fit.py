@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from .. import ipopt
 from ..errors import ImucalError
 from .evaluate import direction_errors_deg
 from .gsens import StaticFit, fit_static
@@ -72,8 +73,7 @@ def _problem(lengths: tuple[int, ...], free_bias: bool) -> tuple[ca.Function, ca
     Jw = ca.jacobian(rw, x)
     hess = ca.Function("nlp_hess_l", [x, p, lam, ca.MX.sym("lam_g", 0)], [lam * ca.triu(ca.mtimes(Jw.T, Jw))],
                        ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
-    opts = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "ipopt.tol": 1e-10,
-            "ipopt.acceptable_tol": 1e-7, "ipopt.acceptable_iter": 3, "ipopt.max_iter": 100, "hess_lag": hess}
+    opts = {**ipopt.OPTIONS, "hess_lag": hess}  # the one option set of every calibration NLP
     solver = ca.nlpsol("gyro_fit", "ipopt", {"x": x, "p": p, "f": 0.5 * ca.sumsqr(rw)}, opts)
     return solver, res, cost, nx
 

@@ -1,0 +1,44 @@
+"""The gyroscope beside an accelerometer run: from the recording's gyro columns, or from a second
+file on the same time base (imu_tk's two files)."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..constants import TIME_UNITS
+from ..data import Recording, load_recording
+from ..errors import ImucalError
+from .fit import GyroOptions, fit_gyro
+from .result import GyroResult
+from .segments import gyro_data_from_run
+
+
+def gyro_channel(run, gyro_file: str | None = None) -> tuple[np.ndarray, np.ndarray, str, float | None] | None:
+    """(time stamps [s], raw rates (N, 3), source, accelerometer start in the gyro's clock), or None.
+
+    A second file is read with the loader's defaults (imu_tk: t x y z); its time stamps and the
+    accelerometer's share one clock, so both keep their original origin.
+    """
+    rec: Recording = run.recording
+    if gyro_file is None:
+        if rec.gyro is None:
+            return None
+        return rec.t, rec.gyro, rec.source, None
+    g = load_recording(gyro_file)
+    if g.t_source is None or rec.t_source is None:
+        raise ImucalError("both files need time stamps to share one time base", file=str(gyro_file),
+                          field="--gyro-data", fix="record t in both files (imu_tk: t x y z)")
+    t_g = g.t_source * TIME_UNITS[g.time_unit]
+    acc_t0 = float(rec.t_source[0]) * TIME_UNITS[rec.time_unit]
+    return t_g, g.raw, g.source, acc_t0
+
+
+def calibrate_gyro(run, gyro_file: str | None = None, options: GyroOptions = GyroOptions()) -> GyroResult | None:
+    """Fit the gyroscope of ``run`` (imucal.pipeline.CalibrationRun); None when it has none."""
+    ch = gyro_channel(run, gyro_file)
+    if ch is None:
+        return None
+    t, raw, _, acc_t0 = ch
+    if gyro_file is not None and raw.shape[0] == run.recording.n:
+        acc_t0 = None  # same samples: taken one by one
+    data = gyro_data_from_run(run, t, raw, unit=run.recording.unit, acc_t0=acc_t0)
+    return fit_gyro(data, options)
