@@ -88,4 +88,5 @@ def run(args: argparse.Namespace) -> int:
         print(gyro.report())
     print(f"wrote {out / 'calibration.yaml'}, {out / 'report.txt'}" + (f", {out / 'gyro.yaml'}" if gyro else "")
           + (", figures" if figures else "") + (f", {args.json}" if args.json else ""))
-    return 0 if result.result.success else 1
+    ok = result.result.success and (gyro is None or gyro.success)
+    return 0 if ok else 1  # EXIT_NOT_CONVERGED: the files say which fit

@@ -36,6 +36,13 @@ class GyroResult:
     seconds: float  #: wall time of the fit
 
     @property
+    def success(self) -> bool:
+        """IPOPT converged (imucal.ipopt.CONVERGED)."""
+        from ..ipopt import CONVERGED
+
+        return self.status in CONVERGED
+
+    @property
     def uses_gsens(self) -> bool:
         return bool(np.any(self.gsens_selected))
 
