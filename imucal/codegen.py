@@ -552,7 +552,7 @@ def _header(c: _Context, k_apply: Kernel | None, k_cov: Kernel | None) -> str:
                   f" * no mutable static state. {p}_apply_coeffs (base model): 6 multiplies, 6 adds."]
     lines += [" */"]
     guard = f"{P}_H"
-    out = ["\n".join(lines), f"#ifndef {guard}", f"#define {guard}", "", "#include <stddef.h>", "",
+    out = ["\n".join(lines), f"#ifndef {guard}", f"#define {guard}", "", "#include <stddef.h>", "#include <stdint.h>", "",
            "#ifdef __cplusplus", 'extern "C" {', "#endif", "",
            f"typedef {real} {p}_real;", "",
            f"/* Return values of {p}_prepare. */",
@@ -584,7 +584,11 @@ def _header(c: _Context, k_apply: Kernel | None, k_cov: Kernel | None) -> str:
             f" * {what}. acc may alias raw. */",
             f"void {p}_apply(const {real} raw[3], {real} acc[3]);", "",
             f"/* {p}_apply over n samples stored as x y z x y z ... (a {real}[n][3] array). */",
-            f"void {p}_apply_batch(const {real} *raw, {real} *acc, size_t n);", ""]
+            f"void {p}_apply_batch(const {real} *raw, {real} *acc, size_t n);", "",
+            f"/* {p}_apply on the integer counts firmware reads from the sensor's registers: signed",
+            " * (two's complement, int16_t) or unsigned (offset binary, uint16_t). Exact conversion. */",
+            f"void {p}_apply_i16(const int16_t raw[3], {real} acc[3]);",
+            f"void {p}_apply_u16(const uint16_t raw[3], {real} acc[3]);", ""]
     else:
         cov_doc = ", ".join(f"cov[{i}] = {comment_text(n)} [{COVARIATE_UNITS.get(n, 'see the effect documentation')}]"
                             for i, n in enumerate(c.covariates))
@@ -637,6 +641,10 @@ def _source(c: _Context, k_prep: Kernel, k_coef: Kernel, k_apply: Kernel | None,
                 k_apply.body(), "}", "",
                 f"void {p}_apply_batch(const {real} *raw, {real} *acc, size_t n)", "{", "  size_t i;",
                 f"  for (i = 0; i < n; ++i) {p}_apply(raw + 3 * i, acc + 3 * i);", "}", ""]
+        for itype, suffix in (("int16_t", "i16"), ("uint16_t", "u16")):  # counts fit exactly in float
+            out += [f"void {p}_apply_{suffix}(const {itype} raw[3], {real} acc[3])", "{",
+                    f"  const {real} r[3] = {{({real})raw[0], ({real})raw[1], ({real})raw[2]}};",
+                    f"  {p}_apply(r, acc);", "}", ""]
     if k_cov is not None:
         n = len(c.covariates)
         out += [f"/* {what} ({k_cov.ops}). */",
