@@ -25,6 +25,7 @@ COMMANDS = {
     "simulate": "imucal.commands.simulate",
     "discover": "imucal.commands.discover",
     "plan-poses": "imucal.commands.plan_poses",
+    "export": "imucal.commands.export",
 }
 
 

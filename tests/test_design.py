@@ -7,7 +7,7 @@ import math
 import casadi as ca
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from imucal import design as D
@@ -158,6 +158,9 @@ def test_information_properties(seed: int, n: int, noise: float) -> None:
     assert w[0] > -1e-12
     F2 = D.fisher(np.vstack([u, random_directions(1, rng)]), noise, ds, G)
     assert np.linalg.slogdet(F2)[1] >= np.linalg.slogdet(F)[1] - 1e-9
+    # The remaining identities hold to 1e-9 only where the poses determine the parameters: a
+    # random set of 9 can be (nearly) degenerate (condition 3e16 at seed 9143, n 9).
+    assume(np.linalg.cond(F) < 1e10)
     a = D.evaluate(u, "D", noise, ds, G, check_distinct=False)
     b = D.evaluate(u, "D", 2 * noise, ds, G, check_distinct=False)
     for k in a.std:
