@@ -45,6 +45,8 @@ class DataSpec:
     unit: str = "raw"
     #: rails of the raw readings: {"low": v, "high": v}, each a number or [x, y, z]
     saturation: dict | None = None
+    #: a gyroscope recording on the same time base (imu_tk's second file), calibrated beside
+    gyro_path: str | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.path, (str, os.PathLike)) or not str(self.path):
@@ -92,6 +94,9 @@ class DataSpec:
                               fix="give each role its own column")
         if self.saturation is not None:
             rails(self.saturation)  # validated here, used by static detection
+        if self.gyro_path is not None and not (isinstance(self.gyro_path, str) and self.gyro_path):
+            raise ImucalError(f"gyro_path {short(self.gyro_path)} must be a file name", field="data.gyro_path",
+                              fix="give the gyroscope recording's path as text")
 
 
 @dataclass(frozen=True)

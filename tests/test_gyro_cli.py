@@ -65,3 +65,14 @@ def test_gyro_file_without_time_is_refused(run_cli, tmp_path):
                  tmp_path / "o", "--no-figures", "--quiet"])
     assert r.code == 2 and len(r.err.splitlines()) == 1
     assert "g.txt" in r.err and "no time column" in r.err
+
+
+def test_the_readme_main_job_calibrates_both_sensors(run_cli, tmp_path):
+    from pathlib import Path
+
+    cfg = Path(__file__).resolve().parents[1] / "configs" / "xsens-mti-imutk.yaml"
+    js = tmp_path / "s.json"
+    r = run_cli(["calibrate", cfg, "--out", tmp_path / "o", "--no-figures", "--quiet", "--json", js])
+    assert r.code == 0, r.err
+    d = json.loads(js.read_text())
+    assert d["gyro"]["rms_direction_error_deg"]["after"] < 0.5 and (tmp_path / "o" / "gyro.yaml").exists()

@@ -56,13 +56,14 @@ def run(args: argparse.Namespace) -> int:
 
     out = Path(os.path.normpath(out))
     figures = cfg.output.figures and not args.no_figures
-    inputs = [args.config, options.data_path(cfg), args.gyro_data]
+    gyro_file = args.gyro_data or options.data_path(cfg, gyro=True)
+    inputs = [args.config, options.data_path(cfg), gyro_file]
     outputs = [out / "calibration.yaml", out / "report.txt", out / "gyro.yaml", args.json,
                *([out / n for n in FIGURES] if figures else [])]
     check_outputs(inputs, outputs)  # fail before the work, not after it
     result = calibrate(cfg)
     text = fit_report(result)
-    gyro = calibrate_gyro(result, args.gyro_data)  # None when the recording has no gyroscope
+    gyro = calibrate_gyro(result, None if gyro_file is None else str(gyro_file))  # None when the recording has no gyroscope
     js = summary(result)
     if gyro is not None:
         text += "[[Gyroscope]]  (provisional: apply and codegen do not use it yet)\n" + gyro.report() + "\n"

@@ -96,7 +96,11 @@ def run_config(args: argparse.Namespace, config: str | None = None, data_overrid
     return dataclasses.replace(cfg, data=data, gravity=grav, fit=fit)
 
 
-def data_path(cfg: RunConfig) -> Path:
-    """The recording's path as the loader resolves it (relative to the YAML file)."""
-    p = Path(cfg.data.path)
+def data_path(cfg: RunConfig, gyro: bool = False) -> Path | None:
+    """The recording's (or with ``gyro``, the gyroscope file's) path as the loader resolves it
+    (relative to the YAML file); None when there is no such file."""
+    name = cfg.data.gyro_path if gyro else cfg.data.path
+    if name is None:
+        return None
+    p = Path(name)
     return p if p.is_absolute() or cfg.base_dir is None else cfg.base_dir / p
