@@ -26,6 +26,7 @@ COMMANDS = {
     "discover": "imucal.commands.discover",
     "plan-poses": "imucal.commands.plan_poses",
     "export": "imucal.commands.export",
+    "noise": "imucal.commands.noise",
 }
 
 
