@@ -57,9 +57,25 @@ class _Terminated(KeyboardInterrupt):
     """SIGTERM, raised where the program is, so staged outputs are removed as on Ctrl-C."""
 
 
+_SIGNALLED: list[int] = []  #: signals received by this run
+
+
 def _on_sigterm(signum, frame) -> None:  # noqa: ARG001 - signal handler signature
+    _SIGNALLED.append(signum)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)  # once: cleanup is not interrupted again
     raise _Terminated()
+
+
+def _interrupted(exc: BaseException) -> bool:
+    """An exception caused by a signal: raised inside a C extension (CasADi), KeyboardInterrupt
+    can come back wrapped, e.g. as SystemError, with the interrupt in its context."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return bool(_SIGNALLED)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -70,6 +86,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return EXIT_BAD_INPUT
     previous = None
+    _SIGNALLED.clear()
     try:
         previous = signal.signal(signal.SIGTERM, _on_sigterm)
     except ValueError:  # not the main thread (e.g. a test runner's worker): leave it alone
@@ -90,6 +107,10 @@ def main(argv: list[str] | None = None) -> int:
                          "rerun with --debug for the traceback)\n")
         return EXIT_INTERNAL
     except Exception as exc:  # noqa: BLE001 - the last line of defence: one line, never a traceback
+        if _interrupted(exc):
+            sys.stderr.write("imucal: terminated; nothing was written\n" if _SIGNALLED
+                             else "imucal: interrupted; nothing was written\n")
+            return EXIT_INTERRUPTED
         if args.debug:
             traceback.print_exc()
         sys.stderr.write(f"imucal: internal error: {type(exc).__name__}: {short(str(exc), 200)} "

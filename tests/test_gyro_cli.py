@@ -76,3 +76,21 @@ def test_the_readme_main_job_calibrates_both_sensors(run_cli, tmp_path):
     assert r.code == 0, r.err
     d = json.loads(js.read_text())
     assert d["gyro"]["rms_direction_error_deg"]["after"] < 0.5 and (tmp_path / "o" / "gyro.yaml").exists()
+
+
+@pytest.mark.parametrize("kind, msg", [
+    ("noise", "the calibrated gyroscope leaves the gravity direction"),  # no rotation signal at all
+    ("short", "the other sensor does not cover the whole time span"),
+    ("zeros", "scale is not determined"),
+])
+def test_a_gyro_that_does_not_describe_the_motions_is_refused(run_cli, tmp_path, unchanged, kind, msg):
+    g = np.loadtxt(real_file(*GYR))
+    rng = np.random.default_rng(0)
+    bad = {"noise": np.column_stack([g[:, 0], rng.normal(32768, 5, (len(g), 3))]), "short": g[:1000],
+           "zeros": np.column_stack([g[:, 0], np.zeros((len(g), 3))])}[kind]
+    src = tmp_path / "g.txt"
+    np.savetxt(src, bad, fmt="%.17g")
+    with unchanged():
+        r = run_cli(["calibrate", "--data", real_file(*ACC), "--gyro-data", src, "--gravity", "9.81744",
+                     "--out", tmp_path / "o", "--no-figures", "--quiet"])
+    assert r.code == 2 and msg in r.err and len(r.err.strip().splitlines()) == 1, r.err

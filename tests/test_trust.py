@@ -572,3 +572,16 @@ def test_a_device_node_is_never_replaced(run_cli, work):
     assert r.code == 2
     one_line_error(r.err, str(node), "output", "is a device: only regular files are replaced")
     assert st.S_ISCHR(node.stat().st_mode)
+
+
+@pytest.mark.parametrize("delay", [0.3, 0.5, 0.7])
+def test_sigterm_at_any_moment_is_an_interruption_never_an_internal_error(work, delay):
+    """A signal inside CasADi's C code comes back as SystemError with the interrupt in its context."""
+    p = _imucal(["calibrate", "--data", "rec.csv", "--out", "s"], work)
+    time.sleep(delay)
+    p.send_signal(signal.SIGTERM)
+    _, err = p.communicate(timeout=60)
+    assert p.returncode in (0, 130), err
+    assert "internal error" not in err and "Traceback" not in err
+    if p.returncode == 130:
+        assert not (work / "s").exists() or not any((work / "s").iterdir())

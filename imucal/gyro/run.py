@@ -32,13 +32,27 @@ def gyro_channel(run, gyro_file: str | None = None) -> tuple[np.ndarray, np.ndar
     return t_g, g.raw, g.source, acc_t0
 
 
+#: A calibrated gyroscope that leaves the gravity direction this far off [deg rms] over the
+#: motions does not describe them: wrong columns, wrong file or no gyroscope signal. Refused.
+MAX_DIRECTION_ERROR_DEG = 10.0
+
+
 def calibrate_gyro(run, gyro_file: str | None = None, options: GyroOptions = GyroOptions()) -> GyroResult | None:
     """Fit the gyroscope of ``run`` (imucal.pipeline.CalibrationRun); None when it has none."""
     ch = gyro_channel(run, gyro_file)
     if ch is None:
         return None
-    t, raw, _, acc_t0 = ch
+    t, raw, source, acc_t0 = ch
     if gyro_file is not None and raw.shape[0] == run.recording.n:
         acc_t0 = None  # same samples: taken one by one
-    data = gyro_data_from_run(run, t, raw, unit=run.recording.unit, acc_t0=acc_t0)
-    return fit_gyro(data, options)
+    try:
+        data = gyro_data_from_run(run, t, raw, unit=run.recording.unit, acc_t0=acc_t0)
+    except ImucalError as exc:
+        raise ImucalError(exc.message, file=exc.file or source, field=exc.field, fix=exc.fix) from None
+    res = fit_gyro(data, options)
+    after = res.rms_direction_error_deg["after"]
+    if not after <= MAX_DIRECTION_ERROR_DEG:
+        raise ImucalError(f"the calibrated gyroscope leaves the gravity direction {after:.3g} deg rms off over "
+                          f"{res.segments.size} motions: it does not describe them", file=source, field="gyro",
+                          fix="check the gyroscope columns (gx, gy, gz) or file, and that it shares the time base")
+    return res
