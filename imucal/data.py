@@ -261,8 +261,8 @@ def _lineno(lines: list[str], k: int, first: int) -> int:
 
 _DEFAULT_NAMES = {"t": ("t", "time", "timestamp"), "ax": ("ax", "acc_x", "accx", "x"),
                   "ay": ("ay", "acc_y", "accy", "y"), "az": ("az", "acc_z", "accz", "z"),
-                  "gx": ("gx", "gyro_x", "gyr_x", "gyrx", "wx"), "gy": ("gy", "gyro_y", "gyr_y", "gyry", "wy"),
-                  "gz": ("gz", "gyro_z", "gyr_z", "gyrz", "wz"), "temp": ("temp", "temperature", "t_c")}
+                  "gx": ("gx", "gyro_x", "gyrx", "wx"), "gy": ("gy", "gyro_y", "gyry", "wy"),
+                  "gz": ("gz", "gyro_z", "gyrz", "wz"), "temp": ("temp", "temperature", "t_c")}
 
 
 def parse_columns(text: str, where: str = "--columns") -> dict[str, int | str]:

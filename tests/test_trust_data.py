@@ -257,11 +257,17 @@ def test_six_columns_without_header_suggest_the_mpu_layout(tmp_path):
              "(logs like the MPU-6050's hold ax ay az gx gy gz)", "--columns ax=0,ay=1,az=2")
 
 
-def test_gyr_headers_are_gyroscope_columns():
-    """mad-lab-fau's session: n_samples, gyr_x..z, acc_x..z; the acc columns are found by name."""
-    rec = load_recording(DataSpec(path=str(real_file("imucal-ferraris", "example_ferraris_session.csv")),
-                                  sample_rate=102.4))
-    d = np.loadtxt(real_file("imucal-ferraris", "example_ferraris_session.csv"), delimiter=",", skiprows=1)
+def test_gyro_columns_before_the_accelerometer_by_name():
+    """mad-lab-fau's session: n_samples, gyr_x..z, acc_x..z. The acc columns are found by name;
+    gyr_* are not default gyro names (their sessions are concatenated segments, not one motion
+    a gyroscope could be calibrated on), so the gyroscope is read only when mapped."""
+    p = real_file("imucal-ferraris", "example_ferraris_session.csv")
+    d = np.loadtxt(p, delimiter=",", skiprows=1)
+    rec = load_recording(DataSpec(path=str(p), sample_rate=102.4))
+    np.testing.assert_array_equal(rec.raw, d[:, 4:7])
+    assert rec.gyro is None
+    rec = load_recording(DataSpec(path=str(p), sample_rate=102.4,
+                                  columns=parse_columns("gx=gyr_x,gy=gyr_y,gz=gyr_z")))
     np.testing.assert_array_equal(rec.raw, d[:, 4:7])
     np.testing.assert_array_equal(rec.gyro, d[:, 1:4])
 
