@@ -76,7 +76,7 @@ class DataSpec:
         if self.time_unit not in TIME_UNIT_CHOICES:
             raise ImucalError(f"unknown time unit {short(self.time_unit)}", field="data.time_unit",
                               fix=f"use one of {', '.join(TIME_UNIT_CHOICES)}")
-        if self.sample_rate is not None and not (math.isfinite(self.sample_rate)
+        if self.sample_rate is not None and not (_finite(self.sample_rate)
                                                  and MIN_RATE_HZ <= self.sample_rate <= MAX_RATE_HZ):
             raise ImucalError(f"sample rate {short(self.sample_rate)} Hz is not an IMU rate",
                               field="data.sample_rate",
@@ -130,6 +130,14 @@ class Recording:
         return float(self.t[-1] - self.t[0]) if self.n else 0.0
 
 
+def _finite(x: int | float) -> bool:
+    """math.isfinite without OverflowError for integers beyond double range (YAML's 10**400)."""
+    try:
+        return math.isfinite(x)
+    except OverflowError:
+        return False
+
+
 def rails(spec: object, where: str = "data.saturation") -> dict[str, np.ndarray | None]:
     """Declared rails of the raw readings: {"low": [x, y, z] or None, "high": ...}.
 
@@ -143,7 +151,7 @@ def rails(spec: object, where: str = "data.saturation") -> dict[str, np.ndarray 
     for k, v in spec.items():
         vals = v if isinstance(v, (list, tuple)) else [v] * 3
         if len(vals) != 3 or not all(isinstance(x, (int, float)) and not isinstance(x, bool)
-                                     and math.isfinite(x) and abs(x) <= MAX_ABS_VALUE for x in vals):
+                                     and _finite(x) and abs(x) <= MAX_ABS_VALUE for x in vals):
             raise ImucalError(f"{k} rail {short(v)} must be a finite number or [x, y, z]", field=f"{where}.{k}",
                               fix="give the raw value at which the sensor clips")
         out[k] = np.array(vals, float)
@@ -272,7 +280,16 @@ def parse_columns(text: str, where: str = "--columns") -> dict[str, int | str]:
             raise ImucalError(f"unknown role {short(role)}", field=where, fix=f"roles: {', '.join(ROLES)}")
         if role in out:
             raise ImucalError(f"role {role} given twice", field=where, fix="give each role once")
-        out[role] = int(col) if col.isdigit() and len(col) < 6 else col
+        index = col.isascii() and col.isdigit()  # not "²" or other Unicode digits
+        if index and len(col) > 4:
+            raise ImucalError(f"column index {short(col)} for {role} is out of range", field=where,
+                              fix="give a 0-based index below 10000")
+        value: int | str = int(col) if index else col
+        if value in out.values():
+            other = next(r for r, v in out.items() if v == value)
+            raise ImucalError(f"roles {other} and {role} both map to column {short(col)}", field=where,
+                              fix="give each role its own column")
+        out[role] = value
     return out
 
 
@@ -284,10 +301,17 @@ def _no_header_layout(ncol: int, path: Path) -> dict[str, int]:
         return {"t": 0, "ax": 1, "ay": 2, "az": 3}  # imu_tk: t x y z
     if ncol == 5:
         return {"t": 0, "ax": 1, "ay": 2, "az": 3, "temp": 4}  # imucal's simulate layout
-    hint = (" (imu_tk-style logs hold t gx gy gz ax ay az)" if ncol == 7 else "")
+    if ncol < 3:
+        raise ImucalError(f"has {ncol} column(s): an accelerometer recording needs at least ax ay az",
+                          file=str(path), field="data.columns",
+                          fix="check the delimiter (data.delimiter) or give the file with its three axes")
+    # The likely layout, and a mapping for it that the user can check against the file.
+    hint, example = {6: (" (logs like the MPU-6050's hold ax ay az gx gy gz)", "ax=0,ay=1,az=2"),
+                     7: (" (imu_tk-style logs hold t gx gy gz ax ay az)", "t=0,ax=4,ay=5,az=6")}.get(
+                         ncol, ("", "t=0,ax=1,ay=2,az=3"))
     raise ImucalError(f"has {ncol} columns and no header: the layout is ambiguous{hint}", file=str(path),
                       field="data.columns",
-                      fix="map the columns, e.g. --columns t=0,ax=4,ay=5,az=6 or data.columns in the YAML")
+                      fix=f"map the columns, e.g. --columns {example} or data.columns in the YAML")
 
 
 def infer_time_unit(stamps: np.ndarray) -> tuple[str, str]:

@@ -1,6 +1,8 @@
 """One calibration run: load, detect static intervals, guess, check observability, fit."""
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -137,6 +139,18 @@ def _axes(dropped: list[dict]) -> str:
     return "axis " + ", ".join(sorted({d["axis"] for d in dropped}))
 
 
+@contextmanager
+def _noting_drops(dropped: list[dict]) -> Iterator[None]:
+    """Re-raise a refusal with a note that clipped intervals were dropped, when some were."""
+    try:
+        yield
+    except ImucalError as exc:
+        if not dropped:
+            raise
+        raise ImucalError(f"{exc.message}; {len(dropped)} static interval(s) were dropped because an axis "
+                          f"was clipped ({_axes(dropped)})", file=exc.file, field=exc.field, fix=exc.fix) from None
+
+
 def discover_command(config: RunConfig, rec: Recording) -> str:
     """The command that investigates a poor fit of this run."""
     data = rec.source if not rec.source.startswith("<") else "FILE (the arrays saved as CSV)"
@@ -189,18 +203,20 @@ def calibrate(config: RunConfig, recording: Recording | None = None) -> Calibrat
 
     model = build_model(effects_from_specs(config.fit.effects, src))
     angles_free = not set(ANGLE_NAMES) <= set(config.fit.fix)
-    guess, dirs, n_distinct = initial_guess(iv, gravity, angles_free, rec.source)
-    params = make_parameters(guess, config, gravity, model, config.data.unit)
-    if model.effects:  # covariate spread, enough intervals, reference temperature (imucal.effects)
-        from .effects import prepare_parameters
+    with _noting_drops(dropped):  # too few poses left: the refusal says that clipping took some
+        guess, dirs, n_distinct = initial_guess(iv, gravity, angles_free, rec.source)
+        params = make_parameters(guess, config, gravity, model, config.data.unit)
+        if model.effects:  # covariate spread, enough intervals, reference temperature (imucal.effects)
+            from .effects import prepare_parameters
 
-        params = prepare_parameters(model.effects, params, {"temp": iv.temp, "time": iv.t_mid}, iv.n, rec.source)
-    data = fit_data(model, iv, rec, config.fit.mode, rec.source)
-    # Observability on interval means (one row per interval), at the initial guess.
-    mdata = fit_data(model, iv, rec, "means", rec.source) if data.mode != "means" else data
-    J, Jw = jacobian_rows(mdata, params, model, gravity, weighted=True)
-    obs = analyse(dirs, J, params.free_names, Jw, thresholds(params.free_names, config.fit.angle_tolerance))
-    require_observable(obs, params.free_names, rec.source)
+            params = prepare_parameters(model.effects, params, {"temp": iv.temp, "time": iv.t_mid}, iv.n,
+                                        rec.source)
+        data = fit_data(model, iv, rec, config.fit.mode, rec.source)
+        # Observability on interval means (one row per interval), at the initial guess.
+        mdata = fit_data(model, iv, rec, "means", rec.source) if data.mode != "means" else data
+        J, Jw = jacobian_rows(mdata, params, model, gravity, weighted=True)
+        obs = analyse(dirs, J, params.free_names, Jw, thresholds(params.free_names, config.fit.angle_tolerance))
+        require_observable(obs, params.free_names, rec.source)
     res = fit(data, params, model, gravity, source=rec.source, weights=config.fit.weights)
     if res.dof > 0 and res.redchi > ABSURD_REDCHI:
         held = [n for n in params.names if params[n].fixed]

@@ -22,6 +22,9 @@ SATURATION_FRACTION = 0.2
 #: ... and its scatter on that axis is below this fraction of the axis's median scatter over the
 #: intervals (a rail flattens the noise; a genuine extreme only appears in the noise's tail).
 SATURATION_STD_RATIO = 0.75
+#: Scatter for that test: the standard deviation of the central samples, without this fraction
+#: at each end, so that a few spikes in a pose that sits on its rail do not hide the rail.
+SATURATION_TRIM = 0.02
 
 
 @dataclass(frozen=True)
@@ -163,7 +166,32 @@ def _quantum(x: np.ndarray) -> float:
     return 0.0
 
 
-def saturation(raw: np.ndarray, start: np.ndarray, end: np.ndarray, std: np.ndarray,
+def central_scatter(seg: np.ndarray, trim: float = SATURATION_TRIM) -> np.ndarray:
+    """Per-column standard deviation of ``seg`` without the ``trim`` fraction at each end."""
+    n = seg.shape[0]
+    cut = int(np.floor(trim * n))
+    core = np.sort(seg, axis=0)[cut:n - cut]
+    return core.std(axis=0, ddof=1) if core.shape[0] > 1 else np.zeros(seg.shape[1])
+
+
+def _on_rail(col: np.ndarray, rail: float, start: np.ndarray, end: np.ndarray, scatter: np.ndarray,
+             j: int) -> list[bool]:
+    """Intervals sitting on a suspect rail of axis ``j`` (the recording's extreme value).
+
+    Candidates hold SATURATION_FRACTION of their samples exactly on the rail; they are clipped
+    when their central scatter is flattened below SATURATION_STD_RATIO of the axis's scatter in
+    the other intervals (or, when every interval is a candidate, of the other axes' scatter). A
+    sensor that reads one constant value in every pose (scatter 0 everywhere) gives no verdict.
+    """
+    cand = np.array([np.mean(col[a:b] == rail) >= SATURATION_FRACTION for a, b in zip(start, end)])
+    if not cand.any():
+        return [False] * cand.size
+    pool = scatter[~cand, j] if (~cand).any() else np.delete(scatter, j, axis=1).ravel()
+    ref = float(np.median(pool))
+    return list(cand & (scatter[:, j] <= SATURATION_STD_RATIO * ref) & (ref > 0))
+
+
+def saturation(raw: np.ndarray, start: np.ndarray, end: np.ndarray,
                declared: dict | None = None) -> tuple[np.ndarray, list[dict], dict]:
     """Intervals with a clipped axis: (keep mask, one record per drop, the rails per axis).
 
@@ -178,7 +206,7 @@ def saturation(raw: np.ndarray, start: np.ndarray, end: np.ndarray, std: np.ndar
     found: dict = {}
     if k == 0:
         return keep, drops, found
-    med = np.median(std, axis=0)
+    scatter = np.array([central_scatter(raw[a:b]) for a, b in zip(start, end)])
     for j, axis in enumerate("xyz"):
         col = raw[:, j]
         rails_j = []
@@ -189,14 +217,12 @@ def saturation(raw: np.ndarray, start: np.ndarray, end: np.ndarray, std: np.ndar
         else:
             rails_j = [("low", float(col.min()), "detected"), ("high", float(col.max()), "detected")]
         for side, rail, how in rails_j:
-            for i, (a, b) in enumerate(zip(start, end)):
-                seg = col[a:b]
-                if how == "declared":
-                    hit = seg <= rail if side == "low" else seg >= rail
-                    clipped = bool(hit.any())
-                else:
-                    frac = float(np.mean(seg == rail))
-                    clipped = frac >= SATURATION_FRACTION and std[i, j] <= SATURATION_STD_RATIO * med[j]
+            if how == "declared":
+                hits = [bool(np.any(col[a:b] <= rail if side == "low" else col[a:b] >= rail))
+                        for a, b in zip(start, end)]
+            else:
+                hits = _on_rail(col, rail, start, end, scatter, j)
+            for i, clipped in enumerate(hits):
                 if clipped:
                     found.setdefault(axis, {"low": None, "high": None, "source": how})[side] = rail
                     if keep[i]:
@@ -262,7 +288,7 @@ def detect_static(t: np.ndarray, raw: np.ndarray, settings: StaticSettings = Sta
                    t_mid=np.array([t[a:b].mean() for a, b in zip(start, end)]),
                    temp=None if temp is None else np.array([temp[a:b].mean() for a, b in zip(start, end)]),
                    threshold=thr, noise_inflation=inflation, window=settings.window)
-    keep, drops, found = saturation(raw, start, end, std, rails)
+    keep, drops, found = saturation(raw, start, end, rails)
     for d in drops:
         i = d.pop("interval")
         d["t_start"], d["t_end"] = float(iv.t_start[i]), float(iv.t_end[i])
