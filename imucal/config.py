@@ -18,6 +18,7 @@ from .errors import ImucalError, short
 from .gravity import normal_gravity
 from .parameters import BASE_NAMES
 from .static import StaticSettings
+from .yamlio import check_structure, key_text
 
 FIT_MODES = ("means", "samples")
 WEIGHTS = ("noise", "uniform")
@@ -36,16 +37,18 @@ class GravitySpec:
             raise ImucalError("give either gravity.value or gravity.latitude, not both", field="gravity")
         if self.value is not None and not (_is_real(self.value) and math.isfinite(self.value)
                                            and 9.7 < self.value < 9.9):
-            raise ImucalError(f"gravity {self.value!r} m/s^2 is not a local gravity on Earth",
+            raise ImucalError(f"gravity {short(self.value)} m/s^2 is not a local gravity on Earth",
                               field="gravity.value", fix="give local g in m/s^2 (9.78 .. 9.84)")
         for name in ("latitude", "height"):
             v = getattr(self, name)
             if (v is not None or name == "height") and not _is_real(v):
-                raise ImucalError(f"{name} {v!r} is not a number", field=f"gravity.{name}",
+                raise ImucalError(f"{name} {short(v)} is not a number", field=f"gravity.{name}",
                                   fix="latitude in degrees, height in metres")
         if self.latitude is None and self.height != 0.0:
+            fix = ("drop gravity.height: gravity.value already sets g" if self.value is not None
+                   else "add gravity.latitude (WGS84 normal gravity), or give gravity.value")
             raise ImucalError(f"height {short(self.height)} m is used only with a latitude", field="gravity.height",
-                              fix="add gravity.latitude (WGS84 normal gravity), or give gravity.value")
+                              fix=fix)
         if self.latitude is not None:
             normal_gravity(self.latitude, self.height)  # range checks, at load time
 
@@ -71,9 +74,9 @@ class EffectSpec:
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str):
-            raise ImucalError(f"effect name {self.name!r} is not a string", field="fit.effects.name")
+            raise ImucalError(f"effect name {short(self.name)} is not a string", field="fit.effects.name")
         if not isinstance(self.axes, (str, list, tuple)) or not all(isinstance(a, str) for a in self.axes):
-            raise ImucalError(f"axes {self.axes!r} must be a list of x, y, z", field="fit.effects.axes")
+            raise ImucalError(f"axes {short(self.axes)} must be a list of x, y, z", field="fit.effects.axes")
 
 
 @dataclass(frozen=True)
@@ -87,23 +90,23 @@ class FitSettings:
 
     def __post_init__(self) -> None:
         if self.mode not in FIT_MODES:
-            raise ImucalError(f"unknown fit mode {self.mode!r}", field="fit.mode",
+            raise ImucalError(f"unknown fit mode {short(self.mode)}", field="fit.mode",
                               fix=f"use one of {', '.join(FIT_MODES)}")
         if self.weights not in WEIGHTS:
-            raise ImucalError(f"unknown weights {self.weights!r}", field="fit.weights",
+            raise ImucalError(f"unknown weights {short(self.weights)}", field="fit.weights",
                               fix=f"use one of {', '.join(WEIGHTS)}")
         if not (isinstance(self.angle_tolerance, (int, float)) and 0 < self.angle_tolerance < 0.5):
-            raise ImucalError(f"angle_tolerance {self.angle_tolerance!r} must lie in (0, 0.5)",
+            raise ImucalError(f"angle_tolerance {short(self.angle_tolerance)} must lie in (0, 0.5)",
                               field="fit.angle_tolerance", fix="use e.g. 0.02 (90 deg +- 2 %)")
         for n in self.fix:
             if n not in BASE_NAMES:
-                raise ImucalError(f"cannot fix {n!r}", field="fit.fix", fix=f"choose from {', '.join(BASE_NAMES)}")
+                raise ImucalError(f"cannot fix {short(n)}", field="fit.fix", fix=f"choose from {', '.join(BASE_NAMES)}")
         for n, v in self.initial.items():
             if n not in BASE_NAMES:
-                raise ImucalError(f"unknown parameter {n!r}", field="fit.initial",
+                raise ImucalError(f"unknown parameter {short(n)}", field="fit.initial",
                                   fix=f"choose from {', '.join(BASE_NAMES)}")
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise ImucalError(f"initial value {v!r} is not a finite number", field=f"fit.initial.{n}")
+                raise ImucalError(f"initial value {short(v)} is not a finite number", field=f"fit.initial.{n}")
 
 
 @dataclass(frozen=True)
@@ -113,9 +116,9 @@ class OutputSettings:
 
     def __post_init__(self) -> None:
         if not isinstance(self.dir, str) or not self.dir:
-            raise ImucalError(f"dir {self.dir!r} must be a directory name", field="output.dir")
+            raise ImucalError(f"dir {short(self.dir)} must be a directory name", field="output.dir")
         if not isinstance(self.figures, bool):
-            raise ImucalError(f"figures {self.figures!r} must be true or false", field="output.figures")
+            raise ImucalError(f"figures {short(self.figures)} must be true or false", field="output.figures")
 
 
 @dataclass(frozen=True)
@@ -141,8 +144,8 @@ def _fill(cls: type, raw: Any, where: str, path: str | None) -> Any:
     allowed = [f.name for f in dataclasses.fields(cls) if f.name != "source"]
     unknown = [k for k in raw if k not in allowed]
     if unknown:
-        raise ImucalError(f"unknown key {unknown[0]!r}", file=path,
-                          field=f"{where}{unknown[0]}", fix=f"allowed keys here: {', '.join(allowed)}")
+        raise ImucalError(f"unknown key {short(unknown[0])}", file=path,
+                          field=f"{where}{key_text(unknown[0])}", fix=f"allowed keys here: {', '.join(allowed)}")
     try:
         return cls(**raw)
     except ImucalError as exc:
@@ -172,13 +175,14 @@ def _fix_list(fx: Any, path: str | None) -> tuple[tuple[str, ...], dict[str, flo
 
 
 def config_from_dict(d: Any, path: str | None = None) -> RunConfig:
+    check_structure(d, path)
     if not isinstance(d, Mapping):
         raise ImucalError("top level must be a mapping with a data: section", file=path, field="top level",
                           fix="see the YAML schema in the README")
     allowed = ("data", "static", "gravity", "fit", "output")
     unknown = [k for k in d if k not in allowed]
     if unknown:
-        raise ImucalError(f"unknown key {unknown[0]!r}", file=path, field=str(unknown[0]),
+        raise ImucalError(f"unknown key {short(unknown[0])}", file=path, field=key_text(unknown[0]),
                           fix=f"allowed top-level keys: {', '.join(allowed)}")
     if "data" not in d or d["data"] is None:
         raise ImucalError("missing section 'data'", file=path, field="data",

@@ -50,11 +50,11 @@ class DataSpec:
 
     def __post_init__(self) -> None:
         if not isinstance(self.path, (str, os.PathLike)) or not str(self.path):
-            raise ImucalError(f"path {self.path!r} must be a file name", field="data.path",
+            raise ImucalError(f"path {short(self.path)} must be a file name", field="data.path",
                               fix="give the recording's path as text")
         for name in ("format", "time_unit", "unit"):
             if not isinstance(getattr(self, name), str):
-                raise ImucalError(f"{name} {getattr(self, name)!r} must be text", field=f"data.{name}")
+                raise ImucalError(f"{name} {short(getattr(self, name))} must be text", field=f"data.{name}")
         if self.delimiter is not None and not (isinstance(self.delimiter, str) and len(self.delimiter) == 1
                                                and self.delimiter not in "\r\n"):
             raise ImucalError(f"delimiter {short(self.delimiter)} must be one character", field="data.delimiter",
@@ -71,7 +71,7 @@ class DataSpec:
                 raise ImucalError(f"column {short(col)} for {short(role)} must be a header name or a "
                                   "0-based index below 10000", field=f"data.columns.{role if isinstance(role, str) and len(role) <= 20 else short(role, 20)}")
         if self.format not in FORMATS:
-            raise ImucalError(f"unknown format {self.format!r}", field="data.format",
+            raise ImucalError(f"unknown format {short(self.format)}", field="data.format",
                               fix=f"use one of {', '.join(FORMATS)}")
         if self.time_unit not in TIME_UNIT_CHOICES:
             raise ImucalError(f"unknown time unit {short(self.time_unit)}", field="data.time_unit",
@@ -399,7 +399,7 @@ def load_recording(spec: DataSpec | str | os.PathLike, base_dir: str | os.PathLi
                 elif want in names:
                     cols[role] = names.index(want)
                 else:
-                    raise ImucalError(f"column {want!r} (for {role}) not in header {names}",
+                    raise ImucalError(f"column {short(want)} (for {role}) not in header {short(names, 200)}",
                                       file=str(path), field=f"data.columns.{role}",
                                       fix="map the role to one of the header's names")
             else:

@@ -40,7 +40,9 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from .constants import RIGHT_ANGLE, STANDARD_GRAVITY
-from .errors import ImucalError
+from .errors import ImucalError, short
+from .limits import (MAX_DESIGN_GRID, MAX_DESIGN_POSES, MAX_RANDOM_SETS, MAX_SIM_POSES, MAX_STARTS, check_count,
+                     check_seed)
 from .observability import distinct_directions
 from .parameters import ANGLE_NAMES, BASE_NAMES
 
@@ -92,12 +94,16 @@ def _frame(angles: Sequence[float]) -> np.ndarray:
 def unit_rows(directions: np.ndarray) -> np.ndarray:
     d = np.atleast_2d(np.asarray(directions, float))
     if d.ndim != 2 or d.shape[1] != 3:
-        raise ImucalError(f"directions must be an (n, 3) array, got shape {d.shape}", field="poses")
-    nrm = np.linalg.norm(d, axis=1, keepdims=True)
-    if not np.all(np.isfinite(d)) or np.any(nrm < 1e-12):
+        raise ImucalError(f"directions must be an (n, 3) array, got shape {short(d.shape)}", field="poses")
+    if d.shape[0] > MAX_SIM_POSES:
+        raise ImucalError(f"{d.shape[0]} poses, above the limit of {MAX_SIM_POSES}", field="poses",
+                          fix="a calibration needs tens of poses")
+    top = np.max(np.abs(d), axis=1, keepdims=True) if d.size else np.ones((0, 1))
+    if not np.all(np.isfinite(d)) or np.any(top == 0):
         raise ImucalError("every pose must be a finite non-zero vector", field="poses",
                           fix="give each pose as the direction of gravity in the sensor frame, e.g. [0, 0, 1]")
-    return d / nrm
+    d = d / top  # scaled first: the norm of [1e308, 1e308, 0] overflows
+    return d / np.linalg.norm(d, axis=1, keepdims=True)
 
 
 def sensitivity(directions: np.ndarray, sensor: DesignSensor = DesignSensor(),
@@ -165,7 +171,7 @@ def criterion_value(F_norm: np.ndarray, criterion: str) -> float:
         return float(np.sum(1.0 / w)) if w[0] > 0 else math.inf
     if criterion == "E":
         return float(w[0])
-    raise ImucalError(f"unknown criterion {criterion!r}", field="criterion", fix="use D, A or E")
+    raise ImucalError(f"unknown criterion {short(criterion)}", field="criterion", fix="use D, A or E")
 
 
 # --- standard schemes -------------------------------------------------------------------------
@@ -202,7 +208,7 @@ def scheme_directions(name: str) -> np.ndarray:
     parts = name.split("+")
     if parts and all(p in ("faces", "edges", "corners") for p in parts):
         return cube_directions(name)
-    raise ImucalError(f"unknown scheme {name!r}", field="scheme",
+    raise ImucalError(f"unknown scheme {short(name)}", field="scheme",
                       fix="use faces, edges, corners, faces+edges, cube-24, wedge-24 or cube-26")
 
 
@@ -267,9 +273,9 @@ def evaluate(directions: np.ndarray, criterion: str = "D", noise: float = DEFAUL
              free: Sequence[str] = BASE_NAMES, label: str = "", check_distinct: bool = True) -> Design:
     """Score a pose set: criterion, det F and predicted standard errors at noise ``noise``."""
     if criterion not in CRITERIA:
-        raise ImucalError(f"unknown criterion {criterion!r}", field="criterion", fix="use D, A or E")
-    if not (math.isfinite(noise) and noise > 0):
-        raise ImucalError(f"noise {noise!r} must be a positive number of m/s^2", field="noise")
+        raise ImucalError(f"unknown criterion {short(criterion)}", field="criterion", fix="use D, A or E")
+    if isinstance(noise, bool) or not isinstance(noise, (int, float)) or not (math.isfinite(noise) and noise > 0):
+        raise ImucalError(f"noise {short(noise)} must be a positive number of m/s^2", field="noise")
     u = unit_rows(directions)
     free = tuple(free)
     k = _require_distinct(u, free, label) if check_distinct else distinct_directions(u)[0]
@@ -424,12 +430,13 @@ def _refine(U: np.ndarray, scorer: _Scorer, rowfn: _RowMap, step0: float = 0.05,
 def _setup(n: int, criterion: str, sensor: DesignSensor, gravity: float, free: tuple[str, ...]
            ) -> tuple[_Scorer, _RowMap]:
     if criterion not in CRITERIA:
-        raise ImucalError(f"unknown criterion {criterion!r}", field="criterion", fix="use D, A or E")
+        raise ImucalError(f"unknown criterion {short(criterion)}", field="criterion", fix="use D, A or E")
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < len(free):
         raise ImucalError(f"{n} poses cannot determine {len(free)} parameters", field="n",
                           fix=f"ask for at least {len(free)} poses (12 or more leave room to check the fit)")
-    if n > 1000:
-        raise ImucalError(f"{n} poses is more than a calibration needs", field="n", fix="ask for at most 1000")
+    if n > MAX_DESIGN_POSES:
+        raise ImucalError(f"{n} poses is more than a calibration needs", field="n",
+                          fix=f"ask for at most {MAX_DESIGN_POSES}")
     idx_p = _select(free)
     return _Scorer(criterion, len(free)), _RowMap(sensor, gravity, idx_p, sensor.column_scale(gravity)[idx_p])
 
@@ -453,10 +460,11 @@ def best_cube_subset(n: int, criterion: str = "D", noise: float = DEFAULT_NOISE,
 
     free = tuple(free)
     scorer, rowfn = _setup(n, criterion, sensor, gravity, free)
+    check_count(starts, "starts", 1, MAX_STARTS)
     if n > 26:
         raise ImucalError(f"a cube has 26 directions, not {n}", field="n")
     v, U = _exchange_starts(cube_directions("faces+edges+corners"), n, scorer, rowfn,
-                            np.random.default_rng(seed), starts, distinct=True)[0]
+                            np.random.default_rng(check_seed(seed)), starts, distinct=True)[0]
     return evaluate(U, criterion, noise, sensor, gravity, free, label="best cube subset", check_distinct=False)
 
 
@@ -474,7 +482,9 @@ def optimal_design(n: int, criterion: str = "D", noise: float = DEFAULT_NOISE,
 
     free = tuple(free)
     scorer, rowfn = _setup(n, criterion, sensor, gravity, free)
-    rng = np.random.default_rng(seed)
+    check_count(starts, "starts", 1, MAX_STARTS)
+    check_count(grid, "grid", 1, MAX_DESIGN_GRID)
+    rng = np.random.default_rng(check_seed(seed))
     cand = np.vstack([cube_directions("faces+edges+corners"), fibonacci_sphere(grid)])
     found = _exchange_starts(cand, n, scorer, rowfn, rng, starts, distinct=False)
     seeds = [scheme_directions(k) for k, m in SCHEMES.items() if m == n]
@@ -517,6 +527,8 @@ def compare(planned: Design, sensor: DesignSensor = DesignSensor(), gravity: flo
     """Score the common schemes with planned.n poses, the best subset of the 26 cube directions
     (exchange, several starts) and random sets, on the planned design's criterion and noise."""
     n, crit, free = planned.n, planned.criterion, planned.free
+    check_count(n_random, "n_random", 0, MAX_RANDOM_SETS)
+    check_seed(seed)
     others: list[Design] = []
     for name, k in SCHEMES.items():
         if k != n or name == planned.label:

@@ -27,7 +27,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from .errors import ImucalError
+from .errors import ImucalError, short
 from .model import Effect
 from .parameters import Parameter, Parameters
 
@@ -229,7 +229,7 @@ EFFECTS: dict[str, type[AxisEffect]] = {
 def make_effect(name: str, axes: Sequence[int] = (0, 1, 2)) -> AxisEffect:
     """The effect ``name`` on ``axes`` (0 = x, 1 = y, 2 = z)."""
     if name not in EFFECTS:
-        raise ImucalError(f"unknown effect {name!r}", field="effects",
+        raise ImucalError(f"unknown effect {short(name)}", field="effects",
                           fix=f"choose from {', '.join(EFFECTS)}")
     return EFFECTS[name](axes)
 
@@ -295,14 +295,14 @@ def effects_from_coefficients(spec: Mapping[str, Mapping[str, float]]) -> list[A
     out = []
     for name, coeffs in spec.items():
         if name not in EFFECTS:
-            raise ImucalError(f"unknown effect {name!r}", field=f"sensor.effects.{name}",
+            raise ImucalError(f"unknown effect {short(name)}", field="sensor.effects",
                               fix=f"choose from {', '.join(EFFECTS)}")
         proto = EFFECTS[name]((0, 1, 2))
         allowed = set(proto.coefficient_names) | ({proto.tref_name} if proto.uses_tref else set())
         coeffs = dict(coeffs or {})
         bad = sorted(set(coeffs) - allowed)
         if bad:
-            raise ImucalError(f"unknown parameter {bad[0]!r} of effect {name}", field=f"sensor.effects.{name}",
+            raise ImucalError(f"unknown parameter {short(bad[0])} of effect {name}", field=f"sensor.effects.{name}",
                               fix=f"use {', '.join(sorted(allowed))}")
         axes = tuple(a for a in range(3) if proto.coefficient(a) in coeffs)
         if not axes:

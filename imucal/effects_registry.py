@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from typing import Sequence
 
-from .errors import ImucalError
+from .errors import ImucalError, short
 
 
 def effects_from_specs(specs: Sequence, source: str | None = None) -> list:
@@ -17,11 +17,11 @@ def effects_from_specs(specs: Sequence, source: str | None = None) -> list:
     out = []
     for i, s in enumerate(specs):
         if s.name not in EFFECTS:
-            raise ImucalError(f"unknown effect {s.name!r}", file=source, field=f"fit.effects[{i}].name",
+            raise ImucalError(f"unknown effect {short(s.name)}", file=source, field=f"fit.effects[{i}].name",
                               fix=f"choose from {', '.join(EFFECTS)}")
         bad = [a for a in s.axes if a not in ("x", "y", "z")]
         if bad or not s.axes:
-            raise ImucalError(f"axes {list(s.axes)} must be a non-empty list of x, y, z", file=source,
+            raise ImucalError(f"axes {short(list(s.axes))} must be a non-empty list of x, y, z", file=source,
                               field=f"fit.effects[{i}].axes")
         out.append(make_effect(s.name, tuple("xyz".index(a) for a in s.axes)))
     return out

@@ -13,7 +13,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .errors import ImucalError
+from .errors import ImucalError, short
 from .limits import MAX_MAP_SAMPLES, check_count, check_seed
 from .worst_case import ANGLE_NAMES, AngleBox, gram_np
 
@@ -120,7 +120,7 @@ def compute_error_map(angles: Sequence[float] = PAPER_ANGLES, range_ms2: float =
     check_count(samples, "samples", 1000, MAX_MAP_SAMPLES)
     check_seed(seed)
     if not all(0 < lv < 1 for lv in levels):
-        raise ImucalError(f"levels {list(levels)} must be fractions in (0, 1)", field="levels",
+        raise ImucalError(f"levels {short(list(levels), 60)} must be fractions in (0, 1)", field="levels",
                           fix="e.g. 0.014 0.016 for 1.4 % and 1.6 %")
     pts = np.random.default_rng(seed).uniform(-range_ms2, range_ms2, (samples, 3))
     lam, vec = np.linalg.eigh(gram_np(angles))

@@ -13,6 +13,13 @@ MAX_STARTS = 10_000
 MAX_MAP_SAMPLES = 20_000_000
 #: Samples of one simulated recording (about 56 bytes each with temperature).
 MAX_SIM_SAMPLES = 50_000_000
+#: Poses of one simulated plan or scored pose plan (listed or random): a calibration uses tens.
+MAX_SIM_POSES = 10_000
+#: Poses plan-poses optimises (the exchange costs grow with N times the grid).
+MAX_DESIGN_POSES = 1000
+#: Candidate directions of the design grid, and random sets a design is compared with.
+MAX_DESIGN_GRID = 100_000
+MAX_RANDOM_SETS = 10_000
 #: Largest seed numpy's generators take.
 MAX_SEED = 2**63 - 1
 

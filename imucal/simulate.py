@@ -15,7 +15,8 @@ import numpy as np
 from .constants import RIGHT_ANGLE, STANDARD_GRAVITY
 from .errors import ImucalError, short
 from .model import frame_np, gram_det_np
-from .limits import MAX_SIM_SAMPLES, check_seed
+from .limits import MAX_SIM_POSES, MAX_SIM_SAMPLES, check_seed
+from .yamlio import check_structure, key_text
 
 
 def frame_matrix(angles: np.ndarray) -> np.ndarray:
@@ -242,8 +243,8 @@ def _section(d: object, where: str, allowed: tuple[str, ...], path: str | None) 
         raise ImucalError(f"section must be a mapping, got {type(d).__name__}", file=path, field=where)
     unknown = [k for k in d if k not in allowed]
     if unknown:
-        raise ImucalError(f"unknown key {unknown[0]!r}", file=path,
-                          field=str(unknown[0]) if where == "top level" else f"{where}.{unknown[0]}",
+        raise ImucalError(f"unknown key {short(unknown[0])}", file=path,
+                          field=key_text(unknown[0]) if where == "top level" else f"{where}.{key_text(unknown[0])}",
                           fix=f"allowed keys here: {', '.join(allowed)}")
     return dict(d)
 
@@ -252,15 +253,15 @@ def _vec3(v: object, path: str | None, where: str) -> tuple[float, float, float]
     vals = [v] * 3 if isinstance(v, (int, float)) and not isinstance(v, bool) else v
     if (not isinstance(vals, (list, tuple)) or len(vals) != 3
             or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x) for x in vals)):
-        raise ImucalError(f"{v!r} must be three finite numbers (or one for all axes)", file=path, field=where)
+        raise ImucalError(f"{short(v)} must be three finite numbers (or one for all axes)", file=path, field=where)
     return tuple(float(x) for x in vals)  # type: ignore[return-value]
 
 
 def _number(v: object, path: str | None, where: str, positive: bool = False, allow_zero: bool = True) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
-        raise ImucalError(f"{v!r} is not a finite number", file=path, field=where)
+        raise ImucalError(f"{short(v)} is not a finite number", file=path, field=where)
     if positive and (v < 0 or (v == 0 and not allow_zero)):
-        raise ImucalError(f"{v!r} must be {'non-negative' if allow_zero else 'positive'}", file=path, field=where)
+        raise ImucalError(f"{short(v)} must be {'non-negative' if allow_zero else 'positive'}", file=path, field=where)
     return float(v)
 
 
@@ -270,13 +271,15 @@ def simulation_from_dict(d: object, path: str | None = None) -> SimulationConfig
     Top level: ``seed``, ``gravity`` [m/s^2], ``sensor``, ``plan``, ``temperature`` (omit or null
     for a recording without a temp column). See configs/simulate_example.yaml.
     """
+    check_structure(d, path)
     if not isinstance(d, dict):
         raise ImucalError("top level must be a mapping", file=path, field="top level",
                           fix="see configs/simulate_example.yaml")
     top = _section(d, "top level", ("seed", "gravity", "sensor", "plan", "temperature"), path)
-    seed = top.get("seed", 0)
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise ImucalError(f"seed {seed!r} must be a non-negative integer", file=path, field="seed")
+    try:
+        seed = check_seed(top.get("seed", 0))
+    except ImucalError as exc:
+        raise ImucalError(exc.message, file=path, field="seed", fix=exc.fix) from None
     gravity = _number(top.get("gravity", STANDARD_GRAVITY), path, "gravity", positive=True, allow_zero=False)
     rng = np.random.default_rng(seed)
     # sensor: a random preset drawn from the seed, explicit values override it
@@ -284,7 +287,7 @@ def simulation_from_dict(d: object, path: str | None = None) -> SimulationConfig
                                                  "effects"), path)
     preset = sd.get("preset", "mems_counts")
     if preset not in SENSOR_PRESETS:
-        raise ImucalError(f"unknown preset {preset!r}", file=path, field="sensor.preset",
+        raise ImucalError(f"unknown preset {short(preset)}", file=path, field="sensor.preset",
                           fix=f"use one of {', '.join(SENSOR_PRESETS)}")
     base = {"mems_counts": lambda: mems_counts_sensor(rng), "si": lambda: si_sensor(rng),
             "none": SensorSpec}[preset]()
@@ -301,7 +304,11 @@ def simulation_from_dict(d: object, path: str | None = None) -> SimulationConfig
     if "quantum" in sd:
         kw["quantum"] = _number(sd["quantum"], path, "sensor.quantum", positive=True)
     if "unit" in sd:
-        kw["unit"] = str(sd["unit"])
+        unit = sd["unit"]
+        if not (isinstance(unit, str) and 0 < len(unit) <= 20 and unit.isprintable()):
+            raise ImucalError(f"unit {short(unit)} must be a short name", file=path, field="sensor.unit",
+                              fix="e.g. unit: raw or unit: m/s^2")
+        kw["unit"] = unit
     effects = sd.get("effects") or {}
     if not isinstance(effects, dict) or not all(isinstance(v, dict) for v in effects.values()):
         raise ImucalError("must map effect names to {parameter: value}", file=path, field="sensor.effects",
@@ -326,18 +333,26 @@ def simulation_from_dict(d: object, path: str | None = None) -> SimulationConfig
                                              "vibration", "rate"), path)
     dirs = pd.get("directions", "faces+edges")
     n_random = pd.get("n_random", 0)
-    if isinstance(n_random, bool) or not isinstance(n_random, int) or n_random < 0:
-        raise ImucalError(f"n_random {n_random!r} must be a non-negative integer", file=path, field="plan.n_random")
+    if isinstance(n_random, bool) or not isinstance(n_random, int) or not 0 <= n_random <= MAX_SIM_POSES:
+        raise ImucalError(f"n_random {short(n_random)} must be an integer from 0 to {MAX_SIM_POSES}", file=path,
+                          field="plan.n_random", fix="a calibration needs tens of poses")
     if isinstance(dirs, str):
         if dirs not in DIRECTION_SETS:
-            raise ImucalError(f"unknown direction set {dirs!r}", file=path, field="plan.directions",
+            raise ImucalError(f"unknown direction set {short(dirs)}", file=path, field="plan.directions",
                               fix=f"use one of {', '.join(DIRECTION_SETS)} or a list of [x, y, z]")
         parts = [] if dirs == "random" else [cube_directions(dirs)]
     else:
-        arr = np.asarray(dirs, float) if isinstance(dirs, list) else np.empty(0)
-        if arr.ndim != 2 or arr.shape[1] != 3 or not np.all(np.isfinite(arr)) or np.any(np.linalg.norm(arr, axis=1) == 0):
+        if not (isinstance(dirs, list) and 0 < len(dirs) <= MAX_SIM_POSES and all(
+                isinstance(r, list) and len(r) == 3
+                and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in r) for r in dirs)):
+            raise ImucalError(f"directions must be a set name or a list of at most {MAX_SIM_POSES} [x, y, z]",
+                              file=path, field="plan.directions")
+        arr = np.asarray(dirs, float)
+        largest = np.max(np.abs(arr), axis=1, keepdims=True)
+        if not np.all(np.isfinite(arr)) or np.any(largest == 0):
             raise ImucalError("directions must be a set name or a list of non-zero [x, y, z]", file=path,
                               field="plan.directions")
+        arr = arr / largest  # scaled first: the norm of [1e308, 1e308, 0] overflows
         parts = [arr / np.linalg.norm(arr, axis=1, keepdims=True)]
     if n_random:
         parts.append(random_directions(n_random, rng))
@@ -480,7 +495,7 @@ def draw_effect_case(seed: int, effect: str | None = "random", axes: tuple[int, 
                 if temperature is not None or "temp" not in EFFECTS[n].covariates]
         name = pool[int(rng.integers(len(pool)))] if effect == "random" else effect
         if name not in EFFECTS:
-            raise ImucalError(f"unknown effect {name!r}", field="effect", fix=f"choose from {', '.join(EFFECTS)}")
+            raise ImucalError(f"unknown effect {short(name)}", field="effect", fix=f"choose from {', '.join(EFFECTS)}")
         subsets = _axis_subsets()
         ax = tuple(axes) if axes is not None else subsets[int(rng.integers(len(subsets)))]
         lo, hi = (snr, snr) if isinstance(snr, (int, float)) else snr

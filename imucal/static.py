@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import ImucalError
+from .errors import ImucalError, short
 
 #: Batches per interval for the batch-means estimate of a mean's noise.
 _BATCHES = 8
@@ -40,15 +40,15 @@ class StaticSettings:
         for name in ("window", "min_duration"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) and v > 0):
-                raise ImucalError(f"{name} {v!r} must be a positive number of seconds",
+                raise ImucalError(f"{name} {short(v)} must be a positive number of seconds",
                                   field=f"static.{name}")
         if not (isinstance(self.trim, (int, float)) and np.isfinite(self.trim) and self.trim >= 0):
-            raise ImucalError(f"trim {self.trim!r} must be a non-negative number of seconds",
+            raise ImucalError(f"trim {short(self.trim)} must be a non-negative number of seconds",
                               field="static.trim")
         if self.threshold is not None and not (isinstance(self.threshold, (int, float))
                                                and not isinstance(self.threshold, bool)
                                                and np.isfinite(self.threshold) and self.threshold > 0):
-            raise ImucalError(f"threshold {self.threshold!r} must be positive", field="static.threshold",
+            raise ImucalError(f"threshold {short(self.threshold)} must be positive", field="static.threshold",
                               fix="omit it to set it automatically from the data")
 
 

@@ -83,8 +83,33 @@ def _check_values(obj: Any, depth: int = 0, where: str = "", seen: set | None = 
     elif isinstance(obj, list):
         for v in obj:
             _check_values(v, depth + 1, where, seen)
-    elif isinstance(obj, int) and not isinstance(obj, bool) and abs(obj) >= 2**1024:
-        raise _TooLarge(where[:80] or "top level")
+    elif isinstance(obj, int) and not isinstance(obj, bool) and abs(obj) >= 2**1023:
+        try:
+            float(obj)
+        except OverflowError:  # rounds beyond the largest float
+            raise _TooLarge(where[:80] or "top level") from None
+
+
+def key_text(key: Any) -> str:
+    """A mapping key as a field name in a message: plain when short and printable, else cut."""
+    if isinstance(key, str) and 0 < len(key) <= 40 and key.isprintable():
+        return key
+    return short(key, 40)
+
+
+def check_structure(obj: Any, path: str | None = None, field: str = "config") -> None:
+    """Refuse integers no float holds and nesting deeper than MAX_DEPTH, in one line.
+
+    read_yaml applies it to every file; config_from_dict and simulation_from_dict apply it to
+    mappings a notebook user builds, so both paths refuse the same values.
+    """
+    try:
+        _check_values(obj)
+    except _TooLarge as exc:
+        raise ImucalError("integer is too large for a float", file=path, field=str(exc),
+                          fix="give a number within the field's range") from None
+    except _Refused as exc:
+        raise ImucalError(f"is refused: {exc}", file=path, field=field, fix=exc.fix) from None
 
 
 def read_yaml(path: str | os.PathLike, field: str, fix: str) -> Any:
@@ -97,8 +122,6 @@ def read_yaml(path: str | os.PathLike, field: str, fix: str) -> Any:
             obj = loader.get_single_data()
         finally:
             loader.dispose()
-        _check_values(obj)
-        return obj
     except _TooLarge as exc:
         raise ImucalError("integer is too large for a float", file=str(p), field=str(exc),
                           fix="give a number within the field's range") from None
@@ -112,3 +135,5 @@ def read_yaml(path: str | os.PathLike, field: str, fix: str) -> Any:
     except (ValueError, TypeError, RecursionError, OverflowError) as exc:  # e.g. "!!timestamp 2001-02-30"
         raise ImucalError(f"is not valid YAML ({type(exc).__name__}: {short(str(exc), 80)})", file=str(p),
                           field=field, fix="check indentation and quoting") from None
+    check_structure(obj, str(p), field)
+    return obj

@@ -20,15 +20,14 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import dataclasses
 
-    from ..errors import ImucalError
+    from ..limits import check_seed
     from ..output import OutputSet, check_outputs
     from ..simulate import load_simulation_config
 
     check_outputs([args.config], [args.out, args.truth])
     cfg = load_simulation_config(args.config)
     if args.seed is not None:
-        if args.seed < 0:
-            raise ImucalError(f"seed {args.seed} must be non-negative", field="--seed")
+        check_seed(args.seed, "--seed")
         cfg = dataclasses.replace(cfg, seed=args.seed)
     sim = cfg.run()
     with OutputSet([args.config]) as o:
