@@ -9,21 +9,21 @@ from __future__ import annotations
 __version__ = "0.1.0"
 
 _LAZY = {
-    "Calibration": "imucal.calibration",
-    "load_calibration": "imucal.calibration",
-    "FitResult": "imucal.fit",
-    "fit": "imucal.fit",
+    "Calibration": "imucal.calibration.frozen",
+    "load_calibration": "imucal.calibration.frozen",
+    "FitResult": "imucal.solve.fit",
+    "fit": "imucal.solve.fit",
     "calibrate": "imucal.api",
     "recording_from_arrays": "imucal.api",
-    "summary": "imucal.report",
-    "fit_report": "imucal.report",
-    "Recording": "imucal.data",
-    "load_recording": "imucal.data",
-    "detect_static": "imucal.static",
-    "Intervals": "imucal.static",
-    "Parameters": "imucal.parameters",
+    "summary": "imucal.report.text",
+    "fit_report": "imucal.report.text",
+    "Recording": "imucal.data.load",
+    "load_recording": "imucal.data.load",
+    "detect_static": "imucal.data.static",
+    "Intervals": "imucal.data.static",
+    "Parameters": "imucal.model.parameters",
     "ImucalError": "imucal.errors",
-    "normal_gravity": "imucal.gravity",
+    "normal_gravity": "imucal.model.gravity",
 }
 
 

@@ -14,10 +14,10 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .config import FitSettings, GravitySpec, RunConfig, config_from_dict
-from .data import DataSpec, Recording, infer_time_unit, TIME_UNITS, MIN_RATE_HZ, MAX_RATE_HZ
-from .errors import ImucalError
-from .pipeline import CalibrationRun, calibrate as _calibrate_config
+from imucal.config.run import FitSettings, GravitySpec, RunConfig, config_from_dict
+from imucal.data.load import DataSpec, Recording, infer_time_unit, TIME_UNITS, MIN_RATE_HZ, MAX_RATE_HZ
+from imucal.errors import ImucalError
+from imucal.pipeline import CalibrationRun, calibrate as _calibrate_config
 
 
 def _columns(acc: Any, t: Any, temp: Any) -> tuple[np.ndarray, Any, Any]:

@@ -8,20 +8,20 @@ from pathlib import Path
 
 import numpy as np
 
-from .calibration import Calibration, now_utc
-from .config import RunConfig
+from imucal.calibration.frozen import Calibration, now_utc
+from imucal.config.run import RunConfig
 import math
 
-from .data import Recording, load_recording, rails
-from .errors import ImucalError
-from .fit import FitData, FitResult, fit, jacobian_rows
-from .initial import InitialGuess, ellipsoid_guess
-from .model import SensorModel, build_model
-from .observability import Observability, analyse, distinct_directions, require_observable, thresholds
-from .constants import RIGHT_ANGLE
-from .parameters import ANGLE_NAMES, Parameters, base_parameters
-from .static import Intervals, detect_static
-from .stats import chi2_sf
+from imucal.data.load import Recording, load_recording, rails
+from imucal.errors import ImucalError
+from imucal.solve.fit import FitData, FitResult, fit, jacobian_rows
+from imucal.solve.initial import InitialGuess, ellipsoid_guess
+from imucal.model.sensor import SensorModel, build_model
+from imucal.solve.observability import Observability, analyse, distinct_directions, require_observable, thresholds
+from imucal.constants import RIGHT_ANGLE
+from imucal.model.parameters import ANGLE_NAMES, Parameters, base_parameters
+from imucal.data.static import Intervals, detect_static
+from imucal.solve.stats import chi2_sf
 
 
 @dataclass(frozen=True)
@@ -199,15 +199,15 @@ def calibrate(config: RunConfig, recording: Recording | None = None) -> Calibrat
         raise ImucalError("only one static interval found: the log holds a single still pose", file=rec.source,
                           field="intervals", fix="record 12 to 50 orientations with movement between them")
     gravity, gsource = config.gravity.resolve()
-    from .effects_registry import effects_from_specs
+    from imucal.model.effects_registry import effects_from_specs
 
     model = build_model(effects_from_specs(config.fit.effects, src))
     angles_free = not set(ANGLE_NAMES) <= set(config.fit.fix)
     with _noting_drops(dropped):  # too few poses left: the refusal says that clipping took some
         guess, dirs, n_distinct = initial_guess(iv, gravity, angles_free, rec.source)
         params = make_parameters(guess, config, gravity, model, config.data.unit)
-        if model.effects:  # covariate spread, enough intervals, reference temperature (imucal.effects)
-            from .effects import prepare_parameters
+        if model.effects:  # covariate spread, enough intervals, reference temperature (imucal.model.effects)
+            from imucal.model.effects import prepare_parameters
 
             params = prepare_parameters(model.effects, params, {"temp": iv.temp, "time": iv.t_mid}, iv.n,
                                         rec.source)

@@ -146,11 +146,11 @@ VARIANTS = [("gen", "generated imucal_apply (L (raw - s))", "imucal_apply_batch"
 
 
 def _calibration(path: str | None, work: Path):
-    from imucal.calibration import load_calibration
+    from imucal.calibration.frozen import load_calibration
 
     if path:
         return load_calibration(path)
-    from imucal.config import config_from_dict
+    from imucal.config.run import config_from_dict
     from imucal.pipeline import calibrate
 
     run = calibrate(config_from_dict({"data": {"path": str(XSENS)}, "gravity": {"value": 9.81744}}))
@@ -175,8 +175,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default=str(ROOT / "docs" / "codegen_bench.md"), help="markdown output")
     args = ap.parse_args(argv)
 
-    from imucal.codegen import c_literal, write_c
-    from imucal.output import write_text_atomic
+    from imucal.export.codegen import c_literal, write_c
+    from imucal.files.output import write_text_atomic
 
     work = Path(tempfile.mkdtemp(prefix="imucal-bench-"))
     try:

@@ -37,7 +37,7 @@ G = 9.80665  # m/s^2, simulations (imucal.constants.STANDARD_GRAVITY)
 
 # --- cases run inside a child process -----------------------------------------------------------
 def _sim_means(n: int, seed: int = 0):
-    from imucal.simulate import frame_matrix, mems_counts_sensor, random_directions
+    from imucal.analysis.simulate import frame_matrix, mems_counts_sensor, random_directions
 
     rng = np.random.default_rng(seed)
     sensor = mems_counts_sensor(np.random.default_rng(7))
@@ -47,18 +47,18 @@ def _sim_means(n: int, seed: int = 0):
 
 
 def _params(means: np.ndarray):
-    from imucal.initial import ellipsoid_guess
-    from imucal.parameters import base_parameters
+    from imucal.solve.initial import ellipsoid_guess
+    from imucal.model.parameters import base_parameters
 
     g = ellipsoid_guess(means, G)
     return base_parameters(g.s, g.b, g.angles, raw_unit="raw", gravity=G)
 
 
 def case_fit_means(n: int, repeats: int) -> dict:
-    from imucal.fit import FitData, fit
-    from imucal.model import build_model
+    from imucal.solve.fit import FitData, fit
+    from imucal.model.sensor import build_model
 
-    from imucal.effects import make_effect
+    from imucal.model.effects import make_effect
 
     sensor, clean, rng = _sim_means(n)
     sig = 0.2  # counts per mean (4 counts per sample, 400 samples)
@@ -92,8 +92,8 @@ def case_fit_means(n: int, repeats: int) -> dict:
 
 
 def case_fit_samples(n: int, repeats: int) -> dict:
-    from imucal.fit import FitData, fit
-    from imucal.model import build_model
+    from imucal.solve.fit import FitData, fit
+    from imucal.model.sensor import build_model
 
     n_poses = 50
     sensor, clean, rng = _sim_means(n_poses)
@@ -117,8 +117,8 @@ def case_fit_samples(n: int, repeats: int) -> dict:
 def case_apply(n: int, repeats: int) -> dict:
     import tracemalloc
 
-    from imucal.calibration import Calibration
-    from imucal.parameters import base_parameters
+    from imucal.calibration.frozen import Calibration
+    from imucal.model.parameters import base_parameters
 
     sensor, clean, rng = _sim_means(30)
     params = base_parameters(sensor.s, sensor.b, sensor.angles, raw_unit="raw", gravity=G)
@@ -284,7 +284,7 @@ def markdown(r: dict, args) -> str:
     if fm:
         L += ["## Fit time against the number of interval means", "",
               "Random directions, raw-count sensor (16384 LSB/g), 0.2 counts noise per mean. The base model is "
-              "fitted by the vectorised NLP (`imucal/samples.py`); models with effects by the CasADi map NLP over "
+              "fitted by the vectorised NLP (`imucal/solve/samples.py`); models with effects by the CasADi map NLP over "
               "the symbolic model, timed here on the same rows with an effect held at zero. `first` includes "
               "building the solver for that problem shape; later fits of the same shape reuse it.", "",
               "| intervals | first [s] | median [s] | CasADi map NLP (models with effects), median [s] | "
@@ -304,8 +304,8 @@ def markdown(r: dict, args) -> str:
     fs = r.get("fit-samples")
     if fs:
         L += ["## Samples mode: fit time against the number of samples", "",
-              "50 poses, 4 counts white noise per sample; `imucal.fit.fit` with `mode=\"samples\"` (vectorised "
-              "residuals and Gauss-Newton Hessian, `imucal/samples.py`). Time of the fit call only (data in memory).",
+              "50 poses, 4 counts white noise per sample; `imucal.solve.fit.fit` with `mode=\"samples\"` (vectorised "
+              "residuals and Gauss-Newton Hessian, `imucal/solve/samples.py`). Time of the fit call only (data in memory).",
               "", "| samples | median [s] | min [s] | IPOPT iterations | peak RSS [MB] |", "|---|---|---|---|---|"]
         for x in fs:
             if "error" in x:
@@ -369,7 +369,7 @@ def main(argv: list[str] | None = None) -> int:
         r["apply"] = run_child("apply", n_apply, 3 if args.quick else 7)
         r["apply_1thread"] = run_child("apply", n_apply, 3 if args.quick else 7, {"OPENBLAS_NUM_THREADS": "1"})
     text = markdown(r, args)
-    from imucal.output import write_text_atomic
+    from imucal.files.output import write_text_atomic
 
     write_text_atomic(args.out, text + "\n")
     print(text)

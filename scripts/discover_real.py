@@ -17,11 +17,11 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from imucal.config import config_from_dict, load_config  # noqa: E402
-from imucal.discover import discover  # noqa: E402
-from imucal.discover_plots import FIGURES  # noqa: E402
+from imucal.config.run import config_from_dict, load_config  # noqa: E402
+from imucal.analysis.discover import discover  # noqa: E402
+from imucal.report.discover_figures import FIGURES  # noqa: E402
 from imucal.errors import ImucalError  # noqa: E402
-from imucal.output import OutputSet, write_text_atomic  # noqa: E402
+from imucal.files.output import OutputSet, write_text_atomic  # noqa: E402
 
 SHARED = ROOT.parent / "shared" / "data" / "real"
 
@@ -101,7 +101,7 @@ def example(out: Path) -> None:
     """The figures of docs/discover.md: configs/simulate_example.yaml (simulated, bias_temperature on x)."""
     import tempfile
 
-    from imucal.simulate import load_simulation_config
+    from imucal.analysis.simulate import load_simulation_config
 
     sim = load_simulation_config(str(ROOT / "configs" / "simulate_example.yaml")).run()
     with tempfile.TemporaryDirectory() as tmp:

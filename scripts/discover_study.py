@@ -1,6 +1,6 @@
 """Detection study for `imucal discover`: how often it names the hidden effect, by size and noise.
 
-Each case is a seeded simulated recording (imucal.simulate.draw_effect_case: random sensor in raw
+Each case is a seeded simulated recording (imucal.analysis.simulate.draw_effect_case: random sensor in raw
 counts or m/s^2, 18-26 poses of 3 s at 100 Hz, warm-up plus a non-monotonic temperature swing)
 with one effect on a random axis subset, or none. Discover runs without being told anything.
 
@@ -30,7 +30,7 @@ sys.path.insert(0, str(ROOT))
 import numpy as np  # noqa: E402
 
 from imucal.constants import STANDARD_GRAVITY  # noqa: E402
-from imucal.effects import EFFECTS  # noqa: E402
+from imucal.model.effects import EFFECTS  # noqa: E402
 
 #: "reliably": the right effect and axes in at least this share of the cases.
 RELIABLE = 0.9
@@ -39,9 +39,9 @@ RELIABLE = 0.9
 def run_case(args: tuple) -> dict:
     """Simulate one case, run discover, classify the outcome."""
     seed, effect, snr, noise_mg = args
-    from imucal.config import config_from_dict
-    from imucal.discover import discover
-    from imucal.simulate import draw_effect_case
+    from imucal.config.run import config_from_dict
+    from imucal.analysis.discover import discover
+    from imucal.analysis.simulate import draw_effect_case
 
     if effect == "pair":
         return run_pair(seed, snr, noise_mg)
@@ -76,9 +76,9 @@ def run_case(args: tuple) -> dict:
 
 def run_pair(seed: int, snr: float, noise_mg: float) -> dict:
     """Two different effects, one axis each, same SNR: are both named, and nothing else?"""
-    from imucal.config import config_from_dict
-    from imucal.discover import discover
-    from imucal.simulate import draw_pair_case, pair_config
+    from imucal.config.run import config_from_dict
+    from imucal.analysis.discover import discover
+    from imucal.analysis.simulate import draw_pair_case, pair_config
 
     c1, c2 = draw_pair_case(seed, snr=snr, noise_mg=noise_mg)
     with tempfile.TemporaryDirectory() as d:
@@ -139,7 +139,7 @@ def main(argv: list[str] | None = None) -> int:
     rows.sort(key=lambda r: r["seed"])
     wall = time.perf_counter() - t0
     text = report(rows, a, wall)
-    from imucal.output import write_text_atomic
+    from imucal.files.output import write_text_atomic
 
     write_text_atomic(a.out, text)
     print(text)

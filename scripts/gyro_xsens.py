@@ -21,13 +21,13 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from imucal.config import load_config  # noqa: E402
+from imucal.config.run import load_config  # noqa: E402
 from imucal.gyro import GyroOptions, fit_gyro, gyro_data_from_run  # noqa: E402
 from imucal.gyro.evaluate import direction_errors_deg, rms  # noqa: E402
 from imucal.gyro.fit import cross_validate  # noqa: E402
 from imucal.gyro.segments import GyroData, motion_segments  # noqa: E402
-from imucal.output import write_text_atomic  # noqa: E402
-from imucal.peers import read_imutk_calib  # noqa: E402
+from imucal.files.output import write_text_atomic  # noqa: E402
+from imucal.export.peers import read_imutk_calib  # noqa: E402
 from imucal.pipeline import calibrate  # noqa: E402
 
 REAL = ROOT.parent.parent / "shared" / "data" / "real"

@@ -2,18 +2,18 @@
 """Monte-Carlo check: are the standard errors imucal reports true? (issue 6)
 
 For each setting (a pose scheme and a sensor), simulate many recordings of the same sensor,
-fit each with ``imucal.fit.fit`` exactly as the pipeline does (ellipsoid guess, bounds, weights
+fit each with ``imucal.solve.fit.fit`` exactly as the pipeline does (ellipsoid guess, bounds, weights
 from the noise of each interval mean, covariance scaled by the reduced chi-square), and compare:
 
 * the empirical scatter of the estimates with the Cramér-Rao bound F^-1 of the pose set and
-  noise (``imucal.design.fisher``): ratio of standard deviations, 1.0 = efficient estimator;
+  noise (``imucal.analysis.design.fisher``): ratio of standard deviations, 1.0 = efficient estimator;
 * the standard errors the fit reports with the empirical scatter;
 * the coverage of the reported 95 % intervals, three ways: scaled covariance with Student-t
   quantiles (dof = n - p), scaled covariance with 1.96, unscaled covariance with 1.96.
 
 Interval means are simulated directly (truth + Gaussian noise of the size of a 4 s hold at
 100 Hz), which is exact for the means fit; a subset runs the full time series through static
-detection (``imucal.simulate`` + ``imucal.static``) so that the detector's noise estimate is
+detection (``imucal.analysis.simulate`` + ``imucal.data.static``) so that the detector's noise estimate is
 in the loop. The 6-face scheme (and the flat "24-position" scheme, 6 faces x 4 turns) cannot
 determine the angles: the 9-parameter fit is refused there and the 6-parameter model (angles
 at 90 deg) is fitted instead, in samples mode for the 6 faces (6 means leave no dof).
@@ -64,7 +64,7 @@ def make_sensor(kind: str, orthogonal: bool = False):
     from dataclasses import replace
 
     from imucal.constants import RIGHT_ANGLE
-    from imucal.simulate import mems_counts_sensor, si_sensor
+    from imucal.analysis.simulate import mems_counts_sensor, si_sensor
 
     rng = np.random.default_rng(SENSOR_SEEDS[kind])
     s = si_sensor(rng) if kind == "si" else mems_counts_sensor(rng)
@@ -83,7 +83,7 @@ _PLANNED: dict = {}
 
 def fixed_directions(scheme: str) -> np.ndarray | None:
     """The scheme's directions (None for per-replicate random poses)."""
-    from imucal.design import optimal_design, scheme_directions
+    from imucal.analysis.design import optimal_design, scheme_directions
 
     if scheme.startswith("random-"):
         return None
@@ -96,16 +96,16 @@ def fixed_directions(scheme: str) -> np.ndarray | None:
 
 
 def free_names_for(dirs: np.ndarray) -> tuple[str, ...]:
-    from imucal.design import SIX_NAMES
-    from imucal.observability import distinct_directions
-    from imucal.parameters import BASE_NAMES
+    from imucal.analysis.design import SIX_NAMES
+    from imucal.solve.observability import distinct_directions
+    from imucal.model.parameters import BASE_NAMES
 
     return BASE_NAMES if distinct_directions(dirs)[0] >= 9 else SIX_NAMES
 
 
 def refusal_message(setting: Setting) -> str | None:
     """What the pipeline says when asked for 9 parameters with this scheme (None: accepted)."""
-    from imucal.design import DesignSensor, evaluate
+    from imucal.analysis.design import DesignSensor, evaluate
     from imucal.errors import ImucalError
 
     dirs = fixed_directions(setting.scheme)
@@ -129,7 +129,7 @@ def _crlb_std(dirs: np.ndarray, sigma_raw_mean: np.ndarray, sensor, free) -> np.
     from dataclasses import replace
 
     from imucal.constants import RIGHT_ANGLE
-    from imucal.design import DesignSensor, crlb, fisher, residual_sigma
+    from imucal.analysis.design import DesignSensor, crlb, fisher, residual_sigma
 
     ds = DesignSensor(tuple(sensor.s), tuple(sensor.b), tuple(sensor.angles))
     if len(free) == 6:
@@ -139,9 +139,9 @@ def _crlb_std(dirs: np.ndarray, sigma_raw_mean: np.ndarray, sensor, free) -> np.
 
 
 def _params(means: np.ndarray, free, unit: str):
-    from imucal.design import SIX_NAMES
-    from imucal.initial import ellipsoid_guess
-    from imucal.parameters import ANGLE_NAMES, base_parameters
+    from imucal.analysis.design import SIX_NAMES
+    from imucal.solve.initial import ellipsoid_guess
+    from imucal.model.parameters import ANGLE_NAMES, base_parameters
 
     general = len(free) == 9
     guess = ellipsoid_guess(means, G, general=general)
@@ -151,7 +151,7 @@ def _params(means: np.ndarray, free, unit: str):
 
 def _newton_ratio(data, res, model, crlb_std) -> float:
     """Largest remaining Gauss-Newton step at the estimate, in units of the CRLB std."""
-    from imucal.fit import jacobian_rows
+    from imucal.solve.fit import jacobian_rows
 
     J = jacobian_rows(data, res.params, model, G)  # columns times each parameter's scale
     r = jacobian_rows(data, res.params, model, G, residuals=True)
@@ -162,9 +162,9 @@ def _newton_ratio(data, res, model, crlb_std) -> float:
 
 
 def one_replicate(setting: Setting, rep: int, seed: int) -> dict:
-    from imucal.fit import FitData, fit
-    from imucal.model import build_model
-    from imucal.simulate import frame_matrix, random_directions
+    from imucal.solve.fit import FitData, fit
+    from imucal.model.sensor import build_model
+    from imucal.analysis.simulate import frame_matrix, random_directions
 
     rng = np.random.default_rng([seed, zlib.crc32(f"{setting.name}/{setting.sensor}".encode()), rep])
     sensor = make_sensor(setting.sensor, setting.orthogonal)
@@ -176,8 +176,8 @@ def one_replicate(setting: Setting, rep: int, seed: int) -> dict:
     nps = noise_per_sample(sensor) * setting.noise_factor
     out: dict = {"free": free}
     if setting.series:
-        from imucal.simulate import PosePlan, simulate
-        from imucal.static import detect_static
+        from imucal.analysis.simulate import PosePlan, simulate
+        from imucal.data.static import detect_static
 
         sim = simulate(sensor, PosePlan(dirs, hold=HOLD_SAMPLES / 100.0, transition=2.0, rate=100.0), G,
                        seed=int(rng.integers(2**31)))
@@ -374,7 +374,7 @@ def _sensor_line(kind: str) -> str:
 
 
 def _table(summ: list[Summary], attr: str, fmt: str, lo: float | None = None, hi: float | None = None) -> list[str]:
-    from imucal.parameters import BASE_NAMES
+    from imucal.model.parameters import BASE_NAMES
 
     L = ["| setting | sensor | free | " + " | ".join(BASE_NAMES) + " |",
          "|---|---|---|" + "---|" * len(BASE_NAMES)]
@@ -403,7 +403,7 @@ def write_report(summ: list[Summary], args, elapsed: float, path: Path) -> None:
          "`--report-only` rewrites this page from the saved recordings). Do not edit by hand.", "",
          "## What is simulated", "",
          f"* {args.n} recordings per setting ({args.n_series} for the time-series rows), each fitted by "
-         "`imucal.fit.fit` as the pipeline does: ellipsoid initial guess, angle bounds 90 deg +- 2 %, weights "
+         "`imucal.solve.fit.fit` as the pipeline does: ellipsoid initial guess, angle bounds 90 deg +- 2 %, weights "
          "1/sigma^2 from the noise of each interval mean, covariance (J^T W J)^-1 scaled by the reduced chi-square.",
          "* Interval means are simulated directly: truth (Eq. theModel with Lemma 1) plus Gaussian noise of a "
          f"{HOLD_SAMPLES}-sample mean. Rows marked [time series] simulate the whole recording (4 s holds, 2 s "
@@ -415,7 +415,7 @@ def write_report(summ: list[Summary], args, elapsed: float, path: Path) -> None:
          "(the same 24 positions with the cube on a 30 deg wedge: 24 distinct directions), `random-24` (24 "
          "uniformly random directions, new for every recording; the CRLB is computed per recording). Rows "
          "marked (noise xK) multiply the SI sensor's noise by K to find where the estimator stops being linear.",
-         "* The CRLB is F^-1 with F = J^T diag(1/sigma_k^2) J at the truth (`imucal.design.fisher`), sigma_k the "
+         "* The CRLB is F^-1 with F = J^T diag(1/sigma_k^2) J at the truth (`imucal.analysis.design.fisher`), sigma_k the "
          "noise of |a_k| - g propagated from the raw noise of mean k. Errors are standardised per recording, "
          "z = (estimate - truth) / sqrt(CRLB_ii), so fixed and random designs are treated alike.", "",
          f"Statistical resolution at {args.n} recordings: a std ratio is known to about +- {n_ci:.3f} (95 %), a "
@@ -445,7 +445,7 @@ def write_report(summ: list[Summary], args, elapsed: float, path: Path) -> None:
     L += ["", "## Mean reported std / empirical std", "",
           "Under lmfit's scale_covar the reported std is the true one times sqrt(redchi), whose mean is "
           "E[sqrt(chi2_dof/dof)] < 1 (column `expected`): e.g. 0.921 at dof 3, 0.959 at dof 6, 0.983 at dof 15.", ""]
-    from imucal.parameters import BASE_NAMES
+    from imucal.model.parameters import BASE_NAMES
 
     L += ["| setting | sensor | recordings | expected | " + " | ".join(BASE_NAMES) + " |", "|---|---|---|---|" + "---|" * 9]
     for s in summ:

@@ -7,7 +7,7 @@ authors' gravity), then evaluate on imucal's static intervals
   * the authors' RMS on the same intervals, computed with their own formula
     (imu_tk: a = T K (raw - b); tomisuarez: a = T K (raw + b); mad-lab-fau: a = R^-1 K^-1 (raw - b)),
 which needs no conversion. The authors' parameters are also converted to the paper's nine
-(``imucal.peers.AffineCalibration``: rows of M^-1 are b_i e_i^T) and shown beside ours.
+(``imucal.export.peers.AffineCalibration``: rows of M^-1 are b_i e_i^T) and shown beside ours.
 Repeatability: the four recordings of one ROS IMU (data1 to data4) calibrated separately,
 and each calibration applied to the other recordings' intervals.
 
@@ -31,19 +31,19 @@ NAMES = ("s1", "s2", "s3", "b1", "b2", "b3", "phi", "psi", "theta")
 
 # --- the authors' published calibrations -----------------------------------------------------
 def imutk(path: Path):
-    from imucal.peers import read_imutk_calib
+    from imucal.export.peers import read_imutk_calib
 
     return read_imutk_calib(path)
 
 
 def tomisuarez(path: Path):
-    from imucal.peers import read_tomisuarez_params
+    from imucal.export.peers import read_tomisuarez_params
 
     return read_tomisuarez_params(path)
 
 
 def madlab(path: Path):
-    from imucal.peers import read_madlab_calibration
+    from imucal.export.peers import read_madlab_calibration
 
     return read_madlab_calibration(path)
 
@@ -60,7 +60,7 @@ class RealRecording:
     note: str = ""
 
     def config(self):
-        from imucal.config import config_from_dict
+        from imucal.config.run import config_from_dict
 
         data = {**self.data, "path": str(REAL / self.data["path"])}
         return config_from_dict({"data": data, "gravity": {"value": self.gravity}, "fit": dict(self.fit)})
@@ -140,7 +140,7 @@ def _sigma_means(run) -> np.ndarray:
     """Noise of |a| - g of each interval mean (as the means fit weighs them)."""
     if run.result.mode == "means":
         return run.result.sigma
-    from imucal.design import DesignSensor, residual_sigma
+    from imucal.analysis.design import DesignSensor, residual_sigma
 
     p = run.result.params
     ds = DesignSensor.from_values({n: p[n].value for n in NAMES})
@@ -201,7 +201,7 @@ def markdown(outs: list[Outcome], ros: list[Outcome]) -> str:
         if o.rec.note:
             L.append(f"* {o.rec.name}: {o.rec.note}.")
     L += ["", "## Parameters: ours and the authors' converted to the paper's nine", "",
-          "Conversion (`imucal.peers`): every model is a = M (raw - o); rows of M^-1 are b_i e_i^T, so "
+          "Conversion (`imucal.export.peers`): every model is a = M (raw - o); rows of M^-1 are b_i e_i^T, so "
           "s = o, b_i = |row_i|, cos(angle_ij) = e_i . e_j (tomisuarez's `+ b`: s = -b). "
           "Difference in units of our standard error.", ""]
     for o in outs:
@@ -263,7 +263,7 @@ def main(argv: list[str] | None = None) -> int:
     outs = [evaluate(r) for r in RECORDINGS]
     ros = [o for o in outs if o.rec.name.startswith("ros-imu")]
     text = markdown(outs, ros)
-    from imucal.output import write_text_atomic
+    from imucal.files.output import write_text_atomic
 
     write_text_atomic(args.out, text)
     for o in outs:

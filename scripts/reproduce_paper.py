@@ -19,11 +19,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from imucal.constants import DEFAULT_ANGLE_TOL, STANDARD_GRAVITY  # noqa: E402
-from imucal.drift import TABLE_TIMES, DriftCase, DriftReport, plot_drift  # noqa: E402
-from imucal.error_map import PAPER_ANGLES, PAPER_LEVELS, PAPER_RANGE, compute_error_map  # noqa: E402
-from imucal.error_map import plot_domains, plot_histogram  # noqa: E402
-from imucal.output import OutputSet, write_text_atomic  # noqa: E402
-from imucal.worst_case import AngleBox, analyse  # noqa: E402
+from imucal.analysis.drift import TABLE_TIMES, DriftCase, DriftReport, plot_drift  # noqa: E402
+from imucal.analysis.error_map import PAPER_ANGLES, PAPER_LEVELS, PAPER_RANGE, compute_error_map  # noqa: E402
+from imucal.analysis.error_map import plot_domains, plot_histogram  # noqa: E402
+from imucal.files.output import OutputSet, write_text_atomic  # noqa: E402
+from imucal.analysis.worst_case import AngleBox, analyse  # noqa: E402
 
 #: Quoted from the paper (shared/seed, Section 4).
 PAPER = {"abs_error_max": 0.3130299, "maximiser_a": 5.48114, "maximiser_angle": 1.60221,

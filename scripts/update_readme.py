@@ -17,7 +17,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from imucal.output import write_text_atomic  # noqa: E402
+from imucal.files.output import write_text_atomic  # noqa: E402
 
 BLOCK = re.compile(r"(<!-- begin:([\w/.#-]+) -->\n)(.*?)(<!-- end:\2 -->)", re.S)
 

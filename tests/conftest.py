@@ -21,7 +21,7 @@ _hyp_settings.register_profile("ci", derandomize=True, print_blob=True)
 if os.environ.get("CI"):
     _hyp_settings.load_profile("ci")
 
-from imucal.simulate import (PosePlan, SensorSpec, Simulation, cube_directions, mems_counts_sensor,
+from imucal.analysis.simulate import (PosePlan, SensorSpec, Simulation, cube_directions, mems_counts_sensor,
                              si_sensor, simulate)
 
 #: The real recordings shared by all engineers (README.md there lists each folder).
@@ -106,7 +106,7 @@ def si_recording(sim_csv) -> SimRecording:
 
 def calibrate_file(path: Path | str, **sections):
     """Run the library pipeline on ``path`` with YAML-like sections (fit=..., static=..., ...)."""
-    from imucal.config import config_from_dict
+    from imucal.config.run import config_from_dict
     from imucal.pipeline import calibrate
 
     data = dict(sections.pop("data", {}))
@@ -134,8 +134,8 @@ class CliResult(NamedTuple):
 
 @pytest.fixture
 def run_cli(capsys) -> Callable[[list[str]], CliResult]:
-    """``run_cli(args)`` calls ``imucal.cli.main`` in-process and returns (code, stdout, stderr)."""
-    from imucal.cli import main
+    """``run_cli(args)`` calls ``imucal.cli.main.main`` in-process and returns (code, stdout, stderr)."""
+    from imucal.cli.main import main
 
     def run(args: list[str]) -> CliResult:
         capsys.readouterr()  # drop anything printed before

@@ -11,7 +11,7 @@ import pytest
 import yaml
 
 from conftest import real_file, write_simulation
-from imucal.simulate import cube_directions, mems_counts_sensor
+from imucal.analysis.simulate import cube_directions, mems_counts_sensor
 
 
 def check_refusal(r, *must_name: str) -> str:

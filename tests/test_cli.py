@@ -1,4 +1,4 @@
-"""End-to-end through ``imucal.cli.main``: calibrate (config or --data), the JSON summary, the
+"""End-to-end through ``imucal.cli.main.main``: calibrate (config or --data), the JSON summary, the
 report and figures, and apply's round trip back to the known accelerations."""
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import pytest
 import yaml
 
 import imucal
-from imucal.gravity import normal_gravity
+from imucal.model.gravity import normal_gravity
 
 PNG = b"\x89PNG\r\n\x1a\n"
 
@@ -19,7 +19,7 @@ PNG = b"\x89PNG\r\n\x1a\n"
 @pytest.fixture(scope="module")
 def cli_counts(counts_recording, tmp_path_factory):
     """One full CLI calibration of the counts recording (with figures), shared by the tests."""
-    from imucal.cli import main
+    from imucal.cli.main import main
 
     root = tmp_path_factory.mktemp("cli")
     out, js = root / "out", root / "summary.json"

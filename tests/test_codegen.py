@@ -1,4 +1,4 @@
-"""Generated C (imucal.codegen): compiled strictly, loaded back, compared with Python's apply.
+"""Generated C (imucal.export.codegen): compiled strictly, loaded back, compared with Python's apply.
 
 Every calibration is generated in float and double, compiled once per module with
 gcc -std=c99 -Wall -Wextra -Werror -pedantic (plus the warnings firmware projects enable),
@@ -28,13 +28,13 @@ import pytest
 import yaml
 from hypothesis import given, settings, strategies as st
 
-from imucal.calibration import OUTPUT_FRAME, Calibration, load_calibration, validate_parameters
-from imucal.cli import main
-from imucal.codegen import (apply_baked_function, apply_coeffs_function, c_literal, check_prefix,
+from imucal.calibration.frozen import OUTPUT_FRAME, Calibration, load_calibration, validate_parameters
+from imucal.cli.main import main
+from imucal.export.codegen import (apply_baked_function, apply_coeffs_function, c_literal, check_prefix,
                             float_error_bound, generate_c, write_c)
 from imucal.errors import ImucalError
-from imucal.model import Effect
-from imucal.parameters import BASE_NAMES, Parameter, Parameters, base_parameters
+from imucal.model.sensor import Effect
+from imucal.model.parameters import BASE_NAMES, Parameter, Parameters, base_parameters
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "codegen"
@@ -112,9 +112,9 @@ def work(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def cases(work) -> dict[str, Case]:
-    from imucal.config import config_from_dict
+    from imucal.config.run import config_from_dict
     from imucal.pipeline import calibrate
-    from imucal.simulate import PosePlan, cube_directions, mems_counts_sensor, si_sensor, simulate
+    from imucal.analysis.simulate import PosePlan, cube_directions, mems_counts_sensor, si_sensor, simulate
 
     rng = np.random.default_rng(20240601)
     out: dict[str, Case] = {}
@@ -144,7 +144,7 @@ def cases(work) -> dict[str, Case]:
                          rng.integers(-32768, 32768, (N, 3)).astype(float), _raw_at_g(cal, rng, N, True),
                          True)
     sensor = mems_counts_sensor(rng)
-    from imucal.simulate import SensorSpec
+    from imucal.analysis.simulate import SensorSpec
 
     cal = _truth_calibration(SensorSpec(s=sensor.s, b=sensor.b, angles=(math.pi / 2,) * 3))
     p = work / "right_angles.yaml"
@@ -483,15 +483,15 @@ def test_effects_generate_apply_cov(effect_case, work):
 
 def _library_effects() -> list:
     try:
-        from imucal.effects import EFFECTS
+        from imucal.model.effects import EFFECTS
     except ModuleNotFoundError:
-        return [pytest.param(None, marks=pytest.mark.skip(reason="imucal.effects not in this build"))]
+        return [pytest.param(None, marks=pytest.mark.skip(reason="imucal.model.effects not in this build"))]
     return list(EFFECTS)
 
 
 @pytest.mark.parametrize("effect", _library_effects())
 def test_each_library_effect_through_the_cli(cases, work, effect, capsys):
-    from imucal.effects import make_effect
+    from imucal.model.effects import make_effect
 
     base = cases["counts"].cal
     eff = make_effect(effect, (0, 1, 2))

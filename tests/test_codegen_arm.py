@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from imucal.calibration import Calibration, load_calibration
-from imucal.codegen import write_c
+from imucal.calibration.frozen import Calibration, load_calibration
+from imucal.export.codegen import write_c
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "codegen"
@@ -42,13 +42,13 @@ def _tool(name: str) -> str:
 def calibration(tmp_path_factory) -> tuple[Calibration, Path]:
     d = tmp_path_factory.mktemp("arm")
     if XSENS.exists():
-        from imucal.config import config_from_dict
+        from imucal.config.run import config_from_dict
         from imucal.pipeline import calibrate
 
         run = calibrate(config_from_dict({"data": {"path": str(XSENS)}, "gravity": {"value": 9.81744}}))
         cal = run.calibration
     else:  # synthetic truth: same code shape
-        from imucal.parameters import base_parameters
+        from imucal.model.parameters import base_parameters
 
         cal = Calibration(params=base_parameters([30, -20, 10], [1670, 1680, 1660], [1.57, 1.56, 1.58]),
                           std={}, gravity=9.80665)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from conftest import calibrate_file, real_file
-from imucal.codegen import write_c
+from imucal.export.codegen import write_c
 from test_codegen import GCC, compile_shared
 
 pytestmark = pytest.mark.skipif(GCC is None, reason="no C compiler")

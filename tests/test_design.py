@@ -1,4 +1,4 @@
-"""Pose design (imucal.design, `imucal plan-poses`): Fisher information, CRLB, criteria, optimiser."""
+"""Pose design (imucal.analysis.design, `imucal plan-poses`): Fisher information, CRLB, criteria, optimiser."""
 from __future__ import annotations
 
 import json
@@ -10,11 +10,11 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from imucal import design as D
+from imucal.analysis import design as D
 from imucal.errors import ImucalError
-from imucal.model import build_model
-from imucal.parameters import BASE_NAMES
-from imucal.simulate import cube_directions, frame_matrix, mems_counts_sensor, random_directions
+from imucal.model.sensor import build_model
+from imucal.model.parameters import BASE_NAMES
+from imucal.analysis.simulate import cube_directions, frame_matrix, mems_counts_sensor, random_directions
 
 G = 9.80665
 
@@ -43,9 +43,9 @@ def test_sensitivity_matches_casadi_model() -> None:
 
 
 def test_fisher_equals_fit_information_at_the_same_point() -> None:
-    """F from design equals J^T W J built from imucal.fit's own Jacobian rows."""
-    from imucal.fit import FitData, jacobian_rows
-    from imucal.parameters import base_parameters
+    """F from design equals J^T W J built from imucal.solve.fit's own Jacobian rows."""
+    from imucal.solve.fit import FitData, jacobian_rows
+    from imucal.model.parameters import base_parameters
 
     spec, ds = _sensor(5)
     u = D.scheme_directions("wedge-24")

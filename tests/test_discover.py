@@ -10,10 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from imucal.config import config_from_dict
-from imucal.discover import DiscoverSettings, chi2_sf, discover
+from imucal.config.run import config_from_dict
+from imucal.analysis.discover import DiscoverSettings, chi2_sf, discover
 from imucal.errors import ImucalError
-from imucal.simulate import (PosePlan, TemperatureProfile, cube_directions, draw_effect_case, mems_counts_sensor,
+from imucal.analysis.simulate import (PosePlan, TemperatureProfile, cube_directions, draw_effect_case, mems_counts_sensor,
                              random_directions, simulate)
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -133,7 +133,7 @@ def test_real_xsens_recording_gets_no_invented_effect():
     cfg_path = ROOT / "configs" / "xsens-mti-imutk.yaml"
     if not cfg_path.exists():
         pytest.skip("xsens config not present")
-    from imucal.config import load_config
+    from imucal.config.run import load_config
 
     d = discover(load_config(cfg_path))
     assert d.base.result.redchi > 3
@@ -244,7 +244,7 @@ def test_chi2_sf_known_values():
 def test_two_comparable_effects_are_both_named(tmp_path):
     """Neither effect alone brings the residual to the noise, so neither passes alone; the pair
     does (lookahead), and an axis picked up on the way is dropped again (backward step)."""
-    from imucal.simulate import draw_pair_case, pair_config
+    from imucal.analysis.simulate import draw_pair_case, pair_config
 
     c1, c2 = draw_pair_case(30)
     d = _discover_sim(pair_config(c1, c2).run(), c1.config.sensor.unit, tmp_path, "pair")
@@ -256,7 +256,7 @@ def test_two_comparable_effects_are_both_named(tmp_path):
 
 
 def test_two_effect_cases_score(tmp_path):
-    from imucal.simulate import draw_pair_case, pair_config
+    from imucal.analysis.simulate import draw_pair_case, pair_config
 
     right = []
     for seed in range(300, 310):

@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from imucal.cli import main
+from imucal.cli.main import main
 from imucal.constants import STANDARD_GRAVITY
-from imucal.drift import TABLE_TIMES, calibration_cases, position_error, sphere_directions
-from imucal.worst_case import AngleBox, gram_np, max_abs_error
+from imucal.analysis.drift import TABLE_TIMES, calibration_cases, position_error, sphere_directions
+from imucal.analysis.worst_case import AngleBox, gram_np, max_abs_error
 
 ANGLES = (1.55, 1.59, 1.56)
 S = (0.3, -0.2, 0.5)
@@ -18,8 +18,8 @@ B = (1.02, 0.97, 1.01)
 
 
 def _calibration(gravity=9.81, rms=0.004):
-    cal_mod = pytest.importorskip("imucal.calibration", reason="imucal.calibration not built yet")
-    from imucal.parameters import base_parameters
+    cal_mod = pytest.importorskip("imucal.calibration.frozen", reason="imucal.calibration.frozen not built yet")
+    from imucal.model.parameters import base_parameters
 
     params = base_parameters(S, B, ANGLES)
     return cal_mod.Calibration(params=params, std={n: 1e-3 for n in params}, gravity=gravity,
@@ -61,8 +61,8 @@ def test_treatments_without_recording():
 
 
 def test_treatments_on_a_simulated_recording(tmp_path):
-    sim = pytest.importorskip("imucal.simulate", reason="imucal.simulate not built yet")
-    from imucal.data import load_recording
+    sim = pytest.importorskip("imucal.analysis.simulate", reason="imucal.analysis.simulate not built yet")
+    from imucal.data.load import load_recording
 
     cal = _calibration()
     dirs = sim.cube_directions()

@@ -9,16 +9,16 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from imucal.calibration import Calibration, from_dict
-from imucal.config import config_from_dict
-from imucal.effects import (EFFECTS, MIN_TEMPERATURE_SPREAD, REFERENCE_TEMPERATURE, ScaleNonlinearity,
+from imucal.calibration.frozen import Calibration, from_dict
+from imucal.config.run import config_from_dict
+from imucal.model.effects import (EFFECTS, MIN_TEMPERATURE_SPREAD, REFERENCE_TEMPERATURE, ScaleNonlinearity,
                             check_effects, effects_from_coefficients, make_effect, prepare_parameters,
                             simulate_effects)
 from imucal.errors import ImucalError
-from imucal.model import build_model
-from imucal.parameters import base_parameters
+from imucal.model.sensor import build_model
+from imucal.model.parameters import base_parameters
 from imucal.pipeline import calibrate
-from imucal.simulate import (PosePlan, SensorSpec, TemperatureProfile, cube_directions, mems_counts_sensor,
+from imucal.analysis.simulate import (PosePlan, SensorSpec, TemperatureProfile, cube_directions, mems_counts_sensor,
                              random_directions, simulate)
 
 G = 9.80665
@@ -272,7 +272,7 @@ def test_generated_c_applies_effects_with_temperature_and_time(tmp_path):
     import shutil
     import subprocess
 
-    from imucal.codegen import write_c
+    from imucal.export.codegen import write_c
 
     rng = np.random.default_rng(12)
     spec = {"bias_temperature": {"bias_temperature_x": 4.0}, "bias_drift": {"bias_drift_z": 0.05},

@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from imucal.cli import main
-from imucal.error_map import (PAPER_ANGLES, compute_error_map, relative_error)
-from imucal.worst_case import gram_np
+from imucal.cli.main import main
+from imucal.analysis.error_map import (PAPER_ANGLES, compute_error_map, relative_error)
+from imucal.analysis.worst_case import gram_np
 
 
 @pytest.fixture(scope="module")
@@ -18,7 +18,7 @@ def emap():
 
 
 def test_relative_error_matches_the_casadi_model():
-    from imucal.model import build_model
+    from imucal.model.sensor import build_model
 
     model = build_model()
     rng = np.random.default_rng(0)

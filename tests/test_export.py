@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from conftest import calibrate_file, real_file
-from imucal.calibration import Calibration
-from imucal.effects import make_effect
+from imucal.calibration.frozen import Calibration
+from imucal.model.effects import make_effect
 from imucal.errors import ImucalError
-from imucal.export import export_text
+from imucal.export.formats import export_text
 
 XSENS = ("xsens-mti-imutk", "xsens_acc.mat")
 
@@ -63,7 +63,7 @@ def test_madlab_rotation_rows_are_unit_vectors(xsens):
 
 
 def test_imutk_export_reads_back_with_our_imutk_reader(xsens, tmp_path):
-    from imucal.peers import read_imutk_calib
+    from imucal.export.peers import read_imutk_calib
 
     cal, raw = xsens
     p = tmp_path / "x.calib"

@@ -15,11 +15,11 @@ import pytest
 from conftest import calibrate_file, real_file, write_simulation
 from imucal.constants import STANDARD_GRAVITY
 from imucal.errors import ImucalError
-from imucal.gravity import normal_gravity
-from imucal.initial import ellipsoid_guess
-from imucal.parameters import ANGLE_NAMES, BASE_NAMES
-from imucal.report import fit_report
-from imucal.simulate import SensorSpec, cube_directions, mems_counts_sensor, random_directions, si_sensor
+from imucal.model.gravity import normal_gravity
+from imucal.solve.initial import ellipsoid_guess
+from imucal.model.parameters import ANGLE_NAMES, BASE_NAMES
+from imucal.report.text import fit_report
+from imucal.analysis.simulate import SensorSpec, cube_directions, mems_counts_sensor, random_directions, si_sensor
 
 HALF_PI = math.pi / 2
 

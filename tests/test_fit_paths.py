@@ -1,17 +1,17 @@
-"""The two NLP builds agree: the vectorised base-model NLP (imucal.samples) and the CasADi map
+"""The two NLP builds agree: the vectorised base-model NLP (imucal.solve.samples) and the CasADi map
 NLP over the symbolic model (used whenever effects extend it)."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from imucal.effects import make_effect
-from imucal.fit import FitData, fit
-from imucal.initial import ellipsoid_guess
-from imucal.model import build_model
-from imucal.parameters import base_parameters
-from imucal.simulate import PosePlan, cube_directions, mems_counts_sensor, simulate
-from imucal.static import detect_static
+from imucal.model.effects import make_effect
+from imucal.solve.fit import FitData, fit
+from imucal.solve.initial import ellipsoid_guess
+from imucal.model.sensor import build_model
+from imucal.model.parameters import base_parameters
+from imucal.analysis.simulate import PosePlan, cube_directions, mems_counts_sensor, simulate
+from imucal.data.static import detect_static
 
 G = 9.80665
 
@@ -52,6 +52,6 @@ def test_vectorised_and_casadi_map_nlp_agree(data, mode):
 
 @pytest.mark.parametrize("dof, t", [(3, 3.1824), (5, 2.5706), (10, 2.2281), (29, 2.0452), (1000, 1.9623)])
 def test_student_t_quantile_in_report(dof, t):
-    from imucal.report import t_quantile_975
+    from imucal.report.text import t_quantile_975
 
     assert t_quantile_975(dof) == pytest.approx(t, rel=0.01)

@@ -15,7 +15,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from imucal.cli import build_parser, main
+from imucal.cli.main import build_parser, main
 
 NUMBERS = ["0", "-1", "1e-310", "1e9", "1e10", "100000000", "nan", "inf", "-inf", "1e308", "12", "9.81",
            "abc", "", "0x10", "-0"]

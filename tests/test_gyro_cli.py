@@ -17,7 +17,7 @@ GYR = ("xsens-mti-imutk", "xsens_gyro.mat")
 
 @pytest.fixture(scope="module")
 def two_files_run(tmp_path_factory):
-    from imucal.cli import main
+    from imucal.cli.main import main
 
     d = tmp_path_factory.mktemp("gyro")
     code = main(["calibrate", "--data", str(real_file(*ACC)), "--gyro-data", str(real_file(*GYR)),

@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from imucal.calibration import Calibration
-from imucal.parameters import base_parameters
-from imucal.peers import AffineCalibration, read_imutk_calib
+from imucal.calibration.frozen import Calibration
+from imucal.model.parameters import base_parameters
+from imucal.export.peers import AffineCalibration, read_imutk_calib
 
 ROOT = Path(__file__).resolve().parents[1]
 spec = importlib.util.spec_from_file_location("compare_imutk", ROOT / "scripts" / "compare_imutk.py")

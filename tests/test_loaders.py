@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from conftest import real_file
-from imucal.config import config_from_dict, load_config
-from imucal.data import DataSpec, load_recording
+from imucal.config.run import config_from_dict, load_config
+from imucal.data.load import DataSpec, load_recording
 from imucal.errors import ImucalError
 
 

@@ -15,9 +15,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from imucal.model import build_model, frame, frame_inverse_transpose, gram, tbar
-from imucal.parameters import BASE_NAMES
-from imucal.simulate import frame_matrix
+from imucal.model.sensor import build_model, frame, frame_inverse_transpose, gram, tbar
+from imucal.model.parameters import BASE_NAMES
+from imucal.analysis.simulate import frame_matrix
 
 RNG = np.random.default_rng(7)
 HALF_PI = math.pi / 2
@@ -34,7 +34,7 @@ def num(f) -> np.ndarray:
 
 
 def paper_tbar(phi, psi, theta) -> np.ndarray:
-    """Remark 1 typed in from the paper, with numpy, independently of imucal.model."""
+    """Remark 1 typed in from the paper, with numpy, independently of imucal.model.sensor."""
     cf, cp, ct = np.cos([phi, psi, theta])
     den = -1 + cf**2 + cp**2 + ct**2 - 2 * cf * cp * ct
     return np.array([[-np.sin(theta) ** 2, cf - ct * cp, cp - cf * ct],

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from conftest import real_file
-from imucal.noise import FLICKER_FACTOR, allan_deviation, estimate
+from imucal.analysis.noise import FLICKER_FACTOR, allan_deviation, estimate
 
 FS = 100.0
 

@@ -6,9 +6,9 @@ import math
 
 import pytest
 
-from imucal.config import FitSettings, config_from_dict
+from imucal.config.run import FitSettings, config_from_dict
 from imucal.errors import ImucalError
-from imucal.parameters import ANGLE_NAMES, BASE_NAMES, Parameter, Parameters, base_parameters
+from imucal.model.parameters import ANGLE_NAMES, BASE_NAMES, Parameter, Parameters, base_parameters
 
 HALF_PI = math.pi / 2
 

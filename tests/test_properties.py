@@ -15,14 +15,14 @@ import yaml
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from imucal.calibration import Calibration, load_calibration
-from imucal.config import load_config
-from imucal.data import DataSpec, load_recording
+from imucal.calibration.frozen import Calibration, load_calibration
+from imucal.config.run import load_config
+from imucal.data.load import DataSpec, load_recording
 from imucal.errors import ImucalError
-from imucal.fit import FitData, fit
-from imucal.model import build_model
-from imucal.parameters import base_parameters
-from imucal.simulate import cube_directions, frame_matrix
+from imucal.solve.fit import FitData, fit
+from imucal.model.sensor import build_model
+from imucal.model.parameters import base_parameters
+from imucal.analysis.simulate import cube_directions, frame_matrix
 
 HALF_PI = math.pi / 2
 SETTINGS = settings(max_examples=150, deadline=None,

@@ -66,8 +66,8 @@ def test_xsens_authors_rms_reproduces_the_published_residual(outcomes: dict) -> 
 def test_converted_parameters_reproduce_the_authors_magnitude(outcomes: dict, name: str) -> None:
     """The authors' calibration converted to the nine parameters gives their |a| through our model
     (Proposition 2), for every interval: the conversion is exact."""
-    from imucal.model import build_model
-    from imucal.parameters import BASE_NAMES
+    from imucal.model.sensor import build_model
+    from imucal.model.parameters import BASE_NAMES
 
     o = outcomes[name]
     p = np.array([o.published[n] for n in BASE_NAMES])
@@ -90,7 +90,7 @@ def test_recordings_without_enough_poses_are_refused(outcomes: dict, name: str, 
 def test_repeatability_across_recordings_of_one_imu(outcomes: dict) -> None:
     """data2..data4 of one ROS IMU: the spread of each parameter is within a few reported standard
     errors, and each calibration carries over to the other recordings better than imu_tk's."""
-    from imucal.parameters import BASE_NAMES
+    from imucal.model.parameters import BASE_NAMES
 
     ra = sys.modules["real_accuracy"]
     ros = [outcomes[f"ros-imu data{i}"] for i in (2, 3, 4)]

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 import yaml
 
-from imucal.cli import main
-from imucal.data import load_recording
+from imucal.cli.main import main
+from imucal.data.load import load_recording
 from imucal.errors import ImucalError
-from imucal.simulate import draw_effect_case, load_simulation_config, sensor_from_values, simulation_from_dict
+from imucal.analysis.simulate import draw_effect_case, load_simulation_config, sensor_from_values, simulation_from_dict
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "configs" / "simulate_example.yaml"
@@ -169,7 +169,7 @@ def test_sensor_from_fitted_values_replays_the_recording():
     """A SensorSpec built from the true values reproduces the simulator's noise-free readings."""
     case = draw_effect_case(5, effect="bias_drift", axes=(0, 2), snr=50)
     s = case.config.sensor
-    from imucal.effects import effects_from_coefficients
+    from imucal.model.effects import effects_from_coefficients
 
     replay = sensor_from_values(s.values(), tuple(effects_from_coefficients(s.effects)), unit=s.unit)
     m = np.random.default_rng(0).normal(0, 5, (20, 3))

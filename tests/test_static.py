@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from conftest import real_file
-from imucal.data import DataSpec, load_recording
+from imucal.data.load import DataSpec, load_recording
 from imucal.errors import ImucalError
-from imucal.simulate import cube_directions, frame_matrix, mems_counts_sensor, si_sensor
-from imucal.static import StaticSettings, detect_static, moving_variance
+from imucal.analysis.simulate import cube_directions, frame_matrix, mems_counts_sensor, si_sensor
+from imucal.data.static import StaticSettings, detect_static, moving_variance
 
 
 def detect(rec, settings: StaticSettings = StaticSettings()):

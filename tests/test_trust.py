@@ -20,10 +20,10 @@ import pytest
 import yaml
 
 from conftest import RATE, calibrate_file, real_file, write_simulation
-from imucal.data import load_recording, parse_columns
+from imucal.data.load import load_recording, parse_columns
 from imucal.errors import EXIT_INTERNAL, ImucalError
-from imucal.simulate import SensorSpec, cube_directions
-from imucal.static import detect_static
+from imucal.analysis.simulate import SensorSpec, cube_directions
+from imucal.data.static import detect_static
 
 ROOT = Path(__file__).resolve().parents[1]
 XSENS = ("xsens-mti-imutk", "xsens_acc.mat")
@@ -207,7 +207,7 @@ def test_clipped_axis_drops_its_intervals_and_says_so(run_cli, tmp_path):
 def test_clipping_without_the_check_would_have_biased_the_fit(tmp_path):
     """The test above can fail: with the clipped intervals kept, the fit is so wrong that the
     absurd-fit rule refuses it (the second line of defence)."""
-    from imucal import static
+    from imucal.data import static
 
     src, _ = _clipped_xsens(tmp_path)
     old = static.SATURATION_FRACTION
@@ -441,7 +441,7 @@ def test_two_runs_into_one_folder_publish_whole_sets(work):
 
 # --- never a traceback ---------------------------------------------------------------------------
 def test_unexpected_exception_is_one_line_with_its_own_status(run_cli, monkeypatch, tmp_path):
-    import imucal.commands.drift as drift
+    import imucal.cli.commands.drift as drift
 
     def boom(args):
         raise RuntimeError("x" * 5000)

@@ -18,8 +18,8 @@ import pytest
 import yaml
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from imucal.calibration import load_calibration
-from imucal.codegen import comment_text, generate_c, write_c
+from imucal.calibration.frozen import load_calibration
+from imucal.export.codegen import comment_text, generate_c, write_c
 from imucal.errors import ImucalError
 
 OLD = Path(__file__).parent / "data" / "calibration_v1_before_rename.yaml"

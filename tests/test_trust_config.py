@@ -19,12 +19,12 @@ import yaml
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from imucal.commands.plan_poses import _read_plan
-from imucal.config import config_from_dict, load_config
-from imucal.design import compare, evaluate, optimal_design
+from imucal.cli.commands.plan_poses import _read_plan
+from imucal.config.run import config_from_dict, load_config
+from imucal.analysis.design import compare, evaluate, optimal_design
 from imucal.errors import ImucalError
-from imucal.simulate import load_simulation_config, simulation_from_dict
-from imucal.yamlio import read_yaml
+from imucal.analysis.simulate import load_simulation_config, simulation_from_dict
+from imucal.files.yamlio import read_yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 RUN_CONFIGS = sorted(p for p in (ROOT / "configs").glob("*.yaml") if p.name != "simulate_example.yaml")

@@ -13,10 +13,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from conftest import real_file, write_simulation
-from imucal.data import DataSpec, load_recording, parse_columns, rails
+from imucal.data.load import DataSpec, load_recording, parse_columns, rails
 from imucal.errors import ImucalError
-from imucal.simulate import cube_directions, mems_counts_sensor
-from imucal.static import detect_static
+from imucal.analysis.simulate import cube_directions, mems_counts_sensor
+from imucal.data.static import detect_static
 
 # (folder..., file), extra DataSpec fields: every recording in ../shared/data/real.
 ACC = [

@@ -17,12 +17,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from imucal import design as D
-from imucal.fit import FitData, fit
-from imucal.initial import ellipsoid_guess
-from imucal.model import build_model
-from imucal.parameters import BASE_NAMES, base_parameters
-from imucal.simulate import frame_matrix, si_sensor
+from imucal.analysis import design as D
+from imucal.solve.fit import FitData, fit
+from imucal.solve.initial import ellipsoid_guess
+from imucal.model.sensor import build_model
+from imucal.model.parameters import BASE_NAMES, base_parameters
+from imucal.analysis.simulate import frame_matrix, si_sensor
 
 G = 9.80665
 SIGMA_MEAN = 0.003  # m/s^2 per axis per interval mean (0.06 m/s^2 per sample, 400 samples)

@@ -9,10 +9,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from imucal import worst_case as wcm
-from imucal.cli import main
+from imucal.analysis import worst_case as wcm
+from imucal.cli.main import main
 from imucal.constants import RIGHT_ANGLE, STANDARD_GRAVITY
-from imucal.worst_case import (CERTIFICATE_TOL, AngleBox, CertificateError, GramBounds, certify,
+from imucal.analysis.worst_case import (CERTIFICATE_TOL, AngleBox, CertificateError, GramBounds, certify,
                                gram_bounds, gram_np, linearisation_samples, max_abs_error,
                                max_linearisation_error, max_rel_error, max_tolerance)
 
@@ -198,8 +198,8 @@ def test_cli_worst_case_json(tmp_path, capsys):
 
 
 def _calibration_file(path, angles, std=1e-3):
-    cal_mod = pytest.importorskip("imucal.calibration", reason="imucal.calibration not built yet")
-    from imucal.parameters import base_parameters
+    cal_mod = pytest.importorskip("imucal.calibration.frozen", reason="imucal.calibration.frozen not built yet")
+    from imucal.model.parameters import base_parameters
 
     params = base_parameters([0.1, -0.2, 0.3], [1.01, 0.99, 1.02], angles)
     cal = cal_mod.Calibration(params=params, std={n: std for n in params}, gravity=9.81,

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .segments import Segments
+from imucal.gyro.segments import Segments
 
 
 def _omega(w: np.ndarray) -> np.ndarray:

@@ -15,13 +15,13 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from .. import ipopt
-from ..errors import ImucalError
-from .evaluate import direction_errors_deg
-from .gsens import StaticFit, fit_static
-from .model import AXES, MIS_NAMES, apply_rate, direction_residual, misalignment_matrix, rk4_step
-from .result import GyroResult
-from .segments import GyroData, Segments, motion_segments
+from imucal.solve import ipopt
+from imucal.errors import ImucalError
+from imucal.gyro.evaluate import direction_errors_deg
+from imucal.gyro.gsens import StaticFit, fit_static
+from imucal.gyro.model import AXES, MIS_NAMES, apply_rate, direction_residual, misalignment_matrix, rk4_step
+from imucal.gyro.result import GyroResult
+from imucal.gyro.segments import GyroData, Segments, motion_segments
 
 #: raw units with a known nominal scale [unit per rad/s]
 NOMINAL_SCALE = {"rad/s": 1.0, "deg/s": 180.0 / np.pi}

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..stats import chi2_sf
+from imucal.solve.stats import chi2_sf
 
 #: significance level of the per-axis test
 ALPHA = 0.01

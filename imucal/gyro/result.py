@@ -5,7 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .model import apply_rate, misalignment_entries
+from imucal.gyro.model import apply_rate, misalignment_entries
 
 
 @dataclass(frozen=True)
@@ -37,8 +37,8 @@ class GyroResult:
 
     @property
     def success(self) -> bool:
-        """IPOPT converged (imucal.ipopt.CONVERGED)."""
-        from ..ipopt import CONVERGED
+        """IPOPT converged (imucal.solve.ipopt.CONVERGED)."""
+        from imucal.solve.ipopt import CONVERGED
 
         return self.status in CONVERGED
 

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..constants import TIME_UNITS
-from ..data import Recording, load_recording
-from ..errors import ImucalError
-from .fit import GyroOptions, fit_gyro
-from .result import GyroResult
-from .segments import gyro_data_from_run
+from imucal.constants import TIME_UNITS
+from imucal.data.load import Recording, load_recording
+from imucal.errors import ImucalError
+from imucal.gyro.fit import GyroOptions, fit_gyro
+from imucal.gyro.result import GyroResult
+from imucal.gyro.segments import gyro_data_from_run
 
 
 def gyro_channel(run, gyro_file: str | None = None) -> tuple[np.ndarray, np.ndarray, str, float | None] | None:

@@ -5,7 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import ImucalError
+from imucal.errors import ImucalError
 
 
 @dataclass(frozen=True)

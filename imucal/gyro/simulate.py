@@ -5,8 +5,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .model import misalignment_matrix
-from .segments import GyroData
+from imucal.gyro.model import misalignment_matrix
+from imucal.gyro.segments import GyroData
 
 
 @dataclass(frozen=True)

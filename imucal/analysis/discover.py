@@ -1,0 +1,637 @@
+"""Effect discovery: find where the paper's model and the data disagree, name the effect, add it.
+
+The workflow (``discover``), on interval means:
+
+1. Fit the base model (the paper's nine parameters, plus any effects the config already lists).
+   Each interval mean carries its own noise (``Intervals.mean_std``, from the interval's scatter),
+   propagated to sigma_k of the residual |a_k| - g. If chi2 = sum (r_k / sigma_k)^2 is
+   consistent with chi-square(dof) (upper-tail p >= ``alpha_noise``), stop: nothing to explain.
+2. Show where they disagree: the residual against time, temperature, orientation and axis; and,
+   for each candidate effect on each axis, how much of the chi-square its pattern would remove
+   (the linearised score below).
+3. Candidates: every effect of the library on every non-empty axis subset (x, y, z, xy, xz, yz,
+   xyz), merged with effects already in the model. Each is screened by a Gauss-Newton step from
+   the current fit (the score, or Lagrange-multiplier, approximation of its chi-square), and the
+   most promising ones are fitted in full (one IPOPT NLP each, warm-started).
+   A candidate c with k_c new coefficients is significant when its likelihood-ratio statistic
+       LR_c = (chi2_current - chi2_c) / max(1, chi2_c / dof_c)
+   has p_c = P(chi2(k_c) > LR_c) below ``alpha_effect / M`` (Bonferroni over the M candidates
+   of the round). The division by the remaining misfit is the honest part: when the noise of the
+   means is underestimated (real sensors, chi2/dof >> 1 for reasons no candidate explains) an
+   effect must remove a share of the misfit, not merely a few "sigmas" of an optimistic sigma.
+   Among significant candidates the one with the lowest chi2_c / scale + penalty * k_c wins
+   (``penalty`` = chi-square(1) at p = 1e-3 per coefficient, so an axis joins only when it earns
+   its coefficient). A non-nested competitor (another effect, or disjoint axes) within
+   ``ambiguity`` of the winner is reported as ambiguous: the data cannot tell them apart.
+4. Add the winner, refit, and repeat while the residual still disagrees with the noise.
+   If no candidate is significant and the residual still disagrees, the verdict says so:
+   "disagreement not explained by any candidate". No effect is invented.
+
+The result (``Discovery``) holds the base and final calibration runs, every candidate's score,
+the effects found with coefficients, standard errors and units, and the gap before and after.
+"""
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from imucal.config.run import EffectSpec, RunConfig
+from imucal.model.effects import (AXIS_NAMES, EFFECTS, MIN_DOF, MIN_TEMPERATURE_SPREAD, AxisEffect, make_effect,
+                      prepare_parameters, reference_values, temperature_spread)
+from imucal.solve.stats import chi2_sf
+from imucal.errors import ImucalError
+from imucal.solve.fit import FitData, FitResult, fit, jacobian_rows
+from imucal.model.sensor import build_model
+from imucal.pipeline import CalibrationRun, calibrate, fit_data, make_parameters
+
+#: chi-square(1) upper quantile at p = 1e-3: the price of one more coefficient when ranking.
+CHI2_1_P1E3 = 10.828
+#: Extra room [chi-square] when choosing which screened candidates to fit in full for the
+#: ambiguity check (the Gauss-Newton screen matches full fits to ~0.1 on simulated data).
+_SCREEN_SLACK = 5.0
+
+
+@dataclass(frozen=True)
+class DiscoverSettings:
+    """Thresholds of the discovery workflow (all dimensionless)."""
+
+    candidates: tuple[str, ...] = tuple(EFFECTS)  #: effect names to try
+    alpha_noise: float = 1e-3  #: chi-square test: p below this means "residual disagrees with the noise"
+    alpha_effect: float = 1e-3  #: family-wise level for adding an effect (Bonferroni over a round)
+    penalty: float = CHI2_1_P1E3  #: chi-square per added coefficient when ranking candidates
+    ambiguity: float = 10.0  #: competitors within this (scaled chi-square) are "cannot tell apart"
+    max_effects: int = 3  #: effects added at most
+    full_fits: int = 4  #: candidates fitted in full per round (best by the screening score)
+    lookahead: int = 3  #: when no single candidate passes, pairs starting from this many are tried
+
+    def __post_init__(self) -> None:
+        unknown = [c for c in self.candidates if c not in EFFECTS]
+        if unknown:
+            raise ImucalError(f"unknown effect {unknown[0]!r}", field="candidates",
+                              fix=f"choose from {', '.join(EFFECTS)}")
+        if not self.candidates:
+            raise ImucalError("no candidate effects", field="candidates", fix=f"choose from {', '.join(EFFECTS)}")
+        for name in ("alpha_noise", "alpha_effect"):
+            v = getattr(self, name)
+            if not 0 < v < 1:
+                raise ImucalError(f"{name} {v!r} must lie in (0, 1)", field=name)
+        if self.max_effects < 1 or self.full_fits < 1:
+            raise ImucalError("max_effects and full_fits must be >= 1", field="settings")
+
+
+# --- statistics (no scipy) -------------------------------------------------------------------
+@dataclass(frozen=True)
+class Candidate:
+    """One candidate of one round: an effect on an axis subset, merged into the current model."""
+
+    name: str
+    axes: tuple[int, ...]  #: the candidate's axes (merged with the same effect already in the model)
+    new_axes: tuple[int, ...]  #: the coefficients it adds
+    chi2_screen: float  #: linearised (Gauss-Newton) chi-square with the candidate
+    chi2: float = math.nan  #: chi-square of the full fit (nan when only screened)
+    dof: int = 0
+    lr: float = math.nan  #: likelihood-ratio statistic, scaled by max(1, chi2/dof)
+    p_value: float = math.nan
+    p_adjusted: float = math.nan  #: Bonferroni: p * candidates in the round
+    score: float = math.nan  #: chi2 / scale + penalty * k, for ranking
+    fitted: bool = False
+    converged: bool = False
+    significant: bool = False
+
+    @property
+    def label(self) -> str:
+        return f"{self.name}[{''.join(AXIS_NAMES[a] for a in self.axes)}]"
+
+    @property
+    def k(self) -> int:
+        return len(self.new_axes)
+
+
+@dataclass(frozen=True)
+class Step:
+    """One round: the candidates tried, the one added (if any) and its competitors."""
+
+    index: int
+    chi2_before: float
+    dof_before: int
+    candidates: tuple[Candidate, ...]
+    chosen: Candidate | None
+    ambiguous_with: tuple[Candidate, ...] = ()
+    scale: float = 1.0  #: the misfit scale used to compare candidates
+    jointly_with: str | None = None  #: the second effect that made the chosen one significant (lookahead)
+
+
+@dataclass(frozen=True)
+class FoundEffect:
+    """An effect the data asked for, with its fitted coefficients."""
+
+    name: str
+    axes: tuple[int, ...]
+    coefficients: dict[str, float]  #: parameter name -> value
+    std: dict[str, float]  #: parameter name -> standard error
+    units: dict[str, str]
+    reference: dict[str, float]  #: fixed references (e.g. {name}_tref in degC)
+    lr: float  #: the likelihood-ratio statistic when it was added
+    p_value: float  #: Bonferroni-adjusted p when it was added
+    ambiguous_with: tuple[str, ...] = ()
+
+    @property
+    def label(self) -> str:
+        return f"{self.name}[{''.join(AXIS_NAMES[a] for a in self.axes)}]"
+
+
+@dataclass(frozen=True)
+class Discovery:
+    """What ``discover`` found: the base and final runs, the rounds, the effects, the verdict."""
+
+    base: CalibrationRun
+    final: CalibrationRun
+    steps: tuple[Step, ...]
+    effects: tuple[FoundEffect, ...]
+    verdict: str  #: one sentence
+    consistent_before: bool
+    consistent_after: bool
+    p_before: float  #: chi-square test p of the base fit
+    p_after: float
+    disagreement: tuple[tuple[str, float], ...]  #: (pattern, chi-square it would remove), base fit
+    notes: tuple[str, ...] = ()
+    settings: DiscoverSettings = field(default_factory=DiscoverSettings)
+
+    # the gap, on interval means
+    @property
+    def rms_before(self) -> float:
+        return float(np.sqrt(np.mean(self.base.result.residuals ** 2)))
+
+    @property
+    def rms_after(self) -> float:
+        return float(np.sqrt(np.mean(self.final.result.residuals ** 2)))
+
+    @property
+    def rms_noise(self) -> float:
+        """RMS the residuals would have from the noise of the means alone [m/s^2]."""
+        return float(np.sqrt(np.mean(self.final.result.sigma ** 2)))
+
+    @property
+    def chi2_before(self) -> float:
+        return float(self.base.result.chi2)
+
+    @property
+    def chi2_after(self) -> float:
+        return float(self.final.result.chi2)
+
+    def to_json(self) -> dict:
+        """The machine-readable summary (``imucal discover --json``)."""
+        b, f = self.base.result, self.final.result
+
+        def num(x: float):
+            return float(x) if math.isfinite(x) else None
+
+        return {
+            "format": "imucal-discover", "format_version": 1,
+            "data": dict(self.final.calibration.data),
+            "verdict": self.verdict,
+            "effects": [{"name": e.name, "axes": [AXIS_NAMES[a] for a in e.axes],
+                         "coefficients": e.coefficients, "std": {k: num(v) for k, v in e.std.items()},
+                         "units": e.units, "reference": e.reference, "lr": num(e.lr),
+                         "p_value": num(e.p_value), "ambiguous_with": list(e.ambiguous_with)}
+                        for e in self.effects],
+            "rms_before": self.rms_before, "rms_after": self.rms_after, "rms_noise": self.rms_noise,
+            "rms_unit": "m/s^2",
+            "chi2_before": self.chi2_before, "chi2_after": self.chi2_after,
+            "dof": int(f.dof), "dof_before": int(b.dof), "dof_after": int(f.dof),
+            "redchi_before": num(b.redchi), "redchi_after": num(f.redchi),
+            "p_before": self.p_before, "p_after": self.p_after,
+            "consistent_before": self.consistent_before, "consistent_after": self.consistent_after,
+            "n_intervals": int(self.base.intervals.n),
+            "model_before": b.model_name, "model_after": f.model_name,
+            "disagreement": [{"pattern": p, "chi2_removed": num(v)} for p, v in self.disagreement],
+            "steps": [{"round": s.index, "chi2_before": s.chi2_before, "dof_before": s.dof_before,
+                       "scale": s.scale, "chosen": s.chosen.label if s.chosen else None,
+                       "jointly_with": s.jointly_with,
+                       "ambiguous_with": [c.label for c in s.ambiguous_with],
+                       "candidates": [{"effect": c.label, "new_axes": [AXIS_NAMES[a] for a in c.new_axes],
+                                       "chi2_screen": num(c.chi2_screen), "chi2": num(c.chi2),
+                                       "dof": c.dof, "lr": num(c.lr), "p_adjusted": num(c.p_adjusted),
+                                       "fitted": c.fitted, "significant": c.significant}
+                                      for c in s.candidates]}
+                      for s in self.steps],
+            "notes": list(self.notes),
+            "settings": dataclasses.asdict(self.settings),
+        }
+
+    def report(self) -> str:
+        """A text report: verdict, gap before/after, effects with coefficients, the rounds."""
+        b, f = self.base.result, self.final.result
+        L = ["[[Discovery]]",
+             f"    data      = {self.base.recording.source} ({self.base.intervals.n} static intervals)",
+             f"    verdict   = {self.verdict}",
+             "[[Gap]]            before          after           (interval means)",
+             f"    RMS |a|-g  = {self.rms_before:<15.6g} {self.rms_after:<15.6g} m/s^2 "
+             f"(noise alone: {self.rms_noise:.3g})",
+             f"    chi2 / dof = {b.chi2:.4g} / {b.dof:<6d}  {f.chi2:.4g} / {f.dof}",
+             f"    chi2/dof   = {b.redchi:<15.4g} {f.redchi:<15.4g} (1 = residual at noise level)",
+             f"    p (chi2)   = {self.p_before:<15.3g} {self.p_after:<15.3g} "
+             f"(below {self.settings.alpha_noise:g}: disagrees with the noise)",
+             f"    model      = {b.model_name}  ->  {f.model_name}"]
+        L.append("[[Effects found]]" + ("" if self.effects else "  none"))
+        for e in self.effects:
+            amb = f"  (ambiguous with {', '.join(e.ambiguous_with)})" if e.ambiguous_with else ""
+            L.append(f"    {e.label}: LR = {e.lr:.4g}, p (adjusted) = {e.p_value:.3g}{amb}")
+            for n, v in e.coefficients.items():
+                L.append(f"        {n} = {v:.6g} +/- {e.std[n]:.3g} {e.units[n]}")
+            for n, v in e.reference.items():
+                L.append(f"        {n} = {v:.6g} degC (fixed reference)")
+        L.append("[[Where the base model disagrees]]  chi-square a single-axis effect would remove "
+                 "(linearised)")
+        for p, v in self.disagreement[:8]:
+            L.append(f"    {p:<28s} {v:10.4g}")
+        for s in self.steps:
+            L.append(f"[[Round {s.index}]]  chi2 = {s.chi2_before:.6g} on {s.dof_before} dof, "
+                     f"{len(s.candidates)} candidates, misfit scale {s.scale:.3g}")
+            shown = sorted(s.candidates, key=lambda c: (not c.fitted, c.score if c.fitted else c.chi2_screen))
+            for c in shown[:10]:
+                if c.fitted:
+                    flag = "significant" if c.significant else "not significant"
+                    L.append(f"    {c.label:<28s} chi2 {c.chi2:10.5g}  LR {c.lr:9.4g}  p_adj {c.p_adjusted:9.3g}  "
+                             f"score {c.score:9.5g}  {flag}")
+                else:
+                    L.append(f"    {c.label:<28s} chi2 ~ {c.chi2_screen:8.5g} (screened out)")
+            if s.chosen is not None:
+                L.append(f"    -> added {s.chosen.label}"
+                         + (f" (significant given {s.jointly_with}: no single effect explains enough, the pair "
+                            "does)" if s.jointly_with else "")
+                         + (f"; cannot be told apart from {', '.join(c.label for c in s.ambiguous_with)}"
+                            if s.ambiguous_with else ""))
+            else:
+                L.append("    -> no candidate is significant")
+        if self.notes:
+            L.append("[[Notes]]")
+            L.extend(f"    - {n}" for n in self.notes)
+        return "\n".join(L) + "\n"
+
+
+# --- the workflow ----------------------------------------------------------------------------
+_EFFECT_ORDER = {n: i for i, n in enumerate(EFFECTS)}
+
+
+def _canonical(effects: dict[str, tuple[int, ...]]) -> list[AxisEffect]:
+    return [make_effect(n, ax) for n, ax in sorted(effects.items(), key=lambda kv: _EFFECT_ORDER[kv[0]])]
+
+
+def _as_dict(effects: Sequence) -> dict[str, tuple[int, ...]]:
+    out: dict[str, tuple[int, ...]] = {}
+    for e in effects:
+        out[e.name] = tuple(sorted(set(out.get(e.name, ())) | set(e.axes)))
+    return out
+
+
+def _subsets() -> list[tuple[int, ...]]:
+    return [c for r in (1, 2, 3) for c in itertools.combinations(range(3), r)]
+
+
+def _p_noise(res: FitResult) -> float:
+    return chi2_sf(res.chi2, res.dof) if res.dof > 0 else 1.0
+
+
+class _Problem:
+    """The fixed parts of one discovery: data, template config, and the fits it makes."""
+
+    def __init__(self, config: RunConfig, base: CalibrationRun) -> None:
+        self.config = config
+        self.run = base
+        self.iv = base.intervals
+        self.rec = base.recording
+        self.gravity = base.calibration.gravity
+        self.cov = {"temp": self.iv.temp, "time": self.iv.t_mid}
+
+    def parameters(self, effects: list[AxisEffect], start: dict[str, float], check: bool = True):
+        model = build_model(effects)
+        params = make_parameters(self.run.guess, self.config, self.gravity, model, self.config.data.unit)
+        if check:
+            params = prepare_parameters(model.effects, params, self.cov, self.iv.n, self.rec.source)
+        else:  # the screening model holds every candidate at once: only its Jacobian is used
+            params = params.with_values(reference_values(model.effects, self.cov))
+        keep = {n: v for n, v in start.items() if n in params.names and not params[n].fixed}
+        return model, params.with_values(keep)
+
+    def data(self, model) -> FitData:
+        return fit_data(model, self.iv, self.rec, "means", self.rec.source)
+
+    def fit(self, effects: list[AxisEffect], start: dict[str, float]) -> FitResult:
+        model, params = self.parameters(effects, start)
+        return fit(self.data(model), params, model, self.gravity, source=self.rec.source)
+
+
+def _screen(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]],
+            names: Sequence[str]) -> tuple[np.ndarray, np.ndarray, dict[str, int], list[str]]:
+    """Column-scaled Jacobian of the residuals w.r.t. base + every candidate coefficient, at the fit.
+
+    Returns (J / sigma, r / sigma, column index by parameter name, current free names).
+    """
+    every = {n: (0, 1, 2) for n in names}
+    for n, ax in cur_effects.items():
+        every[n] = (0, 1, 2)
+    model, params = prob.parameters(_canonical(every), current.values(), check=False)
+    J = jacobian_rows(prob.data(model), params, model, prob.gravity)
+    w = 1.0 / current.sigma
+    cols = {n: i for i, n in enumerate(params.free_names)}
+    return J * w[:, None], current.residuals * w, cols, list(current.free_names)
+
+
+def _linear_chi2(Jw: np.ndarray, rw: np.ndarray, cols: list[int]) -> float:
+    """min_x |rw + Jw[:, cols] x|^2: the Gauss-Newton chi-square (exact for a linear model)."""
+    A = Jw[:, cols]
+    x, *_ = np.linalg.lstsq(A, -rw, rcond=None)
+    return float(np.sum((rw + A @ x) ** 2))
+
+
+def _nested(a: Candidate, b: Candidate) -> bool:
+    return a.name == b.name and (set(a.axes) <= set(b.axes) or set(b.axes) <= set(a.axes))
+
+
+def _found(name: str, axes: tuple[int, ...], res: FitResult, lr: float, p: float,
+           ambiguous: tuple[str, ...]) -> FoundEffect:
+    e = make_effect(name, axes)
+    coef = {n: float(res.params[n].value) for n in e.coefficient_names}
+    ref = {e.tref_name: float(res.params[e.tref_name].value)} if e.uses_tref else {}
+    return FoundEffect(name=name, axes=tuple(axes), coefficients=coef,
+                       std={n: float(res.std.get(n, math.nan)) for n in coef},
+                       units={n: res.params[n].unit for n in coef}, reference=ref, lr=lr, p_value=p,
+                       ambiguous_with=ambiguous)
+
+
+def _candidates(names: Sequence[str], cur_effects: dict[str, tuple[int, ...]], n_free: int, n_rows: int,
+                n_distinct: int) -> list[tuple[str, tuple[int, ...], tuple[int, ...]]]:
+    """(name, merged axes, new axes) of every candidate: each effect on each axis subset, merged
+    with the same effect already in the model, that the intervals can still carry."""
+    out, seen = [], set()
+    for n in names:
+        have = set(cur_effects.get(n, ()))
+        for sub in _subsets():
+            new = tuple(sorted(set(sub) - have))
+            merged = tuple(sorted(set(sub) | have))
+            nf = n_free + len(new)
+            if not new or (n, merged) in seen or n_rows - nf < MIN_DOF or nf > n_distinct:
+                continue
+            seen.add((n, merged))
+            out.append((n, merged, new))
+    return out
+
+
+def _round(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]], names: Sequence[str],
+           cands: list, settings: DiscoverSettings, index: int, notes: list[str]
+           ) -> tuple[Step, dict[int, FitResult]]:
+    """Screen every candidate, fit the finalists, test them, pick the winner (if any)."""
+    # Screening: Gauss-Newton chi-square of each candidate from the current fit.
+    Jw, rw, col, cur_free = _screen(prob, current, cur_effects, names)
+    base_cols = [col[n] for n in cur_free]
+    screened = [Candidate(n, merged, new, chi2_screen=_linear_chi2(
+        Jw, rw, base_cols + [col[c] for c in make_effect(n, new).coefficient_names])) for n, merged, new in cands]
+    # Full fits: the best few by the screening score, and every non-nested competitor close
+    # enough to the best to matter for the ambiguity check.
+    def pre(c: Candidate) -> float:
+        return c.chi2_screen + settings.penalty * c.k
+
+    order = sorted(range(len(screened)), key=lambda i: pre(screened[i]))
+    top = screened[order[0]]
+    pick = list(order[: settings.full_fits])
+    pick += [i for i in order[settings.full_fits:]
+             if pre(screened[i]) - pre(top) < settings.ambiguity + _SCREEN_SLACK and not _nested(screened[i], top)]
+    pick = pick[: 2 * settings.full_fits]
+    M = len(screened)  # Bonferroni over every candidate of the round, screened or fitted
+    fits: dict[int, FitResult] = {}
+    for i in pick:
+        c = screened[i]
+        try:
+            res = prob.fit(_canonical({**cur_effects, c.name: c.axes}), current.values())
+        except ImucalError as exc:
+            notes.append(f"{c.label}: {exc.message}")
+            continue
+        fits[i] = res
+        # LR scaled by the misfit the candidate leaves: an underestimated noise cannot pass for an effect.
+        # A fit that stopped early has a chi2 above its optimum, so its LR errs on the small side.
+        lr = max(0.0, (current.chi2 - res.chi2) / max(1.0, res.redchi))
+        p = chi2_sf(lr, c.k)
+        screened[i] = dataclasses.replace(c, chi2=res.chi2, dof=res.dof, lr=lr, p_value=p,
+                                          p_adjusted=min(1.0, p * M), fitted=True, converged=res.success,
+                                          significant=bool(np.isfinite(res.chi2)) and p * M < settings.alpha_effect)
+    sig = [i for i in fits if screened[i].significant]
+    # The misfit scale candidates are ranked on: the least misfit among the significant ones (or
+    # among all fitted ones when none is significant, for the report).
+    common = max(1.0, min((fits[i].redchi for i in (sig or fits)), default=1.0))
+    for i in fits:
+        screened[i] = dataclasses.replace(screened[i], score=screened[i].chi2 / common + settings.penalty * screened[i].k)
+    if not sig:
+        step = Step(index, current.chi2, current.dof, tuple(screened), None, scale=common)
+        return _lookahead(prob, current, cur_effects, names, step, fits, settings, notes)
+    best = min(sig, key=lambda i: screened[i].score)
+    chosen = screened[best]
+    amb = tuple(screened[i] for i in sig if i != best and not _nested(screened[i], chosen)
+                and screened[i].score - chosen.score < settings.ambiguity)
+    return Step(index, current.chi2, current.dof, tuple(screened), chosen, amb, common), {best: fits[best]}
+
+
+def _lookahead(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]], names: Sequence[str],
+               step: Step, fits: dict[int, FitResult], settings: DiscoverSettings, notes: list[str]
+               ) -> tuple[Step, dict[int, FitResult]]:
+    """Two comparable effects: neither alone leaves a residual at noise level, so each one's LR,
+    scaled by the misfit it leaves, is small. Try pairs (c, then the best d after c): when the
+    pair's misfit scale makes *both* members significant (each tested given the other, Bonferroni
+    over all pairs), add c now; the next round finds d with the ordinary test."""
+    firsts = sorted(fits, key=lambda i: step.candidates[i].score)[: settings.lookahead]
+    n_distinct = prob.run.observability.n_distinct
+    M1 = len(step.candidates)
+    best = None
+    for i in firsts:
+        c, res_c = step.candidates[i], fits[i]
+        eff_c = {**cur_effects, c.name: c.axes}
+        cands2 = _candidates(names, eff_c, len(res_c.free_names), prob.iv.n, n_distinct)
+        if not cands2:
+            continue
+        Jw, rw, col, cur_free = _screen(prob, res_c, eff_c, names)
+        base_cols = [col[n] for n in cur_free]
+
+        def pre(n: str, new: tuple[int, ...]) -> float:
+            cols = base_cols + [col[x] for x in make_effect(n, new).coefficient_names]
+            return _linear_chi2(Jw, rw, cols) + settings.penalty * len(new)
+
+        n2, ax2, new2 = min(cands2, key=lambda t: pre(t[0], t[2]))
+        try:
+            res_cd = prob.fit(_canonical({**eff_c, n2: ax2}), res_c.values())
+            d_alone = tuple(sorted(set(cur_effects.get(n2, ())) | set(new2)))
+            res_d = prob.fit(_canonical({**cur_effects, n2: d_alone}), current.values())
+        except ImucalError as exc:
+            notes.append(f"lookahead {c.label} + {_label(n2, ax2)}: {exc.message}")
+            continue
+        s2 = max(1.0, res_cd.redchi)
+        M2 = M1 * len(cands2)
+        lr_c = max(0.0, (res_d.chi2 - res_cd.chi2) / s2)
+        lr_d = max(0.0, (res_c.chi2 - res_cd.chi2) / s2)
+        p_c, p_d = chi2_sf(lr_c, c.k) * M2, chi2_sf(lr_d, len(new2)) * M2
+        if p_c < settings.alpha_effect and p_d < settings.alpha_effect:
+            score = res_cd.chi2 / s2 + settings.penalty * (c.k + len(new2))
+            if best is None or score < best[0]:
+                best = (score, i, lr_c, min(1.0, p_c), _label(n2, ax2))
+    if best is None:
+        return step, fits
+    _, i, lr_c, p_c, second = best
+    cands = list(step.candidates)
+    cands[i] = dataclasses.replace(cands[i], lr=lr_c, p_adjusted=p_c, significant=True)
+    return (dataclasses.replace(step, candidates=tuple(cands), chosen=cands[i], jointly_with=second),
+            {i: fits[i]})
+
+
+def _prune(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]], found_names: set[str],
+           settings: DiscoverSettings, notes: list[str]) -> tuple[FitResult, dict[str, tuple[int, ...]]]:
+    """Backward step: drop a coefficient (effect, axis) added earlier that the final model no
+    longer needs, i.e. whose removal costs less than ``penalty`` in scaled chi-square. A greedy
+    forward search can pick an extra axis early that a later effect explains better."""
+    while True:
+        scale = max(1.0, current.redchi)
+        trials = []
+        for n in sorted(found_names & set(cur_effects), key=_EFFECT_ORDER.get):
+            for a in cur_effects[n]:
+                reduced = dict(cur_effects)
+                rest = tuple(x for x in cur_effects[n] if x != a)
+                if rest:
+                    reduced[n] = rest
+                else:
+                    del reduced[n]
+                try:
+                    res = prob.fit(_canonical(reduced), current.values())
+                except ImucalError:
+                    continue
+                trials.append(((res.chi2 - current.chi2) / scale, n, a, res, reduced))
+        if not trials:
+            return current, cur_effects
+        cost, n, a, res, reduced = min(trials, key=lambda t: t[0])
+        if cost >= settings.penalty:
+            return current, cur_effects
+        notes.append(f"dropped {n} on axis {AXIS_NAMES[a]} after the later effects: it removed only "
+                     f"{max(cost, 0.0):.3g} of scaled chi-square (< {settings.penalty:.3g} per coefficient)")
+        current, cur_effects = res, reduced
+
+
+def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings()) -> Discovery:
+    """Fit the base model, test its residual against the noise, add effects while they are needed."""
+    notes: list[str] = []
+    if config.fit.mode != "means":
+        notes.append("discovery works on interval means; fit.mode: samples was ignored")
+        config = dataclasses.replace(config, fit=dataclasses.replace(config.fit, mode="means"))
+    try:
+        base = calibrate(config)
+    except ImucalError as exc:
+        if exc.field != "intervals":
+            raise
+        raise ImucalError(f"discover fits interval means: {exc.message}", file=exc.file, field=exc.field,
+                          fix="record more static orientations (e.g. 18 to 30 holds of 3 s)") from None
+    prob = _Problem(config, base)
+    iv, src = base.intervals, base.recording.source
+    names = _testable(list(settings.candidates), iv, src, notes)
+    n_free0 = len(base.result.free_names)
+    if iv.n - (n_free0 + 1) < MIN_DOF:
+        raise ImucalError(f"{iv.n} static intervals are too few to test effects: the base model has {n_free0} free "
+                          f"parameters, one effect coefficient more needs at least {n_free0 + 1 + MIN_DOF} intervals",
+                          file=src, field="intervals", fix="record more static orientations (e.g. 18 to 30 holds of 3 s)")
+
+    current = base.result
+    cur_effects = _as_dict(base.calibration.effect_objects())
+    p_before = _p_noise(current)
+    consistent = p_before >= settings.alpha_noise
+    steps: list[Step] = []
+    found: list[tuple[str, float, float, tuple[str, ...]]] = []  # name, lr, p, ambiguous
+    disagreement: list[tuple[str, float]] = []
+    verdict = (f"consistent with noise: chi2/dof = {current.redchi:.3g} (p = {p_before:.3g}); "
+               "the base model explains the data")
+    while not consistent:
+        if len(steps) >= settings.max_effects:
+            verdict = f"stopped after {settings.max_effects} effects; the residual still disagrees with the noise"
+            break
+        cands = _candidates(names, cur_effects, len(current.free_names), iv.n, base.observability.n_distinct)
+        if not cands:
+            notes.append(f"no candidate fits: {iv.n} intervals ({base.observability.n_distinct} distinct "
+                         f"orientations) leave too few degrees of freedom for {len(current.free_names)} + 1 "
+                         "free parameters")
+            verdict = "disagreement, but too few intervals to test more effects"
+            break
+        step, fits = _round(prob, current, cur_effects, names, cands, settings, len(steps) + 1, notes)
+        steps.append(step)
+        if step.index == 1:  # where the base model disagrees: single-axis patterns, linearised
+            disagreement = sorted(((c.label, current.chi2 - c.chi2_screen) for c in step.candidates
+                                   if len(c.axes) == 1 and c.axes == c.new_axes), key=lambda t: -t[1])
+        if step.chosen is None:
+            verdict = (f"disagreement not explained by any candidate: chi2/dof = {current.redchi:.3g} "
+                       f"(p = {_p_noise(current):.3g}) and no candidate effect is significant")
+            if found:
+                verdict = f"partly explained by {_added(found, cur_effects)}; the remaining {verdict}"
+            break
+        c = step.chosen
+        found.append((c.name, c.lr, c.p_adjusted, tuple(a.label for a in step.ambiguous_with)))
+        cur_effects = {**cur_effects, c.name: c.axes}
+        (current,) = fits.values()
+        consistent = _p_noise(current) >= settings.alpha_noise
+        if consistent:
+            verdict = (f"explained: after adding {_added(found, cur_effects)} "
+                       f"chi2/dof = {current.redchi:.3g} (p = {_p_noise(current):.3g}), at noise level")
+    if found:
+        current, cur_effects = _prune(prob, current, cur_effects, {f[0] for f in found}, settings, notes)
+        found = [f for f in found if f[0] in cur_effects]
+    final = _final_run(config, base, found, cur_effects, current, notes)
+    if found and verdict.startswith("explained"):  # name the effects as kept after the backward step
+        verdict = (f"explained: after adding {_added(found, cur_effects)} chi2/dof = {final.result.redchi:.3g} "
+                   f"(p = {_p_noise(final.result):.3g}), at noise level")
+    elif found and verdict.startswith("partly"):
+        verdict = f"partly explained by {_added(found, cur_effects)}; the remaining " + verdict.split("; the remaining ", 1)[1]
+    last = {n: (lr, p, amb) for n, lr, p, amb in found}
+    effects = tuple(_found(n, ax, final.result, *last[n]) for n, ax in
+                    sorted(cur_effects.items(), key=lambda kv: _EFFECT_ORDER[kv[0]]) if n in last)
+    p_after = _p_noise(final.result)
+    return Discovery(base=base, final=final, steps=tuple(steps), effects=effects, verdict=verdict,
+                     consistent_before=p_before >= settings.alpha_noise,
+                     consistent_after=p_after >= settings.alpha_noise, p_before=p_before, p_after=p_after,
+                     disagreement=tuple(disagreement), notes=tuple(notes), settings=settings)
+
+
+def _testable(names: list[str], iv, source: str, notes: list[str]) -> list[str]:
+    """Drop the temperature effects when the data cannot carry them (and say why)."""
+    temp_names = [n for n in names if "temp" in EFFECTS[n].covariates]
+    reason = None
+    if temp_names and iv.temp is None:
+        reason = "the data have no temp column"
+    elif temp_names and temperature_spread(iv.temp) < MIN_TEMPERATURE_SPREAD:
+        reason = (f"the temperature is constant (interval means span {temperature_spread(iv.temp):.3g} degC "
+                  f"< {MIN_TEMPERATURE_SPREAD} degC)")
+    if reason is None:
+        return names
+    if len(temp_names) == len(names):
+        raise ImucalError(f"{', '.join(temp_names)} cannot be tested: {reason}", file=source, field="candidates",
+                          fix="record with a changing temperature column, or test other effects")
+    notes.append(f"temperature effects not tested: {reason}")
+    return [n for n in names if n not in temp_names]
+
+
+def _final_run(config: RunConfig, base: CalibrationRun, found: list, cur_effects: dict[str, tuple[int, ...]],
+               current: FitResult, notes: list[str]) -> CalibrationRun:
+    """The whole pipeline once more with the effects found: the calibration file to keep."""
+    if not found:
+        return base
+    specs = tuple(EffectSpec(n, tuple(AXIS_NAMES[a] for a in ax)) for n, ax in
+                  sorted(cur_effects.items(), key=lambda kv: _EFFECT_ORDER[kv[0]]))
+    final = calibrate(dataclasses.replace(config, fit=dataclasses.replace(config.fit, effects=specs)))
+    if final.result.chi2 > current.chi2 * (1 + 1e-6) + 1e-9:
+        notes.append(f"the final calibration's chi2 {final.result.chi2:.6g} is above the discovery fit's "
+                     f"{current.chi2:.6g} (a different local optimum)")
+    return final
+
+
+def _label(name: str, axes: tuple[int, ...]) -> str:
+    return f"{name}[{''.join(AXIS_NAMES[a] for a in axes)}]"
+
+
+def _added(found: list, effects: dict[str, tuple[int, ...]]) -> str:
+    return ", ".join(_label(n, effects[n]) for n in dict.fromkeys(f[0] for f in found))

@@ -1,0 +1,538 @@
+"""Simulated recordings with known truth: the same code serves tests, studies and `imucal simulate`.
+
+Forward model (paper, Section 2): the true specific force a (orthonormal frame f of the
+Theorem) is projected on the unit axes, m = E^T a (Lemma 1: m_i = e_i . a), then
+raw = s + b * m (Eq. theModel), plus white noise and quantisation to counts.
+A pose plan holds the sensor still in a list of gravity directions, with smooth transitions
+that carry extra motion and vibration so that static detection is exercised.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from imucal.constants import RIGHT_ANGLE, STANDARD_GRAVITY
+from imucal.errors import ImucalError, short
+from imucal.model.sensor import frame_np, gram_det_np
+from imucal.config.limits import MAX_SIM_POSES, MAX_SIM_SAMPLES, check_seed
+from imucal.files.yamlio import check_structure, key_text
+
+
+def frame_matrix(angles: np.ndarray) -> np.ndarray:
+    """E (columns e_i in frame f), Eq. (eq:125), evaluated from the CasADi model (imucal.model.sensor)."""
+    if not gram_det_np(angles) > 0:
+        raise ImucalError("the angles give no valid frame (Gram determinant <= 0)", field="sensor.angles")
+    return frame_np(angles)
+
+
+@dataclass(frozen=True)
+class SensorSpec:
+    """A simulated sensor: the paper's nine parameters plus noise and quantisation."""
+
+    s: tuple[float, float, float] = (0.0, 0.0, 0.0)  #: shifts [raw]
+    b: tuple[float, float, float] = (1.0, 1.0, 1.0)  #: scales [raw per m/s^2]
+    angles: tuple[float, float, float] = (RIGHT_ANGLE,) * 3  #: phi, psi, theta [rad]
+    noise: tuple[float, float, float] = (0.01, 0.01, 0.01)  #: white noise std [raw]
+    quantum: float = 0.0  #: quantisation step [raw]; 0 = none
+    unit: str = "m/s^2"
+    #: extra model terms: effect name -> {parameter name: value}; see imucal.model.effects
+    effects: dict = field(default_factory=dict)
+
+    def values(self) -> dict[str, float]:
+        v = {f"s{i+1}": float(self.s[i]) for i in range(3)}
+        v.update({f"b{i+1}": float(self.b[i]) for i in range(3)})
+        v.update(dict(zip(("phi", "psi", "theta"), map(float, self.angles))))
+        for coeffs in self.effects.values():
+            v.update({k: float(x) for k, x in coeffs.items()})
+        return v
+
+    def forward(self, m: np.ndarray, t: np.ndarray, temp: np.ndarray | None) -> np.ndarray:
+        """raw from measured values m (N x 3), noise-free. Effects add their terms."""
+        raw = np.asarray(self.s) + np.asarray(self.b) * m
+        if self.effects:
+            from imucal.model.effects import simulate_effects
+
+            raw = simulate_effects(self, m, t, temp, raw)
+        return raw
+
+
+def mems_counts_sensor(rng: np.random.Generator, lsb_per_g: float = 16384.0, noise_counts: float = 4.0,
+                       bias_counts: float = 300.0, scale_err: float = 0.02, angle_err: float = 0.01
+                       ) -> SensorSpec:
+    """A random raw-count MEMS sensor (e.g. MPU-6050 +-2 g: 16384 LSB/g)."""
+    b = lsb_per_g / STANDARD_GRAVITY * (1 + scale_err * rng.uniform(-1, 1, 3))
+    return SensorSpec(s=tuple(rng.uniform(-bias_counts, bias_counts, 3)), b=tuple(b),
+                      angles=tuple(RIGHT_ANGLE * (1 + angle_err * rng.uniform(-1, 1, 3))),
+                      noise=(noise_counts,) * 3, quantum=1.0, unit="raw")
+
+
+def si_sensor(rng: np.random.Generator, noise: float = 0.01, bias: float = 0.2, scale_err: float = 0.02,
+              angle_err: float = 0.01) -> SensorSpec:
+    """A random factory-scaled sensor reporting m/s^2."""
+    return SensorSpec(s=tuple(rng.uniform(-bias, bias, 3)), b=tuple(1 + scale_err * rng.uniform(-1, 1, 3)),
+                      angles=tuple(RIGHT_ANGLE * (1 + angle_err * rng.uniform(-1, 1, 3))),
+                      noise=(noise,) * 3, quantum=0.0, unit="m/s^2")
+
+
+# --- pose plans -----------------------------------------------------------------------------
+def cube_directions(kind: str = "faces+edges+corners") -> np.ndarray:
+    """Unit vectors of the 6 faces, 12 edges and/or 8 corners of a cube."""
+    out = []
+    kinds = kind.split("+")
+    for v in np.array(np.meshgrid([-1, 0, 1], [-1, 0, 1], [-1, 0, 1])).reshape(3, -1).T:
+        nz = int(np.count_nonzero(v))
+        if (nz == 1 and "faces" in kinds) or (nz == 2 and "edges" in kinds) or (nz == 3 and "corners" in kinds):
+            out.append(v / np.linalg.norm(v))
+    return np.array(out, float)
+
+
+def random_directions(n: int, rng: np.random.Generator) -> np.ndarray:
+    v = rng.normal(size=(n, 3))
+    return v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+@dataclass(frozen=True)
+class PosePlan:
+    """Still holds in given gravity directions (frame f), joined by smooth moving transitions."""
+
+    directions: np.ndarray  #: (n, 3) unit vectors
+    hold: float = 4.0  #: seconds still per pose
+    transition: float = 2.0  #: seconds of motion between poses
+    initial_hold: float = 0.0  #: extra still time at the start [s]
+    vibration: float = 1.0  #: std of extra acceleration during transitions [m/s^2]
+    rate: float = 100.0  #: sample rate [Hz]
+
+    def __post_init__(self) -> None:
+        d = np.asarray(self.directions, float)
+        if d.ndim != 2 or d.shape[1] != 3 or d.shape[0] < 1:
+            raise ImucalError("directions must be an (n, 3) array", field="plan.directions")
+        vals = (self.hold, self.transition, self.rate, self.initial_hold)
+        if not all(np.isfinite(vals)) or self.hold <= 0 or self.transition <= 0 or self.rate <= 0 \
+                or self.initial_hold < 0:
+            raise ImucalError("hold, transition and rate must be positive and finite", field="plan")
+        if not 1.0 <= self.rate <= 1.0e5:
+            raise ImucalError(f"rate {short(self.rate)} Hz is not an IMU sample rate", field="plan.rate",
+                              fix="give 1 to 100000 Hz")
+        n = (d.shape[0] * (self.hold + self.transition) + self.initial_hold) * self.rate
+        if n > MAX_SIM_SAMPLES:
+            raise ImucalError(f"the plan makes {n:.3g} samples, above the limit of {MAX_SIM_SAMPLES:g}",
+                              field="plan", fix="shorten the holds or lower the rate")
+
+
+@dataclass(frozen=True)
+class Simulation:
+    t: np.ndarray  #: [s]
+    raw: np.ndarray  #: (N, 3) [raw]
+    temp: np.ndarray | None  #: [deg C]
+    accel: np.ndarray  #: (N, 3) true specific force in frame f [m/s^2]
+    still: np.ndarray  #: (N,) bool, true holds
+    sensor: SensorSpec
+    gravity: float
+    hold_bounds: np.ndarray  #: (n, 2) sample index ranges of the holds
+
+    def to_csv_text(self) -> str:
+        import io
+
+        cols = [self.t, *self.raw.T] + ([self.temp] if self.temp is not None else [])
+        head = "t,ax,ay,az" + (",temp" if self.temp is not None else "")
+        buf = io.StringIO()
+        buf.write(head + "\n")
+        fmt = ["%.6f"] + (["%.0f"] * 3 if self.sensor.quantum == 1.0 else ["%.9g"] * 3)
+        fmt += ["%.4f"] if self.temp is not None else []
+        np.savetxt(buf, np.column_stack(cols), delimiter=",", fmt=fmt)
+        return buf.getvalue()
+
+
+def _slerp(u: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
+    cosang = np.clip(u @ v, -1, 1)
+    ang = np.arccos(cosang)
+    if ang < 1e-9:
+        return np.repeat(u[None], w.size, axis=0)
+    if np.pi - ang < 1e-6:  # antipodal: go through any perpendicular direction
+        perp = np.cross(u, [1, 0, 0] if abs(u[0]) < 0.9 else [0, 1, 0])
+        perp /= np.linalg.norm(perp)
+        half = np.minimum(w * 2, 1)[:, None], np.maximum(w * 2 - 1, 0)[:, None]
+        a = _slerp(u, perp, half[0].ravel())
+        b = _slerp(perp, v, half[1].ravel())
+        return np.where((w < 0.5)[:, None], a, b)
+    s = np.sin(ang)
+    return (np.sin((1 - w) * ang)[:, None] * u + np.sin(w * ang)[:, None] * v) / s
+
+
+def simulate(sensor: SensorSpec, plan: PosePlan, gravity: float = STANDARD_GRAVITY, seed: int = 0,
+             temperature: "TemperatureProfile | None" = None) -> Simulation:
+    """Simulate a multi-pose recording; reproducible for a given seed."""
+    rng = np.random.default_rng(check_seed(seed))
+    dirs = np.asarray(plan.directions, float)
+    dirs = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+    nh, nt = int(round(plan.hold * plan.rate)), int(round(plan.transition * plan.rate))
+    n0 = int(round(plan.initial_hold * plan.rate))
+    acc, still, bounds = [], [], []
+    pos = 0
+    for k, d in enumerate(dirs):
+        h = nh + (n0 if k == 0 else 0)
+        acc.append(np.repeat(d[None] * gravity, h, axis=0))
+        still.append(np.ones(h, bool))
+        bounds.append((pos, pos + h))
+        pos += h
+        if k + 1 < len(dirs):
+            w = 0.5 - 0.5 * np.cos(np.linspace(0, np.pi, nt))  # smooth rotation profile
+            path = _slerp(d, dirs[k + 1], w) * gravity
+            bump = np.sin(np.linspace(0, np.pi, nt))[:, None]
+            motion = bump * (rng.normal(0, plan.vibration, (nt, 3)) + rng.normal(0, 2 * plan.vibration, 3))
+            acc.append(path + motion)
+            still.append(np.zeros(nt, bool))
+            pos += nt
+    a = np.vstack(acc)
+    n = a.shape[0]
+    t = np.arange(n) / plan.rate
+    temp = temperature.sample(t, rng) if temperature is not None else None
+    E = frame_matrix(np.asarray(sensor.angles))
+    m = a @ E  # m_i = e_i . a (Lemma 1), E's columns are e_i
+    raw = sensor.forward(m, t, temp) + rng.normal(0, 1, (n, 3)) * np.asarray(sensor.noise)
+    if sensor.quantum > 0:
+        raw = np.round(raw / sensor.quantum) * sensor.quantum
+    return Simulation(t=t, raw=raw, temp=temp, accel=a, still=np.concatenate(still), sensor=sensor,
+                      gravity=gravity, hold_bounds=np.array(bounds))
+
+
+@dataclass(frozen=True)
+class TemperatureProfile:
+    """Warm-up towards a plateau plus a slow non-monotonic swing and a little noise [deg C]."""
+
+    start: float = 20.0
+    plateau: float = 35.0
+    tau: float = 60.0  #: warm-up time constant [s]
+    swing: float = 3.0  #: amplitude of the slow swing [deg C]
+    period: float = 300.0  #: period of the swing [s]
+    noise: float = 0.02
+
+    def sample(self, t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        warm = self.plateau + (self.start - self.plateau) * np.exp(-t / self.tau)
+        return warm + self.swing * np.sin(2 * np.pi * t / self.period) + rng.normal(0, self.noise, t.size)
+
+
+# --- configuration (YAML -> typed dataclasses) and fitted-sensor replay ---------------------
+#: Named direction sets for ``plan.directions`` in a simulation config.
+DIRECTION_SETS = ("faces", "edges", "corners", "faces+edges", "faces+corners", "edges+corners",
+                  "faces+edges+corners", "random")
+SENSOR_PRESETS = ("mems_counts", "si", "none")
+
+
+@dataclass(frozen=True)
+class SimulationConfig:
+    """Everything one simulated recording needs; ``simulation_from_dict`` fills it from YAML."""
+
+    sensor: SensorSpec
+    plan: PosePlan
+    temperature: "TemperatureProfile | None" = None  #: None: the recording has no temp column
+    gravity: float = STANDARD_GRAVITY  #: [m/s^2]
+    seed: int = 0
+    source: str | None = None  #: the YAML file, for messages
+
+    def run(self) -> Simulation:
+        return simulate(self.sensor, self.plan, gravity=self.gravity, seed=self.seed,
+                        temperature=self.temperature)
+
+
+def _section(d: object, where: str, allowed: tuple[str, ...], path: str | None) -> dict:
+    if d is None:
+        return {}
+    if not isinstance(d, dict):
+        raise ImucalError(f"section must be a mapping, got {type(d).__name__}", file=path, field=where)
+    unknown = [k for k in d if k not in allowed]
+    if unknown:
+        raise ImucalError(f"unknown key {short(unknown[0])}", file=path,
+                          field=key_text(unknown[0]) if where == "top level" else f"{where}.{key_text(unknown[0])}",
+                          fix=f"allowed keys here: {', '.join(allowed)}")
+    return dict(d)
+
+
+def _vec3(v: object, path: str | None, where: str) -> tuple[float, float, float]:
+    vals = [v] * 3 if isinstance(v, (int, float)) and not isinstance(v, bool) else v
+    if (not isinstance(vals, (list, tuple)) or len(vals) != 3
+            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x) for x in vals)):
+        raise ImucalError(f"{short(v)} must be three finite numbers (or one for all axes)", file=path, field=where)
+    return tuple(float(x) for x in vals)  # type: ignore[return-value]
+
+
+def _number(v: object, path: str | None, where: str, positive: bool = False, allow_zero: bool = True) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
+        raise ImucalError(f"{short(v)} is not a finite number", file=path, field=where)
+    if positive and (v < 0 or (v == 0 and not allow_zero)):
+        raise ImucalError(f"{short(v)} must be {'non-negative' if allow_zero else 'positive'}", file=path, field=where)
+    return float(v)
+
+
+def simulation_from_dict(d: object, path: str | None = None) -> SimulationConfig:
+    """Typed simulation config from a YAML mapping; unknown keys are an error naming the allowed ones.
+
+    Top level: ``seed``, ``gravity`` [m/s^2], ``sensor``, ``plan``, ``temperature`` (omit or null
+    for a recording without a temp column). See configs/simulate_example.yaml.
+    """
+    check_structure(d, path)
+    if not isinstance(d, dict):
+        raise ImucalError("top level must be a mapping", file=path, field="top level",
+                          fix="see configs/simulate_example.yaml")
+    top = _section(d, "top level", ("seed", "gravity", "sensor", "plan", "temperature"), path)
+    try:
+        seed = check_seed(top.get("seed", 0))
+    except ImucalError as exc:
+        raise ImucalError(exc.message, file=path, field="seed", fix=exc.fix) from None
+    gravity = _number(top.get("gravity", STANDARD_GRAVITY), path, "gravity", positive=True, allow_zero=False)
+    rng = np.random.default_rng(seed)
+    # sensor: a random preset drawn from the seed, explicit values override it
+    sd = _section(top.get("sensor"), "sensor", ("preset", "s", "b", "angles_deg", "noise", "quantum", "unit",
+                                                 "effects"), path)
+    preset = sd.get("preset", "mems_counts")
+    if preset not in SENSOR_PRESETS:
+        raise ImucalError(f"unknown preset {short(preset)}", file=path, field="sensor.preset",
+                          fix=f"use one of {', '.join(SENSOR_PRESETS)}")
+    base = {"mems_counts": lambda: mems_counts_sensor(rng), "si": lambda: si_sensor(rng),
+            "none": SensorSpec}[preset]()
+    kw: dict = {}
+    for key in ("s", "b", "noise"):
+        if key in sd:
+            kw[key] = _vec3(sd[key], path, f"sensor.{key}")
+    if "b" in kw and not all(x > 0 for x in kw["b"]):
+        raise ImucalError("scales must be positive", file=path, field="sensor.b")
+    if "noise" in kw and not all(x >= 0 for x in kw["noise"]):
+        raise ImucalError("noise must be non-negative", file=path, field="sensor.noise")
+    if "angles_deg" in sd:
+        kw["angles"] = tuple(np.radians(_vec3(sd["angles_deg"], path, "sensor.angles_deg")))
+    if "quantum" in sd:
+        kw["quantum"] = _number(sd["quantum"], path, "sensor.quantum", positive=True)
+    if "unit" in sd:
+        unit = sd["unit"]
+        if not (isinstance(unit, str) and 0 < len(unit) <= 20 and unit.isprintable()):
+            raise ImucalError(f"unit {short(unit)} must be a short name", file=path, field="sensor.unit",
+                              fix="e.g. unit: raw or unit: m/s^2")
+        kw["unit"] = unit
+    effects = sd.get("effects") or {}
+    if not isinstance(effects, dict) or not all(isinstance(v, dict) for v in effects.values()):
+        raise ImucalError("must map effect names to {parameter: value}", file=path, field="sensor.effects",
+                          fix="e.g. effects: {bias_temperature: {bias_temperature_x: 2.0}}")
+    for name, coeffs in effects.items():
+        for k, v in coeffs.items():
+            _number(v, path, f"sensor.effects.{name}.{k}")
+    kw["effects"] = {str(n): {str(k): float(v) for k, v in c.items()} for n, c in effects.items()}
+    from dataclasses import replace
+
+    sensor = replace(base, **kw)
+    try:
+        frame_matrix(np.asarray(sensor.angles))
+        if sensor.effects:
+            from imucal.model.effects import effects_from_coefficients
+
+            effects_from_coefficients(sensor.effects)
+    except ImucalError as exc:
+        raise ImucalError(exc.message, file=path, field=exc.field, fix=exc.fix) from None
+    # pose plan
+    pd = _section(top.get("plan"), "plan", ("directions", "n_random", "hold", "transition", "initial_hold",
+                                             "vibration", "rate"), path)
+    dirs = pd.get("directions", "faces+edges")
+    n_random = pd.get("n_random", 0)
+    if isinstance(n_random, bool) or not isinstance(n_random, int) or not 0 <= n_random <= MAX_SIM_POSES:
+        raise ImucalError(f"n_random {short(n_random)} must be an integer from 0 to {MAX_SIM_POSES}", file=path,
+                          field="plan.n_random", fix="a calibration needs tens of poses")
+    if isinstance(dirs, str):
+        if dirs not in DIRECTION_SETS:
+            raise ImucalError(f"unknown direction set {short(dirs)}", file=path, field="plan.directions",
+                              fix=f"use one of {', '.join(DIRECTION_SETS)} or a list of [x, y, z]")
+        parts = [] if dirs == "random" else [cube_directions(dirs)]
+    else:
+        if not (isinstance(dirs, list) and 0 < len(dirs) <= MAX_SIM_POSES and all(
+                isinstance(r, list) and len(r) == 3
+                and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in r) for r in dirs)):
+            raise ImucalError(f"directions must be a set name or a list of at most {MAX_SIM_POSES} [x, y, z]",
+                              file=path, field="plan.directions")
+        arr = np.asarray(dirs, float)
+        largest = np.max(np.abs(arr), axis=1, keepdims=True)
+        if not np.all(np.isfinite(arr)) or np.any(largest == 0):
+            raise ImucalError("directions must be a set name or a list of non-zero [x, y, z]", file=path,
+                              field="plan.directions")
+        arr = arr / largest  # scaled first: the norm of [1e308, 1e308, 0] overflows
+        parts = [arr / np.linalg.norm(arr, axis=1, keepdims=True)]
+    if n_random:
+        parts.append(random_directions(n_random, rng))
+    if not parts:
+        raise ImucalError("no directions: 'random' needs n_random > 0", file=path, field="plan.n_random")
+    order = np.vstack(parts)
+    order = order[rng.permutation(len(order))]  # poses in a shuffled order, as a person would
+    pkw = {k: _number(pd[k], path, f"plan.{k}", positive=True) for k in
+           ("hold", "transition", "initial_hold", "vibration", "rate") if k in pd}
+    try:
+        plan = PosePlan(order, **pkw)
+    except ImucalError as exc:
+        raise ImucalError(exc.message, file=path, field=exc.field, fix=exc.fix) from None
+    # temperature profile
+    temperature = None
+    if top.get("temperature") is not None:
+        td = _section(top["temperature"], "temperature", ("start", "plateau", "tau", "swing", "period", "noise"),
+                      path)
+        tkw = {k: _number(v, path, f"temperature.{k}") for k, v in td.items()}
+        for k in ("tau", "period"):
+            if k in tkw and tkw[k] <= 0:
+                raise ImucalError(f"{k} must be positive [s]", file=path, field=f"temperature.{k}")
+        if tkw.get("noise", 0) < 0:
+            raise ImucalError("noise must be non-negative [degC]", file=path, field="temperature.noise")
+        temperature = TemperatureProfile(**tkw)
+    if sensor.effects and temperature is None:
+        from imucal.model.effects import effects_from_coefficients
+
+        if any("temp" in e.covariates for e in effects_from_coefficients(sensor.effects)):
+            raise ImucalError("the sensor has a temperature effect but there is no temperature: section",
+                              file=path, field="temperature", fix="add temperature: {start: 20, plateau: 35}")
+    return SimulationConfig(sensor=sensor, plan=plan, temperature=temperature, gravity=gravity, seed=seed,
+                            source=path)
+
+
+def load_simulation_config(path: str) -> SimulationConfig:
+    """Read a simulation YAML (``yaml.safe_load``) into a SimulationConfig."""
+    from imucal.files.yamlio import read_yaml
+
+    d = read_yaml(path, "config", "pass a simulation YAML (see configs/simulate_example.yaml)")
+    return simulation_from_dict(d, str(path))
+
+
+def sensor_from_values(values: dict, effects: tuple = (), noise: tuple[float, float, float] = (0.0, 0.0, 0.0),
+                       unit: str = "raw") -> SensorSpec:
+    """A SensorSpec from fitted parameter values (e.g. ``Calibration.params.value_dict()``).
+
+    ``effects`` are the model's effect objects; their coefficients (and fixed references) are
+    taken from ``values``. Used to replay what a recording should look like under a fitted model.
+    """
+    eff: dict[str, dict[str, float]] = {}
+    for e in effects:
+        names = list(e.coefficient_names) + ([e.tref_name] if getattr(e, "uses_tref", False) else [])
+        eff[e.name] = {n: float(values[n]) for n in names}
+    return SensorSpec(s=tuple(float(values[f"s{i}"]) for i in (1, 2, 3)),
+                      b=tuple(float(values[f"b{i}"]) for i in (1, 2, 3)),
+                      angles=tuple(float(values[a]) for a in ("phi", "psi", "theta")),
+                      noise=tuple(noise), quantum=0.0, unit=unit, effects=eff)
+
+
+# --- seeded cases with one hidden effect (tests and scripts/discover_study.py) ---------------
+@dataclass(frozen=True)
+class EffectCase:
+    """A simulated recording with at most one hidden effect, drawn from a seed."""
+
+    seed: int
+    effect: str | None  #: None: a clean sensor
+    axes: tuple[int, ...]
+    size: float  #: largest change of a reading at 1 g over the recording [m/s^2]
+    sigma_mean: float  #: noise of one interval mean [m/s^2], for the signal-to-noise ratio
+    config: SimulationConfig
+
+    @property
+    def snr(self) -> float:
+        return self.size / self.sigma_mean if self.sigma_mean > 0 else float("inf")
+
+    @property
+    def label(self) -> str:
+        if self.effect is None:
+            return "clean"
+        return f"{self.effect}[{''.join('xyz'[a] for a in self.axes)}]"
+
+
+def _axis_subsets() -> list[tuple[int, ...]]:
+    import itertools
+
+    return [c for r in (1, 2, 3) for c in itertools.combinations(range(3), r)]
+
+
+def draw_effect_case(seed: int, effect: str | None = "random", axes: tuple[int, ...] | None = None,
+                     snr: float | tuple[float, float] = (15.0, 60.0), noise_mg: float | None = None,
+                     counts: bool | None = None, with_temperature: bool = True,
+                     candidates: tuple[str, ...] | None = None) -> EffectCase:
+    """Draw sensor, pose plan, temperature profile and (unless ``effect`` is None) one effect.
+
+    ``effect``: "random", a name from imucal.model.effects.EFFECTS, or None for a clean sensor.
+    ``snr``: effect size in units of the noise of one interval mean (a number or a log-uniform
+    range). ``noise_mg``: white noise per sample [mg]; default drawn in 0.1 .. 1 mg.
+    ``counts``: raw counts with quantisation (True) or factory-scaled m/s^2 (False); default random.
+    18 to 26 poses of 3 s at 100 Hz, so a case simulates in milliseconds and fits in well under a second.
+    """
+    from imucal.model.effects import EFFECTS, make_effect
+
+    rng = np.random.default_rng([seed, 20240611])
+    counts = bool(rng.integers(2)) if counts is None else counts
+    noise_mg = float(np.exp(rng.uniform(np.log(0.1), np.log(1.0)))) if noise_mg is None else float(noise_mg)
+    g = STANDARD_GRAVITY
+    if counts:
+        lsb_per_g = float(rng.choice([4096.0, 8192.0, 16384.0]))
+        sensor = mems_counts_sensor(rng, lsb_per_g=lsb_per_g, noise_counts=noise_mg * 1e-3 * lsb_per_g)
+    else:
+        sensor = si_sensor(rng, noise=noise_mg * 1e-3 * g)
+    kind = ["faces+edges", "faces+corners", "faces+edges+corners"][int(rng.integers(3))]
+    dirs = cube_directions(kind)
+    n_extra = {"faces+edges": int(rng.integers(0, 9)), "faces+corners": int(rng.integers(4, 9)),
+               "faces+edges+corners": 0}[kind]  # 18 to 26 poses
+    if n_extra:
+        dirs = np.vstack([dirs, random_directions(n_extra, rng)])
+    dirs = dirs[rng.permutation(len(dirs))]
+    plan = PosePlan(dirs, hold=3.0, transition=float(rng.uniform(1.5, 2.5)), initial_hold=0.0,
+                    vibration=float(rng.uniform(0.5, 1.5)), rate=100.0)
+    temperature = None
+    if with_temperature:
+        start = float(rng.uniform(15, 25))
+        temperature = TemperatureProfile(start=start, plateau=start + float(rng.uniform(8, 15)),
+                                         tau=float(rng.uniform(30, 90)), swing=float(rng.uniform(2, 4)),
+                                         period=float(rng.uniform(80, 150)), noise=0.02)
+    duration = len(dirs) * plan.hold + (len(dirs) - 1) * plan.transition
+    t = np.linspace(0, duration, 1000)
+    temp_span = 0.0
+    if temperature is not None:
+        temp_clean = TemperatureProfile(**{**temperature.__dict__, "noise": 0.0}).sample(t, rng)
+        temp_span = float(np.ptp(temp_clean))
+    b_mean = float(np.mean(sensor.b))
+    n_hold = 0.8 * plan.hold * plan.rate  # samples an interval keeps after trimming
+    sigma_mean = float(np.mean(sensor.noise)) / b_mean / np.sqrt(n_hold)
+    name, ax, size = None, (), 0.0
+    if effect is not None:
+        pool = [n for n in (candidates or tuple(EFFECTS))
+                if temperature is not None or "temp" not in EFFECTS[n].covariates]
+        name = pool[int(rng.integers(len(pool)))] if effect == "random" else effect
+        if name not in EFFECTS:
+            raise ImucalError(f"unknown effect {short(name)}", field="effect", fix=f"choose from {', '.join(EFFECTS)}")
+        subsets = _axis_subsets()
+        ax = tuple(axes) if axes is not None else subsets[int(rng.integers(len(subsets)))]
+        lo, hi = (snr, snr) if isinstance(snr, (int, float)) else snr
+        size = float(np.exp(rng.uniform(np.log(lo), np.log(hi)))) * sigma_mean
+        e = make_effect(name, ax)
+        coeffs = {}
+        for a in e.axes:
+            sign = 1.0 if rng.integers(2) else -1.0
+            coeffs[e.coefficient(a)] = sign * e.coefficient_for_size(size, float(sensor.b[a]), temp_span, duration, g)
+        if e.uses_tref:
+            coeffs[e.tref_name] = float(np.round(rng.uniform(20, 30), 1))
+        from dataclasses import replace
+
+        sensor = replace(sensor, effects={name: coeffs})
+    cfg = SimulationConfig(sensor=sensor, plan=plan, temperature=temperature, gravity=g, seed=int(seed))
+    return EffectCase(seed=int(seed), effect=name, axes=tuple(ax), size=size, sigma_mean=sigma_mean, config=cfg)
+
+
+def draw_pair_case(seed: int, snr: float = 40.0, noise_mg: float | None = None) -> tuple[EffectCase, EffectCase]:
+    """Two different effects, each on one random axis and of the same SNR, in one recording.
+
+    Returns the two single-effect cases; the recording is ``pair_config(...)`` of them (the
+    first case's sensor, plan and temperature with both effects).
+    """
+    from imucal.model.effects import EFFECTS
+
+    rng = np.random.default_rng([seed, 977])
+    names = list(EFFECTS)
+    a, b = rng.choice(len(names), 2, replace=False)
+    c1 = draw_effect_case(seed, effect=names[a], axes=(int(rng.integers(3)),), snr=snr, noise_mg=noise_mg)
+    c2 = draw_effect_case(seed, effect=names[b], axes=(int(rng.integers(3)),), snr=snr, noise_mg=noise_mg)
+    return c1, c2
+
+
+def pair_config(c1: EffectCase, c2: EffectCase) -> SimulationConfig:
+    """The simulation of ``c1`` with the effects of both cases (same seed: same sensor and plan)."""
+    from dataclasses import replace
+
+    sensor = replace(c1.config.sensor, effects={**c1.config.sensor.effects, **c2.config.sensor.effects})
+    return replace(c1.config, sensor=sensor)

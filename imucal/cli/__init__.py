@@ -1,0 +1,1 @@
+"""The command line: argument parsing, one option set per concern, exit statuses."""

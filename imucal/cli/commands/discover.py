@@ -1,0 +1,81 @@
+"""`imucal discover --data FILE [--config CONFIG.yaml]`: find the effect the 9-parameter model lacks."""
+from __future__ import annotations
+
+import argparse
+
+from imucal.cli.commands import options
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("discover", help="find where the model disagrees with the data, name the effect, add it",
+                       description="Fit the paper's 9-parameter model, test the residual of the interval means "
+                                   "against their noise (chi-square), and while it disagrees add the candidate "
+                                   "effect (temperature, drift, nonlinearity) that is significant by a "
+                                   "likelihood-ratio test. Prints the report; --json, --plot and --out write files.")
+    p.add_argument("--config", help="YAML run file (data, static, gravity, fit sections); --data overrides its path")
+    options.add_data_options(p)
+    options.add_gravity_options(p)
+    options.add_model_options(p, mode=False)  # discovery works on interval means
+    p.add_argument("--json", help="write the machine-readable summary here")
+    p.add_argument("--plot", metavar="DIR", help="write the figures into DIR")
+    p.add_argument("--out", metavar="DIR", help="write the final calibration.yaml and report.txt into DIR")
+    p.add_argument("--candidates", nargs="+", metavar="EFFECT",
+                   help="effects to try (default: all of bias_temperature, scale_temperature, bias_drift, "
+                        "scale_drift, scale_nonlinearity)")
+    p.add_argument("--alpha", type=float, default=1e-3,
+                   help="significance level of the noise test and of adding an effect (default 1e-3)")
+    p.add_argument("--max-effects", type=int, default=3, help="add at most this many effects (default 3)")
+    p.add_argument("--quiet", action="store_true", help="print only the verdict and where the files went")
+    p.set_defaults(run=run)
+
+
+def _config(args: argparse.Namespace):
+    from imucal.errors import ImucalError
+
+    if not args.config and not args.data:
+        raise ImucalError("nothing to analyse", field="arguments", fix="give --data RECORDING (and optionally --config)")
+    return options.run_config(args, args.config)
+
+
+def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from imucal.analysis.discover import DiscoverSettings, discover
+    from imucal.model.effects import EFFECTS
+    from imucal.files.output import OutputSet, check_outputs
+
+    cfg = _config(args)
+    inputs = [args.config, options.data_path(cfg)]
+    plot_names = []
+    if args.plot:
+        from imucal.report.discover_figures import FIGURES as PLOTS
+
+        plot_names = [Path(args.plot) / n for n in PLOTS]
+    outs = [Path(args.out) / "calibration.yaml", Path(args.out) / "report.txt"] if args.out else []
+    check_outputs(inputs, [args.json, *plot_names, *outs])
+    settings = DiscoverSettings(candidates=tuple(args.candidates or EFFECTS), alpha_noise=args.alpha,
+                                alpha_effect=args.alpha, max_effects=args.max_effects)
+    result = discover(cfg, settings)
+    text = result.report()
+    written = []
+    with OutputSet(inputs) as o:
+        if args.json:
+            o.json(args.json, result.to_json())
+            written.append(args.json)
+        if args.plot:
+            from imucal.report.discover_figures import FIGURES
+
+            for name, fn in FIGURES.items():
+                o.call(Path(args.plot) / name, lambda p, fn=fn: fn(result, p))
+            written.append(f"{args.plot}/ ({len(FIGURES)} figures)")
+        if args.out:
+            from imucal.report.text import fit_report
+
+            out = Path(args.out)
+            o.call(out / "calibration.yaml", result.final.calibration.save)
+            o.text(out / "report.txt", fit_report(result.final) + "\n" + text)
+            written.append(f"{out / 'calibration.yaml'}, {out / 'report.txt'}")
+    print(f"verdict: {result.verdict}" if args.quiet else text.rstrip())
+    if written:
+        print("wrote " + ", ".join(written))
+    return 0

@@ -1,0 +1,106 @@
+"""One option set per concern, shared by every command that reads a recording.
+
+data (the recording and how to read it), gravity (local g), model (which parameters and how the
+fit weighs the data), output. ``run_config(args)`` turns them, with an optional YAML run file,
+into the RunConfig the library takes: every given option is used or refused.
+
+Parsing stays light: the library (numpy, CasADi) is imported when a command runs, not when the
+parser is built, so `imucal --help` and `--version` start in about 0.1 s.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from imucal.constants import TIME_UNIT_CHOICES
+from imucal.errors import ImucalError
+
+if TYPE_CHECKING:
+    from imucal.config.run import GravitySpec, RunConfig
+
+
+def add_data_options(p: argparse.ArgumentParser, data_required: bool = False) -> None:
+    g = p.add_argument_group("data")
+    g.add_argument("--data", required=data_required, metavar="FILE",
+                   help="recording (CSV with header, or whitespace text: t x y z)")
+    g.add_argument("--columns", metavar="MAP",
+                   help="column roles, 0-based indices or header names: t=0,ax=4,ay=5,az=6 "
+                        "(roles t, ax, ay, az, gx, gy, gz, temp)")
+    g.add_argument("--time-unit", choices=TIME_UNIT_CHOICES,
+                   help="unit of the time column (default auto: inferred and reported)")
+    g.add_argument("--sample-rate", type=float, help="sample rate [Hz] when the file has no time column")
+    g.add_argument("--unit", help="unit of the raw readings (label only, e.g. raw or m/s^2)")
+
+
+def add_gravity_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("gravity")
+    g.add_argument("--gravity", type=float, help="local gravity [m/s^2] (default: config, else 9.80665)")
+    g.add_argument("--latitude", type=float, help="latitude [deg] for WGS84 normal gravity")
+    g.add_argument("--height", type=float, help="height above the ellipsoid [m] (with --latitude)")
+
+
+def add_model_options(p: argparse.ArgumentParser, mode: bool = True) -> None:
+    """--fix-angles, --weights and (where the command can fit samples) --mode."""
+    g = p.add_argument_group("model")
+    g.add_argument("--fix-angles", action="store_true", help="hold the angles at 90 deg (6-parameter model)")
+    if mode:
+        g.add_argument("--mode", choices=("means", "samples"), help="fit interval means (default) or samples")
+    g.add_argument("--weights", choices=("noise", "uniform"),
+                   help="row weights: noise (1/sigma^2, default) or uniform (as imu_tk)")
+
+
+def _gravity(args: argparse.Namespace, cfg: RunConfig) -> GravitySpec:
+    from imucal.config.run import GravitySpec
+
+    if args.height is not None and args.latitude is None:
+        raise ImucalError("--height is used only with --latitude (WGS84 normal gravity)", field="--height",
+                          fix="add --latitude DEG, or give --gravity G instead")
+    if args.gravity is None and args.latitude is None:
+        return cfg.gravity
+    if args.gravity is not None and args.latitude is not None:
+        raise ImucalError("give either --gravity or --latitude, not both", field="--gravity",
+                          fix="--gravity G, or --latitude DEG [--height M]")
+    return GravitySpec(value=args.gravity, latitude=args.latitude,
+                       height=0.0 if args.height is None else args.height)
+
+
+def run_config(args: argparse.Namespace, config: str | None = None, data_override: bool = True) -> RunConfig:
+    """The RunConfig from a YAML file (optional) and the command's options."""
+    from imucal.config.run import config_from_dict, load_config
+    from imucal.data.load import parse_columns
+
+    if config:
+        cfg = load_config(config)
+        if args.data and data_override:
+            cfg = dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, path=str(Path(args.data).resolve())))
+    elif args.data:
+        cfg = config_from_dict({"data": {"path": args.data}}, None)
+    else:
+        raise ImucalError("nothing to read", field="arguments", fix="give --data RECORDING or a YAML run file")
+    over = {}
+    if getattr(args, "columns", None):
+        over["columns"] = parse_columns(args.columns)
+    for opt, key in (("time_unit", "time_unit"), ("sample_rate", "sample_rate"), ("unit", "unit")):
+        if getattr(args, opt, None) is not None:
+            over[key] = getattr(args, opt)
+    data = dataclasses.replace(cfg.data, **over) if over else cfg.data
+    fit = cfg.fit
+    mode, weights = getattr(args, "mode", None), getattr(args, "weights", None)
+    if getattr(args, "fix_angles", False) or mode or weights:
+        fix = set(fit.fix) | ({"phi", "psi", "theta"} if getattr(args, "fix_angles", False) else set())
+        fit = dataclasses.replace(fit, fix=tuple(sorted(fix)), mode=mode or fit.mode,
+                                  weights=weights or fit.weights)
+    grav = _gravity(args, cfg) if hasattr(args, "gravity") else cfg.gravity
+    return dataclasses.replace(cfg, data=data, gravity=grav, fit=fit)
+
+
+def data_path(cfg: RunConfig, gyro: bool = False) -> Path | None:
+    """The recording's (or with ``gyro``, the gyroscope file's) path as the loader resolves it
+    (relative to the YAML file); None when there is no such file."""
+    name = cfg.data.gyro_path if gyro else cfg.data.path
+    if name is None:
+        return None
+    p = Path(name)
+    return p if p.is_absolute() or cfg.base_dir is None else cfg.base_dir / p

@@ -1,0 +1,183 @@
+"""`imucal plan-poses --n N`: orientations that maximise the information on the 9 parameters.
+
+Also scores a given plan (`--evaluate PLAN.json`) or a named scheme (`--scheme edges`), and
+refuses plans whose gravity directions cannot determine the parameters.
+"""
+from __future__ import annotations
+
+import argparse
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("plan-poses", help="plan the static orientations of a calibration (optimal design)",
+                       description="Plan N still orientations that maximise the Fisher information on the "
+                                   "model's parameters (D: det, A: summed variance, E: worst direction), "
+                                   "with the predicted standard error of each parameter, compared with the "
+                                   "common cube schemes and random poses.")
+    p.add_argument("--n", type=int, help="number of orientations to plan (>= 9; >= 6 with --fix-angles)")
+    p.add_argument("--criterion", choices=("D", "A", "E"), default="D",
+                   help="D: max det F (default); A: min summed variance; E: max smallest eigenvalue")
+    p.add_argument("--noise", type=float, default=None,
+                   help="noise of |a| - g per interval mean [m/s^2] (default 0.002: MEMS, 4 s holds)")
+    p.add_argument("--fix-angles", action="store_true", help="plan for the 6-parameter model (angles at 90 deg)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the multi-start (default 0)")
+    p.add_argument("--evaluate", metavar="PLAN.json", help="score this plan (JSON with 'poses') instead of planning")
+    p.add_argument("--scheme", help="score a named scheme: faces, edges, corners, faces+edges, cube-24, "
+                                    "wedge-24, cube-26")
+    p.add_argument("--no-compare", action="store_true", help="skip the comparison with common schemes")
+    p.add_argument("--json", metavar="OUT", help="write the plan (poses, predicted std, comparison) as JSON")
+    p.set_defaults(run=run)
+
+
+#: Keys of a plan file: only "poses" is read; the rest are what plan-poses --json writes beside it
+#: (its results; scoring uses this command's options).
+PLAN_KEYS = ("format", "format_version", "poses", "criterion", "n", "n_distinct", "noise_m_s2", "free",
+             "criterion_value", "log_det_fisher", "predicted_std", "label", "comparison", "random")
+#: Largest plan file read (a plan of 10000 poses is about 0.5 MB).
+MAX_PLAN_BYTES = 4 << 20
+
+
+def _read_plan(path: str):
+    """The gravity directions of a pose plan: a JSON list of [gx, gy, gz], or an object with 'poses'
+    (plan-poses --json output). Duplicate and unknown keys are refused, like in the YAML files."""
+    import json
+    import math
+
+    import numpy as np
+
+    from imucal.errors import ImucalError, short
+    from imucal.files.inputs import read_input_text
+    from imucal.config.limits import MAX_SIM_POSES
+
+    text = read_input_text(path, field="evaluate", fix="give a JSON plan with 'poses'", max_bytes=MAX_PLAN_BYTES)
+
+    def unique(pairs: list) -> dict:
+        keys = [k for k, _ in pairs]
+        dup = next((k for i, k in enumerate(keys) if k in keys[:i]), None)
+        if dup is not None:
+            raise ImucalError(f"duplicate key {short(dup)}", file=path, field="evaluate",
+                              fix="write each key once")
+        return dict(pairs)
+
+    try:
+        obj = json.loads(text, object_pairs_hook=unique)
+    except RecursionError:
+        raise ImucalError("is nested too deeply", file=path, field="evaluate",
+                          fix="give a JSON plan with 'poses'") from None
+    except ValueError as exc:  # JSONDecodeError, or an integer with too many digits
+        raise ImucalError(f"is not readable JSON: {short(str(exc), 80)}", file=path, field="evaluate") from None
+    if isinstance(obj, dict):
+        unknown = [k for k in obj if k not in PLAN_KEYS]
+        if unknown:
+            raise ImucalError(f"unknown key {short(unknown[0])}", file=path, field="evaluate",
+                              fix="a plan has 'poses' (and what plan-poses --json writes)")
+        fmt = obj.get("format", "imucal-pose-plan")
+        if fmt != "imucal-pose-plan":
+            raise ImucalError(f"format {short(fmt)} is not a pose plan", file=path, field="format",
+                              fix="write {\"poses\": [[gx, gy, gz], ...]}")
+        ver = obj.get("format_version", 1)
+        if ver != 1 or isinstance(ver, bool):
+            raise ImucalError(f"unknown format_version {short(ver)}", file=path, field="format_version",
+                              fix="this imucal reads version 1")
+        if "poses" not in obj:
+            raise ImucalError("missing key 'poses'", file=path, field="poses",
+                              fix="list the gravity direction of each pose, e.g. \"poses\": [[0, 0, 1], ...]")
+        obj = obj["poses"]
+    if isinstance(obj, list) and len(obj) > MAX_SIM_POSES:
+        raise ImucalError(f"{len(obj)} poses, above the limit of {MAX_SIM_POSES}", file=path, field="poses",
+                          fix="a calibration needs tens of poses")
+    if not isinstance(obj, list) or not obj or not all(
+            isinstance(r, list) and len(r) == 3 and all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                                                        and math.isfinite(x) for x in r) for r in obj):
+        raise ImucalError("poses must be a non-empty list of [gx, gy, gz] numbers", file=path, field="poses")
+    return np.array(obj, float)
+
+
+def _nearest_cube(u) -> str:
+    import numpy as np
+
+    from imucal.analysis.simulate import cube_directions
+
+    C = cube_directions("faces+edges+corners")
+    j = int(np.argmax(C @ u))
+    v = np.round(C[j] * np.sqrt(np.count_nonzero(C[j]))).astype(int)
+    name = "".join(f"{'+' if x > 0 else '-'}{a}" for x, a in zip(v, "xyz") if x != 0)
+    kind = {1: "face", 2: "edge", 3: "corner"}[int(np.count_nonzero(v))]
+    ang = float(np.degrees(np.arccos(np.clip(C[j] @ u, -1, 1))))
+    return f"{kind} {name}" + (f" +{ang:.1f} deg" if ang >= 0.05 else "")
+
+
+def _units(name: str) -> tuple[float, str]:
+    """Display factor and unit for the ideal SI sensor the design is evaluated at."""
+    if name.startswith("s"):
+        return 1.0, "m/s^2"
+    if name.startswith("b"):
+        return 1e6, "ppm"
+    return 1e3, "mrad"
+
+
+def format_design(design, comparison=None) -> str:
+    import math
+
+    L = []
+    d = design
+    what = {"D": "log det F, larger is better", "A": "trace F^-1, smaller is better",
+            "E": "smallest eigenvalue of F, larger is better"}[d.criterion]
+    L.append(f"[[Pose plan]] {d.label or 'plan'}: {d.n} orientations ({d.n_distinct} distinct), "
+             f"{len(d.free)} parameters, criterion {d.criterion}")
+    L.append("    gravity direction in the sensor frame (unit vector), nearest cube direction")
+    for k, u in enumerate(d.directions):
+        L.append(f"    {k + 1:3d}  {u[0]:+.4f} {u[1]:+.4f} {u[2]:+.4f}   {_nearest_cube(u)}")
+    L.append(f"[[Predicted standard errors]] noise {d.noise:g} m/s^2 per interval mean, ideal sensor "
+             "(s in m/s^2, b relative)")
+    for n, v in d.std.items():
+        f, unit = _units(n)
+        L.append(f"    {n:<6} +/- {v * f:.4g} {unit}")
+    L.append(f"    criterion {d.criterion} ({what}; F for unit noise, parameters in m/s^2-equivalents) = {d.value:.6g}")
+    if comparison is not None:
+        L.append(f"[[Comparison at N = {d.n}]]  criterion {d.criterion}"
+                 + ("; D-efficiency = (det F / det F_planned)^(1/p)" if d.criterion == "D" else ""))
+        rows = [(d.label, d)] + [(o.label, o) for o in comparison.others if o.label != d.label]
+        for label, o in rows:
+            eff = f"   D-eff {o.d_efficiency(d):.4f}" if d.criterion == "D" else ""
+            L.append(f"    {label:<18} {o.value:12.6g}   max std ratio {max(o.std[k] / d.std[k] for k in d.std):.3f}{eff}")
+        L.append(f"    {'random (median)':<18} {comparison.random_median:12.6g}   ({comparison.n_random} sets)")
+        L.append(f"    {'random (best)':<18} {comparison.random_best:12.6g}")
+        if not math.isfinite(comparison.random_median):
+            L.append("    (some random sets leave parameters undetermined)")
+    return "\n".join(L)
+
+
+def run(args: argparse.Namespace) -> int:
+    from imucal.analysis.design import (BASE_NAMES, DEFAULT_NOISE, SIX_NAMES, compare, evaluate, optimal_design,
+                          scheme_directions)
+    from imucal.errors import ImucalError
+    from imucal.files.output import check_outputs, write_json_atomic
+
+    from imucal.config.limits import check_seed
+
+    check_seed(args.seed, "--seed")
+    check_outputs([args.evaluate], [args.json])
+    free = SIX_NAMES if args.fix_angles else BASE_NAMES
+    noise = DEFAULT_NOISE if args.noise is None else args.noise
+    given = [x for x in (args.n is not None, bool(args.evaluate), bool(args.scheme)) if x]
+    if len(given) != 1:
+        raise ImucalError("give exactly one of --n, --evaluate, --scheme", field="arguments",
+                          fix="e.g. imucal plan-poses --n 12")
+    if args.evaluate or args.scheme:
+        dirs = _read_plan(args.evaluate) if args.evaluate else scheme_directions(args.scheme)
+        label = args.evaluate or args.scheme
+        design = evaluate(dirs, args.criterion, noise, free=free, label=label)
+    else:
+        design = optimal_design(args.n, args.criterion, noise, free=free, seed=args.seed)
+    comp = None if args.no_compare else compare(design, seed=args.seed)
+    print(format_design(design, comp))
+    if args.json:
+        obj = design.to_json()
+        if comp is not None:
+            obj["comparison"] = [{"label": o.label, "criterion_value": o.value, "log_det_fisher": o.log_det_fisher,
+                                  "predicted_std": o.std} for o in comp.others]
+            obj["random"] = {"n_sets": comp.n_random, "median": comp.random_median, "best": comp.random_best}
+        write_json_atomic(args.json, obj)
+        print(f"wrote {args.json}")
+    return 0

@@ -1,0 +1,125 @@
+"""Command line: thin. Parses, calls the library, prints. Bad input exits 2 with one line.
+
+Each subcommand lives in ``imucal/commands/<name>.py`` with ``register(subparsers)`` (argument
+definitions only, no heavy imports) and ``run(args) -> int``.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import signal
+import sys
+import traceback
+
+from imucal import __version__
+from imucal.errors import (EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, ImucalError, short)
+
+#: Subcommand name -> module. Modules import their heavy dependencies inside run().
+COMMANDS = {
+    "calibrate": "imucal.cli.commands.calibrate",
+    "apply": "imucal.cli.commands.apply",
+    "codegen": "imucal.cli.commands.codegen",
+    "worst-case": "imucal.cli.commands.worst_case",
+    "error-map": "imucal.cli.commands.error_map",
+    "drift": "imucal.cli.commands.drift",
+    "simulate": "imucal.cli.commands.simulate",
+    "discover": "imucal.cli.commands.discover",
+    "plan-poses": "imucal.cli.commands.plan_poses",
+    "export": "imucal.cli.commands.export",
+    "noise": "imucal.cli.commands.noise",
+}
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # one line, exit 2 (argparse's convention too)
+        sys.stderr.write(f"{self.prog}: error: {message}\n")
+        raise SystemExit(2)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="imucal", description="Calibrate MEMS accelerometers (Nakov & Ivanov model).")
+    parser.add_argument("--version", action="version", version=f"imucal {__version__}")
+    parser.add_argument("--debug", action="store_true",
+                        help="on an internal error, print the traceback instead of one line")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    for name, modname in COMMANDS.items():
+        try:
+            mod = importlib.import_module(modname)
+        except ModuleNotFoundError as exc:
+            if exc.name == modname:
+                continue  # not built yet
+            raise
+        mod.register(sub)
+    return parser
+
+
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the program is, so staged outputs are removed as on Ctrl-C."""
+
+
+_SIGNALLED: list[int] = []  #: signals received by this run
+
+
+def _on_sigterm(signum, frame) -> None:  # noqa: ARG001 - signal handler signature
+    _SIGNALLED.append(signum)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)  # once: cleanup is not interrupted again
+    raise _Terminated()
+
+
+def _interrupted(exc: BaseException) -> bool:
+    """An exception caused by a signal: raised inside a C extension (CasADi), KeyboardInterrupt
+    can come back wrapped, e.g. as SystemError, with the interrupt in its context."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return bool(_SIGNALLED)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run one command. Exit statuses: imucal.errors.EXIT_* (README, "Exit status")."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "run", None):
+        parser.print_help()
+        return EXIT_BAD_INPUT
+    previous = None
+    _SIGNALLED.clear()
+    try:
+        previous = signal.signal(signal.SIGTERM, _on_sigterm)
+    except ValueError:  # not the main thread (e.g. a test runner's worker): leave it alone
+        pass
+    try:
+        return int(args.run(args) or 0)
+    except ImucalError as exc:
+        sys.stderr.write(f"imucal: error: {exc}\n")
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt as exc:
+        sys.stderr.write("imucal: terminated; nothing was written\n" if isinstance(exc, _Terminated)
+                         else "imucal: interrupted; nothing was written\n")
+        return EXIT_INTERRUPTED
+    except MemoryError:
+        if args.debug:
+            traceback.print_exc()
+        sys.stderr.write("imucal: error: out of memory (the input is too large for this machine; "
+                         "rerun with --debug for the traceback)\n")
+        return EXIT_INTERNAL
+    except Exception as exc:  # noqa: BLE001 - the last line of defence: one line, never a traceback
+        if _interrupted(exc):
+            sys.stderr.write("imucal: terminated; nothing was written\n" if _SIGNALLED
+                             else "imucal: interrupted; nothing was written\n")
+            return EXIT_INTERRUPTED
+        if args.debug:
+            traceback.print_exc()
+        sys.stderr.write(f"imucal: internal error: {type(exc).__name__}: {short(str(exc), 200)} "
+                         "(rerun with --debug for the traceback)\n")
+        return EXIT_INTERNAL
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())

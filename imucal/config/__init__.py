@@ -1,0 +1,1 @@
+"""Run settings from YAML and the bounds on every user-given count."""

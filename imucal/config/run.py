@@ -1,0 +1,233 @@
+"""Run configuration: typed dataclasses, filled from YAML (``yaml.safe_load``).
+
+Unknown keys are an error that names the key and the allowed ones.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+
+from imucal.constants import DEFAULT_ANGLE_TOL
+from imucal.data.load import DataSpec
+from imucal.errors import ImucalError, short
+from imucal.model.gravity import normal_gravity
+from imucal.model.parameters import BASE_NAMES
+from imucal.data.static import StaticSettings
+from imucal.files.yamlio import check_structure, key_text
+
+FIT_MODES = ("means", "samples")
+WEIGHTS = ("noise", "uniform")
+
+
+@dataclass(frozen=True)
+class GravitySpec:
+    """Local gravity: a value [m/s^2], or latitude [deg] and height [m] (WGS84 normal gravity)."""
+
+    value: float | None = None
+    latitude: float | None = None
+    height: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.value is not None and self.latitude is not None:
+            raise ImucalError("give either gravity.value or gravity.latitude, not both", field="gravity")
+        if self.value is not None and not (_is_real(self.value) and math.isfinite(self.value)
+                                           and 9.7 < self.value < 9.9):
+            raise ImucalError(f"gravity {short(self.value)} m/s^2 is not a local gravity on Earth",
+                              field="gravity.value", fix="give local g in m/s^2 (9.78 .. 9.84)")
+        for name in ("latitude", "height"):
+            v = getattr(self, name)
+            if (v is not None or name == "height") and not _is_real(v):
+                raise ImucalError(f"{name} {short(v)} is not a number", field=f"gravity.{name}",
+                                  fix="latitude in degrees, height in metres")
+        if self.latitude is None and self.height != 0.0:
+            fix = ("drop gravity.height: gravity.value already sets g" if self.value is not None
+                   else "add gravity.latitude (WGS84 normal gravity), or give gravity.value")
+            raise ImucalError(f"height {short(self.height)} m is used only with a latitude", field="gravity.height",
+                              fix=fix)
+        if self.latitude is not None:
+            normal_gravity(self.latitude, self.height)  # range checks, at load time
+
+    def resolve(self) -> tuple[float, str]:
+        if self.value is not None:
+            return float(self.value), "given"
+        if self.latitude is not None:
+            return normal_gravity(self.latitude, self.height), (
+                f"WGS84 normal gravity at latitude {self.latitude} deg, height {self.height} m")
+        from imucal.constants import STANDARD_GRAVITY
+
+        return STANDARD_GRAVITY, "standard gravity (no local value given)"
+
+
+def _is_real(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+@dataclass(frozen=True)
+class EffectSpec:
+    name: str
+    axes: tuple[str, ...] = ("x", "y", "z")
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str):
+            raise ImucalError(f"effect name {short(self.name)} is not a string", field="fit.effects.name")
+        if not isinstance(self.axes, (str, list, tuple)) or not all(isinstance(a, str) for a in self.axes):
+            raise ImucalError(f"axes {short(self.axes)} must be a list of x, y, z", field="fit.effects.axes")
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    mode: str = "means"  #: fit interval means (weighted by their noise) or raw samples
+    weights: str = "noise"  #: "noise": 1/sigma^2 from each interval's scatter; "uniform": as imu_tk
+    angle_tolerance: float = DEFAULT_ANGLE_TOL  #: angles in pi/2 (1 +- tol)
+    fix: tuple[str, ...] = ()  #: parameters held at their initial value
+    initial: Mapping[str, float] = field(default_factory=dict)  #: overrides of the initial guess
+    effects: tuple[EffectSpec, ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.mode not in FIT_MODES:
+            raise ImucalError(f"unknown fit mode {short(self.mode)}", field="fit.mode",
+                              fix=f"use one of {', '.join(FIT_MODES)}")
+        if self.weights not in WEIGHTS:
+            raise ImucalError(f"unknown weights {short(self.weights)}", field="fit.weights",
+                              fix=f"use one of {', '.join(WEIGHTS)}")
+        if not (isinstance(self.angle_tolerance, (int, float)) and 0 < self.angle_tolerance < 0.5):
+            raise ImucalError(f"angle_tolerance {short(self.angle_tolerance)} must lie in (0, 0.5)",
+                              field="fit.angle_tolerance", fix="use e.g. 0.02 (90 deg +- 2 %)")
+        for n in self.fix:
+            if n not in BASE_NAMES:
+                raise ImucalError(f"cannot fix {short(n)}", field="fit.fix", fix=f"choose from {', '.join(BASE_NAMES)}")
+        for n, v in self.initial.items():
+            if n not in BASE_NAMES:
+                raise ImucalError(f"unknown parameter {short(n)}", field="fit.initial",
+                                  fix=f"choose from {', '.join(BASE_NAMES)}")
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ImucalError(f"initial value {short(v)} is not a finite number", field=f"fit.initial.{n}")
+
+
+@dataclass(frozen=True)
+class OutputSettings:
+    dir: str = "out"
+    figures: bool = True
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.dir, str) or not self.dir:
+            raise ImucalError(f"dir {short(self.dir)} must be a directory name", field="output.dir")
+        if not isinstance(self.figures, bool):
+            raise ImucalError(f"figures {short(self.figures)} must be true or false", field="output.figures")
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    data: DataSpec
+    static: StaticSettings = StaticSettings()
+    gravity: GravitySpec = GravitySpec()
+    fit: FitSettings = FitSettings()
+    output: OutputSettings = OutputSettings()
+    source: str | None = None  #: the YAML file, for messages and relative paths
+
+    @property
+    def base_dir(self) -> Path | None:
+        return Path(self.source).parent if self.source else None
+
+
+def _fill(cls: type, raw: Any, where: str, path: str | None) -> Any:
+    if raw is None:
+        raw = {}
+    if not isinstance(raw, Mapping):
+        raise ImucalError(f"section must be a mapping, got {type(raw).__name__}", file=path,
+                          field=where or "top level")
+    allowed = [f.name for f in dataclasses.fields(cls) if f.name != "source"]
+    unknown = [k for k in raw if k not in allowed]
+    if unknown:
+        raise ImucalError(f"unknown key {short(unknown[0])}", file=path,
+                          field=f"{where}{key_text(unknown[0])}", fix=f"allowed keys here: {', '.join(allowed)}")
+    try:
+        return cls(**raw)
+    except ImucalError as exc:
+        if exc.file is None:
+            exc = ImucalError(exc.message, file=path, field=exc.field, fix=exc.fix)
+        raise exc from None
+    except TypeError as exc:
+        raise ImucalError(f"bad values: {exc}", file=path, field=where.rstrip(".")) from None
+
+
+def _fix_list(fx: Any, path: str | None) -> tuple[tuple[str, ...], dict[str, float]]:
+    """fit.fix as a name, a list of names, or a mapping name -> value held."""
+    if fx is None:
+        return (), {}
+    if isinstance(fx, str):
+        return (fx,), {}
+    if isinstance(fx, list) and all(isinstance(n, str) for n in fx):
+        return tuple(fx), {}
+    if isinstance(fx, Mapping) and all(isinstance(n, str) for n in fx):
+        for n, v in fx.items():
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ImucalError(f"value {short(v)} to hold {n} at is not a finite number", file=path,
+                                  field=f"fit.fix.{n}", fix="e.g. fix: {phi: 1.5708} or fix: [phi]")
+        return tuple(fx), {n: float(v) for n, v in fx.items()}
+    raise ImucalError(f"{short(fx)} is not a parameter name, a list of names or a mapping of names to values",
+                      file=path, field="fit.fix", fix="e.g. fix: [phi, psi, theta] or fix: {s1: 0.0}")
+
+
+def config_from_dict(d: Any, path: str | None = None) -> RunConfig:
+    check_structure(d, path)
+    if not isinstance(d, Mapping):
+        raise ImucalError("top level must be a mapping with a data: section", file=path, field="top level",
+                          fix="see the YAML schema in the README")
+    allowed = ("data", "static", "gravity", "fit", "output")
+    unknown = [k for k in d if k not in allowed]
+    if unknown:
+        raise ImucalError(f"unknown key {short(unknown[0])}", file=path, field=key_text(unknown[0]),
+                          fix=f"allowed top-level keys: {', '.join(allowed)}")
+    if "data" not in d or d["data"] is None:
+        raise ImucalError("missing section 'data'", file=path, field="data",
+                          fix="add data: {path: RECORDING}")
+    data = dict(d["data"]) if isinstance(d["data"], Mapping) else d["data"]
+    if isinstance(data, Mapping) and "path" not in data:
+        raise ImucalError("missing key 'path'", file=path, field="data.path", fix="add data.path: RECORDING")
+    if isinstance(data, Mapping) and "columns" in data and not isinstance(data["columns"], Mapping):
+        raise ImucalError("must map roles to columns", file=path, field="data.columns")
+    fitraw = d.get("fit") or {}
+    if isinstance(fitraw, Mapping):
+        fitraw = dict(fitraw)
+        if "fix" in fitraw:
+            fitraw["fix"], held = _fix_list(fitraw["fix"], path)
+            if held:  # fix: {phi: 1.5708}: held AT the given value
+                init = dict(fitraw.get("initial") or {})
+                clash = [n for n in held if n in init and init[n] != held[n]]
+                if clash:
+                    raise ImucalError(f"{clash[0]} is given in fit.fix and fit.initial with different values",
+                                      file=path, field=f"fit.fix.{clash[0]}", fix="give the value once")
+                fitraw["initial"] = {**init, **held}
+        if "initial" in fitraw and not isinstance(fitraw["initial"], Mapping):
+            raise ImucalError("must map parameter names to values", file=path, field="fit.initial")
+        if "effects" in fitraw:
+            effs = []
+            if not isinstance(fitraw["effects"] or [], list):
+                raise ImucalError("must be a list of effects", file=path, field="fit.effects",
+                                  fix="e.g. effects: [bias_temperature]")
+            for i, e in enumerate(fitraw["effects"] or []):
+                e = {"name": e} if isinstance(e, str) else e
+                es = _fill(EffectSpec, e, f"fit.effects[{i}].", path)
+                effs.append(EffectSpec(es.name, tuple(es.axes)))
+            fitraw["effects"] = tuple(effs)
+    return RunConfig(
+        data=_fill(DataSpec, data, "data.", path),
+        static=_fill(StaticSettings, d.get("static"), "static.", path),
+        gravity=_fill(GravitySpec, d.get("gravity"), "gravity.", path),
+        fit=_fill(FitSettings, fitraw, "fit.", path),
+        output=_fill(OutputSettings, d.get("output"), "output.", path),
+        source=path,
+    )
+
+
+def load_config(path: str | os.PathLike) -> RunConfig:
+    from imucal.files.yamlio import read_yaml
+
+    d = read_yaml(path, "config", "pass a YAML run file (see configs/)")
+    return config_from_dict(d, str(path))

@@ -1,0 +1,486 @@
+"""Loading recordings: CSV with a header, or whitespace text without one (imu_tk's t x y z)."""
+from __future__ import annotations
+
+import hashlib
+import io
+import math
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from imucal.constants import TIME_UNIT_CHOICES, TIME_UNITS
+from imucal.errors import ImucalError, short
+from imucal.files.inputs import max_data_bytes, open_regular
+
+FORMATS = ("auto", "csv", "whitespace")
+#: Column roles: time, acceleration, angular rate, temperature.
+ROLES = ("t", "ax", "ay", "az", "gx", "gy", "gz", "temp")
+#: Plausible IMU sample rates [Hz]: anything outside is a wrong time unit or a wrong rate.
+MIN_RATE_HZ, MAX_RATE_HZ = 1.0, 1.0e5
+#: Largest magnitude accepted in a data column: beyond it a value is corrupt, not a reading
+#: (squares of it would overflow double precision in the fit).
+MAX_ABS_VALUE = 1.0e30
+_MAX_SCAN_LINES = 50
+
+
+@dataclass(frozen=True)
+class DataSpec:
+    """How to read one recording (the YAML ``data:`` section).
+
+    ``columns`` maps the roles t, ax, ay, az, temp to column names (CSV with header) or to
+    0-based column indices (files without header). Without a time column, give
+    ``sample_rate`` [Hz]. ``unit`` labels the raw values ("raw" counts, or "m/s^2").
+    """
+
+    path: str
+    format: str = "auto"
+    columns: dict = field(default_factory=dict)
+    delimiter: str | None = None
+    skip_rows: int = 0
+    sample_rate: float | None = None
+    time_unit: str = "auto"
+    unit: str = "raw"
+    #: rails of the raw readings: {"low": v, "high": v}, each a number or [x, y, z]
+    saturation: dict | None = None
+    #: a gyroscope recording on the same time base (imu_tk's second file), calibrated beside
+    gyro_path: str | None = None
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.path, (str, os.PathLike)) or not str(self.path):
+            raise ImucalError(f"path {short(self.path)} must be a file name", field="data.path",
+                              fix="give the recording's path as text")
+        for name in ("format", "time_unit", "unit"):
+            if not isinstance(getattr(self, name), str):
+                raise ImucalError(f"{name} {short(getattr(self, name))} must be text", field=f"data.{name}")
+        if self.delimiter is not None and not (isinstance(self.delimiter, str) and len(self.delimiter) == 1
+                                               and self.delimiter not in "\r\n"):
+            raise ImucalError(f"delimiter {short(self.delimiter)} must be one character", field="data.delimiter",
+                              fix='e.g. delimiter: ","  (omit it to detect , ; tab or spaces)')
+        if self.sample_rate is not None and (isinstance(self.sample_rate, bool)
+                                             or not isinstance(self.sample_rate, (int, float))):
+            raise ImucalError(f"sample rate {short(self.sample_rate)} is not an IMU rate (not a number)",
+                              field="data.sample_rate", fix="give the logging rate in Hz")
+        if not isinstance(self.columns, Mapping):
+            raise ImucalError("must map roles to columns", field="data.columns")
+        for role, col in self.columns.items():
+            if not ((isinstance(col, int) and not isinstance(col, bool) and 0 <= col < 10000)
+                    or (isinstance(col, str) and col and len(col) <= 200)):
+                raise ImucalError(f"column {short(col)} for {short(role)} must be a header name or a "
+                                  "0-based index below 10000", field=f"data.columns.{role if isinstance(role, str) and len(role) <= 20 else short(role, 20)}")
+        if self.format not in FORMATS:
+            raise ImucalError(f"unknown format {short(self.format)}", field="data.format",
+                              fix=f"use one of {', '.join(FORMATS)}")
+        if self.time_unit not in TIME_UNIT_CHOICES:
+            raise ImucalError(f"unknown time unit {short(self.time_unit)}", field="data.time_unit",
+                              fix=f"use one of {', '.join(TIME_UNIT_CHOICES)}")
+        if self.sample_rate is not None and not (_finite(self.sample_rate)
+                                                 and MIN_RATE_HZ <= self.sample_rate <= MAX_RATE_HZ):
+            raise ImucalError(f"sample rate {short(self.sample_rate)} Hz is not an IMU rate",
+                              field="data.sample_rate",
+                              fix=f"give the logging rate in Hz ({MIN_RATE_HZ:g} to {MAX_RATE_HZ:g})")
+        if not isinstance(self.skip_rows, int) or isinstance(self.skip_rows, bool) or not 0 <= self.skip_rows < 10**9:
+            raise ImucalError(f"skip_rows {short(self.skip_rows)} must be a non-negative integer below 1e9",
+                              field="data.skip_rows")
+        bad = set(self.columns) - set(ROLES)
+        if bad:
+            raise ImucalError(f"unknown column role(s) {short(sorted(map(str, bad)))}", field="data.columns",
+                              fix=f"map only {', '.join(ROLES)}")
+        cols = [c for c in self.columns.values()]
+        if len(set(map(str, cols))) != len(cols):
+            raise ImucalError("two roles map to the same column", field="data.columns",
+                              fix="give each role its own column")
+        if self.saturation is not None:
+            rails(self.saturation)  # validated here, used by static detection
+        if self.gyro_path is not None and not (isinstance(self.gyro_path, str) and self.gyro_path):
+            raise ImucalError(f"gyro_path {short(self.gyro_path)} must be a file name", field="data.gyro_path",
+                              fix="give the gyroscope recording's path as text")
+
+
+@dataclass(frozen=True)
+class Recording:
+    """A loaded recording: time [s], raw readings (N x 3), optional temperature [deg C]."""
+
+    t: np.ndarray  #: [s], from 0
+    raw: np.ndarray  #: (N, 3) accelerometer readings [unit]
+    temp: np.ndarray | None
+    unit: str
+    source: str
+    sha256: str
+    gyro: np.ndarray | None = None  #: (N, 3) angular-rate readings when mapped (gx, gy, gz)
+    t_source: np.ndarray | None = None  #: the time column exactly as read (unit and origin kept)
+    time_unit: str = "s"  #: unit of t_source
+    time_note: str = ""  #: how the time base was obtained (given, inferred, or from the rate)
+    time_column: str = "t"  #: the time column's name in the file
+
+    @property
+    def n(self) -> int:
+        return self.raw.shape[0]
+
+    @property
+    def sample_rate(self) -> float:
+        if self.n < 2:
+            return float("nan")
+        return float((self.n - 1) / (self.t[-1] - self.t[0]))
+
+    @property
+    def duration(self) -> float:
+        return float(self.t[-1] - self.t[0]) if self.n else 0.0
+
+
+def _finite(x: int | float) -> bool:
+    """math.isfinite without OverflowError for integers beyond double range (YAML's 10**400)."""
+    try:
+        return math.isfinite(x)
+    except OverflowError:
+        return False
+
+
+def rails(spec: object, where: str = "data.saturation") -> dict[str, np.ndarray | None]:
+    """Declared rails of the raw readings: {"low": [x, y, z] or None, "high": ...}.
+
+    YAML: ``saturation: {low: -16000, high: 16000}`` (one value for all axes, or [x, y, z]).
+    A reading at or beyond a rail is clipped (the sensor's range was exceeded).
+    """
+    if not isinstance(spec, Mapping) or not spec or set(spec) - {"low", "high"}:
+        raise ImucalError(f"{short(spec)} must map low and/or high to rail values", field=where,
+                          fix="e.g. saturation: {low: -32768, high: 32767}")
+    out: dict[str, np.ndarray | None] = {"low": None, "high": None}
+    for k, v in spec.items():
+        vals = v if isinstance(v, (list, tuple)) else [v] * 3
+        if len(vals) != 3 or not all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                                     and _finite(x) and abs(x) <= MAX_ABS_VALUE for x in vals):
+            raise ImucalError(f"{k} rail {short(v)} must be a finite number or [x, y, z]", field=f"{where}.{k}",
+                              fix="give the raw value at which the sensor clips")
+        out[k] = np.array(vals, float)
+    if out["low"] is not None and out["high"] is not None and not np.all(out["low"] < out["high"]):
+        raise ImucalError("the low rail must lie below the high rail on every axis", field=where)
+    return out
+
+
+def _read_text(path: Path) -> tuple[str, str]:
+    """Text and SHA-256 of a recording: a regular file, within the size limit, not binary."""
+    fd, _ = open_regular(path, field="data.path", max_bytes=max_data_bytes(),
+                         fix="check the path (relative paths are relative to the YAML file)")
+    try:
+        with os.fdopen(fd, "rb") as f:
+            head = f.read(1 << 16)  # a sparse or binary file is refused before it is read whole
+            if b"\x00" in head:
+                raise ImucalError("is a binary file (NUL bytes), not a text recording", file=str(path),
+                                  field="data.path", fix="export the recording as CSV or whitespace-separated text")
+            blob = head + f.read()
+    except OSError as exc:
+        raise ImucalError(f"cannot read: {exc.strerror or exc}", file=str(path), field="data.path") from None
+    try:
+        text = blob.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        raise ImucalError("is not UTF-8 text", file=str(path), field="data.path",
+                          fix="export the recording as CSV or whitespace-separated text") from None
+    return text, hashlib.sha256(blob).hexdigest()
+
+
+def _is_number(tok: str) -> bool:
+    try:
+        float(tok)
+        return True
+    except ValueError:
+        return False
+
+
+def _split(line: str, delimiter: str | None) -> list[str]:
+    if delimiter is None:
+        return line.replace(",", " ").replace(";", " ").split()
+    return [c.strip() for c in line.split(delimiter)]
+
+
+def _sniff_delimiter(line: str) -> str | None:
+    for d in (",", ";", "\t"):
+        if d in line:
+            return d
+    return None
+
+
+def _parse_block(lines: list[str], first_lineno: int, delimiter: str | None, usecols: list[int],
+                 path: Path) -> np.ndarray:
+    """Parse numeric rows; on failure, find the offending line and name it."""
+    if not any(ln.strip() and not ln.lstrip().startswith("#") for ln in lines):
+        raise ImucalError("has no data rows", file=str(path), field="data",
+                          fix="record samples after the header")
+    ncol = max(usecols) + 1
+    try:
+        arr = np.loadtxt(io.StringIO("\n".join(lines)), delimiter=delimiter, usecols=usecols,
+                         ndmin=2, dtype=float, comments="#")
+        if arr.shape[0] == len([ln for ln in lines if ln.strip() and not ln.lstrip().startswith("#")]):
+            bad = ~np.isfinite(arr).all(axis=1)
+            if bad.any():
+                k = int(np.flatnonzero(bad)[0])
+                raise ImucalError(f"line {_lineno(lines, k, first_lineno)} holds NaN or Inf",
+                                  file=str(path), field="data",
+                                  fix="remove or repair the non-finite rows before calibrating")
+            return arr
+    except ImucalError:
+        raise
+    except (ValueError, IndexError):
+        pass
+    # Slow path: locate the first bad line for the message.
+    k = 0
+    for i, ln in enumerate(lines):
+        s = ln.strip()
+        if not s or s.startswith("#"):
+            continue
+        toks = _split(s, delimiter)
+        if len(toks) < ncol:
+            raise ImucalError(f"line {first_lineno + i} has {len(toks)} columns, expected at least {ncol}",
+                              file=str(path), field="data",
+                              fix="make every row hold the same columns as the header")
+        for c in usecols:
+            if not _is_number(toks[c]):
+                raise ImucalError(f"line {first_lineno + i} column {c + 1}: {toks[c][:20]!r} is not a number",
+                                  file=str(path), field="data",
+                                  fix="remove non-numeric rows or map the right columns")
+            if not math.isfinite(float(toks[c])):
+                raise ImucalError(f"line {first_lineno + i} holds NaN or Inf", file=str(path),
+                                  field="data", fix="remove or repair the non-finite rows before calibrating")
+        k += 1
+    raise ImucalError("could not be parsed as numeric columns", file=str(path), field="data",
+                      fix="use CSV with a header or whitespace-separated numbers")
+
+
+def _lineno(lines: list[str], k: int, first: int) -> int:
+    seen = -1
+    for i, ln in enumerate(lines):
+        s = ln.strip()
+        if s and not s.startswith("#"):
+            seen += 1
+            if seen == k:
+                return first + i
+    return first
+
+
+_DEFAULT_NAMES = {"t": ("t", "time", "timestamp"), "ax": ("ax", "acc_x", "accx", "x"),
+                  "ay": ("ay", "acc_y", "accy", "y"), "az": ("az", "acc_z", "accz", "z"),
+                  "gx": ("gx", "gyro_x", "gyrx", "wx"), "gy": ("gy", "gyro_y", "gyry", "wy"),
+                  "gz": ("gz", "gyro_z", "gyrz", "wz"), "temp": ("temp", "temperature", "t_c")}
+
+
+def parse_columns(text: str, where: str = "--columns") -> dict[str, int | str]:
+    """``"t=0,ax=4,ay=5,az=6"`` (0-based indices) or ``"t=time,ax=acc_x"`` (header names)."""
+    if not isinstance(text, str) or not text.strip() or len(text) > 2000:
+        raise ImucalError("give ROLE=COLUMN pairs separated by commas", field=where,
+                          fix="e.g. --columns t=0,ax=4,ay=5,az=6")
+    out: dict[str, int | str] = {}
+    for item in text.split(","):
+        role, sep, col = (x.strip() for x in item.partition("="))
+        if not sep or not role or not col:
+            raise ImucalError(f"{short(item)} is not ROLE=COLUMN", field=where,
+                              fix="e.g. --columns t=0,ax=4,ay=5,az=6")
+        if role not in ROLES:
+            raise ImucalError(f"unknown role {short(role)}", field=where, fix=f"roles: {', '.join(ROLES)}")
+        if role in out:
+            raise ImucalError(f"role {role} given twice", field=where, fix="give each role once")
+        index = col.isascii() and col.isdigit()  # not "²" or other Unicode digits
+        if index and len(col) > 4:
+            raise ImucalError(f"column index {short(col)} for {role} is out of range", field=where,
+                              fix="give a 0-based index below 10000")
+        value: int | str = int(col) if index else col
+        if value in out.values():
+            other = next(r for r, v in out.items() if v == value)
+            raise ImucalError(f"roles {other} and {role} both map to column {short(col)}", field=where,
+                              fix="give each role its own column")
+        out[role] = value
+    return out
+
+
+def _no_header_layout(ncol: int, path: Path) -> dict[str, int]:
+    """Column roles of a file without header and without a mapping."""
+    if ncol == 3:
+        return {"ax": 0, "ay": 1, "az": 2}
+    if ncol == 4:
+        return {"t": 0, "ax": 1, "ay": 2, "az": 3}  # imu_tk: t x y z
+    if ncol == 5:
+        return {"t": 0, "ax": 1, "ay": 2, "az": 3, "temp": 4}  # imucal's simulate layout
+    if ncol < 3:
+        raise ImucalError(f"has {ncol} column(s): an accelerometer recording needs at least ax ay az",
+                          file=str(path), field="data.columns",
+                          fix="check the delimiter (data.delimiter) or give the file with its three axes")
+    # The likely layout, and a mapping for it that the user can check against the file.
+    hint, example = {6: (" (logs like the MPU-6050's hold ax ay az gx gy gz)", "ax=0,ay=1,az=2"),
+                     7: (" (imu_tk-style logs hold t gx gy gz ax ay az)", "t=0,ax=4,ay=5,az=6")}.get(
+                         ncol, ("", "t=0,ax=1,ay=2,az=3"))
+    raise ImucalError(f"has {ncol} columns and no header: the layout is ambiguous{hint}", file=str(path),
+                      field="data.columns",
+                      fix=f"map the columns, e.g. --columns {example} or data.columns in the YAML")
+
+
+def infer_time_unit(stamps: np.ndarray) -> tuple[str, str]:
+    """The unit (s, ms, us, ns) of time stamps and a sentence saying why.
+
+    The sample rate must be an IMU's (1 Hz to 100 kHz). Among the units that give one, epoch
+    time decides when the stamps look like it (1.7e9 s = 1.7e12 ms = ...). Fractional stamps are
+    read in the first plausible unit of s, ms, us, ns (a logger that writes fractions writes
+    seconds unless that gives no IMU rate); integer stamps (tick counters) in the unit whose rate
+    is closest to 200 Hz on a log scale. A second plausible unit is named in the note.
+    """
+    dt = float(np.median(np.diff(stamps))) if stamps.size > 1 else float("nan")
+    if not (math.isfinite(dt) and dt > 0):
+        return "s", "time unit assumed: s (too few distinct time stamps to infer it)"
+    plausible = [u for u, f in TIME_UNITS.items() if MIN_RATE_HZ <= 1.0 / (dt * f) <= MAX_RATE_HZ]
+    if not plausible:
+        return "s", ""  # refused by the caller with the rate in the message
+    t0 = abs(float(stamps[0]))
+    epoch = [u for u in plausible if 9.0e8 <= t0 * TIME_UNITS[u] <= 4.2e9]  # 1998 .. 2103
+    if epoch:
+        unit = epoch[0]
+        why = f"epoch time stamps; median step {dt:g} {unit} -> {1.0 / (dt * TIME_UNITS[unit]):.4g} Hz"
+        return unit, f"time unit inferred: {unit} ({why})"
+    if np.all(stamps[:1000] == np.round(stamps[:1000])):
+        plausible.sort(key=lambda u: abs(math.log10(1.0 / (dt * TIME_UNITS[u]) / 200.0)))
+    unit = plausible[0]
+    note = f"time unit inferred: {unit} (median step {dt:g} -> {1.0 / (dt * TIME_UNITS[unit]):.4g} Hz"
+    if len(plausible) > 1:
+        alt = plausible[1]
+        note += f"; {alt} would give {1.0 / (dt * TIME_UNITS[alt]):.4g} Hz: give --time-unit if that is right"
+    return unit, note + ")"
+
+
+def load_recording(spec: DataSpec | str | os.PathLike, base_dir: str | os.PathLike | None = None
+                   ) -> Recording:
+    """Read a recording described by ``spec`` (a DataSpec or just a path with defaults)."""
+    if not isinstance(spec, DataSpec):
+        spec = DataSpec(path=str(spec))
+    path = Path(spec.path)
+    if base_dir is not None and not path.is_absolute():
+        path = Path(base_dir) / path
+    text, sha = _read_text(path)
+    lines = text.splitlines()[spec.skip_rows:]
+    first_lineno = spec.skip_rows + 1
+    # Find the first non-empty, non-comment line.
+    k0 = next((i for i, ln in enumerate(lines) if ln.strip() and not ln.lstrip().startswith("#")), None)
+    if k0 is None:
+        raise ImucalError("is empty", file=str(path), field="data.path",
+                          fix="record samples into the file")
+    fmt = spec.format
+    header_idx = None
+    if fmt in ("auto", "csv"):
+        wanted = [str(v) for r, v in spec.columns.items() if isinstance(v, str)]
+        first_text: list[str] | None = None  # the first non-numeric line, for the message
+        for i in range(k0, min(len(lines), k0 + _MAX_SCAN_LINES)):
+            toks = _split(lines[i], spec.delimiter or _sniff_delimiter(lines[i]))
+            if toks and not all(_is_number(t) for t in toks):
+                names = [t.strip().strip('"').strip("'") for t in toks]
+                first_text = names if first_text is None else first_text
+                if wanted and not all(w in names for w in wanted):
+                    continue
+                if not wanted and not any(n.lower() in sum(_DEFAULT_NAMES.values(), ()) for n in names):
+                    continue
+                header_idx = i
+                break
+        if wanted and header_idx is None and first_text is not None:
+            missing = [w for w in wanted if w not in first_text]
+            raise ImucalError(f"mapped column(s) {missing} not in header {first_text[:12]}", file=str(path),
+                              field="data.columns", fix="map the roles to the header's names")
+        if fmt == "csv" and header_idx is None:
+            raise ImucalError("no header line with the mapped column names found", file=str(path),
+                              field="data.columns",
+                              fix="add a header row, or set data.format: whitespace with column indices")
+    if header_idx is not None:
+        hdr_line = lines[header_idx]
+        delim = spec.delimiter or _sniff_delimiter(hdr_line)
+        names = [t.strip().strip('"').strip("'") for t in _split(hdr_line, delim)]
+        lower = [n.lower() for n in names]
+        cols: dict[str, int] = {}
+        for role in ROLES:
+            if role in spec.columns:
+                want = spec.columns[role]
+                if isinstance(want, int):
+                    cols[role] = want
+                elif want in names:
+                    cols[role] = names.index(want)
+                else:
+                    raise ImucalError(f"column {short(want)} (for {role}) not in header {short(names, 200)}",
+                                      file=str(path), field=f"data.columns.{role}",
+                                      fix="map the role to one of the header's names")
+            else:
+                hit = next((lower.index(c) for c in _DEFAULT_NAMES[role] if c in lower), None)
+                if hit is not None:
+                    cols[role] = hit
+        body = lines[header_idx + 1:]
+        body_first = first_lineno + header_idx + 1
+    else:
+        if k0 is not None and not all(_is_number(t) for t in _split(lines[k0], spec.delimiter)):
+            raise ImucalError(f"line {first_lineno + k0} is neither a header with known column names nor numbers",
+                              file=str(path), field="data.columns",
+                              fix="name columns t, ax, ay, az (temp) or map them in data.columns")
+        delim = spec.delimiter or _sniff_delimiter(lines[k0])
+        ncol = len(_split(lines[k0], delim))
+        cols = {r: int(v) for r, v in spec.columns.items() if isinstance(v, int)}
+        if any(isinstance(v, str) for v in spec.columns.values()):
+            raise ImucalError("column names given but the file has no header", file=str(path),
+                              field="data.columns", fix="map roles to 0-based column indices")
+        if not cols:
+            cols = _no_header_layout(ncol, path)
+        body = lines[k0:]
+        body_first = first_lineno + k0
+    for role in ("ax", "ay", "az"):
+        if role not in cols:
+            raise ImucalError(f"missing column for {role}", file=str(path), field=f"data.columns.{role}",
+                              fix=f"add a column named {role} or map it in data.columns")
+    if "t" not in cols and spec.sample_rate is None:
+        raise ImucalError("no time column and no sample rate", file=str(path), field="data.sample_rate",
+                          fix="add a t column or set data.sample_rate in Hz")
+    gyro_roles = [r for r in ("gx", "gy", "gz") if r in cols]
+    if gyro_roles and len(gyro_roles) != 3:
+        raise ImucalError(f"only {', '.join(gyro_roles)} of gx, gy, gz mapped", file=str(path),
+                          field="data.columns", fix="map all three gyroscope columns or none")
+    roles = [r for r in ROLES if r in cols]
+    if spec.sample_rate is not None and "t" in cols and "t" not in spec.columns:
+        roles.remove("t")  # an explicit rate overrides a guessed time column
+    arr = _parse_block(body, body_first, delim, [cols[r] for r in roles], path)
+    big = np.abs(arr) > MAX_ABS_VALUE
+    if big.any():
+        k = int(np.flatnonzero(big.any(axis=1))[0])
+        raise ImucalError(f"line {_lineno(body, k, body_first)} holds a value beyond +-{MAX_ABS_VALUE:g} "
+                          "(corrupt)", file=str(path), field="data",
+                          fix="remove or repair the corrupt rows before calibrating")
+    data = {r: arr[:, i] for i, r in enumerate(roles)}
+    n = arr.shape[0]
+    t, t_source, unit, note = _time_base(data.get("t"), spec, n, path, body, body_first)
+    raw = np.column_stack([data["ax"], data["ay"], data["az"]])
+    gyro = np.column_stack([data["gx"], data["gy"], data["gz"]]) if gyro_roles else None
+    tname = names[cols["t"]] if header_idx is not None and "t" in roles else "t"
+    return Recording(t=t, raw=raw, temp=data.get("temp"), unit=spec.unit, source=str(path), sha256=sha,
+                     gyro=gyro, t_source=t_source, time_unit=unit, time_note=note, time_column=tname)
+
+
+def _time_base(stamps: np.ndarray | None, spec: DataSpec, n: int, path: Path, body: list[str],
+               body_first: int) -> tuple[np.ndarray, np.ndarray | None, str, str]:
+    """(t [s] from 0, the stamps as read, their unit, a note): unit given or inferred, rate checked."""
+    if stamps is None:
+        return (np.arange(n) / float(spec.sample_rate), None, "s",
+                f"no time column: {float(spec.sample_rate):g} Hz given")
+    if n > 1:
+        d = np.diff(stamps)
+        if not (d > 0).all():
+            k = int(np.flatnonzero(~(d > 0))[0])
+            raise ImucalError(f"time is not strictly increasing at line {_lineno(body, k + 1, body_first)}",
+                              file=str(path), field="data.columns.t",
+                              fix="sort the rows by time and drop duplicates")
+    if spec.time_unit == "auto":
+        unit, note = infer_time_unit(stamps)
+    else:
+        unit, note = spec.time_unit, f"time unit given: {spec.time_unit}"
+    t = (stamps - stamps[0]) * TIME_UNITS[unit]
+    if n > 1:
+        rate = (n - 1) / float(t[-1])
+        if not MIN_RATE_HZ <= rate <= MAX_RATE_HZ:
+            likely = [u for u, f in TIME_UNITS.items()
+                      if MIN_RATE_HZ <= (n - 1) / (float(stamps[-1] - stamps[0]) * f) <= MAX_RATE_HZ]
+            fix = (f"the time column looks like {likely[0]}: give --time-unit {likely[0]} "
+                   f"(data.time_unit: {likely[0]})" if likely else
+                   "check the time column (or drop it and give --sample-rate)")
+            raise ImucalError(f"time in {unit} gives {rate:.4g} Hz, not an IMU sample rate "
+                              f"({MIN_RATE_HZ:g} Hz to {MAX_RATE_HZ:g} Hz)", file=str(path),
+                              field="data.time_unit", fix=fix)
+    return t, stamps, unit, note

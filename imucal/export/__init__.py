@@ -1,0 +1,1 @@
+"""Outputs for other tools: generated C, peers' calibration formats (export and import)."""

@@ -1,0 +1,116 @@
+"""Reading input files safely: regular files only, bounded size, one-line errors.
+
+Every file imucal reads (recordings, run configs, calibrations, plans) may be written by an
+attacker: a FIFO would block forever, a device or /dev/zero never ends, a sparse file claims
+gigabytes. Inputs are opened without blocking, checked to be regular files on the opened
+descriptor (no race with a rename), and refused above a size limit before anything is read.
+"""
+from __future__ import annotations
+
+import os
+import stat
+from pathlib import Path
+
+from imucal.errors import ImucalError
+
+#: Largest text file read whole [bytes]: YAML configs, calibrations, plans.
+MAX_TEXT_BYTES = 16 * 1024 * 1024
+#: Largest recording read [bytes] (overridable with IMUCAL_MAX_DATA_BYTES).
+MAX_DATA_BYTES = 4 * 1024**3
+
+
+def max_data_bytes() -> int:
+    """The recording size limit, from IMUCAL_MAX_DATA_BYTES when set (bytes)."""
+    v = os.environ.get("IMUCAL_MAX_DATA_BYTES")
+    if v is None:
+        return MAX_DATA_BYTES
+    try:
+        n = int(v)
+    except ValueError:
+        raise ImucalError(f"IMUCAL_MAX_DATA_BYTES={v[:40]!r} is not an integer", field="environment",
+                          fix="unset it or give a size in bytes") from None
+    return max(n, 0)
+
+
+def open_regular(path: str | os.PathLike, *, field: str, fix: str | None = None,
+                 max_bytes: int = MAX_TEXT_BYTES) -> tuple[int, int]:
+    """Open ``path`` for reading; return (fd, size). Refuses non-regular files and large ones.
+
+    The caller owns the descriptor (``os.fdopen(fd, "rb")``).
+    """
+    p = str(path)
+    try:
+        fd = os.open(p, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
+    except FileNotFoundError:
+        raise ImucalError("file not found", file=p, field=field, fix=fix or "check the path") from None
+    except IsADirectoryError:
+        raise ImucalError("is a directory, not a file", file=p, field=field,
+                          fix=fix or "give the path of a file") from None
+    except OSError as exc:
+        raise ImucalError(f"cannot read: {exc.strerror or exc}", file=p, field=field, fix=fix) from None
+    try:
+        st = os.fstat(fd)
+        if stat.S_ISDIR(st.st_mode):
+            raise ImucalError("is a directory, not a file", file=p, field=field,
+                              fix=fix or "give the path of a file")
+        if not stat.S_ISREG(st.st_mode):
+            kind = ("a FIFO" if stat.S_ISFIFO(st.st_mode) else "a device" if stat.S_ISCHR(st.st_mode)
+                    or stat.S_ISBLK(st.st_mode) else "a socket" if stat.S_ISSOCK(st.st_mode) else "not a file")
+            raise ImucalError(f"is {kind}, not a regular file", file=p, field=field,
+                              fix="save the input to a regular file first")
+        if st.st_size > max_bytes:
+            raise ImucalError(f"is {st.st_size} bytes, above the limit of {max_bytes} bytes", file=p,
+                              field=field, fix=fix or "split the file or check that it is the right one")
+        _clear_nonblock(fd)
+        return fd, int(st.st_size)
+    except BaseException:
+        os.close(fd)
+        raise
+
+
+def _clear_nonblock(fd: int) -> None:
+    try:
+        import fcntl
+
+        fl = fcntl.fcntl(fd, fcntl.F_GETFL)
+        fcntl.fcntl(fd, fcntl.F_SETFL, fl & ~os.O_NONBLOCK)
+    except (ImportError, OSError):  # pragma: no cover - non-POSIX
+        pass
+
+
+def read_input_bytes(path: str | os.PathLike, *, field: str, fix: str | None = None,
+                     max_bytes: int = MAX_TEXT_BYTES) -> bytes:
+    """The whole content of a regular file no larger than ``max_bytes``."""
+    fd, size = open_regular(path, field=field, fix=fix, max_bytes=max_bytes)
+    try:
+        with os.fdopen(fd, "rb") as f:
+            data = f.read(max_bytes + 1)
+    except OSError as exc:
+        raise ImucalError(f"cannot read: {exc.strerror or exc}", file=str(path), field=field) from None
+    if len(data) > max_bytes:  # grew while we read it
+        raise ImucalError(f"is above the limit of {max_bytes} bytes", file=str(path), field=field, fix=fix)
+    return data
+
+
+def read_input_text(path: str | os.PathLike, *, field: str, fix: str | None = None,
+                    max_bytes: int = MAX_TEXT_BYTES) -> str:
+    """UTF-8 text of a regular file (BOM allowed); binary content is refused in one line."""
+    data = read_input_bytes(path, field=field, fix=fix, max_bytes=max_bytes)
+    if b"\x00" in data[:65536]:
+        raise ImucalError("is a binary file (NUL bytes), not text", file=str(path), field=field,
+                          fix=fix or "give a text file")
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        raise ImucalError("is not UTF-8 text", file=str(path), field=field, fix=fix or "save it as UTF-8") from None
+
+
+def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:
+    """True when two paths name the same existing file (device and inode), or resolve equal."""
+    try:
+        sa, sb = os.stat(a), os.stat(b)
+        if (sa.st_dev, sa.st_ino) == (sb.st_dev, sb.st_ino):
+            return True
+    except OSError:
+        pass
+    return Path(os.path.abspath(a)).resolve() == Path(os.path.abspath(b)).resolve()

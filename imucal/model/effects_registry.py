@@ -1,0 +1,27 @@
+"""Name -> effect lookup for configs and calibration files (effects live in imucal.model.effects)."""
+from __future__ import annotations
+
+from typing import Sequence
+
+from imucal.errors import ImucalError, short
+
+
+def effects_from_specs(specs: Sequence, source: str | None = None) -> list:
+    """Build effect objects from config EffectSpecs (name, axes as 'x'/'y'/'z')."""
+    if not specs:
+        return []
+    try:
+        from imucal.model.effects import EFFECTS, make_effect
+    except ModuleNotFoundError:  # pragma: no cover - effects module ships with imucal
+        raise ImucalError("effects are not available in this build", file=source, field="fit.effects")
+    out = []
+    for i, s in enumerate(specs):
+        if s.name not in EFFECTS:
+            raise ImucalError(f"unknown effect {short(s.name)}", file=source, field=f"fit.effects[{i}].name",
+                              fix=f"choose from {', '.join(EFFECTS)}")
+        bad = [a for a in s.axes if a not in ("x", "y", "z")]
+        if bad or not s.axes:
+            raise ImucalError(f"axes {short(list(s.axes))} must be a non-empty list of x, y, z", file=source,
+                              field=f"fit.effects[{i}].axes")
+        out.append(make_effect(s.name, tuple("xyz".index(a) for a in s.axes)))
+    return out

@@ -1,0 +1,161 @@
+"""The paper's sensor model, built once, symbolically, in CasADi.
+
+Notation (shared/seed, Sections 2-3):
+  raw_i = s_i + b_i * m_i            Eq. (theModel): shift s_i [raw], scale b_i [raw/(m/s^2)]
+  m_i   = e_i . a                    Lemma 1: projection of the true acceleration on unit axis e_i
+  G     = Gram matrix of the e_i     Eq. (eq:12): 1 on the diagonal, cos phi, cos psi, cos theta off it
+  abar  = G^-1 m                     Lemma 2 / Remark 1 (Tbar = G^-1): affine coordinates
+  |a|^2 = m . abar = m^T G^-1 m      Lemma 3 (a_nonorth) and Proposition 2
+  E     = Tbar^orth (upper triangular, columns e_i in the frame f)    Proposition 3, Eq. (eq:125)
+  a_orth = E abar = E^-T m           Theorem; E^-T is lower triangular, so the whole apply map is
+                                     a lower-triangular matrix A = E^-T diag(1/b) and an offset -A s.
+Exact trigonometry throughout: no small-angle approximation.
+
+Effects (see imucal.model.effects) extend the shifts, the scales or the measured value with terms in
+covariates such as temperature or time; the base model has none.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import lru_cache
+from typing import Mapping, Sequence
+
+import casadi as ca
+
+from imucal.model.geometry import (frame, frame_inverse_transpose, frame_np, geometry_function,  # noqa: F401
+                                   gram, gram_det, gram_det_np, gram_np, tbar)
+from imucal.model.parameters import BASE_NAMES, Parameter, Parameters
+
+
+class Effect:
+    """A named physical effect: extra parameters and terms in the sensor model.
+
+    Subclasses override ``shift_scale`` (to make s, b depend on covariates) and/or
+    ``correct`` (to change the measured value m). ``key`` identifies the effect for caching.
+    """
+
+    name: str = "effect"
+    covariates: tuple[str, ...] = ()
+
+    def __init__(self, axes: Sequence[int] = (0, 1, 2)) -> None:
+        self.axes = tuple(sorted(set(int(a) for a in axes)))
+
+    @property
+    def key(self) -> tuple:
+        return (self.name, self.axes)
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Effect) and self.key == other.key
+
+    def __hash__(self) -> int:
+        return hash(self.key)
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(axes={self.axes})"
+
+    def parameters(self, base: Parameters) -> list[Parameter]:
+        return []
+
+    def shift_scale(self, s: list, b: list, cov: Mapping[str, ca.SX], p: Mapping[str, ca.SX]
+                    ) -> tuple[list, list]:
+        return s, b
+
+    def correct(self, m: list, raw: ca.SX, cov: Mapping[str, ca.SX], p: Mapping[str, ca.SX]) -> list:
+        return m
+
+
+@dataclass(frozen=True)
+class SensorModel:
+    """The symbolic model with a fixed set of effects; CasADi functions are built once.
+
+    Functions (all per sample; ``cov`` holds the covariates named in ``covariates``):
+      measured(raw[3], cov[k], p[np]) -> m[3]          Eq. (theModel) plus effects
+      accel(raw, cov, p)              -> a_orth[3]     Theorem
+      norm(raw, cov, p)               -> |a|           Proposition 2 (m^T G^-1 m)
+      residual(raw, cov, p, g)        -> |a| - g       the calibration condition g = a_nonorth
+      linear_map(p)                   -> A[3x3], c[3]  a_orth = A raw + c (base model only)
+    """
+
+    effects: tuple[Effect, ...]
+    names: tuple[str, ...]
+    covariates: tuple[str, ...]
+    functions: Mapping[str, ca.Function] = field(compare=False, repr=False)
+
+    @property
+    def name(self) -> str:
+        if not self.effects:
+            return "nakov-ivanov-9"
+        return "nakov-ivanov-9+" + "+".join(f"{e.name}[{''.join('xyz'[a] for a in e.axes)}]"
+                                            for e in self.effects)
+
+    @property
+    def is_affine(self) -> bool:
+        return not self.effects
+
+    def parameters(self, base: Parameters) -> Parameters:
+        """Base parameters extended by each effect's parameters."""
+        extra: list[Parameter] = []
+        for e in self.effects:
+            extra.extend(e.parameters(base))
+        return base.extended(extra)
+
+    def __getattr__(self, name: str) -> ca.Function:
+        fns = object.__getattribute__(self, "functions")
+        if name in fns:
+            return fns[name]
+        raise AttributeError(name)
+
+
+def _build(effects: tuple[Effect, ...], names: tuple[str, ...]) -> dict:
+    covs = tuple(sorted({c for e in effects for c in e.covariates}))
+    raw = ca.SX.sym("raw", 3)
+    cov = ca.SX.sym("cov", len(covs))
+    p = ca.SX.sym("p", len(names))
+    g = ca.SX.sym("g")
+    pd = {n: p[i] for i, n in enumerate(names)}
+    cd = {c: cov[i] for i, c in enumerate(covs)}
+    s = [pd["s1"], pd["s2"], pd["s3"]]
+    b = [pd["b1"], pd["b2"], pd["b3"]]
+    for e in effects:
+        s, b = e.shift_scale(s, b, cd, pd)
+    m = [(raw[i] - s[i]) / b[i] for i in range(3)]  # Eq. (theModel)
+    for e in effects:
+        m = e.correct(m, raw, cd, pd)
+    m = ca.vertcat(*m)
+    phi, psi, theta = pd["phi"], pd["psi"], pd["theta"]
+    abar = ca.mtimes(tbar(phi, psi, theta), m)  # Lemma 2
+    norm = ca.sqrt(ca.dot(m, abar))  # Proposition 2: |a|^2 = m^T G^-1 m
+    L = frame_inverse_transpose(phi, psi, theta)
+    a_orth = ca.mtimes(L, m)  # Theorem
+    fns = {
+        "covariates": covs,
+        "measured": ca.Function("measured", [raw, cov, p], [m], ["raw", "cov", "p"], ["m"]),
+        "accel": ca.Function("accel", [raw, cov, p], [a_orth], ["raw", "cov", "p"], ["a"]),
+        "norm": ca.Function("norm", [raw, cov, p], [norm], ["raw", "cov", "p"], ["norm"]),
+        "residual": ca.Function("residual", [raw, cov, p, g], [norm - g],
+                                ["raw", "cov", "p", "g"], ["r"]),
+    }
+    if not effects:
+        A = ca.SX(3, 3)  # structural zeros stay zeros
+        for i in range(3):
+            for j in range(i + 1):
+                A[i, j] = L[i, j] / b[j]  # A = E^-T diag(1/b): lower triangular
+        c = -ca.mtimes(A, ca.vertcat(*s))
+        fns["linear_map"] = ca.Function("linear_map", [p], [A, c], ["p"], ["A", "c"])
+    return fns
+
+
+@lru_cache(maxsize=64)
+def _cached(effects_key: tuple, effects: tuple[Effect, ...]) -> SensorModel:
+    from imucal.model.parameters import base_parameters
+
+    names = BASE_NAMES + tuple(p.name for e in effects
+                               for p in e.parameters(base_parameters([0, 0, 0], [1, 1, 1])))
+    fns = _build(effects, names)
+    return SensorModel(effects, names, fns.pop("covariates"), fns)
+
+
+def build_model(effects: Sequence[Effect] = ()) -> SensorModel:
+    """The sensor model with the given effects; symbolic functions are built once per effect set."""
+    effects = tuple(effects)
+    return _cached(tuple(e.key for e in effects), effects)

@@ -1,0 +1,1 @@
+"""Human-facing outputs: text and JSON reports, figures."""

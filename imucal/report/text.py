@@ -1,0 +1,129 @@
+"""Text report in the manner of lmfit's fit_report."""
+from __future__ import annotations
+
+import math
+
+from imucal.pipeline import CalibrationRun
+
+#: Correlations above this are listed.
+CORREL_MIN = 0.3
+
+
+def t_quantile_975(dof: int) -> float:
+    """Student-t 97.5 % quantile (Cornish-Fisher expansion about the normal; < 1 % off for dof >= 3)."""
+    z = 1.959963984540054
+    if dof <= 0:
+        return float("nan")
+    v = float(dof)
+    return (z + (z**3 + z) / (4 * v) + (5 * z**5 + 16 * z**3 + 3 * z) / (96 * v**2)
+            + (3 * z**7 + 19 * z**5 + 17 * z**3 - 15 * z) / (384 * v**3))
+
+
+def _fmt(v: float) -> str:
+    return "nan" if not math.isfinite(v) else f"{v:.10g}"
+
+
+def fit_report(run: CalibrationRun, correl_min: float = CORREL_MIN) -> str:
+    """Values, standard errors (absolute and %), initial values, bounds hit, correlations, status."""
+    res, cal, iv, rec = run.result, run.calibration, run.intervals, run.recording
+    L: list[str] = []
+    L.append("[[Calibration]]")
+    L.append(f"    model              = {res.model_name}")
+    L.append(f"    data               = {rec.source} ({rec.n} samples, {rec.duration:.1f} s, "
+             f"{rec.sample_rate:.4g} Hz, unit {cal.raw_unit})")
+    L.append(f"    sha256             = {rec.sha256}")
+    if rec.time_note:
+        L.append(f"    time               = {rec.time_note}")
+    L.append(f"    gravity            = {cal.gravity:.6f} m/s^2 ({run.gravity_source})")
+    L.append("[[Fit Statistics]]")
+    L.append(f"    solver             = IPOPT: {res.status_words}")
+    L.append(f"    # iterations       = {res.iterations}")
+    L.append("    fit on             = interval means" if res.mode == "means" else
+             f"    fit on             = {res.residuals.size} samples")
+    L.append(f"    # intervals        = {iv.n} ({run.observability.n_distinct} distinct orientations)")
+    L.append(f"    # free parameters  = {len(res.free_names)}")
+    L.append(f"    chi-square         = {res.chi2:.6g}")
+    L.append(f"    reduced chi-square = {res.redchi:.6g}  (1 = residuals match the noise of the means)")
+    L.append(f"    degrees of freedom = {res.dof}  (95 % intervals: value +/- {t_quantile_975(res.dof):.3g} x std, "
+             "Student-t, since std is scaled by the reduced chi-square)")
+    L.append(f"    RMS |a|-g, means   = {cal.fit['rms_residual']:.6g} m/s^2")
+    L.append(f"    RMS |a|-g, samples = {cal.fit['rms_residual_samples']:.6g} m/s^2")
+    L.append(f"    noise inflation    = {iv.noise_inflation:.3g}  (batch-means / white-noise variance)")
+    L.append(f"    Jacobian condition = {run.observability.condition:.4g}")
+    if run.observability.poorly_determined:
+        L.append("    WARNING            = poorly determined by these poses: "
+                 + ", ".join(f"{n} (predicted std {run.observability.predicted_z[n]:.2g} x scale)"
+                             for n in run.observability.poorly_determined))
+    for wtext in cal.fit.get("warnings", []):
+        L.append(f"    WARNING            = {wtext}")
+    L.append("[[Variables]]")
+    w = max(len(n) for n in res.params)
+    for n, p in res.params.items():
+        sd = res.std.get(n, float("nan"))
+        init = res.initial[n].value
+        if p.fixed:
+            L.append(f"    {n:<{w}}: {_fmt(p.value)} (fixed) {p.unit}")
+            continue
+        pct = abs(sd / p.value) * 100 if p.value else float("nan")
+        flag = f"  (at {res.at_bound[n]} bound)" if n in res.at_bound else ""
+        err = f"+/- {sd:.4g} ({pct:.3g}%)" if math.isfinite(sd) else "+/- n/a (not estimable: 0 dof)"
+        L.append(f"    {n:<{w}}: {_fmt(p.value)} {err} {p.unit} (init = {_fmt(init)}){flag}")
+    if any(n in res.params and n in ("phi", "psi", "theta") for n in res.free_names):
+        L.append("    angles in degrees: " + ", ".join(
+            f"{n} = {math.degrees(res.params[n].value):.4f}" for n in ("phi", "psi", "theta")))
+    L.append(f"[[Correlations]] (unreported correlations are < {correl_min:.3f})")
+    pairs = []
+    fn = res.free_names
+    for i in range(len(fn)):
+        for j in range(i + 1, len(fn)):
+            c = res.correlation[i, j]
+            if math.isfinite(c) and abs(c) > correl_min:
+                pairs.append((abs(c), fn[i], fn[j], c))
+    for _, a, b, c in sorted(pairs, reverse=True):
+        L.append(f"    C({a}, {b}) = {c:+.4f}")
+    A, c = cal.linear_map()
+    L.append("[[Apply map]]  a = A raw + c  (Theorem; A lower triangular, output in m/s^2)")
+    for i in range(3):
+        L.append("    " + " ".join(f"{v:+.9e}" for v in A[i]) + f"   | {c[i]:+.9e}")
+    L.append(f"[[Static intervals]]  times in s, means and std in {cal.raw_unit}, directions unit vectors")
+    L.append(iv.table(run.directions))
+    for d in cal.data.get("dropped_intervals", []):
+        L.append(f"    dropped {d['t_start']:.2f}..{d['t_end']:.2f} s: {d['reason']}")
+    L.append("[[Residuals per interval]]  |a| - g [m/s^2], sigma from the interval's own scatter")
+    r = res.residuals if res.mode == "means" else None
+    if r is not None:
+        for k in range(iv.n):
+            L.append(f"    {k:3d} {r[k]:+.6f} +/- {res.sigma[k]:.6f}  ({r[k] / res.sigma[k]:+.2f} sigma)")
+    return "\n".join(L) + "\n"
+
+
+def summary(run: CalibrationRun) -> dict:
+    """The machine-readable summary (the CLI's --json), built from a run."""
+    res, cal = run.result, run.calibration
+    v, sd = res.params, res.std
+
+    def nz(x: float):
+        return None if not math.isfinite(x) else float(x)
+
+    return {
+        "status": "ok" if res.success else "failed",
+        "solver_status": res.status,
+        "model": res.model_name,
+        "params": {"s": [v[f"s{i}"].value for i in (1, 2, 3)], "b": [v[f"b{i}"].value for i in (1, 2, 3)],
+                   "phi": v["phi"].value, "psi": v["psi"].value, "theta": v["theta"].value},
+        "std": {"s": [nz(sd[f"s{i}"]) for i in (1, 2, 3)], "b": [nz(sd[f"b{i}"]) for i in (1, 2, 3)],
+                "phi": nz(sd["phi"]), "psi": nz(sd["psi"]), "theta": nz(sd["theta"])},
+        "effects": [{"name": n, "axes": ["xyz"[a] for a in ax],
+                     "coefficients": {k: v[k].value for k in v if k.startswith(n)}} for n, ax in cal.effects],
+        "rms_residual": cal.fit["rms_residual"],
+        "rms_residual_samples": cal.fit["rms_residual_samples"],
+        "chi2": res.chi2, "dof": res.dof, "redchi": nz(res.redchi),
+        "n_intervals": run.intervals.n,
+        "n_distinct_orientations": run.observability.n_distinct,
+        "gravity": cal.gravity,
+        "raw_unit": cal.raw_unit,
+        "matrix": cal.linear_map()[0].tolist(),
+        "offset": cal.linear_map()[1].tolist(),
+        "data": dict(cal.data),
+        "warnings": list(cal.fit.get("warnings", [])),
+    }

@@ -1,0 +1,25 @@
+"""One IPOPT option set and one reading of its status, for every calibration NLP.
+
+The unknowns are in units of each parameter's predicted standard error (imucal.solve.fit), so the
+tolerance means "a millionth of a standard error" for every parameter of every model. IPOPT's
+"acceptable" exit is allowed only after many consecutive acceptable iterates, so a normal run
+ends optimal ("Solve_Succeeded") rather than stopping early at the looser level.
+"""
+from __future__ import annotations
+
+#: IPOPT options shared by the means, samples and effects fits.
+OPTIONS = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
+           "ipopt.tol": 1e-8, "ipopt.acceptable_tol": 1e-6, "ipopt.acceptable_iter": 25,
+           "ipopt.max_iter": 300}
+
+#: IPOPT's return_status in words an engineer reads right.
+STATUS_WORDS = {
+    "Solve_Succeeded": "converged (optimal to 1e-8 of a standard error)",
+    "Solved_To_Acceptable_Level": "converged (IPOPT stopped at its acceptable level, 1e-6 of a "
+                                  "standard error: far below the uncertainty, the result is usable)",
+    "Search_Direction_Becomes_Too_Small": "converged (the step fell below machine precision at the optimum)",
+    "Maximum_Iterations_Exceeded": "did not converge: maximum iterations exceeded",
+    "Infeasible_Problem_Detected": "failed: infeasible problem",
+    "Restoration_Failed": "failed: restoration phase failed",
+}
+CONVERGED = ("Solve_Succeeded", "Solved_To_Acceptable_Level", "Search_Direction_Becomes_Too_Small")

@@ -1,0 +1,144 @@
+"""Observability: refuse fits the poses cannot determine, and say what to add.
+
+Two checks before the fit: the number of distinct gravity directions (repeated poses add no
+rank), and the rank of the residual Jacobian with one row per distinct direction. Parameters
+that load on the Jacobian's (near) null space are named as undetermined.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from imucal.errors import ImucalError
+from imucal.solve.fit import unscaled_covariance
+from imucal.model.parameters import ANGLE_NAMES
+
+#: Two interval directions closer than this are the same pose [deg].
+DISTINCT_ANGLE_DEG = 10.0
+#: Relative singular value below which a direction of parameter space is undetermined.
+RANK_TOL = 1e-6
+#: Predicted standard error above which the poses leave a parameter undetermined, in units of
+#: the parameter's scale (b_i for a scale, one g of raw output for a shift, pi/2 for an angle):
+#: 1 % of the sensitivity, 1 % of g of bias; for an angle, the half-width of its bound box
+#: (the angle tolerance), since the bounds alone already pin it that well.
+UNDETERMINED_Z = {"s": 0.01, "b": 0.01}
+#: Reported as poorly determined above this fraction of the threshold.
+POOR_FRACTION = 0.1
+
+
+def thresholds(free_names: tuple[str, ...], angle_tol: float) -> np.ndarray:
+    """Per-parameter undetermined thresholds in scaled units (effect parameters: 1)."""
+    out = []
+    for n in free_names:
+        if n in ANGLE_NAMES:
+            out.append(angle_tol)
+        elif n[:1] in UNDETERMINED_Z and n[1:] in ("1", "2", "3"):
+            out.append(UNDETERMINED_Z[n[:1]])
+        else:
+            out.append(1.0)
+    return np.array(out)
+
+
+@dataclass(frozen=True)
+class Observability:
+    n_distinct: int
+    labels: np.ndarray  #: cluster index of each interval
+    singular_values: np.ndarray  #: of the column-scaled Jacobian, largest first
+    undetermined: tuple[str, ...]
+    predicted_z: dict = None  #: predicted std / scale per free parameter (noise only)
+    poorly_determined: tuple[str, ...] = ()
+
+    @property
+    def condition(self) -> float:
+        sv = self.singular_values
+        return float(sv[0] / sv[-1]) if sv.size and sv[-1] > 0 else float("inf")
+
+
+def distinct_directions(directions: np.ndarray, min_angle_deg: float = DISTINCT_ANGLE_DEG
+                        ) -> tuple[int, np.ndarray]:
+    """Greedy clustering of unit vectors: returns the count and a label per row."""
+    cos_min = np.cos(np.radians(min_angle_deg))
+    centres: list[np.ndarray] = []
+    labels = np.empty(len(directions), int)
+    for i, d in enumerate(directions):
+        for j, c in enumerate(centres):
+            if d @ c >= cos_min:
+                labels[i] = j
+                break
+        else:
+            centres.append(d)
+            labels[i] = len(centres) - 1
+    return len(centres), labels
+
+
+def analyse(directions: np.ndarray, jac_rows: np.ndarray, free_names: tuple[str, ...],
+            weighted_rows: np.ndarray | None = None, limits: np.ndarray | None = None) -> Observability:
+    """Distinct poses, Jacobian rank and predicted standard errors.
+
+    ``jac_rows`` is (n_intervals, n_free) with columns times each parameter's scale;
+    ``weighted_rows`` the same divided by each row's noise (Fisher information J^T J).
+    """
+    n_distinct, labels = distinct_directions(directions)
+    # One row per distinct direction: repeats of a pose add no information about the model.
+    J = np.vstack([jac_rows[labels == k].mean(axis=0) for k in range(n_distinct)])
+    # Columns are already multiplied by each parameter's typical scale (dimensionless), so a
+    # column that the poses barely excite stays small and shows up in the null space.
+    U, sv, Vt = np.linalg.svd(J, full_matrices=True)
+    nf = len(free_names)
+    svf = np.zeros(nf)
+    svf[: sv.size] = sv
+    null = svf < RANK_TOL * max(svf[0], 1e-300)
+    null[n_distinct:] = True  # fewer distinct poses than parameters: rank <= n_distinct
+    und: list[str] = []
+    if null.any():
+        V = Vt[null]
+        load = np.sqrt((V**2).sum(axis=0))  # share of each parameter in the null space
+        und = [free_names[j] for j in range(nf) if load[j] > 0.5]
+    z: dict[str, float] = {}
+    poor: list[str] = []
+    if weighted_rows is not None and n_distinct >= nf:
+        # Noise-only Fisher information at the initial guess, in units of each parameter's
+        # threshold. Its eigenvectors whose predicted standard error exceeds 1 are directions
+        # the poses do not determine; the parameters that load on them are named. (Exact
+        # degeneracies show up at noise level in the singular values, so a rank test alone
+        # misses them.)
+        lim = np.ones(nf) if limits is None else np.asarray(limits, float)
+        Jt = weighted_rows * lim
+        lam, V = np.linalg.eigh(Jt.T @ Jt)
+        bad = 1.0 / np.sqrt(np.maximum(lam, 1e-300)) > 1.0
+        if bad.any():
+            load = np.sqrt((V[:, bad] ** 2).sum(axis=1))
+            und += [free_names[j] for j in range(nf) if load[j] > 0.5 and free_names[j] not in und]
+        with np.errstate(invalid="ignore"):
+            zt = np.sqrt(np.clip(np.diag(unscaled_covariance(Jt)), 0, None))
+        z = {n: float(v * l) for n, v, l in zip(free_names, zt, lim)}  # std / scale
+        poor = [n for n, v in zip(free_names, zt) if v > POOR_FRACTION and n not in und]
+    return Observability(n_distinct, labels, svf, tuple(sorted(und, key=free_names.index)), z, tuple(poor))
+
+
+def require_observable(obs: Observability, free_names: tuple[str, ...], source: str | None) -> None:
+    """Raise a one-line ImucalError naming undetermined parameters and the poses to add."""
+    nf = len(free_names)
+    angles_free = [a for a in ANGLE_NAMES if a in free_names]
+    if obs.n_distinct < nf:
+        und = list(obs.undetermined)
+        if not und and angles_free:
+            und = angles_free
+        what = f"{', '.join(und)} undetermined" if und else "parameters undetermined"
+        fix = (f"hold the sensor still in at least {nf - obs.n_distinct} more orientations with gravity "
+               "between the axes (e.g. the 12 cube edges or 8 corners)")
+        if angles_free:
+            fix += ", or fit the 6-parameter model with the angles fixed at 90 deg (--fix-angles, "
+            fix += "or fit.fix: [phi, psi, theta] in the YAML)"
+        raise ImucalError(f"only {obs.n_distinct} distinct orientations for {nf} free parameters: {what}",
+                          file=source, field="intervals", fix=fix)
+    if obs.undetermined:
+        detail = f"Jacobian condition {obs.condition:.3g}"
+        fix = "add orientations that tilt gravity towards the missing axes (cube faces, edges and corners)"
+        if not angles_free:
+            fix += "; fixing the angles does not help here"
+        else:
+            fix += ", or fix those parameters"
+        raise ImucalError(f"the orientations leave {', '.join(obs.undetermined)} undetermined ({detail})",
+                          file=source, field="intervals", fix=fix)
