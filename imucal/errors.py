@@ -33,6 +33,26 @@ EXIT_INTERNAL = 3  #: an unexpected internal error (a bug): one line; rerun with
 EXIT_INTERRUPTED = 130  #: SIGINT (Ctrl-C) or SIGTERM: staged outputs removed, nothing published
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the program is, so staged outputs are removed as on Ctrl-C."""
+
+
+#: Signals received while a command runs, recorded by the command line's handlers. A signal that
+#: arrives inside CasADi's C code is caught there and becomes a solver failure status; every
+#: solve calls ``raise_if_signalled`` after IPOPT returns, so the run ends as an interruption.
+SIGNALS: list[int] = []
+
+
+def raise_if_signalled() -> None:
+    """Raise the interrupt a signal asked for, if one arrived during the last solve."""
+    import signal
+
+    if signal.SIGTERM in SIGNALS:
+        raise Terminated()
+    if SIGNALS:
+        raise KeyboardInterrupt()
+
+
 def short(value: object, limit: int = 40) -> str:
     """repr of a value for a message, cut to ``limit`` characters (never repr an unbounded value)."""
     try:

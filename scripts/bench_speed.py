@@ -283,11 +283,13 @@ def markdown(r: dict, args) -> str:
     fm = r.get("fit-means")
     if fm:
         L += ["## Fit time against the number of interval means", "",
-              "Random directions, raw-count sensor (16384 LSB/g), 0.2 counts noise per mean. The base model is "
-              "fitted by the vectorised NLP (`imucal/solve/samples.py`); models with effects by the CasADi map NLP over "
-              "the symbolic model, timed here on the same rows with an effect held at zero. `first` includes "
-              "building the solver for that problem shape; later fits of the same shape reuse it.", "",
-              "| intervals | first [s] | median [s] | CasADi map NLP (models with effects), median [s] | "
+              "Random directions, raw-count sensor (16384 LSB/g), 0.2 counts noise per mean. Every model is "
+              "fitted by the one least-squares path (`imucal/solve/least_squares.py`: the row residual generated "
+              "from the CasADi model as numpy code, normal equations accumulated in blocks, Gauss-Newton Hessian, "
+              "IPOPT built once per number of unknowns). The second time column fits the same rows with a model "
+              "that carries an effect (bias drift, coefficients held at zero). `first` includes "
+              "generating the row functions for that model; later fits reuse them.", "",
+              "| intervals | first [s] | median [s] | same rows, model with an effect held at zero, median [s] | "
               "peak RSS [MB] | IPOPT status |",
               "|---|---|---|---|---|---|"]
         for x in fm:
@@ -298,14 +300,14 @@ def markdown(r: dict, args) -> str:
             L.append(f"| {x['n']} | {x['first_s']:.3f} | {x['cached_median_s']:.3f} | {x['vectorised_median_s']:.3f} | "
                      f"{x['maxrss_mb']:.0f} | "
                      + ", ".join(f"{k} x{v}" for k, v in sorted(st.items())) + " |")
-        L += ["", "The two NLPs agree to "
+        L += ["", "The two models agree to "
               f"{max(x.get('vectorised_max_diff_std', math.nan) for x in fm if 'error' not in x):.1g} standard errors "
               "(also asserted by tests/test_fit_paths.py).", ""]
     fs = r.get("fit-samples")
     if fs:
         L += ["## Samples mode: fit time against the number of samples", "",
-              "50 poses, 4 counts white noise per sample; `imucal.solve.fit.fit` with `mode=\"samples\"` (vectorised "
-              "residuals and Gauss-Newton Hessian, `imucal/solve/samples.py`). Time of the fit call only (data in memory).",
+              "50 poses, 4 counts white noise per sample; `imucal.solve.fit.fit` with `mode=\"samples\"` (the same "
+              "least-squares path, blocks of 8192 rows, Gauss-Newton Hessian). Time of the fit call only (data in memory).",
               "", "| samples | median [s] | min [s] | IPOPT iterations | peak RSS [MB] |", "|---|---|---|---|---|"]
         for x in fs:
             if "error" in x:

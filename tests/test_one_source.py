@@ -21,7 +21,6 @@ import pytest
 from imucal.analysis.design import DesignSensor, sensitivity
 from imucal.model.effects import REFERENCE_TEMPERATURE, make_effect
 from imucal.model.sensor import build_model, frame_np, gram_det_np, gram_np
-from imucal.solve.samples import SampleResiduals
 from imucal.analysis.simulate import SensorSpec
 
 PKG = Path(__file__).resolve().parents[1] / "imucal"
@@ -64,11 +63,48 @@ def test_design_sensitivities_equal_the_models_jacobian():
     np.testing.assert_allclose(sensitivity(u, sensor, G0), _casadi_jacobian(raw, p, G0), rtol=1e-9, atol=1e-12)
 
 
-def test_samples_mode_gradient_equals_the_models_jacobian():
+def test_generated_numpy_rows_equal_casadis_map_and_jacobian():
+    """The one solver path evaluates rows with numpy code generated from the CasADi residual:
+    it must equal CasADi's own evaluation (map) of the same function, value and derivatives,
+    for the base model and with effects."""
+    import casadi as ca
+
+    from imucal.model.effects import make_effect
+    from imucal.model.sensor import build_model
+    from imucal.solve import least_squares as lsq
+
+    rng = np.random.default_rng(2)
+    for effects in [(), (make_effect("bias_temperature"), make_effect("scale_nonlinearity", (0, 2)),
+                         make_effect("scale_drift", (1,)))]:
+        model = build_model(effects)
+        k, npar = len(model.covariates), len(model.names)
+        raw = rng.normal(size=(3000, 3)) * 5 + 1.0
+        cov = rng.normal(size=(3000, k))
+        p = np.r_[0.3, -0.1, 0.2, 1.02, 0.98, 1.01, ANGLES, rng.normal(size=npar - 9) * 1e-3]
+        free = tuple(model.names[i] for i in range(npar) if i != 4)  # one held
+        fns = lsq.row_functions(model, free)
+        pfree = np.array([p[model.names.index(n)] for n in free])
+        r, J, Jraw = lsq.jacobians(fns, lsq.Rows(raw, cov), pfree, p, G0)
+        rs, cs, ps, gs = ca.SX.sym("r", 3), ca.SX.sym("c", k), ca.SX.sym("p", npar), ca.SX.sym("g")
+        res = model.residual(rs, cs, ps, gs)
+        f = ca.Function("f", [rs, cs, ps, gs], [res, ca.jacobian(res, ps), ca.jacobian(res, rs)]).map(3000)
+        r0, J0, Jr0 = (np.asarray(v) for v in f(raw.T, cov.T, p, G0))
+        idx = [model.names.index(n) for n in free]
+        np.testing.assert_allclose(r, r0.ravel(), rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(J, J0.reshape(3000, npar)[:, idx], rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(Jraw, Jr0.reshape(3000, 3), rtol=1e-10, atol=1e-12)
+
+
+def test_base_model_jacobian_equals_the_models_jacobian():
+    from imucal.model.sensor import build_model
+    from imucal.model.parameters import BASE_NAMES
+    from imucal.solve import least_squares as lsq
+
     rng = np.random.default_rng(2)
     raw = rng.normal(size=(20, 3)) * 5 + 1.0
     p = np.array([0.3, -0.1, 0.2, 1.02, 0.98, 1.01, *ANGLES])
-    r, J = SampleResiduals(raw, G0).residuals(p, jac=True)
+    fns = lsq.row_functions(build_model(), BASE_NAMES)
+    _, J, _ = lsq.jacobians(fns, lsq.Rows(raw, np.zeros((20, 0))), p, p, G0)
     np.testing.assert_allclose(J, _casadi_jacobian(raw, p, G0), rtol=1e-9, atol=1e-12)
 
 

@@ -12,7 +12,8 @@ import sys
 import traceback
 
 from imucal import __version__
-from imucal.errors import (EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, ImucalError, short)
+from imucal.errors import (EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, SIGNALS, ImucalError, Terminated,
+                           short)
 
 #: Subcommand name -> module. Modules import their heavy dependencies inside run().
 COMMANDS = {
@@ -53,17 +54,18 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-class _Terminated(KeyboardInterrupt):
-    """SIGTERM, raised where the program is, so staged outputs are removed as on Ctrl-C."""
-
-
-_SIGNALLED: list[int] = []  #: signals received by this run
+_SIGNALLED = SIGNALS  #: signals received by this run (imucal.errors.SIGNALS)
 
 
 def _on_sigterm(signum, frame) -> None:  # noqa: ARG001 - signal handler signature
     _SIGNALLED.append(signum)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)  # once: cleanup is not interrupted again
-    raise _Terminated()
+    raise Terminated()
+
+
+def _on_sigint(signum, frame) -> None:  # noqa: ARG001 - signal handler signature
+    _SIGNALLED.append(signum)
+    raise KeyboardInterrupt()
 
 
 def _interrupted(exc: BaseException) -> bool:
@@ -85,10 +87,12 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "run", None):
         parser.print_help()
         return EXIT_BAD_INPUT
-    previous = None
+    previous = previous_int = None
     _SIGNALLED.clear()
     try:
         previous = signal.signal(signal.SIGTERM, _on_sigterm)
+        if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+            previous_int = signal.signal(signal.SIGINT, _on_sigint)
     except ValueError:  # not the main thread (e.g. a test runner's worker): leave it alone
         pass
     try:
@@ -97,7 +101,7 @@ def main(argv: list[str] | None = None) -> int:
         sys.stderr.write(f"imucal: error: {exc}\n")
         return EXIT_BAD_INPUT
     except KeyboardInterrupt as exc:
-        sys.stderr.write("imucal: terminated; nothing was written\n" if isinstance(exc, _Terminated)
+        sys.stderr.write("imucal: terminated; nothing was written\n" if isinstance(exc, Terminated)
                          else "imucal: interrupted; nothing was written\n")
         return EXIT_INTERRUPTED
     except MemoryError:
@@ -119,6 +123,8 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+        if previous_int is not None:
+            signal.signal(signal.SIGINT, previous_int)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -11,12 +11,11 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from functools import lru_cache
 
-import casadi as ca
 import numpy as np
 
 from imucal.solve import ipopt
+from imucal.solve import least_squares as lsq
 from imucal.errors import ImucalError
 from imucal.model.sensor import SensorModel
 from imucal.model.parameters import Parameters, model_label
@@ -74,98 +73,11 @@ class FitResult:
         return self.params.value_dict()
 
 
-def _selection(names: tuple[str, ...], free: tuple[str, ...]) -> np.ndarray:
-    S = np.zeros((len(names), len(free)))
-    for j, n in enumerate(free):
-        S[names.index(n), j] = 1.0
-    return S
-
-
-@lru_cache(maxsize=32)
-def _solver(model: SensorModel, n: int, free: tuple[str, ...]) -> tuple[ca.Function, ca.Function]:
-    """IPOPT solver and residual/Jacobian function for one problem shape, built once."""
-    names, k = model.names, len(model.covariates)
-    nf = len(free)
-    x = ca.MX.sym("x", nf)
-    raw = ca.MX.sym("raw", 3, n)
-    cov = ca.MX.sym("cov", k, n)
-    w = ca.MX.sym("w", 1, n)
-    g = ca.MX.sym("g")
-    pfix = ca.MX.sym("pfix", len(names))  # fixed values (free entries ignored)
-    off = ca.MX.sym("off", nf)  # free parameters at the start
-    step = ca.MX.sym("step", nf)  # their predicted standard errors: x is in those units
-    S = ca.DM(_selection(names, free))
-    mask = ca.DM(1.0 - S.full().sum(axis=1))
-    p = mask * pfix + ca.mtimes(S, off + step * x)
-    # Per-row objective term, summed by a reducing map: no per-row symbolic expansion.
-    rs, cs, ps, gs, ws = (ca.SX.sym("r", 3), ca.SX.sym("c", k), ca.SX.sym("p", len(names)),
-                          ca.SX.sym("g"), ca.SX.sym("w"))
-    term = ca.Function("term", [rs, cs, ws, ps, gs], [0.5 * ws * model.residual(rs, cs, ps, gs) ** 2])
-    par = "serial"
-    fsum = term.map("fsum", par, n, [3, 4], [0]) if n > 1 else term
-    obj = fsum(raw, cov, w, p, g)
-    P = ca.vertcat(ca.vec(raw), ca.vec(cov), ca.vec(w), g, pfix, off, step)
-    nlp = {"x": x, "p": P, "f": obj}
-    solver = ca.nlpsol("calib", "ipopt", nlp, ipopt.OPTIONS)
-    # Residuals and their Jacobian w.r.t. the free (unscaled) parameters, for the covariance.
-    pf = ca.SX.sym("pf", nf)
-    pfix_s = ca.SX.sym("pfix", len(names))
-    p_s = ca.DM(mask) * pfix_s + ca.mtimes(S, pf)
-    r = model.residual(rs, cs, p_s, gs)
-    jr_raw = ca.jacobian(r, rs)
-    row = ca.Function("row", [rs, cs, pf, pfix_s, gs], [r, ca.jacobian(r, pf), jr_raw])
-    rows = row.map(n, par) if n > 1 else row
-    return solver, rows
-
-
-def _row_eval(rows: ca.Function, data: FitData, pfree: np.ndarray, pfix: np.ndarray, g: float
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    r, J, Jraw = rows(data.raw.T, data.cov.T, pfree, pfix, g)
-    n = data.raw.shape[0]
-    r = np.asarray(r).reshape(n)
-    J = np.asarray(J).reshape(len(pfree), n, order="F").T if n > 1 else np.asarray(J).reshape(1, -1)
-    Jraw = np.asarray(Jraw).reshape(3, n, order="F").T if n > 1 else np.asarray(Jraw).reshape(1, 3)
-    return r, J, Jraw
-
-
-def _sigma(Jraw: np.ndarray, raw_var: np.ndarray, weights: str = "noise") -> np.ndarray:
-    """Noise of |a| - g from the raw noise: first-order propagation."""
-    s = np.sqrt(np.sum(Jraw**2 * raw_var, axis=1))
-    floor = max(float(np.median(s)) * 1e-3, 1e-12)
-    if weights == "uniform":
-        return np.full_like(s, max(float(np.median(s)), floor))
-    return np.maximum(s, floor)
-
-
-class _Rows:
-    """Residuals, their parameter Jacobian and raw Jacobian at a parameter vector."""
-
-    def __init__(self, data: FitData, model: SensorModel, free: tuple[str, ...], gravity: float,
-                 pfix: np.ndarray) -> None:
-        self.data, self.g, self.pfix = data, gravity, pfix
-        self.free_idx = np.array([model.names.index(nm) for nm in free], int)
-        # Base model: the vectorised NLP (imucal.solve.samples), for means and samples alike; with
-        # effects, the CasADi map NLP over the extended model.
-        self.fast = not model.effects
-        if self.fast:
-            from imucal.solve.samples import SampleResiduals
-
-            self.sres = SampleResiduals(data.raw, gravity)
-            self.solver = None
-        else:
-            self.solver, self.rows = _solver(model, data.raw.shape[0], free)
-
-    def __call__(self, pfree: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        if self.fast:
-            p = self.pfix.copy()
-            p[self.free_idx] = pfree
-            r, Jp = self.sres.residuals(p, jac=True)
-            return r, Jp[:, self.free_idx], -Jp[:, 0:3]  # dr/draw = -dr/ds
-        return _row_eval(self.rows, self.data, pfree, self.pfix, self.g)
-
-
 def unscaled_covariance(Jw: np.ndarray, rcond: float = 1e-12) -> np.ndarray:
     """(Jw^T Jw)^-1 by the SVD of the column-equilibrated Jacobian.
+
+    ``Jw`` may be the weighted Jacobian itself or any R with R^T R = Jw^T Jw (the block QR of
+    imucal.solve.least_squares): both have the same column norms and singular values.
 
     Columns are divided by their norms first, so the result does not depend on the units of
     the parameters (a shift in counts x 1e12 and an angle in rad differ by 1e15 in scale, and a
@@ -193,11 +105,12 @@ def _step_scale(Jw: np.ndarray, scale: np.ndarray) -> np.ndarray:
 
 
 def fit(data: FitData, params: Parameters, model: SensorModel, gravity: float,
-        source: str | None = None, weights: str = "noise") -> FitResult:
+        source: str | None = None, weights: str = "noise", hessian: str = "gauss-newton") -> FitResult:
     """Fit the free parameters of ``params`` to ``data`` by weighted least squares (IPOPT).
 
     ``weights="noise"`` weighs each row by 1/sigma^2 (its noise propagated from the raw
     scatter); ``"uniform"`` gives every row the median sigma (imu_tk's unweighted cost).
+    ``hessian="exact"`` gives IPOPT the exact Hessian instead of Gauss-Newton's J^T W J.
     """
     names = model.names
     if tuple(params.names) != names:
@@ -214,42 +127,31 @@ def fit(data: FitData, params: Parameters, model: SensorModel, gravity: float,
     lo = np.array([params[nm].lower for nm in free])
     hi = np.array([params[nm].upper for nm in free])
     p_now = np.array([params[nm].value for nm in free])
-    rows = _Rows(data, model, free, gravity, pfix)
+    fns, rows = lsq.row_functions(model, free), lsq.Rows(data.raw, data.cov)
     t0 = time.perf_counter()
     iters = 0
     # Weights from the noise propagated at the current estimate; refresh once at the solution.
     for _ in range(2):
-        r0, J0, Jraw = rows(p_now)
-        sigma = _sigma(Jraw, data.raw_var, weights)
-        d = _step_scale(J0 / sigma[:, None], scale)  # p = p0 + d * x
-        lb, ub = (lo - p_now) / d, (hi - p_now) / d
-        x0 = np.zeros(len(free))
-        if rows.fast:
-            from imucal.solve.samples import solve_samples
-
-            x, stats = solve_samples(data.raw, 1.0 / sigma**2, gravity, pfix, rows.free_idx, p_now, d,
-                                     x0, lb, ub)
-        else:
-            P = np.concatenate([data.raw.T.ravel(order="F"), data.cov.T.ravel(order="F"),
-                                1.0 / sigma**2, [gravity], pfix, p_now, d])
-            sol = rows.solver(x0=x0, p=P, lbx=lb, ubx=ub)
-            stats = rows.solver.stats()
-            x = np.asarray(sol["x"]).ravel()
+        sigma = lsq.noise_sigma(fns, rows, data.raw_var, p_now, pfix, gravity, weights)
+        R = lsq.weighted_r_factor(fns, rows, sigma, p_now, pfix, gravity)
+        d = _step_scale(R, scale)  # p = p0 + d * x
+        problem = lsq.Problem(fns, rows, 1.0 / sigma**2, pfix, gravity, p_now, d, exact=hessian == "exact")
+        x, stats = lsq.solve(problem, (lo - p_now) / d, (hi - p_now) / d)
         iters += int(stats.get("iter_count", 0))
         p_now = np.clip(p_now + d * x, lo, hi)
     solve_time = time.perf_counter() - t0
     status = str(stats.get("return_status", "unknown"))
     pfree = p_now
-    r, J, _ = rows(pfree)
+    r = lsq.residuals(fns, rows, pfree, pfix, gravity)
+    R = lsq.weighted_r_factor(fns, rows, sigma, pfree, pfix, gravity)
     fitted = params.with_values(dict(zip(free, pfree)))
-    Jw = J / sigma[:, None]
     chi2 = float(np.sum((r / sigma) ** 2))
     dof = n - len(free)
     redchi = chi2 / dof if dof > 0 else float("nan")
     # Covariance from the Jacobian at the solution (via its SVD, symmetric by construction),
     # scaled by the residual variance as lmfit's scale_covar does: (J^T W J)^-1 chi2/dof.
     # With no degrees of freedom left, the noise-only covariance (J^T W J)^-1.
-    cov = unscaled_covariance(Jw) * (redchi if dof > 0 else 1.0)
+    cov = unscaled_covariance(R) * (redchi if dof > 0 else 1.0)
     sd = np.sqrt(np.clip(np.diag(cov), 0, None))
     with np.errstate(divide="ignore", invalid="ignore"):
         corr = cov / np.outer(sd, sd)
@@ -273,11 +175,12 @@ def jacobian_rows(data: FitData, params: Parameters, model: SensorModel, gravity
     residuals |a| - g instead.
     """
     free = params.free_names
-    rows = _Rows(data, model, free, gravity, np.array(params.values(), float))
-    r, J, Jraw = rows(np.array([params[n].value for n in free]))
+    fns, rows = lsq.row_functions(model, free), lsq.Rows(data.raw, data.cov)
+    pfix, pfree = np.array(params.values(), float), np.array([params[n].value for n in free])
     if residuals:
-        return r
+        return lsq.residuals(fns, rows, pfree, pfix, gravity)
+    _, J, _ = lsq.jacobians(fns, rows, pfree, pfix, gravity)
     J = J * np.array([params[n].scale for n in free])
     if weighted:
-        return J, J / _sigma(Jraw, data.raw_var)[:, None]
+        return J, J / lsq.noise_sigma(fns, rows, data.raw_var, pfree, pfix, gravity)[:, None]
     return J

@@ -23,3 +23,17 @@ STATUS_WORDS = {
     "Restoration_Failed": "failed: restoration phase failed",
 }
 CONVERGED = ("Solve_Succeeded", "Solved_To_Acceptable_Level", "Search_Direction_Becomes_Too_Small")
+
+
+def run(solver, **args) -> tuple[dict, dict]:
+    """Call an IPOPT ``nlpsol`` and return (solution, stats).
+
+    A signal that arrived while IPOPT ran was swallowed by CasADi as a failed evaluation; it is
+    raised here again (imucal.errors.raise_if_signalled), so an interrupted run never reports a
+    solver failure.
+    """
+    from imucal.errors import raise_if_signalled
+
+    sol = solver(**args)
+    raise_if_signalled()
+    return sol, solver.stats()
