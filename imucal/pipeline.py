@@ -3,14 +3,15 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from imucal.calibration.frozen import Calibration, now_utc
+from imucal.calibration.gyro import GyroCalibration
 from imucal.config.run import RunConfig
-import math
 
 from imucal.data.load import Recording, load_recording, rails
 from imucal.errors import ImucalError
@@ -22,6 +23,8 @@ from imucal.constants import RIGHT_ANGLE
 from imucal.model.parameters import ANGLE_NAMES, Parameters, base_parameters
 from imucal.data.static import Intervals, detect_static
 from imucal.solve.stats import chi2_sf
+from imucal.gyro.result import GyroResult
+from imucal.gyro.run import calibrate_gyro
 
 
 @dataclass(frozen=True)
@@ -38,6 +41,7 @@ class CalibrationRun:
     directions: np.ndarray  #: unit gravity direction per interval, calibrated frame
     sample_residuals: np.ndarray  #: |a| - g for every sample inside an interval [m/s^2]
     gravity_source: str
+    gyro: GyroResult | None = None  #: the gyroscope fit, when the recording has one
 
     @property
     def rms_residual_samples(self) -> float:
@@ -252,3 +256,14 @@ def calibrate(config: RunConfig, recording: Recording | None = None) -> Calibrat
     return CalibrationRun(config=config, recording=rec, intervals=iv, guess=guess, observability=obs,
                           result=res, calibration=cal, directions=directions, sample_residuals=samp_res,
                           gravity_source=gsource)
+
+
+def calibrate_imu(config: RunConfig, recording: Recording | None = None,
+                  gyro_file: str | None = None) -> CalibrationRun:
+    """The accelerometer (``calibrate``), then the gyroscope when the recording has gx, gy, gz
+    or ``gyro_file`` (imu_tk's second file) is given: one calibration holding both sensors."""
+    run = calibrate(config, recording)
+    res = calibrate_gyro(run, gyro_file)
+    if res is None:
+        return run
+    return replace(run, gyro=res, calibration=replace(run.calibration, gyro=GyroCalibration.from_result(res)))

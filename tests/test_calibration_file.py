@@ -100,17 +100,42 @@ def _dict(saved) -> dict:
     return yaml.safe_load(saved[1].read_text())
 
 
-@pytest.mark.parametrize("version", [2, 0, "1", 1.5, True, None])
+@pytest.mark.parametrize("version", [3, 0, "1", 1.5, True, None])
 def test_unknown_version_is_refused(saved, tmp_path, version):
     d = _dict(saved)
     d["format_version"] = version
     p = tmp_path / "v.yaml"
     p.write_text(yaml.safe_dump(d))
-    with pytest.raises(ImucalError, match=rf"unknown format version {version!r} \(this imucal reads version 1\)") \
+    with pytest.raises(ImucalError, match=rf"unknown format version {version!r} \(this imucal reads versions 1, 2\)") \
             as ei:
         load_calibration(p)
     assert ei.value.field == "format_version" and str(ei.value).startswith(str(p))
     assert "upgrade imucal" in str(ei.value)
+
+
+def test_version_1_files_still_load(saved, tmp_path):
+    """A file as imucal wrote it before format version 2 (no sensor list) gives the same calibration."""
+    d = _dict(saved)
+    assert d["format_version"] == 2 and d["sensors"] == ["accelerometer"]
+    d["format_version"] = 1
+    del d["sensors"]
+    p = tmp_path / "v1.yaml"
+    p.write_text(yaml.safe_dump(d))
+    old, new = load_calibration(p), load_calibration(saved[1])
+    assert old.sensors == ("accelerometer",) and old.gyro is None
+    raw = np.random.default_rng(0).normal(size=(50, 3)) * 1000
+    np.testing.assert_array_equal(old.apply(raw), new.apply(raw))
+
+
+@pytest.mark.parametrize("sensors", [None, ["accelerometer", "gyroscope"], ["gyroscope"], "accelerometer"])
+def test_the_sensor_list_must_match_the_sections(saved, tmp_path, sensors):
+    d = _dict(saved)
+    d["sensors"] = sensors
+    p = tmp_path / "s.yaml"
+    p.write_text(yaml.safe_dump(d))
+    with pytest.raises(ImucalError) as ei:
+        load_calibration(p)
+    assert ei.value.field == "sensors"
 
 
 @pytest.mark.parametrize("mutate, field, match", [

@@ -9,29 +9,29 @@ from __future__ import annotations
 import datetime as _dt
 import math
 import os
-import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Mapping
 
 import numpy as np
 import yaml
 
 from imucal import __version__
+from imucal.calibration.fields import NAME_PATTERN, SHA256_PATTERN, UNIT_PATTERN, VERSION_PATTERN
+from imucal.calibration.gyro import KIND as GYRO_KIND, GyroCalibration
 from imucal.constants import SI_ACCEL_UNIT
 from imucal.errors import ImucalError, short
 from imucal.model.sensor import gram_det_np
 from imucal.model.parameters import ANGLE_NAMES, BASE_NAMES, Parameter, Parameters, model_label
 
 FORMAT = "imucal-calibration"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+#: Versions this imucal reads: 1 (accelerometer only, no sensor list) and 2 (``sensors`` lists the
+#: kinds the file holds; a ``gyroscope`` section when it has one).
+READABLE_VERSIONS = (1, 2)
+ACCELEROMETER = "accelerometer"
 #: Relative disagreement between apply.matrix/offset and the parameters' map that counts as an
 #: edit rather than round-off (the file stores floats with repr, so a true file agrees exactly).
 DERIVED_RTOL = 1e-9
-#: Text fields that reach generated C: what each may look like (validated on load and in codegen).
-UNIT_PATTERN = re.compile(r"[A-Za-z0-9^.%()/ -]{0,40}\Z")
-VERSION_PATTERN = re.compile(r"[0-9A-Za-z][0-9A-Za-z.+_-]{0,39}\Z")
-NAME_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,39}\Z")
-SHA256_PATTERN = re.compile(r"[0-9a-f]{64}\Z")
 OUTPUT_FRAME = ("orthonormal frame f of the Theorem: f1 along sensor axis x, f2 in the plane of "
                 "axes x and y, f3 = f1 x f2")
 
@@ -49,6 +49,12 @@ class Calibration:
     data: Mapping[str, Any] = field(default_factory=dict)  #: file name, sha256
     created: str = ""
     software_version: str = __version__
+    gyro: GyroCalibration | None = None  #: the gyroscope part, in the same output frame
+
+    @property
+    def sensors(self) -> tuple[str, ...]:
+        """The sensor kinds this calibration holds."""
+        return (ACCELEROMETER,) + ((GYRO_KIND,) if self.gyro is not None else ())
 
     # --- the model -------------------------------------------------------------------------
     @property
@@ -117,6 +123,27 @@ class Calibration:
         f = self.model.accel.map(n, "serial")
         return np.asarray(f(raw.T, C.T, self.values)).T
 
+    def apply_imu(self, raw_acc: np.ndarray, raw_gyro: np.ndarray,
+                  covariates: Mapping[str, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(acceleration [m/s^2], angular rate [rad/s]) of the same samples, in one frame."""
+        if self.gyro is None:
+            raise ImucalError("this calibration has no gyroscope part", field="gyroscope",
+                              fix="calibrate with gyro columns (gx, gy, gz) or --gyro-data")
+        acc = self.apply(raw_acc, covariates)
+        return acc, self.gyro.apply(raw_gyro, acc)
+
+    @property
+    def equation(self) -> str:
+        """The accelerometer's apply equation as actually applied."""
+        if not self.effects:
+            return "a = matrix @ raw + offset (matrix lower triangular)"
+        covs = ", ".join(self.covariates)
+        terms = ", ".join(f"{n}[{''.join('xyz'[i] for i in ax)}]" for n, ax in self.effects)
+        return (f"a = E^-T m with m_i = (raw_i - s_i) / b_i (Eq. theModel) extended by {terms}"
+                + (f", evaluated at each sample's {covs}" if covs else "")
+                + "; matrix and offset are the map with every effect term at zero"
+                + (f" ({covs} at their reference)" if covs else ""))
+
     def generate_c(self, prefix: str = "imucal", precision: str = "float"):
         """C source applying this calibration (see imucal.export.codegen.generate_c)."""
         from imucal.export.codegen import generate_c
@@ -134,6 +161,7 @@ class Calibration:
         return {
             "format": FORMAT,
             "format_version": FORMAT_VERSION,
+            "sensors": list(self.sensors),
             "model": model_label(self.model_name, self.params),
             "effects": [{"name": n, "axes": ["xyz"[a] for a in ax]} for n, ax in self.effects],
             "units": {"input": self.raw_unit, "output": SI_ACCEL_UNIT, "angles": "rad",
@@ -145,12 +173,12 @@ class Calibration:
                     "lower": _f(p.lower), "upper": _f(p.upper), "fixed": bool(p.fixed),
                     "solver_scale": float(p.scale)}  # IPOPT's scaling magnitude, not b1..b3
                 for n, p in self.params.items()},
-            "apply": {"matrix": A.tolist(), "offset": c.tolist(),
-                      "equation": "a = matrix @ raw + offset (matrix lower triangular)"},
+            "apply": {"matrix": A.tolist(), "offset": c.tolist(), "equation": self.equation},
             "fit": dict(self.fit),
             "data": dict(self.data),
             "software": {"name": "imucal", "version": self.software_version},
             "created": self.created,
+            **({"gyroscope": self.gyro.to_dict()} if self.gyro is not None else {}),
         }
 
     def save(self, path: str | os.PathLike) -> None:
@@ -192,8 +220,9 @@ def from_dict(d: Mapping[str, Any], path: str = "<calibration>") -> Calibration:
         raise ImucalError(f"format {fmt!r} is not {FORMAT!r}", file=path, field="format",
                           fix="pass a calibration.yaml written by `imucal calibrate`")
     ver = _get(d, "format_version", path, "")
-    if ver != FORMAT_VERSION or isinstance(ver, bool):
-        raise ImucalError(f"unknown format version {ver!r} (this imucal reads version {FORMAT_VERSION})",
+    if ver not in READABLE_VERSIONS or isinstance(ver, bool):
+        raise ImucalError(f"unknown format version {short(ver)} (this imucal reads versions "
+                          f"{', '.join(map(str, READABLE_VERSIONS))})",
                           file=path, field="format_version",
                           fix="regenerate the file with this imucal or upgrade imucal")
     pd = _get(d, "parameters", path, "")
@@ -255,6 +284,9 @@ def from_dict(d: Mapping[str, Any], path: str = "<calibration>") -> Calibration:
                       data=dict(_section(d, "data", path, Mapping)),
                       created=_text(created, path, "created"),
                       software_version=_text(sw.get("version", ""), path, "software.version"))
+    gyro = _gyro_section(d, ver, path)
+    if gyro is not None:
+        cal = replace(cal, gyro=gyro)
     check_text_fields(cal, path)
     if effects:  # the parameters must be exactly the model's (base + each effect's)
         try:
@@ -271,6 +303,21 @@ def from_dict(d: Mapping[str, Any], path: str = "<calibration>") -> Calibration:
     _check_model_name(d.get("model"), cal, path)
     _check_derived(d.get("apply"), cal, path)
     return cal
+
+
+def _gyro_section(d: Mapping, version: int, path: str) -> GyroCalibration | None:
+    """The gyroscope part of a version-2 file; ``sensors`` must list exactly what the file holds."""
+    if version == 1:
+        if "gyroscope" in d or "sensors" in d:
+            raise ImucalError("version 1 files hold an accelerometer only", file=path, field="format_version",
+                              fix="write format_version: 2 for a file with sensors and a gyroscope section")
+        return None
+    sensors = d.get("sensors")
+    want = [ACCELEROMETER] + ([GYRO_KIND] if "gyroscope" in d else [])
+    if sensors != want:
+        raise ImucalError(f"{short(sensors)} does not list the file's sensors {want}", file=path, field="sensors",
+                          fix="regenerate the file with `imucal calibrate`")
+    return GyroCalibration.from_dict(d["gyroscope"], path) if "gyroscope" in d else None
 
 
 def _text(x: Any, path: str, field_: str) -> str:

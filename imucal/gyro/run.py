@@ -12,13 +12,13 @@ from imucal.gyro.result import GyroResult
 from imucal.gyro.segments import gyro_data_from_run
 
 
-def gyro_channel(run, gyro_file: str | None = None) -> tuple[np.ndarray, np.ndarray, str, float | None] | None:
+def gyro_channel(rec: Recording, gyro_file: str | None = None
+                 ) -> tuple[np.ndarray, np.ndarray, str, float | None] | None:
     """(time stamps [s], raw rates (N, 3), source, accelerometer start in the gyro's clock), or None.
 
     A second file is read with the loader's defaults (imu_tk: t x y z); its time stamps and the
     accelerometer's share one clock, so both keep their original origin.
     """
-    rec: Recording = run.recording
     if gyro_file is None:
         if rec.gyro is None:
             return None
@@ -39,7 +39,7 @@ MAX_DIRECTION_ERROR_DEG = 10.0
 
 def calibrate_gyro(run, gyro_file: str | None = None, options: GyroOptions = GyroOptions()) -> GyroResult | None:
     """Fit the gyroscope of ``run`` (imucal.pipeline.CalibrationRun); None when it has none."""
-    ch = gyro_channel(run, gyro_file)
+    ch = gyro_channel(run.recording, gyro_file)
     if ch is None:
         return None
     t, raw, source, acc_t0 = ch
@@ -56,3 +56,23 @@ def calibrate_gyro(run, gyro_file: str | None = None, options: GyroOptions = Gyr
                           f"{res.segments.size} motions: it does not describe them", file=source, field="gyro",
                           fix="check the gyroscope columns (gx, gy, gz) or file, and that it shares the time base")
     return res
+
+
+def gyro_on_accel_samples(rec: Recording, gyro_file: str | None = None) -> np.ndarray | None:
+    """Raw gyro readings (N, 3) at the accelerometer's samples, or None without a gyroscope.
+
+    A second file with as many samples is taken sample by sample; one at another rate is
+    interpolated linearly onto the accelerometer's time stamps (same clock), never extrapolated.
+    """
+    ch = gyro_channel(rec, gyro_file)
+    if ch is None:
+        return None
+    t_g, raw, source, acc_t0 = ch
+    if acc_t0 is None or raw.shape[0] == rec.n:
+        return raw
+    t_a = rec.t_source * TIME_UNITS[rec.time_unit]
+    if t_a[0] < t_g[0] or t_a[-1] > t_g[-1]:
+        raise ImucalError(f"the gyroscope covers {t_g[0]:.6g}..{t_g[-1]:.6g} s, the accelerometer "
+                          f"{t_a[0]:.6g}..{t_a[-1]:.6g} s on their shared clock", file=source, field="t",
+                          fix="give a gyroscope recording that spans the accelerometer's")
+    return np.column_stack([np.interp(t_a, t_g, raw[:, j]) for j in range(3)])

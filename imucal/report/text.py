@@ -82,7 +82,8 @@ def fit_report(run: CalibrationRun, correl_min: float = CORREL_MIN) -> str:
     for _, a, b, c in sorted(pairs, reverse=True):
         L.append(f"    C({a}, {b}) = {c:+.4f}")
     A, c = cal.linear_map()
-    L.append("[[Apply map]]  a = A raw + c  (Theorem; A lower triangular, output in m/s^2)")
+    L.append("[[Apply map]]  a = A raw + c  (Theorem; A lower triangular, output in m/s^2)" if not cal.effects
+             else f"[[Apply map]]  {cal.equation}; A, c:")
     for i in range(3):
         L.append("    " + " ".join(f"{v:+.9e}" for v in A[i]) + f"   | {c[i]:+.9e}")
     L.append(f"[[Static intervals]]  times in s, means and std in {cal.raw_unit}, directions unit vectors")
@@ -94,6 +95,15 @@ def fit_report(run: CalibrationRun, correl_min: float = CORREL_MIN) -> str:
     if r is not None:
         for k in range(iv.n):
             L.append(f"    {k:3d} {r[k]:+.6f} +/- {res.sigma[k]:.6f}  ({r[k] / res.sigma[k]:+.2f} sigma)")
+    if run.gyro is not None:
+        L.append("[[Gyroscope]]")
+        L.append(run.gyro.report())
+        C, c, D = cal.gyro.rate_map()
+        L.append("[[Gyro apply map]]  omega = C raw + c - D a  (rad/s, the accelerometer's frame; "
+                 "a: calibrated acceleration)")
+        for i in range(3):
+            L.append("    " + " ".join(f"{v:+.9e}" for v in C[i]) + f"   | {c[i]:+.9e}   | "
+                     + " ".join(f"{v:+.6e}" for v in D[i]))
     return "\n".join(L) + "\n"
 
 
@@ -126,4 +136,7 @@ def summary(run: CalibrationRun) -> dict:
         "offset": cal.linear_map()[1].tolist(),
         "data": dict(cal.data),
         "warnings": list(cal.fit.get("warnings", [])),
+        "sensors": list(cal.sensors),
+        "equation": cal.equation,
+        **({"gyro": run.gyro.to_dict()} if run.gyro is not None else {}),
     }

@@ -10,10 +10,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("apply", help="apply a calibration to a recording",
                        description="Write calibrated acceleration [m/s^2] in the Theorem's orthonormal "
                                    "frame for every sample: the input's time column exactly as it was "
-                                   "(name, unit, origin), then ax, ay, az.")
+                                   "(name, unit, origin), then ax, ay, az; with a calibrated gyroscope "
+                                   "and gyro data, also gx, gy, gz [rad/s] in the same frame.")
     p.add_argument("calibration", help="calibration.yaml written by `imucal calibrate`")
     p.add_argument("--config", help="YAML run file: reuse its data section (columns, units, path)")
-    options.add_data_options(p)
+    options.add_data_options(p, gyro=True)
     p.add_argument("--out", required=True, help="output CSV")
     p.set_defaults(run=run)
 
@@ -39,9 +40,11 @@ def run(args: argparse.Namespace) -> int:
     from imucal.data.load import load_recording
     from imucal.errors import ImucalError
     from imucal.files.output import check_outputs, write_text_atomic
+    from imucal.gyro.run import gyro_on_accel_samples
 
     cfg = options.run_config(args, args.config)
-    inputs = [args.calibration, args.config, options.data_path(cfg)]
+    gyro_file = args.gyro_data or options.data_path(cfg, gyro=True)
+    inputs = [args.calibration, args.config, options.data_path(cfg), gyro_file]
     check_outputs(inputs, [args.out])
     cal = load_calibration(args.calibration)
     rec = load_recording(cfg.data, cfg.base_dir)
@@ -54,14 +57,20 @@ def run(args: argparse.Namespace) -> int:
     if "time" in cal.covariates:
         covs["time"] = rec.t
     a = cal.apply(rec.raw, covs)
+    cols, body = ["ax", "ay", "az"], [a]
+    raw_g = None if cal.gyro is None else gyro_on_accel_samples(rec, None if gyro_file is None else str(gyro_file))
+    if raw_g is not None:
+        cols, body = cols + ["gx", "gy", "gz"], body + [cal.gyro.apply(raw_g, a)]
     ts, tfmt = _time_column(rec)
     buf = io.StringIO()
-    buf.write("t,ax,ay,az\n")  # imucal's layout (examples/codegen reads it)
-    body = np.column_stack([ts, a])
-    np.savetxt(buf, body, delimiter=",", fmt=[tfmt, "%.9g", "%.9g", "%.9g"])
+    buf.write(",".join(["t", *cols]) + "\n")  # imucal's layout (examples/codegen reads it)
+    np.savetxt(buf, np.column_stack([ts, *body]), delimiter=",", fmt=[tfmt] + ["%.9g"] * len(cols))
     check_outputs(inputs, [args.out])  # nothing changed meanwhile
     write_text_atomic(args.out, buf.getvalue())
     how = (f"the input's {rec.time_column} column as read ({rec.time_unit})" if rec.t_source is not None
            else "s from the first sample")
-    print(f"wrote {rec.n} calibrated samples [m/s^2] to {args.out}; t is {how}")
+    what = "[m/s^2] and angular rate [rad/s]" if raw_g is not None else "[m/s^2]"
+    note = ("; the calibration has a gyroscope but the data have none (gx, gy, gz or --gyro-data): "
+            "acceleration only" if cal.gyro is not None and raw_g is None else "")
+    print(f"wrote {rec.n} calibrated samples {what} to {args.out}; t is {how}{note}")
     return 0

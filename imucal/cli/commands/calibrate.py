@@ -11,12 +11,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Fit shifts, scales and axis angles (Nakov & Ivanov) to a recording. "
                                    "Writes DIR/calibration.yaml, DIR/report.txt and figures.")
     p.add_argument("config", nargs="?", help="YAML run file (see configs/)")
-    options.add_data_options(p)
+    options.add_data_options(p, gyro=True)
     options.add_gravity_options(p)
     options.add_model_options(p)
-    p.add_argument("--gyro-data", metavar="FILE",
-                   help="gyroscope recording on the accelerometer's time base (imu_tk: t x y z); "
-                        "gyro columns gx, gy, gz in --data are used without it")
     p.add_argument("--out", help="output directory (default: config output.dir, else ./out)")
     p.add_argument("--json", help="also write a machine-readable summary to this file")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
@@ -40,10 +37,7 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from imucal.files.output import OutputSet, check_outputs
-    from imucal.pipeline import calibrate
-    import yaml
-
-    from imucal.gyro.run import calibrate_gyro
+    from imucal.pipeline import calibrate_imu
     from imucal.report.text import fit_report, summary
 
     cfg = _config(args)
@@ -58,25 +52,19 @@ def run(args: argparse.Namespace) -> int:
     figures = cfg.output.figures and not args.no_figures
     gyro_file = args.gyro_data or options.data_path(cfg, gyro=True)
     inputs = [args.config, options.data_path(cfg), gyro_file]
-    outputs = [out / "calibration.yaml", out / "report.txt", out / "gyro.yaml", args.json,
+    outputs = [out / "calibration.yaml", out / "report.txt", args.json,
                *([out / n for n in FIGURES] if figures else [])]
     check_outputs(inputs, outputs)  # fail before the work, not after it
-    result = calibrate(cfg)
+    result = calibrate_imu(cfg, gyro_file=None if gyro_file is None else str(gyro_file))
+    gyro = result.gyro  # None when the recording has no gyroscope
     text = fit_report(result)
-    gyro = calibrate_gyro(result, None if gyro_file is None else str(gyro_file))  # None when the recording has no gyroscope
     js = summary(result)
-    if gyro is not None:
-        text += "[[Gyroscope]]  (provisional: apply and codegen do not use it yet)\n" + gyro.report() + "\n"
-        js["gyro"] = gyro.to_dict()
     with OutputSet(inputs) as o:
         o.call(out / "calibration.yaml", result.calibration.save)
         o.text(out / "report.txt", text)
         if figures:
             for name, fn in FIGURES.items():
                 o.call(out / name, lambda p, fn=fn: fn(result, p))
-        if gyro is not None:
-            o.text(out / "gyro.yaml", yaml.safe_dump({"format": "imucal-gyro-calibration", "format_version": 0,
-                                                      **gyro.to_dict()}, sort_keys=False))
         if args.json:
             o.json(args.json, js)
     import sys
@@ -87,7 +75,8 @@ def run(args: argparse.Namespace) -> int:
         print(text.split("[[Static intervals]]")[0].rstrip())
     if gyro is not None and not args.quiet:
         print(gyro.report())
-    print(f"wrote {out / 'calibration.yaml'}, {out / 'report.txt'}" + (f", {out / 'gyro.yaml'}" if gyro else "")
+    print(f"wrote {out / 'calibration.yaml'}" + (" (accelerometer and gyroscope)" if gyro else "")
+          + f", {out / 'report.txt'}"
           + (", figures" if figures else "") + (f", {args.json}" if args.json else ""))
     ok = result.result.success and (gyro is None or gyro.success)
     return 0 if ok else 1  # EXIT_NOT_CONVERGED: the files say which fit

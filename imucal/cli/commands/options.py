@@ -21,7 +21,7 @@ if TYPE_CHECKING:
     from imucal.config.run import GravitySpec, RunConfig
 
 
-def add_data_options(p: argparse.ArgumentParser, data_required: bool = False) -> None:
+def add_data_options(p: argparse.ArgumentParser, data_required: bool = False, gyro: bool = False) -> None:
     g = p.add_argument_group("data")
     g.add_argument("--data", required=data_required, metavar="FILE",
                    help="recording (CSV with header, or whitespace text: t x y z)")
@@ -32,6 +32,10 @@ def add_data_options(p: argparse.ArgumentParser, data_required: bool = False) ->
                    help="unit of the time column (default auto: inferred and reported)")
     g.add_argument("--sample-rate", type=float, help="sample rate [Hz] when the file has no time column")
     g.add_argument("--unit", help="unit of the raw readings (label only, e.g. raw or m/s^2)")
+    if gyro:
+        g.add_argument("--gyro-data", metavar="FILE",
+                       help="gyroscope recording on the accelerometer's time base (imu_tk: t x y z); "
+                            "gyro columns gx, gy, gz in --data are used without it")
 
 
 def add_gravity_options(p: argparse.ArgumentParser) -> None:

@@ -1,0 +1,160 @@
+"""The gyroscope part of a calibration: values, standard errors, its apply map and its file section.
+
+omega = M_g^-1 (B_g^-1 (raw - s_g) - G_s a)     (imucal.gyro.model; a: calibrated acceleration)
+      = C raw + c - D a,   C = M_g^-1 B_g^-1,  c = -C s_g,  D = M_g^-1 G_s
+
+in rad/s, in the accelerometer's orthonormal frame (the Theorem's), so both sensors' outputs
+share one frame. The file stores the parameters (the source of truth) and, for people and other
+tools, the derived C, c and D; on load the derived values must match the parameters.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+import numpy as np
+
+from imucal.calibration.fields import UNIT_PATTERN
+from imucal.errors import ImucalError
+from imucal.gyro.model import misalignment_entries, rate_map
+from imucal.gyro.result import GyroResult
+
+KIND = "gyroscope"
+OUTPUT_UNIT = "rad/s"
+EQUATION = "omega = matrix @ raw + offset - acc_matrix @ a  (a: calibrated acceleration [m/s^2])"
+#: Relative disagreement between the stored apply map and the parameters' that counts as an edit.
+DERIVED_RTOL = 1e-9
+_SHAPES = {"bias": (3,), "scale": (3,), "misalignment": (3, 3), "gsens": (3, 3)}
+
+
+@dataclass(frozen=True)
+class GyroCalibration:
+    """A calibrated gyroscope (the accelerometer's frame, rad/s)."""
+
+    unit: str  #: raw unit of the gyro readings
+    bias: np.ndarray  #: s_g (3,) [unit]
+    scale: np.ndarray  #: diag(B_g) (3,) [unit per rad/s]
+    misalignment: np.ndarray  #: M_g (3, 3), unit diagonal
+    gsens: np.ndarray  #: G_s (3, 3) [(rad/s) per (m/s^2)], zero rows where not selected
+    std: Mapping[str, np.ndarray]  #: same keys and shapes as the values
+    fit: Mapping[str, Any] = field(default_factory=dict)
+
+    @classmethod
+    def from_result(cls, res: GyroResult) -> "GyroCalibration":
+        return cls(unit=res.unit, bias=res.bias, scale=res.scale, misalignment=res.misalignment,
+                   gsens=res.gsens if res.uses_gsens else np.zeros((3, 3)),
+                   std={"bias": res.bias_std, "scale": res.scale_std, "misalignment": res.misalignment_std,
+                        "gsens": res.gsens_std if res.uses_gsens else np.zeros((3, 3))},
+                   fit={**res.to_dict()["fit"], "rms_direction_error_deg": res.rms_direction_error_deg,
+                        "gsens_p_value": [float(v) for v in res.gsens_p_value]})
+
+    @property
+    def uses_gsens(self) -> bool:
+        return bool(np.any(self.gsens != 0))
+
+    def rate_map(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(C, c, D) with omega = C raw + c - D a."""
+        C, D = rate_map(self.scale, misalignment_entries(self.misalignment), self.gsens)
+        return C, -C @ self.bias, D
+
+    def apply(self, raw: np.ndarray, acc: np.ndarray | None = None) -> np.ndarray:
+        """Calibrated rate [rad/s] of raw readings (N, 3) or (3,); ``acc`` [m/s^2] is the
+        calibrated acceleration of the same samples (needed when G_s is not zero)."""
+        raw = np.asarray(raw, float)
+        one = raw.shape == (3,)
+        raw = np.atleast_2d(raw)
+        if raw.ndim != 2 or raw.shape[1] != 3:
+            raise ImucalError(f"gyro data must have shape (N, 3) or (3,), got {raw.shape}", field="raw_gyro")
+        C, c, D = self.rate_map()
+        w = raw @ C.T + c
+        if self.uses_gsens:
+            if acc is None:
+                raise ImucalError("this gyro calibration has a g-sensitivity", field="acc",
+                                  fix="pass the calibrated acceleration of the same samples")
+            w -= np.atleast_2d(np.asarray(acc, float)) @ D.T
+        return w[0] if one else w
+
+    def to_dict(self) -> dict[str, Any]:
+        C, c, D = self.rate_map()
+        return {
+            "kind": KIND,
+            "model": "raw = s_g + B_g (M_g omega + G_s a); omega = M_g^-1 (B_g^-1 (raw - s_g) - G_s a)",
+            "units": {"input": self.unit, "output": OUTPUT_UNIT, "gsens": "(rad/s)/(m/s^2)"},
+            "parameters": {k: np.asarray(getattr(self, k)).tolist() for k in _SHAPES},
+            "std": {k: np.asarray(self.std[k]).tolist() for k in _SHAPES},
+            "apply": {"matrix": C.tolist(), "offset": c.tolist(), "acc_matrix": D.tolist(), "equation": EQUATION},
+            "fit": _plain(dict(self.fit)),
+        }
+
+    @classmethod
+    def from_dict(cls, d: Any, path: str) -> "GyroCalibration":
+        where = "gyroscope"
+        if not isinstance(d, Mapping):
+            raise ImucalError("must be a mapping", file=path, field=where, fix="restore the file imucal wrote")
+        if d.get("kind") != KIND:
+            raise ImucalError(f"kind must be {KIND!r}", file=path, field=f"{where}.kind",
+                              fix="restore the file imucal wrote")
+        units = d.get("units")
+        unit = units.get("input") if isinstance(units, Mapping) else None
+        if not isinstance(unit, str) or not UNIT_PATTERN.match(unit):
+            raise ImucalError("missing or invalid unit", file=path, field=f"{where}.units.input",
+                              fix="a short unit such as rad/s, deg/s or LSB")
+        vals = {k: _array(d, "parameters", k, path) for k in _SHAPES}
+        std = {k: _array(d, "std", k, path, allow_nan=True) for k in _SHAPES}
+        if np.any(vals["scale"] == 0) or np.any(np.diag(vals["misalignment"]) != 1.0):
+            raise ImucalError("scales must be non-zero and the misalignment's diagonal 1", file=path,
+                              field=f"{where}.parameters", fix="restore the file imucal wrote")
+        fit = d.get("fit", {})
+        out = cls(unit=unit, std=std, fit=fit if isinstance(fit, Mapping) else {}, **vals)
+        M = vals["misalignment"]
+        if abs(np.linalg.det(M)) < 1e-6:
+            raise ImucalError("the misalignment matrix is singular", file=path, field=f"{where}.parameters",
+                              fix="restore the file imucal wrote")
+        _check_derived(out, d.get("apply"), path)
+        return out
+
+
+def _array(d: Mapping, section: str, key: str, path: str, allow_nan: bool = False) -> np.ndarray:
+    fld = f"gyroscope.{section}.{key}"
+    sec = d.get(section)
+    v = sec.get(key) if isinstance(sec, Mapping) else None
+    try:
+        a = np.array(v, dtype=float)
+    except (TypeError, ValueError, OverflowError):
+        a = None
+    if a is None or a.shape != _SHAPES[key] or not (np.all(np.isfinite(a)) or (allow_nan and not np.any(np.isinf(a)))):
+        raise ImucalError(f"must be {'x'.join(map(str, _SHAPES[key]))} finite numbers", file=path, field=fld,
+                          fix="restore the file imucal wrote")
+    if np.any(np.abs(a) > 1e15):
+        raise ImucalError("a value is out of range (|x| > 1e15)", file=path, field=fld,
+                          fix="restore the file imucal wrote")
+    return a
+
+
+def _check_derived(g: GyroCalibration, apply: Any, path: str) -> None:
+    if apply is None:
+        return
+    C, c, D = g.rate_map()
+    for key, want in (("matrix", C), ("offset", c), ("acc_matrix", D)):
+        try:
+            got = np.array(apply.get(key), dtype=float) if isinstance(apply, Mapping) else None
+        except (TypeError, ValueError, OverflowError):
+            got = None
+        if got is None or got.shape != want.shape or not np.allclose(got, want, rtol=DERIVED_RTOL,
+                                                                    atol=DERIVED_RTOL * np.abs(want).max(initial=1e-300)):
+            raise ImucalError("does not match the parameters (edited by hand?)", file=path,
+                              field=f"gyroscope.apply.{key}",
+                              fix="edit the parameters, not the derived apply map, or restore the file")
+
+
+def _plain(x: Any) -> Any:
+    """Numbers and containers as YAML's safe dumper writes them."""
+    if isinstance(x, Mapping):
+        return {str(k): _plain(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple, np.ndarray)):
+        return [_plain(v) for v in np.asarray(x, dtype=object).tolist()] if isinstance(x, np.ndarray) else [_plain(v) for v in x]
+    if isinstance(x, (np.floating, float)):
+        return float(x)
+    if isinstance(x, (np.integer, bool, int)) and not isinstance(x, bool):
+        return int(x)
+    return x
