@@ -132,7 +132,7 @@ def _json(path: str, field_: str) -> Any:
         return json.loads(read_input_text(path, field=field_), parse_constant=no_constant,
                           object_pairs_hook=no_duplicates)
     except (ValueError, RecursionError) as exc:
-        raise ImucalError(f"is not valid JSON: {short(str(exc), 80)}", file=path, field=field_) from None
+        raise ImucalError(f"is not valid JSON: {' '.join(str(exc).split())[:80]}", file=path, field=field_) from None
 
 
 # --- readers --------------------------------------------------------------------------------
