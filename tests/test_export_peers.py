@@ -190,7 +190,7 @@ def test_every_export_format_is_covered():
 def test_kalibr_without_offset_reads_back_with_zero_bias_and_says_so(xsens, tmp_path):
     text = "\n".join(ln for ln in export(xsens[0], "kalibr").text.splitlines()
                      if not ln.startswith("imucal_accelerometer_offset"))
-    (tmp_path / "imu.yaml").write_text(f"imu0:\n" + "\n".join(f"  {ln}" for ln in text.splitlines()) + "\n")
+    (tmp_path / "imu.yaml").write_text("imu0:\n" + "\n".join(f"  {ln}" for ln in text.splitlines()) + "\n")
     back = read_peer(tmp_path / "imu.yaml", "kalibr")  # Kalibr's results nest the IMU under imu0
     assert back.extra["offset_held"] is False and np.all(back.o == 0)
 

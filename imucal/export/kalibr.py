@@ -90,6 +90,8 @@ def to_kalibr(cal: Calibration, opts: ExportOptions) -> Exported:
                  "gyroscope_noise_density": None, "gyroscope_random_walk": None}
         if n.accelerometer_random_walk is None:
             lines.append("# accelerometer_random_walk: the curve shows no +1/2 slope (record a longer still log).")
+            notes.append("accelerometer_random_walk is null: the still segment shows no random walk (record a "
+                         "longer still log and run `imucal noise`); Kalibr refuses null")
         lines.append("# gyroscope noise: not estimated by this export (imucal's calibration holds no gyroscope).")
     for k in NOISE_FIELDS:
         lines.append(f"{k}: {_flow(noise[k])}")
