@@ -28,6 +28,7 @@ COMMANDS = {
     "plan-poses": "imucal.cli.commands.plan_poses",
     "export": "imucal.cli.commands.export",
     "noise": "imucal.cli.commands.noise",
+    "compare": "imucal.cli.commands.compare",
 }
 
 

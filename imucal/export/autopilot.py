@@ -1,0 +1,176 @@
+"""ArduPilot and PX4 accelerometer parameters: offset and diagonal scale, and what they lose.
+
+Both autopilots correct each axis on its own, in the sensor frame, before rotating to the body:
+  ArduPilot  libraries/AP_InertialSensor/AP_InertialSensor_Backend.cpp, _rotate_and_correct_accel:
+             "accel -= offset; accel.x *= accel_scale.x" (y, z alike), then the board rotation;
+             parameters INS_ACCOFFS_X/Y/Z [m/s^2] and INS_ACCSCAL_X/Y/Z.
+  PX4        src/lib/sensor_calibration/Accelerometer.hpp, Correct():
+             _rotation * (data - _thermal_offset - _offset).emult(_scale);
+             parameters CAL_ACC0_XOFF..ZOFF [m/s^2] and CAL_ACC0_XSCALE..ZSCALE.
+So a_peer = diag(k) (raw - o). The paper's model gives raw_i = s_i + b_i e_i . a (Eq. theModel),
+hence o = s and k_i = 1/b_i make each axis read exactly its own projection e_i . a; what is lost
+is the non-orthogonality of the axes. With a_ours = A (raw - s) (Theorem), a_peer = B a_ours,
+B = diag(1/b) A^-1. A rotation between the frames is the board's orientation (AHRS_TRIM,
+CAL_ACC0_ROT), not calibration, so the error is taken in the rotation R that best aligns them
+(orthogonal Procrustes: the polar factor of B): d(u) = (R^T B - I) g u over unit directions u,
+  max |d| = g ||R^T B - I||_2,   RMS |d| = g ||R^T B - I||_F / sqrt(3)  (uniform directions).
+Temperature terms (INS_TCAL1_*, TC_A0_*) are not exported: the file and the command say so.
+"""
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from imucal import __version__
+from imucal.calibration.frozen import Calibration
+from imucal.constants import SI_ACCEL_UNIT
+from imucal.errors import ImucalError, short
+from imucal.export.formats import ExportOptions, Exported, affine, dropped_effects
+from imucal.export.peers import AffineCalibration, _text_number, checked
+from imucal.files.inputs import read_input_text
+
+AXES = ("X", "Y", "Z")
+ARDUPILOT_OFFSETS = tuple(f"INS_ACCOFFS_{a}" for a in AXES)
+ARDUPILOT_SCALES = tuple(f"INS_ACCSCAL_{a}" for a in AXES)
+PX4_OFFSETS = tuple(f"CAL_ACC0_{a}OFF" for a in AXES)
+PX4_SCALES = tuple(f"CAL_ACC0_{a}SCALE" for a in AXES)
+#: QGroundControl's parameter file: MAV_PARAM_TYPE_REAL32 for a float parameter.
+MAV_PARAM_TYPE_REAL32 = 9
+
+
+@dataclass(frozen=True)
+class DiagonalFit:
+    """The offset + diagonal-scale map written, and the error it leaves for this sensor."""
+
+    offset: np.ndarray  #: o = s [raw unit]
+    scale: np.ndarray  #: k = 1/b [(m/s^2) per raw unit]
+    max_error: float  #: [m/s^2] over all directions at |a| = g
+    rms_error: float  #: [m/s^2] over uniformly distributed directions at |a| = g
+    angles_deg: tuple[float, float, float]  #: phi, psi, theta [deg], 90 for orthogonal axes
+
+    def sentence(self, what: str) -> str:
+        ang = ", ".join(f"{a:.3f}" for a in self.angles_deg)
+        return (f"{what} holds no misalignment (angles phi, psi, theta = {ang} deg): the error this leaves "
+                f"for this sensor, |a_imucal - a_{what.lower()}| over all directions at |a| = g in the best-aligned "
+                f"frame, is max {self.max_error:.3g} m/s^2, RMS {self.rms_error:.3g} m/s^2")
+
+
+def diagonal_fit(cal: Calibration) -> DiagonalFit:
+    """Offset s, scale 1/b and the residual of the diagonal model (module docstring)."""
+    A, s = affine(cal)
+    b = cal.values[3:6]
+    B = np.diag(1.0 / b) @ np.linalg.inv(A)  # a_peer = B a_ours
+    U, _, Vt = np.linalg.svd(B)
+    D = (U @ Vt).T @ B - np.eye(3)  # R^T B - I, R the polar factor of B
+    g = float(cal.gravity)
+    return DiagonalFit(offset=s, scale=1.0 / b, max_error=g * float(np.linalg.norm(D, 2)),
+                       rms_error=g * float(np.linalg.norm(D, "fro")) / math.sqrt(3),
+                       angles_deg=tuple(math.degrees(v) for v in cal.values[6:9]))
+
+
+def _notes(cal: Calibration, fit: DiagonalFit, what: str, units: str) -> tuple[str, ...]:
+    notes = [fit.sentence(what)]
+    if any(n in ("bias_temperature", "scale_temperature") for n, _ in cal.effects):
+        notes.append(f"temperature terms ({'INS_TCAL1_*' if what == 'ArduPilot' else 'TC_A0_*'}) are not exported")
+    notes += dropped_effects(cal)
+    if cal.raw_unit != SI_ACCEL_UNIT:
+        notes.append(f"{what} applies {units} to its driver's readings in m/s^2 (offsets in m/s^2, scales "
+                     f"near 1); this calibration's input unit is {cal.raw_unit!r}, so these numbers reproduce it "
+                     f"only on readings in {cal.raw_unit}")
+    return tuple(notes)
+
+
+def _header(cal: Calibration, title: str, formula: list[str], notes: tuple[str, ...]) -> list[str]:
+    src = (cal.data or {}).get("file", "?")
+    lines = [f"# {title}, exported by imucal {__version__} from a calibration of {src} ({cal.created or 'no date'})"]
+    lines += [f"# {ln}" for ln in formula]
+    lines += [f"# NOTE: {n}." for n in notes]
+    return lines
+
+
+def to_ardupilot(cal: Calibration, opts: ExportOptions) -> Exported:
+    """An ArduPilot parameter file (NAME,VALUE lines, as Mission Planner and MAVProxy load)."""
+    fit = diagonal_fit(cal)
+    notes = _notes(cal, fit, "ArduPilot", "INS_ACCOFFS and INS_ACCSCAL")
+    lines = _header(cal, "ArduPilot accelerometer calibration", [
+        "ArduPilot corrects each axis in the sensor frame (AP_InertialSensor_Backend.cpp,",
+        "_rotate_and_correct_accel): a = (raw - INS_ACCOFFS) * INS_ACCSCAL, then rotates to the body.",
+        f"INS_ACCOFFS = the shifts s_i [{cal.raw_unit}], INS_ACCSCAL = 1/b_i of the paper's model."], notes)
+    lines += [f"{n},{v!r}" for n, v in zip(ARDUPILOT_OFFSETS + ARDUPILOT_SCALES,
+                                            [*map(float, fit.offset), *map(float, fit.scale)])]
+    return Exported("\n".join(lines) + "\n", notes)
+
+
+def to_px4(cal: Calibration, opts: ExportOptions) -> Exported:
+    """A QGroundControl parameter file (vehicle, component, name, value, type; tab separated)."""
+    fit = diagonal_fit(cal)
+    notes = _notes(cal, fit, "PX4", "CAL_ACC0_*OFF and CAL_ACC0_*SCALE") + (
+        "set CAL_ACC0_ID to your accelerometer's device id (PX4 uses a calibration only for its device)",)
+    lines = _header(cal, "PX4 accelerometer calibration (QGroundControl parameter file)", [
+        "PX4 corrects each axis in the sensor frame (src/lib/sensor_calibration/Accelerometer.hpp,",
+        "Correct()): a = rotation * ((raw - thermal_offset - CAL_ACC0_*OFF) .* CAL_ACC0_*SCALE).",
+        f"CAL_ACC0_*OFF = the shifts s_i [{cal.raw_unit}], CAL_ACC0_*SCALE = 1/b_i of the paper's model."], notes)
+    lines.append("# Vehicle-Id\tComponent-Id\tName\tValue\tType")
+    lines += [f"1\t1\t{n}\t{v!r}\t{MAV_PARAM_TYPE_REAL32}"
+              for n, v in zip(PX4_OFFSETS + PX4_SCALES, [*map(float, fit.offset), *map(float, fit.scale)])]
+    return Exported("\n".join(lines) + "\n", notes)
+
+
+# --- reading back -------------------------------------------------------------------------------
+_NAME = re.compile(r"[A-Z][A-Z0-9_]{0,31}\Z")
+
+
+def _params(pairs: list[tuple[int, str, str]], path: str, offsets: tuple[str, ...], scales: tuple[str, ...],
+            fmt: str) -> AffineCalibration:
+    values: dict[str, float] = {}
+    for line, name, tok in pairs:
+        where = f"line {line}"
+        if not _NAME.match(name):
+            raise ImucalError(f"{short(name)} is not a parameter name", file=path, field=where,
+                              fix="write NAME,VALUE with an upper-case name")
+        if name in values:
+            raise ImucalError(f"parameter {name} is given twice", file=path, field=where, fix="keep one")
+        values[name] = _text_number(tok, path, name)
+    missing = [n for n in offsets + scales if n not in values]
+    if missing:
+        raise ImucalError("missing", file=path, field=missing[0],
+                          fix=f"the file needs {', '.join(offsets + scales)}")
+    o = np.array([values[n] for n in offsets])
+    k = np.array([values[n] for n in scales])
+    return checked(np.diag(k), o, path, "/".join(scales), fmt)
+
+
+def read_ardupilot_params(path: str | Path) -> AffineCalibration:
+    """NAME,VALUE (or NAME VALUE) lines, # comments; other parameters of a full dump are ignored."""
+    p = str(path)
+    pairs = []
+    for i, ln in enumerate(read_input_text(p, field="parameters").splitlines(), 1):
+        ln = ln.split("#", 1)[0].strip()
+        if not ln:
+            continue
+        parts = re.split(r"[,\s]+", ln)
+        if len(parts) != 2:
+            raise ImucalError(f"{short(ln)} is not NAME,VALUE", file=p, field=f"line {i}",
+                              fix="one parameter per line: NAME,VALUE")
+        pairs.append((i, parts[0], parts[1]))
+    return _params(pairs, p, ARDUPILOT_OFFSETS, ARDUPILOT_SCALES, "ardupilot")
+
+
+def read_px4_params(path: str | Path) -> AffineCalibration:
+    """QGroundControl's lines: vehicle, component, name, value, type; # comments."""
+    p = str(path)
+    pairs = []
+    for i, ln in enumerate(read_input_text(p, field="parameters").splitlines(), 1):
+        ln = ln.split("#", 1)[0].strip()
+        if not ln:
+            continue
+        parts = ln.split()
+        if len(parts) != 5:
+            raise ImucalError(f"{short(ln)} is not vehicle, component, name, value, type", file=p,
+                              field=f"line {i}", fix="one parameter per line as QGroundControl saves them")
+        pairs.append((i, parts[2], parts[3]))
+    return _params(pairs, p, PX4_OFFSETS, PX4_SCALES, "px4")
