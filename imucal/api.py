@@ -72,7 +72,7 @@ def recording_from_arrays(acc: Any, t: Sequence[float] | None = None, temp: Sequ
 def calibrate(acc: Any, t: Sequence[float] | None = None, temp: Sequence[float] | None = None, *,
               fs: float | None = None, gravity: float | None = None, latitude: float | None = None,
               height: float = 0.0, unit: str = "raw", time_unit: str = "auto", fix_angles: bool = False,
-              mode: str = "means", weights: str = "noise", config: RunConfig | None = None
+              mode: str = "means", weights: str = "auto", config: RunConfig | None = None
               ) -> CalibrationRun:
     """Calibrate from arrays: ``acc`` (N, 3) raw readings (or a DataFrame with ax, ay, az[, t, temp]).
 
@@ -85,7 +85,7 @@ def calibrate(acc: Any, t: Sequence[float] | None = None, temp: Sequence[float] 
     grav = base.gravity if gravity is None and latitude is None else GravitySpec(
         value=gravity, latitude=latitude, height=height)
     fit = base.fit
-    if fix_angles or mode != "means" or weights != "noise":
+    if fix_angles or mode != "means" or weights != "auto":
         fit = FitSettings(mode=mode, weights=weights, angle_tolerance=fit.angle_tolerance,
                           fix=tuple(sorted(set(fit.fix) | ({"phi", "psi", "theta"} if fix_angles else set()))),
                           initial=fit.initial, effects=fit.effects)

@@ -176,10 +176,12 @@ def fit_warnings(res: FitResult, config: RunConfig, rec: Recording, dropped: lis
     if res.dof <= 0 and res.mode == "means":
         out.append("0 degrees of freedom: the standard errors cannot be estimated from the residuals "
                    "(reported as n/a); fit samples (--mode samples) or hold more orientations")
-    elif res.dof > 0 and res.redchi > POOR_FIT_REDCHI and chi2_sf(res.chi2, res.dof) < POOR_FIT_P:
-        out.append(f"reduced chi-square {res.redchi:.3g} ({res.dof} dof, p < {POOR_FIT_P:g}): the residuals "
-                   "exceed the noise, so the model misses an effect or the noise is underestimated; "
-                   f"investigate with: {discover_command(config, rec)}")
+    elif res.dof > 0 and res.redchi_noise > POOR_FIT_REDCHI and chi2_sf(res.chi2_noise, res.dof) < POOR_FIT_P:
+        held = (f"; the weights and standard errors include it as a random bias per visit of a pose "
+                f"(bias_instability, {math.sqrt(res.excess):.3g} m/s^2 rms)" if res.excess > 0 else "")
+        out.append(f"reduced chi-square {res.redchi_noise:.3g} against the noise ({res.dof} dof, p < {POOR_FIT_P:g}): "
+                   "the residuals exceed the noise, so the model misses an effect or the noise is underestimated"
+                   f"{held}; investigate with: {discover_command(config, rec)}")
     return out
 
 
@@ -222,10 +224,10 @@ def calibrate(config: RunConfig, recording: Recording | None = None) -> Calibrat
         obs = analyse(dirs, J, params.free_names, Jw, thresholds(params.free_names, config.fit.angle_tolerance))
         require_observable(obs, params.free_names, rec.source)
     res = fit(data, params, model, gravity, source=rec.source, weights=config.fit.weights)
-    if res.dof > 0 and res.redchi > ABSURD_REDCHI:
+    if res.dof > 0 and res.redchi_noise > ABSURD_REDCHI:
         held = [n for n in params.names if params[n].fixed]
         rms = float(np.sqrt(np.mean(res.residuals**2)))
-        raise ImucalError(f"reduced chi-square {res.redchi:.3g} (RMS |a|-g {rms:.3g} m/s^2): the model cannot "
+        raise ImucalError(f"reduced chi-square {res.redchi_noise:.3g} (RMS |a|-g {rms:.3g} m/s^2): the model cannot "
                           "describe these data, refused", file=rec.source, field="fit",
                           fix=(f"free the held parameters ({', '.join(held)}); " if held else "")
                           + "check that the log holds still poses of one sensor and the data columns")
@@ -236,7 +238,9 @@ def calibrate(config: RunConfig, recording: Recording | None = None) -> Calibrat
     cal_fit = {
         "mode": res.mode, "weights": config.fit.weights, "status": res.status, "iterations": res.iterations,
         "rms_residual": float(np.sqrt(np.mean(rm**2))), "chi2": res.chi2, "dof": res.dof,
-        "redchi": res.redchi, "n_intervals": iv.n, "n_distinct_orientations": obs.n_distinct,
+        "redchi": res.redchi, "redchi_noise": res.redchi_noise,
+        "bias_instability": math.sqrt(res.excess),  # between-interval excess in the weights [m/s^2]
+        "n_intervals": iv.n, "n_distinct_orientations": obs.n_distinct,
         "gravity_source": gsource,
         "warnings": fit_warnings(res, config, rec, dropped),
     }

@@ -43,9 +43,10 @@ import numpy as np
 from imucal.config.run import EffectSpec, RunConfig
 from imucal.model.effects import (AXIS_NAMES, EFFECTS, MIN_DOF, MIN_TEMPERATURE_SPREAD, AxisEffect, make_effect,
                       prepare_parameters, reference_values, temperature_spread)
-from imucal.solve.stats import chi2_sf
+from imucal.solve.stats import between_excess, chi2_sf
 from imucal.errors import ImucalError
 from imucal.solve.fit import FitData, FitResult, fit, jacobian_rows
+
 from imucal.model.sensor import build_model
 from imucal.pipeline import CalibrationRun, calibrate, fit_data, make_parameters
 
@@ -520,6 +521,8 @@ def _prune(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int,
 def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings()) -> Discovery:
     """Fit the base model, test its residual against the noise, add effects while they are needed."""
     notes: list[str] = []
+    if config.fit.weights == "auto":  # discovery tests the residual against the noise alone
+        config = dataclasses.replace(config, fit=dataclasses.replace(config.fit, weights="noise"))
     if config.fit.mode != "means":
         notes.append("discovery works on interval means; fit.mode: samples was ignored")
         config = dataclasses.replace(config, fit=dataclasses.replace(config.fit, mode="means"))
@@ -565,8 +568,12 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings())
             disagreement = sorted(((c.label, current.chi2 - c.chi2_screen) for c in step.candidates
                                    if len(c.axes) == 1 and c.axes == c.new_axes), key=lambda t: -t[1])
         if step.chosen is None:
+            tau = math.sqrt(between_excess(current.residuals, current.sigma, current.dof))
             verdict = (f"disagreement not explained by any candidate: chi2/dof = {current.redchi:.3g} "
-                       f"(p = {_p_noise(current):.3g}) and no candidate effect is significant")
+                       f"(p = {_p_noise(current):.3g}) and no candidate effect is significant; the scatter "
+                       f"between intervals fits a random bias per visit of a pose (bias_instability, "
+                       f"{tau:.3g} m/s^2 rms), which the default fit (weights: auto) includes in its weights "
+                       "and standard errors")
             if found:
                 verdict = f"partly explained by {_added(found, cur_effects)}; the remaining {verdict}"
             break

@@ -21,7 +21,7 @@ from imucal.data.static import StaticSettings
 from imucal.files.yamlio import check_structure, key_text
 
 FIT_MODES = ("means", "samples")
-WEIGHTS = ("noise", "uniform")
+WEIGHTS = ("auto", "noise", "uniform")
 
 
 @dataclass(frozen=True)
@@ -82,7 +82,9 @@ class EffectSpec:
 @dataclass(frozen=True)
 class FitSettings:
     mode: str = "means"  #: fit interval means (weighted by their noise) or raw samples
-    weights: str = "noise"  #: "noise": 1/sigma^2 from each interval's scatter; "uniform": as imu_tk
+    #: "auto": 1/(sigma^2 + excess), the between-interval excess used when the data show one;
+    #: "noise": 1/sigma^2 from each interval's scatter; "uniform": as imu_tk
+    weights: str = "auto"
     angle_tolerance: float = DEFAULT_ANGLE_TOL  #: angles in pi/2 (1 +- tol)
     fix: tuple[str, ...] = ()  #: parameters held at their initial value
     initial: Mapping[str, float] = field(default_factory=dict)  #: overrides of the initial guess

@@ -16,11 +16,16 @@ import numpy as np
 
 from imucal.solve import ipopt
 from imucal.solve import least_squares as lsq
+from imucal.solve.stats import between_excess, chi2_sf
 from imucal.errors import ImucalError
 from imucal.model.sensor import SensorModel
 from imucal.model.parameters import Parameters, model_label
 
 _STATUS_WORDS, _CONVERGED = ipopt.STATUS_WORDS, ipopt.CONVERGED
+#: weights="auto": the noise-only chi-square test at which a between-interval excess is used.
+EXCESS_P = 1e-3
+#: weights="auto": at most this many solves while the excess settles.
+MAX_PASSES = 8
 
 
 @dataclass(frozen=True)
@@ -56,10 +61,17 @@ class FitResult:
     solve_time: float
     model_name: str
     at_bound: dict[str, str] = field(default_factory=dict)
+    excess: float = 0.0  #: between-interval excess variance in the weights [(m/s^2)^2] (weights="auto")
+    chi2_noise: float = float("nan")  #: chi-square against the noise of each row alone
 
     @property
     def redchi(self) -> float:
         return self.chi2 / self.dof if self.dof > 0 else float("nan")
+
+    @property
+    def redchi_noise(self) -> float:
+        """Reduced chi-square against the noise alone (the test of the model, excess or not)."""
+        return self.chi2_noise / self.dof if self.dof > 0 else float("nan")
 
     @property
     def rms_residual(self) -> float:
@@ -109,7 +121,10 @@ def fit(data: FitData, params: Parameters, model: SensorModel, gravity: float,
     """Fit the free parameters of ``params`` to ``data`` by weighted least squares (IPOPT).
 
     ``weights="noise"`` weighs each row by 1/sigma^2 (its noise propagated from the raw
-    scatter); ``"uniform"`` gives every row the median sigma (imu_tk's unweighted cost).
+    scatter); ``"uniform"`` gives every row the median sigma (imu_tk's unweighted cost);
+    ``"auto"`` (interval means) adds to every sigma^2 the between-interval excess (a random bias
+    offset per visit of a pose) when the residuals exceed the noise at p < EXCESS_P, estimated by
+    Paule-Mandel and iterated with the fit: with no excess it is the noise-weighted fit.
     ``hessian="exact"`` gives IPOPT the exact Hessian instead of Gauss-Newton's J^T W J.
     """
     names = model.names
@@ -128,17 +143,31 @@ def fit(data: FitData, params: Parameters, model: SensorModel, gravity: float,
     hi = np.array([params[nm].upper for nm in free])
     p_now = np.array([params[nm].value for nm in free])
     fns, rows = lsq.row_functions(model, free), lsq.Rows(data.raw, data.cov)
+    dof = n - len(free)
     t0 = time.perf_counter()
-    iters = 0
-    # Weights from the noise propagated at the current estimate; refresh once at the solution.
-    for _ in range(2):
-        sigma = lsq.noise_sigma(fns, rows, data.raw_var, p_now, pfix, gravity, weights)
+    iters, excess, passes = 0, 0.0, 0
+    # Weights from the noise propagated at the current estimate; refreshed once at the solution
+    # (and, with weights="auto", until the between-interval excess settles).
+    while True:
+        sigma0 = lsq.noise_sigma(fns, rows, data.raw_var, p_now, pfix, gravity, weights)
+        sigma = np.sqrt(sigma0**2 + excess)
         R = lsq.weighted_r_factor(fns, rows, sigma, p_now, pfix, gravity)
         d = _step_scale(R, scale)  # p = p0 + d * x
         problem = lsq.Problem(fns, rows, 1.0 / sigma**2, pfix, gravity, p_now, d, exact=hessian == "exact")
         x, stats = lsq.solve(problem, (lo - p_now) / d, (hi - p_now) / d)
         iters += int(stats.get("iter_count", 0))
         p_now = np.clip(p_now + d * x, lo, hi)
+        passes += 1
+        if passes < 2:
+            continue
+        if weights != "auto" or data.mode != "means" or dof < 1 or passes >= MAX_PASSES:
+            break
+        r0 = lsq.residuals(fns, rows, p_now, pfix, gravity)
+        s0 = lsq.noise_sigma(fns, rows, data.raw_var, p_now, pfix, gravity, weights)
+        new = between_excess(r0, s0, dof) if chi2_sf(float(np.sum((r0 / s0) ** 2)), dof) < EXCESS_P else 0.0
+        if abs(new - excess) <= 1e-4 * max(new, excess) or (new == 0.0 and excess == 0.0):
+            break
+        excess = new
     solve_time = time.perf_counter() - t0
     status = str(stats.get("return_status", "unknown"))
     pfree = p_now
@@ -146,7 +175,7 @@ def fit(data: FitData, params: Parameters, model: SensorModel, gravity: float,
     R = lsq.weighted_r_factor(fns, rows, sigma, pfree, pfix, gravity)
     fitted = params.with_values(dict(zip(free, pfree)))
     chi2 = float(np.sum((r / sigma) ** 2))
-    dof = n - len(free)
+    chi2_noise = float(np.sum((r / sigma0) ** 2))
     redchi = chi2 / dof if dof > 0 else float("nan")
     # Covariance from the Jacobian at the solution (via its SVD, symmetric by construction),
     # scaled by the residual variance as lmfit's scale_covar does: (J^T W J)^-1 chi2/dof.
@@ -163,7 +192,8 @@ def fit(data: FitData, params: Parameters, model: SensorModel, gravity: float,
     return FitResult(params=fitted, initial=params, std=std, covariance=cov, correlation=corr,
                      free_names=free, gravity=gravity, mode=data.mode, residuals=r, sigma=sigma,
                      chi2=chi2, dof=dof, status=status, success=success, iterations=iters,
-                     solve_time=solve_time, model_name=model_label(model.name, params), at_bound=at_bound)
+                     solve_time=solve_time, model_name=model_label(model.name, params), at_bound=at_bound,
+                     excess=excess, chi2_noise=chi2_noise)
 
 
 def jacobian_rows(data: FitData, params: Parameters, model: SensorModel, gravity: float,

@@ -23,3 +23,24 @@ def chi2_sf(x: float, k: int) -> float:
         m = max(logs)
         head += math.exp(m) * sum(math.exp(v - m) for v in logs)
     return min(1.0, head)
+
+
+def between_excess(r, sigma, dof: int) -> float:
+    """Paule-Mandel estimate of a common excess variance s^2 between rows: the s^2 >= 0 with
+    sum r_k^2 / (sigma_k^2 + s^2) = dof (the random-effects moment equation that REML solves
+    approximately; Paule & Mandel 1982, DerSimonian & Kacker 2007). 0 when the residuals are
+    within their noise."""
+    import numpy as np
+
+    r2, s2 = np.asarray(r, float) ** 2, np.asarray(sigma, float) ** 2
+    if dof < 1 or np.sum(r2 / s2) <= dof:
+        return 0.0
+    lo, hi = 0.0, float(np.sum(r2)) / dof
+    while np.sum(r2 / (s2 + hi)) > dof:  # bracket (guards against degenerate sigma)
+        hi *= 2.0
+    for _ in range(200):  # bisection on a monotone function: robust, 1e-15 relative
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if np.sum(r2 / (s2 + mid)) > dof else (lo, mid)
+        if hi - lo <= 1e-15 * hi:
+            break
+    return 0.5 * (lo + hi)

@@ -51,8 +51,9 @@ def add_model_options(p: argparse.ArgumentParser, mode: bool = True) -> None:
     g.add_argument("--fix-angles", action="store_true", help="hold the angles at 90 deg (6-parameter model)")
     if mode:
         g.add_argument("--mode", choices=("means", "samples"), help="fit interval means (default) or samples")
-    g.add_argument("--weights", choices=("noise", "uniform"),
-                   help="row weights: noise (1/sigma^2, default) or uniform (as imu_tk)")
+    g.add_argument("--weights", choices=("auto", "noise", "uniform"),
+                   help="row weights: auto (default: 1/(sigma^2 + excess), the between-interval excess "
+                        "added when the residuals exceed the noise), noise (1/sigma^2) or uniform (as imu_tk)")
 
 
 def _gravity(args: argparse.Namespace, cfg: RunConfig) -> GravitySpec:
