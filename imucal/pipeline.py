@@ -254,7 +254,7 @@ def calibrate(config: RunConfig, recording: Recording | None = None) -> Calibrat
     covs = {c: covariates_for(model, recording=rec, rows=mask_rows)[:, i] for i, c in enumerate(model.covariates)}
     a = cal.apply(rec.raw[mask_rows], covs)
     samp_res = np.linalg.norm(a, axis=1) - gravity
-    cal_fit["rms_residual_samples"] = float(np.sqrt(np.mean(samp_res**2)))
+    cal = replace(cal, fit={**cal_fit, "rms_residual_samples": float(np.sqrt(np.mean(samp_res**2)))})
     ai = cal.apply(iv.mean, {c: covariates_for(model, iv)[:, i] for i, c in enumerate(model.covariates)})
     directions = ai / np.linalg.norm(ai, axis=1, keepdims=True)
     return CalibrationRun(config=config, recording=rec, intervals=iv, guess=guess, observability=obs,

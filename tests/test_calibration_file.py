@@ -10,7 +10,7 @@ import pytest
 import yaml
 
 import imucal
-from imucal.calibration.frozen import FORMAT, FORMAT_VERSION, from_dict, load_calibration
+from imucal.calibration.fileformat import FORMAT, FORMAT_VERSION, from_dict, load_calibration
 from imucal.constants import SI_ACCEL_UNIT
 from imucal.errors import ImucalError
 from imucal.model.parameters import BASE_NAMES
@@ -224,7 +224,7 @@ def test_apply_checks_its_input(saved):
 def test_save_is_atomic(saved, tmp_path, monkeypatch):
     """A failing save leaves neither the file nor a temporary behind."""
     cal, _ = saved
-    import imucal.calibration.frozen as mod
+    import imucal.calibration.fileformat as mod
 
     def boom(*a, **k):
         raise RuntimeError("disk full")

@@ -16,7 +16,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from imucal.calibration.frozen import Calibration, load_calibration
+from imucal.calibration.frozen import Calibration
+
+from imucal.calibration.fileformat import load_calibration
 from imucal.export.codegen import write_c
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -15,7 +15,9 @@ import yaml
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from imucal.calibration.frozen import Calibration, load_calibration
+from imucal.calibration.frozen import Calibration
+
+from imucal.calibration.fileformat import load_calibration
 from imucal.config.run import load_config
 from imucal.data.load import DataSpec, load_recording
 from imucal.errors import ImucalError

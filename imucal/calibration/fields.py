@@ -7,3 +7,6 @@ UNIT_PATTERN = re.compile(r"[A-Za-z0-9^.%()/ -]{0,40}\Z")
 VERSION_PATTERN = re.compile(r"[0-9A-Za-z][0-9A-Za-z.+_-]{0,39}\Z")
 NAME_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,39}\Z")
 SHA256_PATTERN = re.compile(r"[0-9a-f]{64}\Z")
+
+#: The sensor kind of the paper's model (the gyroscope's is imucal.calibration.gyro.KIND).
+ACCELEROMETER = "accelerometer"

@@ -38,7 +38,8 @@ import casadi as ca
 import numpy as np
 
 from imucal import __version__
-from imucal.calibration.frozen import OUTPUT_FRAME, Calibration, check_text_fields
+from imucal.calibration.frozen import Calibration
+from imucal.calibration.fileformat import OUTPUT_FRAME, check_text_fields
 from imucal.constants import SI_ACCEL_UNIT
 from imucal.errors import ImucalError, short
 from imucal.files.inputs import read_input_bytes

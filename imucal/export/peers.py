@@ -226,7 +226,7 @@ def read_px4(path: str | Path) -> AffineCalibration:
 
 def read_imucal(path: str | Path) -> Any:
     """imucal's own calibration.yaml (a Calibration: applies itself, with its effects)."""
-    from imucal.calibration.frozen import load_calibration
+    from imucal.calibration.fileformat import load_calibration
 
     return load_calibration(path)
 

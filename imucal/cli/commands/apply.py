@@ -36,7 +36,7 @@ def run(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from imucal.calibration.frozen import load_calibration
+    from imucal.calibration.fileformat import load_calibration
     from imucal.data.load import load_recording
     from imucal.errors import ImucalError
     from imucal.files.output import check_outputs, write_text_atomic

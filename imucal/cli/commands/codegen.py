@@ -20,7 +20,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from imucal.calibration.frozen import load_calibration
+    from imucal.calibration.fileformat import load_calibration
     from imucal.export.codegen import check_prefix, write_c
 
     from pathlib import Path

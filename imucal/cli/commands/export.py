@@ -27,7 +27,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from imucal.calibration.frozen import load_calibration
+    from imucal.calibration.fileformat import load_calibration
     from imucal.errors import ImucalError
     from imucal.export.formats import FORMATS, ExportOptions, export
     from imucal.files.output import check_outputs, write_text_atomic
