@@ -39,16 +39,26 @@ def _write(tmp_path, sim, name="rec.csv"):
 def test_every_effect_adds_named_parameters_with_units():
     base = base_parameters([100, -50, 20], [1670, 1670, 1670], raw_unit="raw")
     units = {"bias_temperature": "raw/degC", "scale_temperature": "1/degC", "bias_drift": "raw/s",
-             "scale_drift": "1/s", "scale_nonlinearity": "1/(m/s^2)"}
+             "scale_drift": "1/s", "scale_nonlinearity": "1/(m/s^2)",
+             "bias_temperature2": "raw/degC^2", "scale_temperature2": "1/degC^2",
+             "bias_temperature3": "raw/degC^3", "scale_temperature3": "1/degC^3",
+             "bias_drift2": "raw/s^2", "scale_drift2": "1/s^2", "bias_warmup": "raw", "scale_warmup": "1",
+             "scale_nonlinearity3": "1/(m/s^2)^2", "cross_axis_nonlinearity": "1/(m/s^2)"}
     assert set(EFFECTS) == set(units)
     for name, unit in units.items():
         e = make_effect(name, (0, 2))
         ps = {p.name: p for p in e.parameters(base)}
         assert f"{name}_x" in ps and f"{name}_z" in ps and f"{name}_y" not in ps
-        assert ps[f"{name}_x"].unit == unit and ps[f"{name}_x"].value == 0.0 and not ps[f"{name}_x"].fixed
+        assert ps[f"{name}_x"].unit == unit and not ps[f"{name}_x"].fixed
+        assert ps[f"{name}_x"].value == (ps[f"{name}_x"].scale if "warmup" in name else 0.0)
         assert ps[f"{name}_x"].scale > 0
         if "temp" in e.covariates:  # the reference temperature is a fixed parameter of the file
             assert ps[f"{name}_tref"].fixed and ps[f"{name}_tref"].unit == "degC"
+        if name.endswith(("2", "3")) and "nonlinearity" not in name:  # orthogonal-polynomial constants
+            assert ps[f"{name}_a2"].fixed and ps[f"{name}_b2"].unit.endswith("^2")
+        if "warmup" in name:  # tau fitted, bounded positive
+            tau = ps[f"{name}_tau"]
+            assert not tau.fixed and tau.unit == "s" and tau.lower > 0
         model = build_model([e])
         assert model.names[:9] == ("s1", "s2", "s3", "b1", "b2", "b3", "phi", "psi", "theta")
         assert set(model.covariates) == set(e.covariates)
