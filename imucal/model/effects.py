@@ -78,6 +78,8 @@ class AxisEffect(Effect):
     bound: float = math.inf
     #: the coefficient multiplies a raw-unit quantity (its scale is one g of raw output)
     raw_coefficient: bool = False
+    #: static poses tell the axes apart (False: only the sum of the coefficients reaches |a|)
+    axes_observable: bool = True
 
     def __init__(self, axes: Sequence[int] = (0, 1, 2)) -> None:
         super().__init__(axes)
@@ -393,9 +395,14 @@ class CrossAxisNonlinearity(AxisEffect):
 
     Inverted by fixed-point steps m_i <- u_i - q_i m_j m_k from m = u (a contraction with factor
     below 0.1 inside the bound up to |m| = 2.5 g).
+
+    Observability: to first order |u|^2 = |m|^2 + 2 (q_x + q_y + q_z) m_x m_y m_z, so a
+    calibration from |a| alone determines the sum of the coefficients, not which axis carries it
+    (the axis is a convention; discovery fits one axis and says so).
     """
 
     name = "cross_axis_nonlinearity"
+    axes_observable = False
     unit = "1/(m/s^2)"
     typical = 1e-3  # 0.5 % of g at 1 g split between two axes
     bound = 2e-3
