@@ -42,7 +42,8 @@ import numpy as np
 
 from imucal.config.run import EffectSpec, RunConfig
 from imucal.model.effects import (AXIS_NAMES, EFFECTS, MIN_DOF, MIN_TEMPERATURE_SPREAD, AxisEffect, make_effect,
-                                  prepare_parameters, reference_values, temperature_spread)
+                                  fit_to_data, prepare_parameters, temperature_spread)
+from imucal.analysis.f_test import f_sf
 from imucal.solve.stats import chi2_sf
 from imucal.errors import ImucalError
 from imucal.solve.fit import FitData, FitResult, fit, jacobian_rows
@@ -301,6 +302,15 @@ def _subsets() -> list[tuple[int, ...]]:
     return [c for r in (1, 2, 3) for c in itertools.combinations(range(3), r)]
 
 
+def _p_lr(lr: float, k: int, res: FitResult, alpha_noise: float) -> float:
+    """p of a likelihood-ratio statistic scaled by max(1, chi2/dof): chi-square(k) while the fit's
+    residual is consistent with the noise (the noise is known), F(k, dof) when it is not (the
+    misfit scale is then estimated from the fit, and chi-square would overstate the evidence)."""
+    if res.dof > 0 and res.redchi > 1.0 and _p_noise(res) < alpha_noise:
+        return f_sf(lr / k, k, res.dof)
+    return chi2_sf(lr, k)
+
+
 def _p_noise(res: FitResult) -> float:
     return chi2_sf(res.chi2, res.dof) if res.dof > 0 else 1.0
 
@@ -322,7 +332,7 @@ class _Problem:
         if check:
             params = prepare_parameters(model.effects, params, self.cov, self.iv.n, self.rec.source)
         else:  # the screening model holds every candidate at once: only its Jacobian is used
-            params = params.with_values(reference_values(model.effects, self.cov))
+            params = fit_to_data(model.effects, params, self.cov)
         keep = {n: v for n, v in start.items() if n in params.names and not params[n].fixed}
         return model, params.with_values(keep)
 
@@ -453,11 +463,21 @@ def _round(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int,
         except ImucalError as exc:
             notes.append(f"{c.label}: {exc.message}")
             continue
+        shapes = make_effect(c.name, c.axes).shape_names
+        shape_bound = [n for n in shapes if n in res.at_bound]
+        if shape_bound:  # a warm-up with tau on its bound is a step or a straight line: not this term
+            notes.append(f"{c.label}: {shape_bound[0]} at its {res.at_bound[shape_bound[0]]} bound, not counted")
+            continue
+        loose = [n for n in shapes if not res.std.get(n, 0.0) <= res.params[n].scale]
+        if loose:  # the final calibration would refuse it as undetermined
+            notes.append(f"{c.label}: {loose[0]} undetermined (standard error above {res.params[loose[0]].scale:.3g} "
+                         f"{res.params[loose[0]].unit}), not counted")
+            continue
         fits[i] = res
         # LR scaled by the misfit the candidate leaves: an underestimated noise cannot pass for an effect.
         # A fit that stopped early has a chi2 above its optimum, so its LR errs on the small side.
         lr = max(0.0, (current.chi2 - res.chi2) / max(1.0, res.redchi))
-        p = chi2_sf(lr, c.k)
+        p = _p_lr(lr, c.k, res, settings.alpha_noise)
         screened[i] = dataclasses.replace(c, chi2=res.chi2, dof=res.dof, lr=lr, p_value=p,
                                           p_adjusted=min(1.0, p * M), fitted=True, converged=res.success,
                                           significant=bool(np.isfinite(res.chi2)) and p * M < settings.alpha_effect)
@@ -515,7 +535,8 @@ def _lookahead(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[
         M2 = M1 * len(cands2)
         lr_c = max(0.0, (res_d.chi2 - res_cd.chi2) / s2)
         lr_d = max(0.0, (res_c.chi2 - res_cd.chi2) / s2)
-        p_c, p_d = chi2_sf(lr_c, c.k) * M2, chi2_sf(lr_d, k2) * M2
+        p_c = _p_lr(lr_c, c.k, res_cd, settings.alpha_noise) * M2
+        p_d = _p_lr(lr_d, k2, res_cd, settings.alpha_noise) * M2
         if p_c < settings.alpha_effect and p_d < settings.alpha_effect:
             total = res_cd.chi2 / s2 + settings.penalty * (c.k + k2)
             if best is None or total < best[0]:
@@ -559,6 +580,30 @@ def _prune(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int,
         notes.append(f"dropped {n} on axis {AXIS_NAMES[a]} after the later effects: it removed only "
                      f"{max(cost, 0.0):.3g} of scaled chi-square (< {settings.penalty:.3g} per coefficient)")
         current, cur_effects = res, reduced
+
+
+def _simplify(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]], found_names: set[str],
+              settings: DiscoverSettings, notes: list[str]) -> tuple[FitResult, dict[str, tuple[int, ...]], set[str]]:
+    """Replace a term by its nested simpler relative (a warm-up by the drift it tends to) when the
+    simpler one explains the data within ``penalty`` per parameter saved."""
+    for n in sorted(found_names & set(cur_effects), key=_EFFECT_ORDER.get):
+        simple = EFFECTS[n].simpler
+        if simple is None or simple not in settings.candidates:
+            continue
+        reduced = {k: v for k, v in cur_effects.items() if k != n}
+        reduced[simple] = tuple(sorted(set(reduced.get(simple, ())) | set(cur_effects[n])))
+        try:
+            res = prob.fit(_canonical(reduced), current.values())
+        except ImucalError:
+            continue
+        saved = len(current.free_names) - len(res.free_names)
+        cost = (res.chi2 - current.chi2) / max(1.0, current.redchi)
+        if saved > 0 and cost < settings.penalty * saved:
+            notes.append(f"{_label(n, cur_effects[n])} replaced by the simpler {_label(simple, reduced[simple])}: "
+                         f"it explains the data within {max(cost, 0.0):.3g} of scaled chi-square")
+            current, cur_effects = res, reduced
+            found_names = (found_names - {n}) | {simple}
+    return current, cur_effects, found_names
 
 
 def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings()) -> Discovery:
@@ -623,6 +668,8 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings())
             verdict = (f"explained: after adding {_added(found, cur_effects)} "
                        f"chi2/dof = {current.redchi:.3g} (p = {_p_noise(current):.3g}), at noise level")
     if found:
+        current, cur_effects, kept = _simplify(prob, current, cur_effects, {f[0] for f in found}, settings, notes)
+        found = [f if f[0] in kept else (EFFECTS[f[0]].simpler, *f[1:]) for f in found]
         current, cur_effects = _prune(prob, current, cur_effects, {f[0] for f in found}, settings, notes)
         found = [f for f in found if f[0] in cur_effects]
     final = _final_run(config, base, found, cur_effects, current, notes)

@@ -38,6 +38,7 @@ cross-axis term, each converged to rounding within the coefficient bounds (teste
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import Mapping, Sequence
 
 import casadi as ca
@@ -58,8 +59,10 @@ MIN_DOF = 3
 #: enough for rounding-level agreement within the coefficient bounds up to |m| = 2.5 g (tested).
 CUBIC_NEWTON_STEPS = 6
 CROSS_FIXED_POINT_STEPS = 12
-#: Warm-up time constant: bounds [s] and starting value as a fraction of the recording's length.
+#: Warm-up time constant: bounds [s] in a file or simulation; in a fit, bounds, start and scale
+#: as fractions of the last interval time (beyond it 1 - exp(-t/tau) is a straight line, the drift).
 WARMUP_TAU_BOUNDS = (1.0, 1.0e5)
+WARMUP_TAU_FIT = (0.02, 1.0)
 WARMUP_TAU_START = 0.2
 
 
@@ -80,6 +83,8 @@ class AxisEffect(Effect):
     raw_coefficient: bool = False
     #: static poses tell the axes apart (False: only the sum of the coefficients reaches |a|)
     axes_observable: bool = True
+    #: the nested simpler term this one tends to (warm-up with tau beyond the recording -> drift)
+    simpler: str | None = None
 
     def __init__(self, axes: Sequence[int] = (0, 1, 2)) -> None:
         super().__init__(axes)
@@ -118,6 +123,10 @@ class AxisEffect(Effect):
 
     def data_values(self, covariates: Mapping[str, np.ndarray | None]) -> dict[str, float]:
         """Reference constants (and shape starting values) from the interval covariates."""
+        return {}
+
+    def data_bounds(self, covariates: Mapping[str, np.ndarray | None]) -> dict[str, tuple[float, float, float]]:
+        """(lower, upper, scale) of shape parameters for these data."""
         return {}
 
     def default_values(self) -> dict[str, float]:
@@ -174,6 +183,9 @@ class Basis:
         raise NotImplementedError
 
     def data_values(self, x: np.ndarray, prefix: str) -> dict[str, float]:
+        return {}
+
+    def data_bounds(self, x: np.ndarray | None, prefix: str) -> dict[str, tuple[float, float, float]]:
         return {}
 
 
@@ -258,10 +270,20 @@ class Warmup(Basis):
         return 1 - (ca.exp(e) if isinstance(e, (ca.SX, ca.MX, ca.DM)) else np.exp(e))
 
     def data_values(self, x, prefix):
-        if x is None or len(x) == 0:
+        return {f"{prefix}_tau": WARMUP_TAU_START * _t_end(x)} if x is not None and len(x) else {}
+
+    def data_bounds(self, x: np.ndarray | None, prefix: str) -> dict[str, tuple[float, float, float]]:
+        """tau within the recording (lower, upper, scale) [s]; the scale, the recording's length, is
+        also what the observability check calls undetermined."""
+        if x is None or not len(x):
             return {}
-        lo, hi = WARMUP_TAU_BOUNDS
-        return {f"{prefix}_tau": float(np.clip(WARMUP_TAU_START * np.max(x), lo, hi))}
+        t = _t_end(x)
+        return {f"{prefix}_tau": (WARMUP_TAU_FIT[0] * t, WARMUP_TAU_FIT[1] * t, t)}
+
+
+def _t_end(x: np.ndarray) -> float:
+    lo, hi = WARMUP_TAU_BOUNDS
+    return float(np.clip(np.max(x), lo / WARMUP_TAU_FIT[0], hi))
 
 
 BASES: dict[str, Basis] = {b.name: b for b in (
@@ -293,6 +315,10 @@ class Term(AxisEffect):
         x = covariates.get(self.basis.covariate)
         return self.basis.data_values(None if x is None else np.asarray(x, float), self.name)
 
+    def data_bounds(self, covariates):
+        x = covariates.get(self.basis.covariate)
+        return self.basis.data_bounds(None if x is None else np.asarray(x, float), self.name)
+
     def start(self, base, axis):
         # A warm-up amplitude starts at its scale: at 0 its tau would not enter the model, and the
         # observability check (and IPOPT's first step) would see no tau at all.
@@ -320,6 +346,7 @@ def _term(target: str, basis: Basis) -> type[Term]:
         "unit": ("{raw}" + unit if unit else "{raw}") if target == "bias" else ("1" + unit if unit else "1"),
         "covariates": (basis.covariate,), "typical": basis.typical[target], "bound": basis.bound[target], "raw_coefficient": target == "bias",
         "meaning": f"{_MEANING[target]} {basis.name}",
+        "simpler": f"{target}_drift" if isinstance(basis, Warmup) else None,
         "__doc__": f"{target} x {basis.name}: see imucal.model.effects.", "__module__": __name__})
 
 
@@ -496,14 +523,28 @@ def reference_values(effects: Sequence[Effect], covariates: Mapping[str, np.ndar
     return out
 
 
+def fit_to_data(effects: Sequence[Effect], params: Parameters, covariates: Mapping[str, np.ndarray | None]
+                ) -> Parameters:
+    """Reference values, shape starts and shape bounds (the warm-up's tau) from the data."""
+    bounds: dict[str, tuple[float, float, float]] = {}
+    for e in effects:
+        if isinstance(e, AxisEffect):
+            bounds.update(e.data_bounds(covariates))
+    if bounds:
+        params = Parameters(replace(p, lower=bounds[n][0], upper=bounds[n][1], scale=bounds[n][2])
+                            if n in bounds else p for n, p in params.items())
+    values = reference_values(effects, covariates)
+    return params.with_values({n: float(np.clip(v, params[n].lower, params[n].upper)) for n, v in values.items()})
+
+
 def prepare_parameters(effects: Sequence[Effect], params: Parameters,
                        covariates: Mapping[str, np.ndarray | None], n_rows: int,
                        source: str | None = None) -> Parameters:
-    """Check that the data determine the effects, then set their reference parameters."""
+    """Check that the data determine the effects, then set their reference and shape parameters."""
     if not effects:
         return params
     check_effects(effects, covariates, n_rows, len(params.free_names), source)
-    return params.with_values(reference_values(effects, covariates))
+    return fit_to_data(effects, params, covariates)
 
 
 # --- the simulator's side ---------------------------------------------------------------------
