@@ -41,7 +41,7 @@ from typing import Sequence
 import numpy as np
 
 from imucal.config.run import EffectSpec, RunConfig
-from imucal.model.effects import (AXIS_NAMES, EFFECTS, MIN_DOF, MIN_TEMPERATURE_SPREAD, AxisEffect, make_effect,
+from imucal.model.effects import (AXIS_NAMES, EFFECTS, MIN_DOF, MIN_TEMPERATURE_SPREAD, AxisEffect, Term, make_effect,
                                   fit_to_data, prepare_parameters, temperature_spread)
 from imucal.analysis.f_test import f_sf
 from imucal.solve.stats import chi2_sf
@@ -582,6 +582,51 @@ def _prune(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int,
         current, cur_effects = res, reduced
 
 
+#: Bins of the piecewise-constant alternative in the shape check (quantiles of the covariate).
+SHAPE_BINS = 6
+
+
+def _shape_check(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]],
+                 found_names: set[str], settings: DiscoverSettings) -> dict[str, str]:
+    """Is each term found in time or temperature the right *shape*? Its alternative is a
+    piecewise-constant bias or scale in the same covariate on the same axes (``SHAPE_BINS``
+    quantile bins), added to the final model in a Gauss-Newton step. When that removes
+    significantly more (scaled LR, Bonferroni over the checks), the data follow the covariate in
+    a way no term of the grammar describes (a step, say): the term is dropped and the verdict says
+    so. Returns {effect name: note} of the terms that fail."""
+    terms = [n for n in sorted(found_names & set(cur_effects), key=_EFFECT_ORDER.get)
+             if isinstance(make_effect(n, (0,)), Term)]
+    if not terms:
+        return {}
+    model, params = prob.parameters(_canonical(cur_effects), current.values(), check=False)
+    J = jacobian_rows(prob.data(model), params, model, prob.gravity) * (1.0 / current.sigma)[:, None]
+    rw = current.residuals / current.sigma
+    col = {n: i for i, n in enumerate(params.free_names)}
+    base_cols = [col[n] for n in current.free_names]
+    out: dict[str, str] = {}
+    for n in terms:
+        e = make_effect(n, cur_effects[n])
+        x = np.asarray(prob.cov[e.basis.covariate], float)
+        edges = np.quantile(x, np.linspace(0, 1, SHAPE_BINS + 1)[1:-1])
+        ind = np.eye(SHAPE_BINS)[np.searchsorted(edges, x, side="right")]  # one-hot bin of each row
+        extra = np.hstack([J[:, [col[f"{'s' if e.target == 'bias' else 'b'}{a + 1}"]]] * ind for a in e.axes])
+        A = np.hstack([J[:, base_cols], extra])
+        sol, *_ = np.linalg.lstsq(A, -rw, rcond=None)
+        chi2_bins = float(np.sum((rw + A @ sol) ** 2))
+        k = (SHAPE_BINS - 1) * len(e.axes)  # one bin per axis is the shift or scale itself
+        dof = current.dof - k
+        if dof < MIN_DOF:
+            continue
+        scale = chi2_bins / dof
+        lr = max(0.0, (current.chi2 - chi2_bins) / max(1.0, scale))
+        p = (f_sf(lr / k, k, dof) if scale > 1 and chi2_sf(chi2_bins, dof) < settings.alpha_noise else chi2_sf(lr, k))
+        if p * len(terms) < settings.alpha_effect:
+            out[n] = (f"{_label(n, cur_effects[n])} dropped: a piecewise-constant {e.target} in "
+                      f"{e.basis.covariate} ({SHAPE_BINS} bins) removes {current.chi2 - chi2_bins:.4g} more chi-square "
+                      f"(LR {lr:.3g} on {k} parameters, p adjusted {min(1.0, p * len(terms)):.2g}): not its shape")
+    return out
+
+
 def _simplify(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]], found_names: set[str],
               settings: DiscoverSettings, notes: list[str]) -> tuple[FitResult, dict[str, tuple[int, ...]], set[str]]:
     """Replace a term by its nested simpler relative (a warm-up by the drift it tends to) when the
@@ -672,6 +717,18 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings())
         found = [f if f[0] in kept else (EFFECTS[f[0]].simpler, *f[1:]) for f in found]
         current, cur_effects = _prune(prob, current, cur_effects, {f[0] for f in found}, settings, notes)
         found = [f for f in found if f[0] in cur_effects]
+        wrong = _shape_check(prob, current, cur_effects, {f[0] for f in found}, settings)
+        if wrong:
+            notes.extend(wrong.values())
+            cur_effects = {n: ax for n, ax in cur_effects.items() if n not in wrong}
+            found = [f for f in found if f[0] not in wrong]
+            current = prob.fit(_canonical(cur_effects), current.values()) if found else base.result
+            verdict = (f"disagreement not explained by any candidate: chi2/dof = {current.redchi:.3g} "
+                       f"(p = {_p_noise(current):.3g}); the residual follows "
+                       f"{', '.join(sorted({EFFECTS[n].covariates[0] for n in wrong}))} but not as any term of "
+                       "the grammar (a piecewise-constant shape fits significantly better)")
+            if found:
+                verdict = f"partly explained by {_added(found, cur_effects)}; the remaining {verdict}"
     final = _final_run(config, base, found, cur_effects, current, notes)
     if found and verdict.startswith("explained"):  # name the effects as kept after the backward step
         verdict = (f"explained: after adding {_added(found, cur_effects)} chi2/dof = {final.result.redchi:.3g} "
