@@ -468,8 +468,9 @@ def _round(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int,
         if shape_bound:  # a warm-up with tau on its bound is a step or a straight line: not this term
             notes.append(f"{c.label}: {shape_bound[0]} at its {res.at_bound[shape_bound[0]]} bound, not counted")
             continue
-        loose = [n for n in shapes if not res.std.get(n, 0.0) <= res.params[n].scale]
-        if loose:  # the final calibration would refuse it as undetermined
+        loose = [n for n in (*make_effect(c.name, c.new_axes).coefficient_names, *shapes)
+                 if not res.std.get(n, 0.0) <= res.params[n].scale]
+        if loose and shapes:  # the final calibration would refuse it as undetermined
             notes.append(f"{c.label}: {loose[0]} undetermined (standard error above {res.params[loose[0]].scale:.3g} "
                          f"{res.params[loose[0]].unit}), not counted")
             continue
@@ -729,7 +730,13 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings())
                        "the grammar (a piecewise-constant shape fits significantly better)")
             if found:
                 verdict = f"partly explained by {_added(found, cur_effects)}; the remaining {verdict}"
-    final = _final_run(config, base, found, cur_effects, current, notes)
+    try:
+        final = _final_run(config, base, found, cur_effects, current, notes)
+    except ImucalError as exc:  # the calibration refuses the model found (e.g. a parameter undetermined)
+        notes.append(f"the calibration with {_added(found, cur_effects)} was refused: {exc.message}")
+        final, found, cur_effects = base, [], {}
+        verdict = (f"disagreement not explained by any candidate: chi2/dof = {base.result.redchi:.3g} "
+                   f"(p = {p_before:.3g}); the model found cannot be calibrated from these poses")
     if found and verdict.startswith("explained"):  # name the effects as kept after the backward step
         verdict = (f"explained: after adding {_added(found, cur_effects)} chi2/dof = {final.result.redchi:.3g} "
                    f"(p = {_p_noise(final.result):.3g}), at noise level")
