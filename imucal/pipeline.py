@@ -20,7 +20,7 @@ from imucal.solve.initial import InitialGuess, ellipsoid_guess
 from imucal.model.sensor import SensorModel, build_model
 from imucal.solve.observability import Observability, analyse, distinct_directions, require_observable, thresholds
 from imucal.constants import RIGHT_ANGLE
-from imucal.model.parameters import ANGLE_NAMES, Parameters, base_parameters
+from imucal.model.parameters import ANGLE_NAMES, BASE_NAMES, Parameters, base_parameters
 from imucal.data.static import Intervals, detect_static
 from imucal.solve.stats import chi2_sf
 from imucal.gyro.result import GyroResult
@@ -117,7 +117,17 @@ def make_parameters(guess: InitialGuess, config: RunConfig, gravity: float, mode
     b0 = [init.get(f"b{i+1}", guess.b[i]) for i in range(3)]
     base = base_parameters(s0, b0, angles0, angle_tol=fs.angle_tolerance, raw_unit=raw_unit, gravity=gravity)
     base = base.with_fixed(fs.fix)
-    return model.parameters(base)
+    return effect_initial(model.parameters(base), config)
+
+
+def effect_initial(params: Parameters, config: RunConfig) -> Parameters:
+    """``fit.initial`` values of free effect parameters (coefficients, the warm-up's tau)."""
+    init = {n: v for n, v in config.fit.initial.items() if n not in BASE_NAMES}
+    bad = [n for n in init if n not in params.names or params[n].fixed]
+    if bad:
+        raise ImucalError(f"{bad[0]} is not a free parameter of this model", file=config.source,
+                          field=f"fit.initial.{bad[0]}", fix="name a base parameter or a coefficient of fit.effects")
+    return params.with_values(init)
 
 
 def fit_data(model: SensorModel, intervals: Intervals, recording: Recording, mode: str, source: str | None
@@ -217,6 +227,7 @@ def calibrate(config: RunConfig, recording: Recording | None = None) -> Calibrat
 
             params = prepare_parameters(model.effects, params, {"temp": iv.temp, "time": iv.t_mid}, iv.n,
                                         rec.source)
+            params = effect_initial(params, config)  # a given start wins over the data's
         data = fit_data(model, iv, rec, config.fit.mode, rec.source)
         # Observability on interval means (one row per interval), at the initial guess.
         mdata = fit_data(model, iv, rec, "means", rec.source) if data.mode != "means" else data

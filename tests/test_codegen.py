@@ -498,7 +498,14 @@ def test_each_library_effect_through_the_cli(cases, work, effect, capsys):
     base = cases["counts"].cal
     eff = make_effect(effect, (0, 1, 2))
     extra = eff.parameters(base.params)
-    values = {q.name: (3 * q.scale * (-1) ** i if not q.fixed else q.value) for i, q in enumerate(extra)}
+    values = {q.name: (float(np.clip(3 * q.scale * (-1) ** i, q.lower, q.upper)) if not q.fixed else q.value)
+              for i, q in enumerate(extra)}
+    values.update({n: 40.0 for n in eff.shape_names})  # the warm-up's tau [s]
+    cov_values = {"temp": np.random.default_rng(12).uniform(-10, 60, 20_000),
+                  "time": np.random.default_rng(13).uniform(0, 3600, 20_000)}
+    if getattr(eff, "target", None) == "scale":  # b_i (1 + c f) stays a correction (|c f| <= 0.2), not a sign flip
+        f = np.abs(eff.basis.value(cov_values[eff.basis.covariate], values, effect)).max()
+        values.update({n: float(np.clip(values[n], -0.2 / f, 0.2 / f)) for n in eff.coefficient_names})
     params = base.params.extended(extra).with_values(values)
     cal = Calibration(params=params, std={n: 0.0 for n in params}, gravity=base.gravity,
                       effects=((effect, (0, 1, 2)),), data=base.data, created=base.created)
@@ -508,7 +515,6 @@ def test_each_library_effect_through_the_cli(cases, work, effect, capsys):
     rng = np.random.default_rng(11)
     n = 20_000
     raw = rng.integers(-32768, 32768, (n, 3)).astype(float)
-    cov_values = {"temp": rng.uniform(-10, 60, n), "time": rng.uniform(0, 3600, n)}
     covs = {c: cov_values[c] for c in cal.covariates}
     ref = cal.apply(raw, covs)
     for prec in ("double", "float"):

@@ -41,16 +41,26 @@ def _write(tmp_path, sim, name="rec.csv"):
 def test_every_effect_adds_named_parameters_with_units():
     base = base_parameters([100, -50, 20], [1670, 1670, 1670], raw_unit="raw")
     units = {"bias_temperature": "raw/degC", "scale_temperature": "1/degC", "bias_drift": "raw/s",
-             "scale_drift": "1/s", "scale_nonlinearity": "1/(m/s^2)"}
+             "scale_drift": "1/s", "scale_nonlinearity": "1/(m/s^2)",
+             "bias_temperature2": "raw/degC^2", "scale_temperature2": "1/degC^2",
+             "bias_temperature3": "raw/degC^3", "scale_temperature3": "1/degC^3",
+             "bias_drift2": "raw/s^2", "scale_drift2": "1/s^2", "bias_warmup": "raw", "scale_warmup": "1",
+             "scale_nonlinearity3": "1/(m/s^2)^2", "cross_axis_nonlinearity": "1/(m/s^2)"}
     assert set(EFFECTS) == set(units)
     for name, unit in units.items():
         e = make_effect(name, (0, 2))
         ps = {p.name: p for p in e.parameters(base)}
         assert f"{name}_x" in ps and f"{name}_z" in ps and f"{name}_y" not in ps
-        assert ps[f"{name}_x"].unit == unit and ps[f"{name}_x"].value == 0.0 and not ps[f"{name}_x"].fixed
+        assert ps[f"{name}_x"].unit == unit and not ps[f"{name}_x"].fixed
+        assert ps[f"{name}_x"].value == (ps[f"{name}_x"].scale if "warmup" in name else 0.0)
         assert ps[f"{name}_x"].scale > 0
         if "temp" in e.covariates:  # the reference temperature is a fixed parameter of the file
             assert ps[f"{name}_tref"].fixed and ps[f"{name}_tref"].unit == "degC"
+        if name.endswith(("2", "3")) and "nonlinearity" not in name:  # orthogonal-polynomial constants
+            assert ps[f"{name}_a2"].fixed and ps[f"{name}_b2"].unit.endswith("^2")
+        if "warmup" in name:  # tau fitted, bounded positive
+            tau = ps[f"{name}_tau"]
+            assert not tau.fixed and tau.unit == "s" and tau.lower > 0
         model = build_model([e])
         assert model.names[:9] == ("s1", "s2", "s3", "b1", "b2", "b3", "phi", "psi", "theta")
         assert set(model.covariates) == set(e.covariates)
@@ -301,3 +311,31 @@ def test_generated_c_applies_effects_with_temperature_and_time(tmp_path):
     fn(raw.ctypes.data, cov.ctypes.data, acc.ctypes.data, raw.shape[0])
     ref = cal.apply(raw, {"temp": cov[:, 0], "time": cov[:, 1]})
     np.testing.assert_allclose(acc, ref, rtol=1e-12, atol=1e-12)
+
+
+def test_a_file_with_the_classic_effects_loads_and_applies_as_before():
+    """A calibration file as written before the grammar (names, order, tref) loads, and its apply
+    inverts the published forward model of those effects (written here)."""
+    angles = (1.56, 1.58, 1.57)
+    vals = {"s1": 12.0, "s2": -30.0, "s3": 5.0, "b1": 1650.0, "b2": 1680.0, "b3": 1670.0,
+            "phi": angles[0], "psi": angles[1], "theta": angles[2],
+            "bias_temperature_x": 2.5, "bias_temperature_tref": 26.4, "scale_drift_y": 2e-5,
+            "scale_nonlinearity_z": 3e-3}
+    units = {"bias_temperature_x": "raw/degC", "bias_temperature_tref": "degC", "scale_drift_y": "1/s",
+             "scale_nonlinearity_z": "1/(m/s^2)"}
+    d = {"format": "imucal-calibration", "format_version": 1, "gravity": G,
+         "effects": [{"name": "bias_temperature", "axes": ["x"]}, {"name": "scale_drift", "axes": ["y"]},
+                     {"name": "scale_nonlinearity", "axes": ["z"]}],
+         "units": {"input": "raw"},
+         "parameters": {n: {"value": v, "unit": units.get(n, ""), "fixed": n.endswith("_tref")} for n, v in vals.items()}}
+    cal = from_dict(d, "old.yaml")
+    rng = np.random.default_rng(8)
+    m = rng.normal(0, 6, (30, 3))
+    t, temp = np.linspace(0, 200, 30), 20 + 10 * np.sin(np.linspace(0, 6, 30))
+    s, b = np.array([12.0, -30.0, 5.0]), np.array([1650.0, 1680.0, 1670.0])
+    raw = np.column_stack([s[0] + 2.5 * (temp - 26.4) + b[0] * m[:, 0],
+                           s[1] + b[1] * (1 + 2e-5 * t) * m[:, 1],
+                           s[2] + b[2] * (m[:, 2] + 3e-3 * m[:, 2] ** 2)])
+    got = np.asarray(cal.model.measured.map(30)(raw.T, np.vstack([temp, t]), cal.values)).T
+    np.testing.assert_allclose(got, m, rtol=1e-10, atol=1e-10)
+    assert cal.model.covariates == ("temp", "time")

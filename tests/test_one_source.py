@@ -147,3 +147,110 @@ def test_effects_match_an_independent_forward_model(name):
     got = np.asarray(model.measured.map(n)(want.T, C, p)).T  # the fit's model inverts it
     np.testing.assert_allclose(got, m, rtol=1e-10, atol=1e-10)
     assert not math.isclose(float(np.abs(want - (s + b * m)).max()), 0.0)  # the effect is really there
+
+
+# --- the grammar's new terms against forward models written here ---------------------------------
+#: Reference constants (fixed parameters of the file) chosen away from the defaults, so a wrong
+#: recurrence or a swapped constant shows.
+REFS = {"tref": 27.5, "t0": 120.0, "a2": 29.0, "b2": 40.0, "a3": 26.0, "b3": 35.0}
+TAU = 45.0
+
+
+def grammar_basis(basis: str, t: np.ndarray, T: np.ndarray) -> np.ndarray:
+    """The published bases: monic orthogonal polynomials in the recurrence form, and the warm-up."""
+    a1T, a1t, a2, b2, a3, b3 = (REFS[k] for k in ("tref", "t0", "a2", "b2", "a3", "b3"))
+    return {
+        "temperature2": (T - a2) * (T - a1T) - b2,
+        "temperature3": (T - a3) * ((T - a2) * (T - a1T) - b2) - b3 * (T - a1T),
+        "drift2": (t - a2) * (t - a1t) - b2,
+        "warmup": 1 - np.exp(-t / TAU),
+    }[basis]
+
+
+def grammar_forward(name: str, s, b, m, t, T, k):
+    """raw for one new term (coefficients k per axis); the nonlinear ones on the true m."""
+    if name == "scale_nonlinearity3":
+        return s + b * (m + k * m**3)
+    if name == "cross_axis_nonlinearity":
+        mjmk = np.column_stack([m[:, 1] * m[:, 2], m[:, 0] * m[:, 2], m[:, 0] * m[:, 1]])
+        return s + b * (m + k * mjmk)
+    target, basis = name.split("_", 1)
+    f = grammar_basis(basis, t, T)[:, None]
+    return s + k * f + b * m if target == "bias" else s + b * (1 + k * f) * m
+
+
+GRAMMAR_COEFF = {
+    "bias_temperature2": [2e-3, -1e-3, 1.5e-3], "scale_temperature2": [2e-5, -1e-5, 3e-5],
+    "bias_temperature3": [1e-4, -2e-4, 5e-5], "scale_temperature3": [1e-6, -2e-6, 3e-6],
+    "bias_drift2": [1e-5, -2e-5, 5e-6], "scale_drift2": [1e-7, -2e-7, 3e-7],
+    "bias_warmup": [0.05, -0.03, 0.02], "scale_warmup": [2e-3, -1e-3, 3e-3],
+    "scale_nonlinearity3": [2e-4, -1.5e-4, 1e-4], "cross_axis_nonlinearity": [1.5e-3, -1e-3, 2e-3],
+}
+
+
+@pytest.mark.parametrize("name", sorted(GRAMMAR_COEFF))
+def test_grammar_terms_match_an_independent_forward_model(name):
+    rng = np.random.default_rng(4)
+    n = 60
+    s, b = np.array([0.3, -0.1, 0.2]), np.array([1.02, 0.98, 1.01])
+    m = rng.normal(size=(n, 3)) * 8
+    m *= np.minimum(1.0, 2.5 * G0 / np.linalg.norm(m, axis=1))[:, None]  # |m| up to 2.5 g
+    t = np.linspace(0, 300, n)
+    T = 25 + 12 * np.sin(t / 40)  # not monotonic in time
+    k = np.array(GRAMMAR_COEFF[name])
+    want = grammar_forward(name, s, b, m, t, T, k)
+    eff = make_effect(name, (0, 1, 2))
+    coeffs = {f"{name}_{a}": float(v) for a, v in zip("xyz", k)}
+    refs = {n_: REFS[n_.rsplit("_", 1)[1]] for n_ in eff.reference_names}
+    if eff.shape_names:
+        refs[f"{name}_tau"] = TAU
+    sensor = SensorSpec(s=tuple(s), b=tuple(b), angles=tuple(ANGLES), effects={name: {**coeffs, **refs}})
+    np.testing.assert_allclose(sensor.forward(m, t, T), want, rtol=1e-12, atol=1e-12)  # the simulator
+    model = build_model([eff])
+    values = {**sensor.values(), **refs}
+    p = np.array([values[nm] for nm in model.names])
+    cov = {"temp": T, "time": t}
+    C = np.vstack([cov[c] for c in model.covariates]) if model.covariates else np.zeros((0, n))
+    got = np.asarray(model.measured.map(n)(want.T, C, p)).T  # the fit's model inverts it
+    np.testing.assert_allclose(got, m, rtol=1e-11, atol=1e-11)
+    assert float(np.abs(want - (s + b * m)).max()) > 1e-3  # the effect is really there
+
+
+@pytest.mark.parametrize("name,q", [("scale_nonlinearity3", 3e-4), ("scale_nonlinearity3", -3e-4),
+                                    ("cross_axis_nonlinearity", 2e-3), ("cross_axis_nonlinearity", -2e-3)])
+def test_iterative_inverses_converge_at_the_coefficient_bounds(name, q):
+    """Newton (cubic) and fixed-point (cross-axis) inverses reach rounding at |m| = 2.5 g and the bounds."""
+    eff = make_effect(name, (0, 1, 2))
+    assert make_effect(name, (0,)).parameters(base_parameters_for_test())[0].upper == pytest.approx(abs(q))
+    rng = np.random.default_rng(5)
+    m = rng.normal(size=(200, 3))
+    m *= (2.5 * G0 / np.linalg.norm(m, axis=1))[:, None]
+    p = {f"{name}_{a}": q for a in "xyz"}
+    u = np.column_stack(eff.distort([m[:, i] for i in range(3)], p))
+    back = np.column_stack(eff.correct([u[:, i] for i in range(3)], None, {}, p))
+    np.testing.assert_allclose(back, m, rtol=0, atol=1e-12 * 2.5 * G0)
+
+
+def base_parameters_for_test():
+    from imucal.model.parameters import base_parameters
+
+    return base_parameters([0, 0, 0], [1, 1, 1])
+
+
+def test_grammar_pair_composes_in_the_models_order():
+    """Two specific-force terms: the sensor applies them in the grammar's order, the model undoes
+    them in reverse (the pair's forward model written here as the composition)."""
+    rng = np.random.default_rng(6)
+    m = rng.normal(size=(40, 3)) * 7
+    q2, qc = np.array([2e-3, -1e-3, 1e-3]), np.array([1e-3, 1e-3, -1.5e-3])
+    u = m + q2 * m**2
+    u = u + qc * np.column_stack([u[:, 1] * u[:, 2], u[:, 0] * u[:, 2], u[:, 0] * u[:, 1]])
+    spec = {"scale_nonlinearity": {f"scale_nonlinearity_{a}": v for a, v in zip("xyz", q2)},
+            "cross_axis_nonlinearity": {f"cross_axis_nonlinearity_{a}": v for a, v in zip("xyz", qc)}}
+    sensor = SensorSpec(effects=spec)
+    raw = sensor.forward(m, np.zeros(40), None)
+    np.testing.assert_allclose(raw, u, rtol=1e-13, atol=1e-13)
+    model = build_model([make_effect("scale_nonlinearity"), make_effect("cross_axis_nonlinearity")])
+    p = np.array([sensor.values()[nm] for nm in model.names])
+    got = np.asarray(model.measured.map(40)(raw.T, np.zeros((0, 40)), p)).T
+    np.testing.assert_allclose(got, m, rtol=1e-11, atol=1e-11)

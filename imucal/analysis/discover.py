@@ -41,8 +41,9 @@ from typing import Sequence
 import numpy as np
 
 from imucal.config.run import EffectSpec, RunConfig
-from imucal.model.effects import (AXIS_NAMES, EFFECTS, MIN_DOF, MIN_TEMPERATURE_SPREAD, AxisEffect, make_effect,
-                      prepare_parameters, reference_values, temperature_spread)
+from imucal.model.effects import (AXIS_NAMES, EFFECTS, MIN_DOF, MIN_TEMPERATURE_SPREAD, AxisEffect, Term, make_effect,
+                                  fit_to_data, prepare_parameters, temperature_spread)
+from imucal.analysis.f_test import f_sf
 from imucal.solve.stats import between_excess, chi2_sf
 from imucal.errors import ImucalError
 from imucal.solve.fit import FitData, FitResult, fit, jacobian_rows
@@ -55,6 +56,10 @@ CHI2_1_P1E3 = 10.828
 #: Extra room [chi-square] when choosing which screened candidates to fit in full for the
 #: ambiguity check (the Gauss-Newton screen matches full fits to ~0.1 on simulated data).
 _SCREEN_SLACK = 5.0
+#: Warm-up time constants screened, as fractions of the recording's last interval time: the
+#: screen is linear in the amplitudes only, so tau is profiled on this grid and the full fit
+#: starts from the best one.
+TAU_GRID = (0.03, 0.06, 0.12, 0.25, 0.5)
 
 
 @dataclass(frozen=True)
@@ -94,6 +99,8 @@ class Candidate:
     axes: tuple[int, ...]  #: the candidate's axes (merged with the same effect already in the model)
     new_axes: tuple[int, ...]  #: the coefficients it adds
     chi2_screen: float  #: linearised (Gauss-Newton) chi-square with the candidate
+    extra: int = 0  #: shared free parameters it adds besides the coefficients (a new warm-up's tau)
+    start: tuple[tuple[str, float], ...] = ()  #: starting values of those (the screen's best tau)
     chi2: float = math.nan  #: chi-square of the full fit (nan when only screened)
     dof: int = 0
     lr: float = math.nan  #: likelihood-ratio statistic, scaled by max(1, chi2/dof)
@@ -110,7 +117,8 @@ class Candidate:
 
     @property
     def k(self) -> int:
-        return len(self.new_axes)
+        """Free parameters the candidate adds: its new coefficients and shape parameters."""
+        return len(self.new_axes) + self.extra
 
 
 @dataclass(frozen=True)
@@ -136,7 +144,7 @@ class FoundEffect:
     coefficients: dict[str, float]  #: parameter name -> value
     std: dict[str, float]  #: parameter name -> standard error
     units: dict[str, str]
-    reference: dict[str, float]  #: fixed references (e.g. {name}_tref in degC)
+    reference: dict[str, float]  #: fixed references ({name}_tref [degC], {name}_t0 [s], basis constants)
     lr: float  #: the likelihood-ratio statistic when it was added
     p_value: float  #: Bonferroni-adjusted p when it was added
     ambiguous_with: tuple[str, ...] = ()
@@ -246,7 +254,7 @@ class Discovery:
             for n, v in e.coefficients.items():
                 L.append(f"        {n} = {v:.6g} +/- {e.std[n]:.3g} {e.units[n]}")
             for n, v in e.reference.items():
-                L.append(f"        {n} = {v:.6g} degC (fixed reference)")
+                L.append(f"        {n} = {v:.6g} {e.units.get(n, '')} (fixed reference)")
         L.append("[[Where the base model disagrees]]  chi-square a single-axis effect would remove "
                  "(linearised)")
         for p, v in self.disagreement[:8]:
@@ -295,6 +303,15 @@ def _subsets() -> list[tuple[int, ...]]:
     return [c for r in (1, 2, 3) for c in itertools.combinations(range(3), r)]
 
 
+def _p_lr(lr: float, k: int, res: FitResult, alpha_noise: float) -> float:
+    """p of a likelihood-ratio statistic scaled by max(1, chi2/dof): chi-square(k) while the fit's
+    residual is consistent with the noise (the noise is known), F(k, dof) when it is not (the
+    misfit scale is then estimated from the fit, and chi-square would overstate the evidence)."""
+    if res.dof > 0 and res.redchi > 1.0 and _p_noise(res) < alpha_noise:
+        return f_sf(lr / k, k, res.dof)
+    return chi2_sf(lr, k)
+
+
 def _p_noise(res: FitResult) -> float:
     return chi2_sf(res.chi2, res.dof) if res.dof > 0 else 1.0
 
@@ -316,7 +333,7 @@ class _Problem:
         if check:
             params = prepare_parameters(model.effects, params, self.cov, self.iv.n, self.rec.source)
         else:  # the screening model holds every candidate at once: only its Jacobian is used
-            params = params.with_values(reference_values(model.effects, self.cov))
+            params = fit_to_data(model.effects, params, self.cov)
         keep = {n: v for n, v in start.items() if n in params.names and not params[n].fixed}
         return model, params.with_values(keep)
 
@@ -329,19 +346,44 @@ class _Problem:
 
 
 def _screen(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]],
-            names: Sequence[str]) -> tuple[np.ndarray, np.ndarray, dict[str, int], list[str]]:
-    """Column-scaled Jacobian of the residuals w.r.t. base + every candidate coefficient, at the fit.
+            names: Sequence[str]) -> tuple[list[tuple[np.ndarray, dict[str, float]]], np.ndarray, dict[str, int],
+                                           list[str]]:
+    """Column-scaled Jacobians of the residuals w.r.t. base + every candidate coefficient, at the fit.
 
-    Returns (J / sigma, r / sigma, column index by parameter name, current free names).
+    Candidates not in the model enter with coefficient 0 (the current fit). A new warm-up's tau
+    does not enter at amplitude 0, so the Jacobian is taken once per tau of ``TAU_GRID``.
+    Returns ([(J / sigma, shape values)], r / sigma, column index by parameter name, current free names).
     """
     every = {n: (0, 1, 2) for n in names}
     for n, ax in cur_effects.items():
         every[n] = (0, 1, 2)
     model, params = prob.parameters(_canonical(every), current.values(), check=False)
-    J = jacobian_rows(prob.data(model), params, model, prob.gravity)
+    have = set(current.params.names)
+    params = params.with_values({n: 0.0 for e in model.effects for n in e.coefficient_names if n not in have})
+    shapes = [n for e in model.effects for n in e.shape_names if n not in have]
+    t_end = float(np.max(prob.iv.t_mid)) if prob.iv.n else 1.0
+    grid = [{n: f * t_end for n in shapes} for f in TAU_GRID] if shapes else [{}]
     w = 1.0 / current.sigma
+    data = prob.data(model)
+    screens = [(jacobian_rows(data, params.with_values(g), model, prob.gravity) * w[:, None], g) for g in grid]
     cols = {n: i for i, n in enumerate(params.free_names)}
-    return J * w[:, None], current.residuals * w, cols, list(current.free_names)
+    return screens, current.residuals * w, cols, list(current.free_names)
+
+
+def _screen_candidate(screens: list, rw: np.ndarray, base_cols: list[int], col: dict[str, int], name: str,
+                      new: tuple[int, ...]) -> tuple[float, tuple[tuple[str, float], ...]]:
+    """Gauss-Newton chi-square of one candidate, profiled over the screened shape values."""
+    eff = make_effect(name, new)
+    cols = base_cols + [col[c] for c in eff.coefficient_names]
+    best = None
+    for Jw, g in screens:
+        start = tuple((n, g[n]) for n in eff.shape_names if n in g)
+        if best is not None and not start:
+            break  # no shape parameter to profile: every screen gives the same columns
+        chi2 = _linear_chi2(Jw, rw, cols)
+        if best is None or chi2 < best[0]:
+            best = (chi2, start)
+    return best
 
 
 def _linear_chi2(Jw: np.ndarray, rw: np.ndarray, cols: list[int]) -> float:
@@ -358,12 +400,17 @@ def _nested(a: Candidate, b: Candidate) -> bool:
 def _found(name: str, axes: tuple[int, ...], res: FitResult, lr: float, p: float,
            ambiguous: tuple[str, ...]) -> FoundEffect:
     e = make_effect(name, axes)
-    coef = {n: float(res.params[n].value) for n in e.coefficient_names}
-    ref = {e.tref_name: float(res.params[e.tref_name].value)} if e.uses_tref else {}
+    coef = {n: float(res.params[n].value) for n in (*e.coefficient_names, *e.shape_names)}
+    ref = {n: float(res.params[n].value) for n in e.reference_names}
     return FoundEffect(name=name, axes=tuple(axes), coefficients=coef,
                        std={n: float(res.std.get(n, math.nan)) for n in coef},
-                       units={n: res.params[n].unit for n in coef}, reference=ref, lr=lr, p_value=p,
+                       units={n: res.params[n].unit for n in (*coef, *ref)}, reference=ref, lr=lr, p_value=p,
                        ambiguous_with=ambiguous)
+
+
+def _extra(name: str, cur_effects: dict[str, tuple[int, ...]]) -> int:
+    """Shape parameters (tau) an effect adds when it enters the model."""
+    return 0 if name in cur_effects else len(make_effect(name, (0,)).shape_names)
 
 
 def _candidates(names: Sequence[str], cur_effects: dict[str, tuple[int, ...]], n_free: int, n_rows: int,
@@ -373,10 +420,12 @@ def _candidates(names: Sequence[str], cur_effects: dict[str, tuple[int, ...]], n
     out, seen = [], set()
     for n in names:
         have = set(cur_effects.get(n, ()))
-        for sub in _subsets():
+        if not EFFECTS[n].axes_observable and have:
+            continue  # only the sum over axes is determined: one axis carries it
+        for sub in _subsets() if EFFECTS[n].axes_observable else [(0,), (1,), (2,)]:
             new = tuple(sorted(set(sub) - have))
             merged = tuple(sorted(set(sub) | have))
-            nf = n_free + len(new)
+            nf = n_free + len(new) + _extra(n, cur_effects)
             if not new or (n, merged) in seen or n_rows - nf < MIN_DOF or nf > n_distinct:
                 continue
             seen.add((n, merged))
@@ -389,10 +438,12 @@ def _round(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int,
            ) -> tuple[Step, dict[int, FitResult]]:
     """Screen every candidate, fit the finalists, test them, pick the winner (if any)."""
     # Screening: Gauss-Newton chi-square of each candidate from the current fit.
-    Jw, rw, col, cur_free = _screen(prob, current, cur_effects, names)
+    screens, rw, col, cur_free = _screen(prob, current, cur_effects, names)
     base_cols = [col[n] for n in cur_free]
-    screened = [Candidate(n, merged, new, chi2_screen=_linear_chi2(
-        Jw, rw, base_cols + [col[c] for c in make_effect(n, new).coefficient_names])) for n, merged, new in cands]
+    screened = []
+    for n, merged, new in cands:
+        chi2, start = _screen_candidate(screens, rw, base_cols, col, n, new)
+        screened.append(Candidate(n, merged, new, chi2_screen=chi2, extra=_extra(n, cur_effects), start=start))
     # Full fits: the best few by the screening score, and every non-nested competitor close
     # enough to the best to matter for the ambiguity check.
     def pre(c: Candidate) -> float:
@@ -409,15 +460,26 @@ def _round(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int,
     for i in pick:
         c = screened[i]
         try:
-            res = prob.fit(_canonical({**cur_effects, c.name: c.axes}), current.values())
+            res = prob.fit(_canonical({**cur_effects, c.name: c.axes}), {**current.values(), **dict(c.start)})
         except ImucalError as exc:
             notes.append(f"{c.label}: {exc.message}")
+            continue
+        shapes = make_effect(c.name, c.axes).shape_names
+        shape_bound = [n for n in shapes if n in res.at_bound]
+        if shape_bound:  # a warm-up with tau on its bound is a step or a straight line: not this term
+            notes.append(f"{c.label}: {shape_bound[0]} at its {res.at_bound[shape_bound[0]]} bound, not counted")
+            continue
+        loose = [n for n in (*make_effect(c.name, c.new_axes).coefficient_names, *shapes)
+                 if not res.std.get(n, 0.0) <= res.params[n].scale]
+        if loose and shapes:  # the final calibration would refuse it as undetermined
+            notes.append(f"{c.label}: {loose[0]} undetermined (standard error above {res.params[loose[0]].scale:.3g} "
+                         f"{res.params[loose[0]].unit}), not counted")
             continue
         fits[i] = res
         # LR scaled by the misfit the candidate leaves: an underestimated noise cannot pass for an effect.
         # A fit that stopped early has a chi2 above its optimum, so its LR errs on the small side.
         lr = max(0.0, (current.chi2 - res.chi2) / max(1.0, res.redchi))
-        p = chi2_sf(lr, c.k)
+        p = _p_lr(lr, c.k, res, settings.alpha_noise)
         screened[i] = dataclasses.replace(c, chi2=res.chi2, dof=res.dof, lr=lr, p_value=p,
                                           p_adjusted=min(1.0, p * M), fitted=True, converged=res.success,
                                           significant=bool(np.isfinite(res.chi2)) and p * M < settings.alpha_effect)
@@ -454,18 +516,20 @@ def _lookahead(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[
         cands2 = _candidates(names, eff_c, len(res_c.free_names), prob.iv.n, n_distinct)
         if not cands2:
             continue
-        Jw, rw, col, cur_free = _screen(prob, res_c, eff_c, names)
+        screens, rw, col, cur_free = _screen(prob, res_c, eff_c, names)
         base_cols = [col[n] for n in cur_free]
+        pre = {(n, new): _screen_candidate(screens, rw, base_cols, col, n, new) for n, _, new in cands2}
 
-        def pre(n: str, new: tuple[int, ...]) -> float:
-            cols = base_cols + [col[x] for x in make_effect(n, new).coefficient_names]
-            return _linear_chi2(Jw, rw, cols) + settings.penalty * len(new)
+        def score(n: str, new: tuple[int, ...]) -> float:
+            return pre[(n, new)][0] + settings.penalty * (len(new) + _extra(n, eff_c))
 
-        n2, ax2, new2 = min(cands2, key=lambda t: pre(t[0], t[2]))
+        n2, ax2, new2 = min(cands2, key=lambda t: score(t[0], t[2]))
+        start2 = dict(pre[(n2, new2)][1])
+        k2 = len(new2) + _extra(n2, eff_c)
         try:
-            res_cd = prob.fit(_canonical({**eff_c, n2: ax2}), res_c.values())
+            res_cd = prob.fit(_canonical({**eff_c, n2: ax2}), {**res_c.values(), **start2})
             d_alone = tuple(sorted(set(cur_effects.get(n2, ())) | set(new2)))
-            res_d = prob.fit(_canonical({**cur_effects, n2: d_alone}), current.values())
+            res_d = prob.fit(_canonical({**cur_effects, n2: d_alone}), {**current.values(), **start2})
         except ImucalError as exc:
             notes.append(f"lookahead {c.label} + {_label(n2, ax2)}: {exc.message}")
             continue
@@ -473,11 +537,12 @@ def _lookahead(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[
         M2 = M1 * len(cands2)
         lr_c = max(0.0, (res_d.chi2 - res_cd.chi2) / s2)
         lr_d = max(0.0, (res_c.chi2 - res_cd.chi2) / s2)
-        p_c, p_d = chi2_sf(lr_c, c.k) * M2, chi2_sf(lr_d, len(new2)) * M2
+        p_c = _p_lr(lr_c, c.k, res_cd, settings.alpha_noise) * M2
+        p_d = _p_lr(lr_d, k2, res_cd, settings.alpha_noise) * M2
         if p_c < settings.alpha_effect and p_d < settings.alpha_effect:
-            score = res_cd.chi2 / s2 + settings.penalty * (c.k + len(new2))
-            if best is None or score < best[0]:
-                best = (score, i, lr_c, min(1.0, p_c), _label(n2, ax2))
+            total = res_cd.chi2 / s2 + settings.penalty * (c.k + k2)
+            if best is None or total < best[0]:
+                best = (total, i, lr_c, min(1.0, p_c), _label(n2, ax2))
     if best is None:
         return step, fits
     _, i, lr_c, p_c, second = best
@@ -507,7 +572,8 @@ def _prune(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int,
                     res = prob.fit(_canonical(reduced), current.values())
                 except ImucalError:
                     continue
-                trials.append(((res.chi2 - current.chi2) / scale, n, a, res, reduced))
+                k = 1 + (0 if rest else len(make_effect(n, (0,)).shape_names))
+                trials.append(((res.chi2 - current.chi2) / scale / k, n, a, res, reduced))
         if not trials:
             return current, cur_effects
         cost, n, a, res, reduced = min(trials, key=lambda t: t[0])
@@ -516,6 +582,75 @@ def _prune(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int,
         notes.append(f"dropped {n} on axis {AXIS_NAMES[a]} after the later effects: it removed only "
                      f"{max(cost, 0.0):.3g} of scaled chi-square (< {settings.penalty:.3g} per coefficient)")
         current, cur_effects = res, reduced
+
+
+#: Bins of the piecewise-constant alternative in the shape check (quantiles of the covariate).
+SHAPE_BINS = 6
+
+
+def _shape_check(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]],
+                 found_names: set[str], settings: DiscoverSettings) -> dict[str, str]:
+    """Is each term found in time or temperature the right *shape*? Its alternative is a
+    piecewise-constant bias or scale in the same covariate on the same axes (``SHAPE_BINS``
+    quantile bins), added to the final model in a Gauss-Newton step. When that removes
+    significantly more (scaled LR, Bonferroni over the checks), the data follow the covariate in
+    a way no term of the grammar describes (a step, say): the term is dropped and the verdict says
+    so. Returns {effect name: note} of the terms that fail."""
+    terms = [n for n in sorted(found_names & set(cur_effects), key=_EFFECT_ORDER.get)
+             if isinstance(make_effect(n, (0,)), Term)]
+    if not terms:
+        return {}
+    model, params = prob.parameters(_canonical(cur_effects), current.values(), check=False)
+    J = jacobian_rows(prob.data(model), params, model, prob.gravity) * (1.0 / current.sigma)[:, None]
+    rw = current.residuals / current.sigma
+    col = {n: i for i, n in enumerate(params.free_names)}
+    base_cols = [col[n] for n in current.free_names]
+    out: dict[str, str] = {}
+    for n in terms:
+        e = make_effect(n, cur_effects[n])
+        x = np.asarray(prob.cov[e.basis.covariate], float)
+        edges = np.quantile(x, np.linspace(0, 1, SHAPE_BINS + 1)[1:-1])
+        ind = np.eye(SHAPE_BINS)[np.searchsorted(edges, x, side="right")]  # one-hot bin of each row
+        extra = np.hstack([J[:, [col[f"{'s' if e.target == 'bias' else 'b'}{a + 1}"]]] * ind for a in e.axes])
+        A = np.hstack([J[:, base_cols], extra])
+        sol, *_ = np.linalg.lstsq(A, -rw, rcond=None)
+        chi2_bins = float(np.sum((rw + A @ sol) ** 2))
+        k = (SHAPE_BINS - 1) * len(e.axes)  # one bin per axis is the shift or scale itself
+        dof = current.dof - k
+        if dof < MIN_DOF:
+            continue
+        scale = chi2_bins / dof
+        lr = max(0.0, (current.chi2 - chi2_bins) / max(1.0, scale))
+        p = (f_sf(lr / k, k, dof) if scale > 1 and chi2_sf(chi2_bins, dof) < settings.alpha_noise else chi2_sf(lr, k))
+        if p * len(terms) < settings.alpha_effect:
+            out[n] = (f"{_label(n, cur_effects[n])} dropped: a piecewise-constant {e.target} in "
+                      f"{e.basis.covariate} ({SHAPE_BINS} bins) removes {current.chi2 - chi2_bins:.4g} more chi-square "
+                      f"(LR {lr:.3g} on {k} parameters, p adjusted {min(1.0, p * len(terms)):.2g}): not its shape")
+    return out
+
+
+def _simplify(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]], found_names: set[str],
+              settings: DiscoverSettings, notes: list[str]) -> tuple[FitResult, dict[str, tuple[int, ...]], set[str]]:
+    """Replace a term by its nested simpler relative (a warm-up by the drift it tends to) when the
+    simpler one explains the data within ``penalty`` per parameter saved."""
+    for n in sorted(found_names & set(cur_effects), key=_EFFECT_ORDER.get):
+        simple = EFFECTS[n].simpler
+        if simple is None or simple not in settings.candidates:
+            continue
+        reduced = {k: v for k, v in cur_effects.items() if k != n}
+        reduced[simple] = tuple(sorted(set(reduced.get(simple, ())) | set(cur_effects[n])))
+        try:
+            res = prob.fit(_canonical(reduced), current.values())
+        except ImucalError:
+            continue
+        saved = len(current.free_names) - len(res.free_names)
+        cost = (res.chi2 - current.chi2) / max(1.0, current.redchi)
+        if saved > 0 and cost < settings.penalty * saved:
+            notes.append(f"{_label(n, cur_effects[n])} replaced by the simpler {_label(simple, reduced[simple])}: "
+                         f"it explains the data within {max(cost, 0.0):.3g} of scaled chi-square")
+            current, cur_effects = res, reduced
+            found_names = (found_names - {n}) | {simple}
+    return current, cur_effects, found_names
 
 
 def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings()) -> Discovery:
@@ -586,14 +721,41 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings())
             verdict = (f"explained: after adding {_added(found, cur_effects)} "
                        f"chi2/dof = {current.redchi:.3g} (p = {_p_noise(current):.3g}), at noise level")
     if found:
+        current, cur_effects, kept = _simplify(prob, current, cur_effects, {f[0] for f in found}, settings, notes)
+        found = [f if f[0] in kept else (EFFECTS[f[0]].simpler, *f[1:]) for f in found]
         current, cur_effects = _prune(prob, current, cur_effects, {f[0] for f in found}, settings, notes)
         found = [f for f in found if f[0] in cur_effects]
-    final = _final_run(config, base, found, cur_effects, current, notes)
+        wrong = _shape_check(prob, current, cur_effects, {f[0] for f in found}, settings)
+        if wrong:
+            notes.extend(wrong.values())
+            cur_effects = {n: ax for n, ax in cur_effects.items() if n not in wrong}
+            found = [f for f in found if f[0] not in wrong]
+            current = prob.fit(_canonical(cur_effects), current.values()) if found else base.result
+            verdict = (f"disagreement not explained by any candidate: chi2/dof = {current.redchi:.3g} "
+                       f"(p = {_p_noise(current):.3g}); the residual follows "
+                       f"{', '.join(sorted({EFFECTS[n].covariates[0] for n in wrong}))} but not as any term of "
+                       "the grammar (a piecewise-constant shape fits significantly better)")
+            if found:
+                verdict = f"partly explained by {_added(found, cur_effects)}; the remaining {verdict}"
+    try:
+        final = _final_run(config, base, found, cur_effects, current, notes)
+    except ImucalError as exc:  # the calibration refuses the model found (e.g. a parameter undetermined)
+        notes.append(f"the calibration with {_added(found, cur_effects)} was refused: {exc.message}")
+        final, found, cur_effects = base, [], {}
+        verdict = (f"disagreement not explained by any candidate: chi2/dof = {base.result.redchi:.3g} "
+                   f"(p = {p_before:.3g}); the model found cannot be calibrated from these poses")
     if found and verdict.startswith("explained"):  # name the effects as kept after the backward step
         verdict = (f"explained: after adding {_added(found, cur_effects)} chi2/dof = {final.result.redchi:.3g} "
                    f"(p = {_p_noise(final.result):.3g}), at noise level")
     elif found and verdict.startswith("partly"):
         verdict = f"partly explained by {_added(found, cur_effects)}; the remaining " + verdict.split("; the remaining ", 1)[1]
+    for n, ax in cur_effects.items():
+        if n in {f[0] for f in found} and not EFFECTS[n].axes_observable:
+            e = make_effect(n, ax)
+            v = sum(final.result.params[c].value for c in e.coefficient_names)
+            notes.append(f"{n}: static poses determine only the sum of its coefficients over the axes "
+                         f"({v:.4g} {final.result.params[e.coefficient_names[0]].unit}; |a|^2 changes by 2 (q_x + q_y "
+                         f"+ q_z) m_x m_y m_z), not which axis carries it: axis {_label(n, ax)[-2]} is a convention")
     last = {n: (lr, p, amb) for n, lr, p, amb in found}
     effects = tuple(_found(n, ax, final.result, *last[n]) for n, ax in
                     sorted(cur_effects.items(), key=lambda kv: _EFFECT_ORDER[kv[0]]) if n in last)
@@ -629,7 +791,10 @@ def _final_run(config: RunConfig, base: CalibrationRun, found: list, cur_effects
         return base
     specs = tuple(EffectSpec(n, tuple(AXIS_NAMES[a] for a in ax)) for n, ax in
                   sorted(cur_effects.items(), key=lambda kv: _EFFECT_ORDER[kv[0]]))
-    final = calibrate(dataclasses.replace(config, fit=dataclasses.replace(config.fit, effects=specs)))
+    start = {n: v for e in _canonical(cur_effects) for n in (*e.coefficient_names, *e.shape_names)
+             for v in [current.params[n].value] if n not in config.fit.initial}
+    final = calibrate(dataclasses.replace(config, fit=dataclasses.replace(
+        config.fit, effects=specs, initial={**config.fit.initial, **start})))
     if final.result.chi2 > current.chi2 * (1 + 1e-6) + 1e-9:
         notes.append(f"the final calibration's chi2 {final.result.chi2:.6g} is above the discovery fit's "
                      f"{current.chi2:.6g} (a different local optimum)")

@@ -405,7 +405,7 @@ def sensor_from_values(values: dict, effects: tuple = (), noise: tuple[float, fl
     """
     eff: dict[str, dict[str, float]] = {}
     for e in effects:
-        names = list(e.coefficient_names) + ([e.tref_name] if getattr(e, "uses_tref", False) else [])
+        names = [*e.coefficient_names, *e.reference_names, *e.shape_names]
         eff[e.name] = {n: float(values[n]) for n in names}
     return SensorSpec(s=tuple(float(values[f"s{i}"]) for i in (1, 2, 3)),
                       b=tuple(float(values[f"b{i}"]) for i in (1, 2, 3)),
@@ -448,13 +448,16 @@ def draw_effect_case(seed: int, effect: str | None = "random", axes: tuple[int, 
                      candidates: tuple[str, ...] | None = None) -> EffectCase:
     """Draw sensor, pose plan, temperature profile and (unless ``effect`` is None) one effect.
 
-    ``effect``: "random", a name from imucal.model.effects.EFFECTS, or None for a clean sensor.
+    ``effect``: "random" (drawn from ``candidates``, default the five classic effects), a name from
+    imucal.model.effects.EFFECTS, or None for a clean sensor. A term's basis constants are those of
+    the planned hold centres (what discovery computes from the interval means), a warm-up's tau is
+    drawn in 5-30 % of the recording's length.
     ``snr``: effect size in units of the noise of one interval mean (a number or a log-uniform
     range). ``noise_mg``: white noise per sample [mg]; default drawn in 0.1 .. 1 mg.
     ``counts``: raw counts with quantisation (True) or factory-scaled m/s^2 (False); default random.
     18 to 26 poses of 3 s at 100 Hz, so a case simulates in milliseconds and fits in well under a second.
     """
-    from imucal.model.effects import EFFECTS, make_effect
+    from imucal.model.effects import CLASSIC, EFFECTS, Term, make_effect
 
     rng = np.random.default_rng([seed, 20240611])
     counts = bool(rng.integers(2)) if counts is None else counts
@@ -482,31 +485,41 @@ def draw_effect_case(seed: int, effect: str | None = "random", axes: tuple[int, 
                                          period=float(rng.uniform(80, 150)), noise=0.02)
     duration = len(dirs) * plan.hold + (len(dirs) - 1) * plan.transition
     t = np.linspace(0, duration, 1000)
-    temp_span = 0.0
-    if temperature is not None:
-        temp_clean = TemperatureProfile(**{**temperature.__dict__, "noise": 0.0}).sample(t, rng)
-        temp_span = float(np.ptp(temp_clean))
+    t_mid = np.arange(len(dirs)) * (plan.hold + plan.transition) + plan.hold / 2  # hold centres
+    clean = TemperatureProfile(**{**temperature.__dict__, "noise": 0.0}) if temperature is not None else None
+    temp_clean = clean.sample(t, rng) if clean is not None else None
     b_mean = float(np.mean(sensor.b))
     n_hold = 0.8 * plan.hold * plan.rate  # samples an interval keeps after trimming
     sigma_mean = float(np.mean(sensor.noise)) / b_mean / np.sqrt(n_hold)
     name, ax, size = None, (), 0.0
     if effect is not None:
-        pool = [n for n in (candidates or tuple(EFFECTS))
+        pool = [n for n in (candidates or CLASSIC)
                 if temperature is not None or "temp" not in EFFECTS[n].covariates]
         name = pool[int(rng.integers(len(pool)))] if effect == "random" else effect
         if name not in EFFECTS:
             raise ImucalError(f"unknown effect {short(name)}", field="effect", fix=f"choose from {', '.join(EFFECTS)}")
         subsets = _axis_subsets()
         ax = tuple(axes) if axes is not None else subsets[int(rng.integers(len(subsets)))]
+        if not EFFECTS[name].axes_observable:  # only the sum over axes reaches |a|: hide it on one axis
+            ax = ax[:1]
         lo, hi = (snr, snr) if isinstance(snr, (int, float)) else snr
         size = float(np.exp(rng.uniform(np.log(lo), np.log(hi)))) * sigma_mean
         e = make_effect(name, ax)
-        coeffs = {}
-        for a in e.axes:
-            sign = 1.0 if rng.integers(2) else -1.0
-            coeffs[e.coefficient(a)] = sign * e.coefficient_for_size(size, float(sensor.b[a]), temp_span, duration, g)
-        if e.uses_tref:
-            coeffs[e.tref_name] = float(np.round(rng.uniform(20, 30), 1))
+        signs = [1.0 if rng.integers(2) else -1.0 for _ in e.axes]
+        refs: dict[str, float] = {}
+        if name in CLASSIC and e.uses_tref:  # a reference of its own: the fit's shift absorbs the difference
+            refs[e.tref_name] = float(np.round(rng.uniform(20, 30), 1))
+        elif isinstance(e, Term):  # the basis as discovery will build it from the interval means
+            hold_cov = {"time": t_mid, "temp": clean.sample(t_mid, rng) if clean is not None else None}
+            refs = {n: v for n, v in e.data_values(hold_cov).items() if n in e.reference_names}
+            refs.update({n: float(rng.uniform(0.05, 0.3)) * duration for n in e.shape_names})
+        span = 0.0
+        if isinstance(e, Term):
+            cov = {"time": t, "temp": temp_clean}
+            span = float(np.ptp(e.basis.value(cov[e.basis.covariate], {**e.default_values(), **refs}, e.name)))
+        coeffs = {e.coefficient(a): sign * e.coefficient_for_size(size, float(sensor.b[a]), span, g)
+                  for a, sign in zip(e.axes, signs)}
+        coeffs.update(refs)
         from dataclasses import replace
 
         sensor = replace(sensor, effects={name: coeffs})
@@ -514,16 +527,18 @@ def draw_effect_case(seed: int, effect: str | None = "random", axes: tuple[int, 
     return EffectCase(seed=int(seed), effect=name, axes=tuple(ax), size=size, sigma_mean=sigma_mean, config=cfg)
 
 
-def draw_pair_case(seed: int, snr: float = 40.0, noise_mg: float | None = None) -> tuple[EffectCase, EffectCase]:
+def draw_pair_case(seed: int, snr: float = 40.0, noise_mg: float | None = None,
+                   candidates: tuple[str, ...] | None = None) -> tuple[EffectCase, EffectCase]:
     """Two different effects, each on one random axis and of the same SNR, in one recording.
 
-    Returns the two single-effect cases; the recording is ``pair_config(...)`` of them (the
-    first case's sensor, plan and temperature with both effects).
+    The effects are drawn from ``candidates`` (default: the five classic effects). Returns the two
+    single-effect cases; the recording is ``pair_config(...)`` of them (the first case's sensor,
+    plan and temperature with both effects).
     """
-    from imucal.model.effects import EFFECTS
+    from imucal.model.effects import CLASSIC
 
     rng = np.random.default_rng([seed, 977])
-    names = list(EFFECTS)
+    names = list(candidates or CLASSIC)
     a, b = rng.choice(len(names), 2, replace=False)
     c1 = draw_effect_case(seed, effect=names[a], axes=(int(rng.integers(3)),), snr=snr, noise_mg=noise_mg)
     c2 = draw_effect_case(seed, effect=names[b], axes=(int(rng.integers(3)),), snr=snr, noise_mg=noise_mg)

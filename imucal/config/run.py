@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
@@ -79,6 +80,11 @@ class EffectSpec:
             raise ImucalError(f"axes {short(self.axes)} must be a list of x, y, z", field="fit.effects.axes")
 
 
+#: A free effect parameter's name: a coefficient <effect>_x|y|z or a shape parameter <effect>_tau
+#: (checked against the model's parameters when the model is built).
+EFFECT_PARAMETER = re.compile(r"[a-z][a-z0-9_]{0,60}_(x|y|z|tau)\Z")
+
+
 @dataclass(frozen=True)
 class FitSettings:
     mode: str = "means"  #: fit interval means (weighted by their noise) or raw samples
@@ -104,9 +110,9 @@ class FitSettings:
             if n not in BASE_NAMES:
                 raise ImucalError(f"cannot fix {short(n)}", field="fit.fix", fix=f"choose from {', '.join(BASE_NAMES)}")
         for n, v in self.initial.items():
-            if n not in BASE_NAMES:
+            if n not in BASE_NAMES and not (isinstance(n, str) and EFFECT_PARAMETER.match(n)):
                 raise ImucalError(f"unknown parameter {short(n)}", field="fit.initial",
-                                  fix=f"choose from {', '.join(BASE_NAMES)}")
+                                  fix=f"choose from {', '.join(BASE_NAMES)} or a free parameter of fit.effects")
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
                 raise ImucalError(f"initial value {short(v)} is not a finite number", field=f"fit.initial.{n}")
 

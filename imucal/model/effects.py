@@ -1,30 +1,47 @@
-"""The effect library: physical effects the paper's 9-parameter model leaves out.
+"""The effect grammar: physical effects the paper's 9-parameter model leaves out.
 
 Each effect is a small named unit (a subclass of :class:`imucal.model.sensor.Effect`) that adds
 per-axis parameters and terms to the CasADi model, so a fit with effects is still one IPOPT
-NLP. The paper's model, Eq. (theModel), is raw_i = s_i + b_i m_i; the effects make the shift
-s_i or the scale b_i depend on a covariate, or make the reading nonlinear in m_i:
+NLP. The paper's model, Eq. (theModel), is raw_i = s_i + b_i m_i. A *term* is a target times a
+basis f of a covariate, named ``<target>_<basis>``:
 
-  bias_temperature    s_i -> s_i + k_i (T - T_ref)             k_i [raw/degC]
-  scale_temperature   b_i -> b_i (1 + c_i (T - T_ref))         c_i [1/degC]
-  bias_drift          s_i -> s_i + d_i t                       d_i [raw/s], t from the recording start
-  scale_drift         b_i -> b_i (1 + e_i t)                   e_i [1/s]
-  scale_nonlinearity  raw_i = s_i + b_i (m_i + q_i m_i^2)      q_i [1/(m/s^2)]
+  target  bias    s_i -> s_i + c_i f          c_i [raw / unit of f]
+          scale   b_i -> b_i (1 + c_i f)      c_i [1 / unit of f]
+  basis   temperature   p1(T) = T - T_ref                         degC
+          temperature2  p2(T), orthogonal quadratic in T          degC^2
+          temperature3  p3(T), orthogonal cubic in T              degC^3
+          drift         t (seconds since the recording's start)   s
+          drift2        p2(t), orthogonal quadratic in t          s^2
+          warmup        1 - exp(-t / tau), tau fitted (> 0)       1
 
-T_ref is a *fixed* parameter stored with the calibration (set to the mean interval temperature
-of the fitted data, so that s_i and b_i are the values at the data's typical temperature and
-the coefficients are well conditioned); the apply map needs nothing else. Time is seconds since
-the recording's first sample, so s_i, b_i are the values at the start of the recording.
+and three terms in the specific force itself, u_i = m_i + ..., raw_i = s_i + b_i u_i:
+
+  scale_nonlinearity        u_i = m_i + q_i m_i^2       q_i [1/(m/s^2)]
+  scale_nonlinearity3       u_i = m_i + q_i m_i^3       q_i [1/(m/s^2)^2]
+  cross_axis_nonlinearity   u_i = m_i + q_i m_j m_k     q_i [1/(m/s^2)], j, k the other two axes
+
+Orders are not confounded: the polynomial bases are the monic orthogonal polynomials of the
+recording's interval covariate values (three-term recurrence, p1 = x - a1,
+p_{n+1} = (x - a_{n+1}) p_n - b_{n+1} p_{n-1}); their constants a1 (``_tref`` [degC] or ``_t0``
+[s]), a2, b2, a3, b3 are *fixed* parameters stored with the calibration, set from the fitted data,
+so the apply map needs nothing else. A quadratic term then leaves the linear coefficient what a
+linear fit gives, and a cubic leaves both. (``bias_drift``/``scale_drift`` keep t from the
+recording's start, and ``*_temperature`` keep T - T_ref with T_ref the mean interval
+temperature, as before the grammar: files with those effects load and apply unchanged.)
 
 The same term code serves the symbolic model (CasADi SX) and the simulator (numpy arrays):
-``shift_scale`` uses arithmetic only. The nonlinearity is written forward in ``distort`` (what
-the sensor does) and inverted exactly in ``correct`` (what the calibration does).
+``shift_scale`` uses arithmetic (and exp for the warm-up) only. Specific-force terms are written
+forward in ``distort`` (what the sensor does) and inverted in ``correct`` (what the calibration
+does): exactly for the quadratic, by Newton steps for the cubic, by fixed-point steps for the
+cross-axis term, each converged to rounding within the coefficient bounds (tested).
 """
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import Mapping, Sequence
 
+import casadi as ca
 import numpy as np
 
 from imucal.errors import ImucalError, short
@@ -38,6 +55,15 @@ REFERENCE_TEMPERATURE = 25.0
 MIN_TEMPERATURE_SPREAD = 0.5
 #: Degrees of freedom an effect fit must keep (rows - free parameters), so its chi-square means something.
 MIN_DOF = 3
+#: Newton steps inverting u = m + q m^3, and fixed-point steps inverting the cross-axis term:
+#: enough for rounding-level agreement within the coefficient bounds up to |m| = 2.5 g (tested).
+CUBIC_NEWTON_STEPS = 6
+CROSS_FIXED_POINT_STEPS = 12
+#: Warm-up time constant: bounds [s] in a file or simulation; in a fit, bounds, start and scale
+#: as fractions of the last interval time (beyond it 1 - exp(-t/tau) is a straight line, the drift).
+WARMUP_TAU_BOUNDS = (1.0, 1.0e5)
+WARMUP_TAU_FIT = (0.02, 1.0)
+WARMUP_TAU_START = 0.2
 
 
 class AxisEffect(Effect):
@@ -53,8 +79,12 @@ class AxisEffect(Effect):
     meaning: str = ""
     #: bounds on the coefficient (keep the scale positive, the inverse defined)
     bound: float = math.inf
-    #: the effect needs a reference temperature parameter
-    uses_tref: bool = False
+    #: the coefficient multiplies a raw-unit quantity (its scale is one g of raw output)
+    raw_coefficient: bool = False
+    #: static poses tell the axes apart (False: only the sum of the coefficients reaches |a|)
+    axes_observable: bool = True
+    #: the nested simpler term this one tends to (warm-up with tau beyond the recording -> drift)
+    simpler: str | None = None
 
     def __init__(self, axes: Sequence[int] = (0, 1, 2)) -> None:
         super().__init__(axes)
@@ -69,125 +99,259 @@ class AxisEffect(Effect):
     def coefficient_names(self) -> tuple[str, ...]:
         return tuple(self.coefficient(a) for a in self.axes)
 
+    # -- parameters besides the per-axis coefficients ------------------------------------------
+    @property
+    def uses_tref(self) -> bool:
+        return f"{self.name}_tref" in self.reference_names
+
     @property
     def tref_name(self) -> str:
         return f"{self.name}_tref"
 
-    def _scale(self, base: Parameters, axis: int) -> float:
+    @property
+    def reference_names(self) -> tuple[str, ...]:
+        """Fixed parameters set from the data (reference temperature/time, basis constants)."""
+        return tuple(p.name for p in self._extra(None) if p.fixed)
+
+    @property
+    def shape_names(self) -> tuple[str, ...]:
+        """Free parameters shared by the axes (the warm-up's tau)."""
+        return tuple(p.name for p in self._extra(None) if not p.fixed)
+
+    def _extra(self, base: Parameters | None) -> list[Parameter]:
+        return []
+
+    def data_values(self, covariates: Mapping[str, np.ndarray | None]) -> dict[str, float]:
+        """Reference constants (and shape starting values) from the interval covariates."""
+        return {}
+
+    def data_bounds(self, covariates: Mapping[str, np.ndarray | None]) -> dict[str, tuple[float, float, float]]:
+        """(lower, upper, scale) of shape parameters for these data."""
+        return {}
+
+    def default_values(self) -> dict[str, float]:
+        """Reference values when no data set them (the simulator's defaults)."""
+        return {p.name: p.value for p in self._extra(None)}
+
+    def _scale(self, base: Parameters | None, axis: int) -> float:
+        if self.raw_coefficient and base is not None:
+            return base[f"s{axis + 1}"].scale * self.typical
         return self.typical
 
-    def _unit(self, base: Parameters) -> str:
-        return self.unit.replace("{raw}", base["s1"].unit or "raw")
+    def _unit(self, base: Parameters | None) -> str:
+        raw = (base["s1"].unit or "raw") if base is not None else "raw"
+        return self.unit.replace("{raw}", raw)
+
+    def start(self, base: Parameters, axis: int) -> float:
+        """Starting value of a coefficient (0: no effect)."""
+        return 0.0
 
     def parameters(self, base: Parameters) -> list[Parameter]:
-        out = [Parameter(self.coefficient(a), 0.0, lower=-self.bound, upper=self.bound,
+        out = [Parameter(self.coefficient(a), self.start(base, a), lower=-self.bound, upper=self.bound,
                          unit=self._unit(base), scale=self._scale(base, a),
                          description=f"{self.meaning}, axis {AXIS_NAMES[a]}")
                for a in self.axes]
-        if self.uses_tref:
-            out.append(Parameter(self.tref_name, REFERENCE_TEMPERATURE, unit="degC", fixed=True,
-                                 scale=REFERENCE_TEMPERATURE,
-                                 description=f"reference temperature of {self.name} (fixed)"))
-        return out
+        return out + self._extra(base)
 
     def distort(self, m: list, p: Mapping) -> list:
         """Forward (sensor) form of a measured-value effect; identity for shift/scale effects."""
         return m
 
-    def coefficient_for_size(self, size: float, b: float, temp_span: float, duration: float,
-                             gravity: float) -> float:
-        """The coefficient whose largest change of a reading at 1 g is ``size`` [m/s^2].
+    def coefficient_for_size(self, size: float, b: float, span: float, gravity: float) -> float:
+        """The coefficient whose largest change of a reading at 1 g over the recording is ``size`` [m/s^2].
 
-        ``b`` is the axis scale [raw/(m/s^2)], ``temp_span`` the temperature range [degC] and
-        ``duration`` the recording's length [s]. Used by the simulator and the detection study.
+        ``b`` is the axis scale [raw/(m/s^2)], ``span`` the range of the basis over the
+        recording (unused by the specific-force terms). Used by the simulator and the studies.
         """
         raise NotImplementedError
 
 
-class BiasTemperature(AxisEffect):
-    """Bias linear in temperature: s_i(T) = s_i + k_i (T - T_ref)."""
+# --- bases: functions of one covariate ---------------------------------------------------------
+class Basis:
+    """f(covariate) with its fixed constants; ``value`` works on CasADi SX and numpy alike."""
 
-    name = "bias_temperature"
-    covariates = ("temp",)
-    unit = "{raw}/degC"
-    typical = 1e-3  # x one g in raw units: 1 mg/degC
-    meaning = "change of the shift s_i per degC"
-    uses_tref = True
+    name = ""
+    covariate = ""
+    unit = ""  #: unit of f
+    typical = {"bias": 1.0, "scale": 1.0}  #: generous coefficient magnitudes (bias: in g of raw)
+    bound = {"bias": math.inf, "scale": math.inf}
 
-    def _scale(self, base: Parameters, axis: int) -> float:
-        return base[f"s{axis + 1}"].scale * self.typical
+    def extra(self, prefix: str, base: Parameters | None) -> list[Parameter]:
+        return []
+
+    def value(self, x, p: Mapping, prefix: str):
+        raise NotImplementedError
+
+    def data_values(self, x: np.ndarray, prefix: str) -> dict[str, float]:
+        return {}
+
+    def data_bounds(self, x: np.ndarray | None, prefix: str) -> dict[str, tuple[float, float, float]]:
+        return {}
+
+
+def recurrence(x: np.ndarray, order: int, a1: float | None = None) -> tuple[list[float], list[float]]:
+    """Constants (a_1..a_n, b_2..b_n) of the monic orthogonal polynomials over the points x.
+
+    p_0 = 1, p_1 = x - a_1, p_{k+1} = (x - a_{k+1}) p_k - b_{k+1} p_{k-1} with
+    a_{k+1} = <x p_k, p_k> / <p_k, p_k>, b_{k+1} = <p_k, p_k> / <p_{k-1}, p_{k-1}> (Forsythe).
+    """
+    x = np.asarray(x, float)
+    a = [float(np.mean(x)) if a1 is None else float(a1)]
+    b: list[float] = []
+    prev, cur = np.ones_like(x), x - a[0]
+    for _ in range(order - 1):
+        nn = float(cur @ cur)
+        a.append(float((x * cur) @ cur / nn) if nn > 0 else a[0])
+        b.append(nn / float(prev @ prev) if nn > 0 else 0.0)
+        prev, cur = cur, (x - a[-1]) * cur - b[-1] * prev
+    return a, b
+
+
+class Polynomial(Basis):
+    """p_n of the orthogonal recurrence; order 1 is x - a1 (or x itself, without a reference)."""
+
+    def __init__(self, name: str, covariate: str, order: int, unit: str, ref: str | None,
+                 ref_default: float, typical: dict, bound: dict) -> None:
+        self.name, self.covariate, self.order, self.unit = name, covariate, order, unit
+        self.ref, self.ref_default, self.typical, self.bound = ref, ref_default, typical, bound
+        self.cov_unit = unit.split("^")[0]
+
+    def _names(self, prefix: str) -> list[tuple[str, str]]:
+        out = [(f"{prefix}_{self.ref}", self.cov_unit)] if self.ref else []
+        for k in range(2, self.order + 1):
+            out += [(f"{prefix}_a{k}", self.cov_unit), (f"{prefix}_b{k}", f"{self.cov_unit}^2")]
+        return out
+
+    def extra(self, prefix, base):
+        what = {"tref": "reference temperature", "t0": "reference time"}
+        out = []
+        for n, unit in self._names(prefix):
+            key = n[len(prefix) + 1:]
+            value = self.ref_default if key in ("tref", "t0") or key.startswith("a") else 0.0
+            descr = (f"{what[key]} of {prefix} (fixed)" if key in what else
+                     f"orthogonal-polynomial constant {key} of {prefix} (fixed)")
+            out.append(Parameter(n, value, unit=unit, fixed=True, scale=max(abs(value), 1.0), description=descr))
+        return out
+
+    def value(self, x, p, prefix):
+        if not self.ref:  # t from the recording's start (bias_drift, scale_drift)
+            return x
+        prev, cur = 1.0, x - p[f"{prefix}_{self.ref}"]
+        for k in range(2, self.order + 1):  # p_k = (x - a_k) p_{k-1} - b_k p_{k-2}
+            prev, cur = cur, (x - p[f"{prefix}_a{k}"]) * cur - p[f"{prefix}_b{k}"] * prev
+        return cur
+
+    def data_values(self, x, prefix):
+        if not self.ref or x is None or len(x) == 0:
+            return {}
+        a1 = float(np.round(np.mean(x), 3)) if self.ref == "tref" else None  # T_ref as before the grammar
+        a, b = recurrence(x, self.order, a1)
+        out = {f"{prefix}_{self.ref}": a[0]}
+        for k in range(2, self.order + 1):
+            out[f"{prefix}_a{k}"] = a[k - 1]
+            out[f"{prefix}_b{k}"] = b[k - 2]
+        return out
+
+
+class Warmup(Basis):
+    """1 - exp(-t / tau): the settling of a part after power-on; tau [s] fitted, shared by the axes."""
+
+    name, covariate, unit = "warmup", "time", ""
+    typical = {"bias": 2e-3, "scale": 1e-3}
+    bound = {"bias": math.inf, "scale": 0.1}
+
+    def extra(self, prefix, base):
+        lo, hi = WARMUP_TAU_BOUNDS
+        return [Parameter(f"{prefix}_tau", 60.0, lower=lo, upper=hi, unit="s", scale=60.0,
+                          description=f"time constant of {prefix}")]
+
+    def value(self, x, p, prefix):
+        e = -x / p[f"{prefix}_tau"]
+        return 1 - (ca.exp(e) if isinstance(e, (ca.SX, ca.MX, ca.DM)) else np.exp(e))
+
+    def data_values(self, x, prefix):
+        return {f"{prefix}_tau": WARMUP_TAU_START * _t_end(x)} if x is not None and len(x) else {}
+
+    def data_bounds(self, x: np.ndarray | None, prefix: str) -> dict[str, tuple[float, float, float]]:
+        """tau within the recording (lower, upper, scale) [s]; the scale, the recording's length, is
+        also what the observability check calls undetermined."""
+        if x is None or not len(x):
+            return {}
+        t = _t_end(x)
+        return {f"{prefix}_tau": (WARMUP_TAU_FIT[0] * t, WARMUP_TAU_FIT[1] * t, t)}
+
+
+def _t_end(x: np.ndarray) -> float:
+    lo, hi = WARMUP_TAU_BOUNDS
+    return float(np.clip(np.max(x), lo / WARMUP_TAU_FIT[0], hi))
+
+
+BASES: dict[str, Basis] = {b.name: b for b in (
+    Polynomial("temperature", "temp", 1, "degC", "tref", REFERENCE_TEMPERATURE,
+               {"bias": 1e-3, "scale": 1e-3}, {"bias": math.inf, "scale": 0.01}),
+    Polynomial("temperature2", "temp", 2, "degC^2", "tref", REFERENCE_TEMPERATURE,
+               {"bias": 1e-4, "scale": 1e-4}, {"bias": math.inf, "scale": 1e-3}),
+    Polynomial("temperature3", "temp", 3, "degC^3", "tref", REFERENCE_TEMPERATURE,
+               {"bias": 1e-5, "scale": 1e-5}, {"bias": math.inf, "scale": 1e-4}),
+    Polynomial("drift", "time", 1, "s", None, 0.0, {"bias": 1e-4, "scale": 1e-5}, {"bias": math.inf, "scale": 1e-3}),
+    Polynomial("drift2", "time", 2, "s^2", "t0", 0.0, {"bias": 1e-6, "scale": 1e-7},
+               {"bias": math.inf, "scale": 1e-5}),
+    Warmup(),
+)}
+
+_MEANING = {"bias": "change of the shift s_i per unit of", "scale": "relative change of the scale b_i per unit of"}
+
+
+class Term(AxisEffect):
+    """target x basis: bias s_i + c_i f, or scale b_i (1 + c_i f) (see the module's table)."""
+
+    target = "bias"
+    basis: Basis = BASES["temperature"]
+
+    def _extra(self, base):
+        return self.basis.extra(self.name, base)
+
+    def data_values(self, covariates):
+        x = covariates.get(self.basis.covariate)
+        return self.basis.data_values(None if x is None else np.asarray(x, float), self.name)
+
+    def data_bounds(self, covariates):
+        x = covariates.get(self.basis.covariate)
+        return self.basis.data_bounds(None if x is None else np.asarray(x, float), self.name)
+
+    def start(self, base, axis):
+        # A warm-up amplitude starts at its scale: at 0 its tau would not enter the model, and the
+        # observability check (and IPOPT's first step) would see no tau at all.
+        return self._scale(base, axis) if isinstance(self.basis, Warmup) else 0.0
 
     def shift_scale(self, s, b, cov, p):
-        s = list(s)
+        f = self.basis.value(cov[self.basis.covariate], p, self.name)
+        s, b = list(s), list(b)
         for a in self.axes:
-            s[a] = s[a] + p[self.coefficient(a)] * (cov["temp"] - p[self.tref_name])  # s_i + k_i (T - T_ref)
+            c = p[self.coefficient(a)]
+            if self.target == "bias":
+                s[a] = s[a] + c * f  # s_i + c_i f
+            else:
+                b[a] = b[a] * (1 + c * f)  # b_i (1 + c_i f)
         return s, b
 
-    def coefficient_for_size(self, size, b, temp_span, duration, gravity):
-        return size * b / temp_span
+    def coefficient_for_size(self, size, b, span, gravity):
+        return size * b / span if self.target == "bias" else size / (gravity * span)
 
 
-class ScaleTemperature(AxisEffect):
-    """Scale linear in temperature: b_i(T) = b_i (1 + c_i (T - T_ref))."""
-
-    name = "scale_temperature"
-    covariates = ("temp",)
-    unit = "1/degC"
-    typical = 1e-3  # 0.1 %/degC
-    bound = 0.01  # 1 %/degC: far beyond any MEMS part, keeps b_i(T) > 0
-    meaning = "relative change of the scale b_i per degC"
-    uses_tref = True
-
-    def shift_scale(self, s, b, cov, p):
-        b = list(b)
-        for a in self.axes:
-            b[a] = b[a] * (1 + p[self.coefficient(a)] * (cov["temp"] - p[self.tref_name]))  # b_i (1 + c_i dT)
-        return s, b
-
-    def coefficient_for_size(self, size, b, temp_span, duration, gravity):
-        return size / (gravity * temp_span)
+def _term(target: str, basis: Basis) -> type[Term]:
+    unit = basis.unit and ("/" + basis.unit)
+    return type("".join(w.capitalize() for w in f"{target}_{basis.name}".split("_")), (Term,), {
+        "name": f"{target}_{basis.name}", "target": target, "basis": basis,
+        "unit": ("{raw}" + unit if unit else "{raw}") if target == "bias" else ("1" + unit if unit else "1"),
+        "covariates": (basis.covariate,), "typical": basis.typical[target], "bound": basis.bound[target], "raw_coefficient": target == "bias",
+        "meaning": f"{_MEANING[target]} {basis.name}",
+        "simpler": f"{target}_drift" if isinstance(basis, Warmup) else None,
+        "__doc__": f"{target} x {basis.name}: see imucal.model.effects.", "__module__": __name__})
 
 
-class BiasDrift(AxisEffect):
-    """Bias linear in time: s_i(t) = s_i + d_i t, t in seconds since the recording's start."""
-
-    name = "bias_drift"
-    covariates = ("time",)
-    unit = "{raw}/s"
-    typical = 1e-4  # x one g in raw units: 0.1 mg/s
-    meaning = "change of the shift s_i per second"
-
-    def _scale(self, base: Parameters, axis: int) -> float:
-        return base[f"s{axis + 1}"].scale * self.typical
-
-    def shift_scale(self, s, b, cov, p):
-        s = list(s)
-        for a in self.axes:
-            s[a] = s[a] + p[self.coefficient(a)] * cov["time"]  # s_i + d_i t
-        return s, b
-
-    def coefficient_for_size(self, size, b, temp_span, duration, gravity):
-        return size * b / duration
-
-
-class ScaleDrift(AxisEffect):
-    """Scale linear in time: b_i(t) = b_i (1 + e_i t)."""
-
-    name = "scale_drift"
-    covariates = ("time",)
-    unit = "1/s"
-    typical = 1e-5  # 10 ppm/s
-    bound = 1e-3  # 0.1 %/s
-    meaning = "relative change of the scale b_i per second"
-
-    def shift_scale(self, s, b, cov, p):
-        b = list(b)
-        for a in self.axes:
-            b[a] = b[a] * (1 + p[self.coefficient(a)] * cov["time"])  # b_i (1 + e_i t)
-        return s, b
-
-    def coefficient_for_size(self, size, b, temp_span, duration, gravity):
-        return size / (gravity * duration)
+BiasTemperature, ScaleTemperature = _term("bias", BASES["temperature"]), _term("scale", BASES["temperature"])
+BiasDrift, ScaleDrift = _term("bias", BASES["drift"]), _term("scale", BASES["drift"])
 
 
 class ScaleNonlinearity(AxisEffect):
@@ -216,14 +380,94 @@ class ScaleNonlinearity(AxisEffect):
             m[a] = m[a] + p[self.coefficient(a)] * m[a] ** 2  # u = m + q m^2
         return m
 
-    def coefficient_for_size(self, size, b, temp_span, duration, gravity):
+    def coefficient_for_size(self, size, b, span, gravity):
         return size / gravity**2
 
 
-#: Effect name -> class. Order = the order candidates are listed in reports.
-EFFECTS: dict[str, type[AxisEffect]] = {
-    cls.name: cls for cls in (BiasTemperature, ScaleTemperature, BiasDrift, ScaleDrift, ScaleNonlinearity)
-}
+class ScaleNonlinearity3(AxisEffect):
+    """Cubic (odd-order) term in each axis's own reading: raw_i = s_i + b_i (m_i + q_i m_i^3).
+
+    Inverted by Newton's method from m = u: m <- m - (m + q m^3 - u) / (1 + 3 q m^2); the
+    bound keeps 1 + 3 q m^2 > 0.4 up to |m| = 2.5 g, where the steps converge quadratically.
+    """
+
+    name = "scale_nonlinearity3"
+    unit = "1/(m/s^2)^2"
+    typical = 1e-4  # 1 % of the reading at 1 g
+    bound = 3e-4  # 3 % at 1 g
+    meaning = "cubic coefficient of the axis's own reading"
+
+    def correct(self, m, raw, cov, p):
+        m = list(m)
+        for a in self.axes:
+            q, u = p[self.coefficient(a)], m[a]
+            x = u
+            for _ in range(CUBIC_NEWTON_STEPS):
+                x = x - (x + q * x * x * x - u) / (1 + 3 * q * x * x)
+            m[a] = x
+        return m
+
+    def distort(self, m, p):
+        m = list(m)
+        for a in self.axes:
+            m[a] = m[a] + p[self.coefficient(a)] * m[a] * m[a] * m[a]  # u = m + q m^3
+        return m
+
+    def coefficient_for_size(self, size, b, span, gravity):
+        return size / gravity**3
+
+
+class CrossAxisNonlinearity(AxisEffect):
+    """Axis i responds to the product of the other two: raw_i = s_i + b_i (m_i + q_i m_j m_k).
+
+    Inverted by fixed-point steps m_i <- u_i - q_i m_j m_k from m = u (a contraction with factor
+    below 0.1 inside the bound up to |m| = 2.5 g).
+
+    Observability: to first order |u|^2 = |m|^2 + 2 (q_x + q_y + q_z) m_x m_y m_z, so a
+    calibration from |a| alone determines the sum of the coefficients, not which axis carries it
+    (the axis is a convention; discovery fits one axis and says so).
+    """
+
+    name = "cross_axis_nonlinearity"
+    axes_observable = False
+    unit = "1/(m/s^2)"
+    typical = 1e-3  # 0.5 % of g at 1 g split between two axes
+    bound = 2e-3
+    meaning = "coefficient of the product of the other two axes' readings"
+
+    @staticmethod
+    def _others(a: int) -> tuple[int, int]:
+        return tuple(k for k in range(3) if k != a)  # type: ignore[return-value]
+
+    def correct(self, m, raw, cov, p):
+        u = list(m)
+        x = list(m)
+        for _ in range(CROSS_FIXED_POINT_STEPS):
+            nxt = list(x)
+            for a in self.axes:
+                j, k = self._others(a)
+                nxt[a] = u[a] - p[self.coefficient(a)] * x[j] * x[k]
+            x = nxt
+        return x
+
+    def distort(self, m, p):
+        out = list(m)
+        for a in self.axes:
+            j, k = self._others(a)
+            out[a] = m[a] + p[self.coefficient(a)] * m[j] * m[k]  # u_i = m_i + q_i m_j m_k
+        return out
+
+    def coefficient_for_size(self, size, b, span, gravity):
+        return size / (gravity**2 / 2)  # |m_j m_k| <= g^2 / 2 at 1 g
+
+
+#: Effect name -> class. Order = the order candidates are listed in reports (today's five first).
+EFFECTS: dict[str, type[AxisEffect]] = {cls.name: cls for cls in (
+    BiasTemperature, ScaleTemperature, BiasDrift, ScaleDrift, ScaleNonlinearity,
+    *(_term(t, BASES[b]) for b in ("temperature2", "temperature3", "drift2", "warmup") for t in ("bias", "scale")),
+    ScaleNonlinearity3, CrossAxisNonlinearity)}
+#: The five effects of the library before the grammar.
+CLASSIC = ("bias_temperature", "scale_temperature", "bias_drift", "scale_drift", "scale_nonlinearity")
 
 
 def make_effect(name: str, axes: Sequence[int] = (0, 1, 2)) -> AxisEffect:
@@ -270,35 +514,53 @@ def check_effects(effects: Sequence[Effect], covariates: Mapping[str, np.ndarray
 
 def reference_values(effects: Sequence[Effect], covariates: Mapping[str, np.ndarray | None]
                      ) -> dict[str, float]:
-    """Fixed reference parameters from the data: T_ref = mean interval temperature [degC]."""
+    """Parameters set from the data: fixed references (T_ref = mean interval temperature [degC],
+    the orthogonal-polynomial constants) and the warm-up's starting tau."""
     out: dict[str, float] = {}
-    temp = covariates.get("temp")
     for e in effects:
-        if getattr(e, "uses_tref", False) and temp is not None and len(temp):
-            out[e.tref_name] = float(np.round(np.mean(temp), 3))
+        if isinstance(e, AxisEffect):
+            out.update(e.data_values(covariates))
     return out
+
+
+def fit_to_data(effects: Sequence[Effect], params: Parameters, covariates: Mapping[str, np.ndarray | None]
+                ) -> Parameters:
+    """Reference values, shape starts and shape bounds (the warm-up's tau) from the data."""
+    bounds: dict[str, tuple[float, float, float]] = {}
+    for e in effects:
+        if isinstance(e, AxisEffect):
+            bounds.update(e.data_bounds(covariates))
+    if bounds:
+        params = Parameters(replace(p, lower=bounds[n][0], upper=bounds[n][1], scale=bounds[n][2])
+                            if n in bounds else p for n, p in params.items())
+    values = reference_values(effects, covariates)
+    return params.with_values({n: float(np.clip(v, params[n].lower, params[n].upper)) for n, v in values.items()})
 
 
 def prepare_parameters(effects: Sequence[Effect], params: Parameters,
                        covariates: Mapping[str, np.ndarray | None], n_rows: int,
                        source: str | None = None) -> Parameters:
-    """Check that the data determine the effects, then set their reference parameters."""
+    """Check that the data determine the effects, then set their reference and shape parameters."""
     if not effects:
         return params
     check_effects(effects, covariates, n_rows, len(params.free_names), source)
-    return params.with_values(reference_values(effects, covariates))
+    return fit_to_data(effects, params, covariates)
 
 
 # --- the simulator's side ---------------------------------------------------------------------
 def effects_from_coefficients(spec: Mapping[str, Mapping[str, float]]) -> list[AxisEffect]:
-    """Effects of a simulated sensor: effect name -> {parameter name: value}; axes from the names."""
+    """Effects of a simulated sensor: effect name -> {parameter name: value}; axes from the names.
+
+    Besides the coefficients an effect may give its references (``_tref``, ``_t0``, ``_a2`` ...;
+    default: plain powers about 25 degC or the recording's start) and the warm-up's ``_tau``.
+    """
     out = []
     for name, coeffs in spec.items():
         if name not in EFFECTS:
             raise ImucalError(f"unknown effect {short(name)}", field="sensor.effects",
                               fix=f"choose from {', '.join(EFFECTS)}")
         proto = EFFECTS[name]((0, 1, 2))
-        allowed = set(proto.coefficient_names) | ({proto.tref_name} if proto.uses_tref else set())
+        allowed = set(proto.coefficient_names) | set(proto.reference_names) | set(proto.shape_names)
         coeffs = dict(coeffs or {})
         bad = sorted(set(coeffs) - allowed)
         if bad:
@@ -308,6 +570,10 @@ def effects_from_coefficients(spec: Mapping[str, Mapping[str, float]]) -> list[A
         if not axes:
             raise ImucalError(f"effect {name} has no coefficient", field=f"sensor.effects.{name}",
                               fix=f"give at least one of {', '.join(proto.coefficient_names)}")
+        lo, hi = WARMUP_TAU_BOUNDS
+        for n in proto.shape_names:
+            if n in coeffs and not lo <= coeffs[n] <= hi:
+                raise ImucalError(f"{short(coeffs[n])} s is outside [{lo:g}, {hi:g}] s", field=f"sensor.effects.{name}.{n}")
         out.append(EFFECTS[name](axes))
     return out
 
@@ -317,10 +583,13 @@ def simulate_effects(sensor, m: np.ndarray, t: np.ndarray, temp: np.ndarray | No
     """Noise-free raw readings of ``sensor`` (a SensorSpec) with its effects' forward terms.
 
     ``raw`` is the paper's s + b m (Eq. theModel) without effects; it is recomputed here as
-    raw_i = s_i(T, t) + b_i(T, t) * u_i with u = distort(m) (the sensor's forward model).
+    raw_i = s_i(T, t) + b_i(T, t) * u_i with u = distort(m) (the sensor's forward model; several
+    specific-force terms compose in the model's order, and the model inverts them in reverse).
     """
     effects = effects_from_coefficients(sensor.effects)
-    p = {e.tref_name: REFERENCE_TEMPERATURE for e in effects if e.uses_tref}
+    p: dict[str, float] = {}
+    for e in effects:
+        p.update(e.default_values())
     p.update(sensor.values())
     n = m.shape[0]
     cov: dict[str, np.ndarray] = {"time": np.asarray(t, float)}
@@ -334,6 +603,11 @@ def simulate_effects(sensor, m: np.ndarray, t: np.ndarray, temp: np.ndarray | No
     for e in effects:
         s, b = e.shift_scale(s, b, cov, p)
     u = [m[:, i] for i in range(3)]
-    for e in effects:
+    for e in _model_order(effects):
         u = e.distort(u, p)
     return np.column_stack([s[i] + b[i] * u[i] for i in range(3)])
+
+
+def _model_order(effects: Sequence[AxisEffect]) -> list[AxisEffect]:
+    order = {n: i for i, n in enumerate(EFFECTS)}
+    return sorted(effects, key=lambda e: order[e.name])

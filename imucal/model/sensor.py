@@ -119,7 +119,7 @@ def _build(effects: tuple[Effect, ...], names: tuple[str, ...]) -> dict:
     for e in effects:
         s, b = e.shift_scale(s, b, cd, pd)
     m = [(raw[i] - s[i]) / b[i] for i in range(3)]  # Eq. (theModel)
-    for e in effects:
+    for e in reversed(effects):  # the sensor applies its specific-force terms in order: undo them in reverse
         m = e.correct(m, raw, cd, pd)
     m = ca.vertcat(*m)
     phi, psi, theta = pd["phi"], pd["psi"], pd["theta"]

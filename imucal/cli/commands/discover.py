@@ -20,8 +20,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--plot", metavar="DIR", help="write the figures into DIR")
     p.add_argument("--out", metavar="DIR", help="write the final calibration.yaml and report.txt into DIR")
     p.add_argument("--candidates", nargs="+", metavar="EFFECT",
-                   help="effects to try (default: all of bias_temperature, scale_temperature, bias_drift, "
-                        "scale_drift, scale_nonlinearity)")
+                   help="terms to try (default: the whole grammar: bias_/scale_ x temperature, temperature2, "
+                        "temperature3, drift, drift2, warmup; scale_nonlinearity, scale_nonlinearity3, "
+                        "cross_axis_nonlinearity)")
     p.add_argument("--alpha", type=float, default=1e-3,
                    help="significance level of the noise test and of adding an effect (default 1e-3)")
     p.add_argument("--max-effects", type=int, default=3, help="add at most this many effects (default 3)")
