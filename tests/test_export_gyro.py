@@ -102,8 +102,9 @@ def autopilot_gyro_apply(text: str, raw: np.ndarray, fmt: str) -> np.ndarray:
 
 def stated_gyro(text: str) -> tuple[float, float, float, float]:
     """(rate max, rate RMS, at-rest max, at-rest RMS) [deg/s] as the file states them."""
-    m = re.search(r"\|omega\| = 1 rad/s over all directions is max ([0-9.e+-]+) deg/s, RMS ([0-9.e+-]+) deg/s, "
-                  r"and at rest with \|a\| = g over all directions max ([0-9.e+-]+) deg/s, RMS ([0-9.e+-]+) deg/s", text)
+    num = r"([0-9.e+-]+)"
+    m = re.search(rf"\|omega\| = 1 rad/s over all directions is max {num} deg/s, RMS {num} deg/s, "
+                  rf"and at rest with \|a\| = g over all directions max {num} deg/s, RMS {num} deg/s", text)
     assert m, "the file states the gyroscope residual"
     return tuple(float(x) for x in m.groups())
 
@@ -327,7 +328,8 @@ def _kalibr_ok() -> str:
     return ("model: scale-misalignment\naccelerometers:\n  M: [[400.0, 0.0, 0.0], [1.0, 410.0, 0.0], "
             "[2.0, 3.0, 405.0]]\ngyroscopes:\n  M: [[1.0, 0.0, 0.0], [0.01, 1.0, 0.0], [0.0, 0.02, 1.0]]\n"
             "  A: [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]\n"
-            "  C_gyro_i: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]\nimucal_gyroscope_offset: [0.1, 0.2, 0.3]\n")
+            "  C_gyro_i: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]\n"
+            "imucal_gyroscope_offset: [0.1, 0.2, 0.3]\n")
 
 
 MADLAB_G = {"K_a": np.diag([200.0] * 3).tolist(), "R_a": np.eye(3).tolist(), "b_a": [1.0, 2.0, 3.0],
@@ -339,13 +341,16 @@ MATRIX_G = json.dumps({"format": "imucal-affine", "matrix": np.eye(3).tolist(), 
                                      "acc_matrix": np.zeros((3, 3)).tolist()}})
 
 BAD = [
-    ("kalibr", "imu.yaml", _kalibr_ok().replace("C_gyro_i: [[1.0", "C_gyro_i: [[1.1"), "gyroscopes.C_gyro_i: is not a rotation"),
+    ("kalibr", "imu.yaml", _kalibr_ok().replace("C_gyro_i: [[1.0", "C_gyro_i: [[1.1"),
+     "gyroscopes.C_gyro_i: is not a rotation"),
     ("kalibr", "imu.yaml", _kalibr_ok().replace("[[1.0, 0.0, 0.0], [0.01", "[[1.0, 0.3, 0.0], [0.01"),
      "gyroscopes.M: is not lower triangular"),
-    ("kalibr", "imu.yaml", _kalibr_ok().replace("  A: [[0.0, 0.0, 0.0], ", "  A: [[.nan, 0.0, 0.0], "), "gyroscopes.A: nan"),
+    ("kalibr", "imu.yaml", _kalibr_ok().replace("  A: [[0.0, 0.0, 0.0], ", "  A: [[.nan, 0.0, 0.0], "),
+     "gyroscopes.A: nan"),
     ("kalibr", "imu.yaml", _kalibr_ok().replace("  A: [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]\n", ""),
      "A: missing"),
-    ("kalibr", "imu.yaml", _kalibr_ok().replace("  C_gyro_i:", "  C_gyro: [[1.0]]\n  C_gyro_i:"), "unknown field 'C_gyro'"),
+    ("kalibr", "imu.yaml", _kalibr_ok().replace("  C_gyro_i:", "  C_gyro: [[1.0]]\n  C_gyro_i:"),
+     "unknown field 'C_gyro'"),
     ("kalibr", "imu.yaml", _kalibr_ok().split("gyroscopes:")[0] + "imucal_gyroscope_offset: [0.1, 0.2, 0.3]\n",
      "imucal_gyroscope_offset: is given without a gyroscopes section"),
     ("madlab", "x.json", json.dumps({k: v for k, v in MADLAB_G.items() if k != "K_ga"}), "K_ga: missing"),

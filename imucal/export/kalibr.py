@@ -66,7 +66,8 @@ def still_noise(cal: Calibration, t: np.ndarray, raw: np.ndarray, rate: float,
     sel, what = slice(None), "the whole log"
     if iv.n and int(iv.n_samples.max()) < 0.9 * raw.shape[0]:
         k = int(np.argmax(iv.n_samples))
-        sel, what = slice(iv.start[k], iv.end[k]), f"the longest still interval, {iv.t_start[k]:.1f}..{iv.t_end[k]:.1f} s"
+        sel = slice(iv.start[k], iv.end[k])
+        what = f"the longest still interval, {iv.t_start[k]:.1f}..{iv.t_end[k]:.1f} s"
     A, s = affine(cal)  # the map at the effects' reference point: slow effects do not change the noise
     acc = (raw[sel] - s) @ A.T
     n = acc.shape[0]
@@ -111,9 +112,10 @@ def to_kalibr(cal: Calibration, opts: ExportOptions) -> Exported:
              f"# accelerometers.M = imucal's apply matrix inverted, exactly [{cal.raw_unit} per m/s^2];",
              "# a = M^-1 (measurement - b_a)."]
     if g is not None:
-        lines += ["# gyroscope: measurement = M C_gyro_i omega + A C_gyro_i a + b_g (addGyroscopeErrorTerms), omega and a",
-                  "# in the accelerometer's frame; M lower triangular, C_gyro_i a rotation, A the g-sensitivity",
-                  f"# [{g.unit} per m/s^2]; gyroscopes.M [{g.unit} per rad/s] (Kalibr's rad/s when the raw unit is).",
+        lines += ["# gyroscope: measurement = M C_gyro_i omega + A C_gyro_i a + b_g (addGyroscopeErrorTerms),",
+                  "# omega and a in the accelerometer's frame; M lower triangular, C_gyro_i a rotation,",
+                  f"# A the g-sensitivity [{g.unit} per m/s^2]; gyroscopes.M [{g.unit} per rad/s] (Kalibr's",
+                  "# rad/s when the raw unit is).",
                   "# omega = (M C_gyro_i)^-1 (measurement - b_g - A C_gyro_i a): imucal's gyroscope, exactly.",
                   "# Kalibr writes these intrinsics in its results; it does not read them as a starting point."]
     lines += [f"# NOTE: {x}." for x in notes]
