@@ -182,7 +182,7 @@ def read_kalibr_yaml(path: str | Path) -> AffineCalibration:
     if d["model"] != MODEL:
         raise ImucalError(f"model {short(d['model'])} is not {MODEL!r}", file=p, field="model",
                           fix="only the scale-misalignment intrinsics hold an accelerometer matrix")
-    acc = _keys(d["accelerometers"], ("M",), ("M",), p, "Kalibr's accelerometers section")
+    acc = _keys(d["accelerometers"], ("M",), ("M",), p, "Kalibr's accelerometers section", "accelerometers")
     M = numbers(acc["M"], (3, 3), p, "accelerometers.M")
     if np.any(M[np.triu_indices(3, 1)] != 0):
         raise ImucalError("is not lower triangular (Kalibr's M_accel is)", file=p, field="accelerometers.M")
@@ -205,7 +205,7 @@ def read_kalibr_yaml(path: str | Path) -> AffineCalibration:
 def _kalibr_gyro(d: Mapping, p: str, extra: dict[str, Any]) -> GyroMap:
     """omega = (M C)^-1 (measurement - b_g) - (M C)^-1 A C a (module docstring); b_g is
     imucal_gyroscope_offset when present, else zero (``extra['gyro_offset_held']``)."""
-    gy = _keys(d["gyroscopes"], GYRO_FIELDS, GYRO_FIELDS, p, "Kalibr's gyroscopes section")
+    gy = _keys(d["gyroscopes"], GYRO_FIELDS, GYRO_FIELDS, p, "Kalibr's gyroscopes section", "gyroscopes")
     M = numbers(gy["M"], (3, 3), p, "gyroscopes.M")
     A = numbers(gy["A"], (3, 3), p, "gyroscopes.A")
     R = numbers(gy["C_gyro_i"], (3, 3), p, "gyroscopes.C_gyro_i")

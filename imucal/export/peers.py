@@ -128,9 +128,10 @@ def checked_gyro(C: np.ndarray, o: np.ndarray, D: np.ndarray, path: str, field_:
     return GyroMap(C=C, o=o, D=D)
 
 
-def _keys(d: Any, required: tuple[str, ...], allowed: tuple[str, ...], path: str, what: str) -> Mapping:
+def _keys(d: Any, required: tuple[str, ...], allowed: tuple[str, ...], path: str, what: str,
+          where: str = "format") -> Mapping:
     if not isinstance(d, Mapping):
-        raise ImucalError(f"is not {what} (top level is not a mapping)", file=path, field="format")
+        raise ImucalError(f"is not {what} (not a mapping)", file=path, field=where)
     unknown = [k for k in d if k not in allowed]
     if unknown:
         raise ImucalError(f"unknown field {short(str(unknown[0]))}", file=path, field=str(unknown[0])[:40],
@@ -276,7 +277,7 @@ def read_matrix(path: str | Path) -> AffineCalibration:
         A, c = numbers(d["matrix"], (3, 3), p, "matrix"), numbers(d["offset"], (3,), p, "offset")
         if "gyroscope" in d:
             g = _keys(d["gyroscope"], ("matrix", "offset", "acc_matrix"), MATRIX_GYRO_FIELDS, p,
-                      "the matrix file's gyroscope section")
+                      "the matrix file's gyroscope section", "gyroscope")
             if g.get("output_unit", "rad/s") != "rad/s":
                 raise ImucalError(f"{short(g['output_unit'])} is not rad/s", file=p, field="gyroscope.output_unit")
             gyro = _matrix_gyro(numbers(g["matrix"], (3, 3), p, "gyroscope.matrix"),
