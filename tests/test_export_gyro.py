@@ -321,6 +321,8 @@ def test_cli_kalibr_gyro_noise_is_imucal_noise_on_the_gyro_channel(xsens, xsens_
     r = run_cli(["export", xsens_file, "--format", "kalibr", "--out", tmp_path / "i2.yaml", "--data", real_file(*ACC)])
     assert r.code == 0 and yaml.safe_load((tmp_path / "i2.yaml").read_text())["gyroscope_noise_density"] is None
     assert "no gyroscope data on the still segment" in r.out
+    r = run_cli(["export", xsens_file, "--format", "kalibr", "--out", tmp_path / "i3.yaml", "--gyro-data", "g.mat"])
+    assert r.code == 2 and "--gyro-data: needs the accelerometer's recording" in r.err
 
 
 # --- malicious gyro fields: exit 2, one line ------------------------------------------------------
