@@ -29,3 +29,8 @@ TIME_UNIT_CHOICES = ("auto", *TIME_UNITS)
 
 #: SI unit of the calibrated output.
 SI_ACCEL_UNIT = "m/s^2"
+
+#: SI unit of a calibrated angular rate, and the rate units a raw reading may already be in,
+#: with their factor to rad/s (anything else, counts or LSB, needs the sensor's sensitivity).
+SI_RATE_UNIT = "rad/s"
+RATE_UNITS = {"rad/s": 1.0, "deg/s": math.pi / 180.0}

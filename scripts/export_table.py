@@ -1,12 +1,17 @@
 #!/usr/bin/env python3
 """What each export format holds, and the error it loses, measured on the Xsens recording.
 
-Calibrates configs/xsens-mti-imutk.yaml, exports to every format, reads each file back with
-imucal.export.peers (strict readers), and measures against our calibration:
+Calibrates configs/xsens-mti-imutk.yaml (accelerometer and gyroscope), exports to every format,
+reads each file back with imucal.export.peers (strict readers; imu_tk's gyro file too), and
+measures against our calibration:
   - over all directions at |a| = g (20 000 random unit directions, the peer's output rotated onto
     ours by the least-squares rotation, since a mounting rotation is not calibration):
     max and RMS of |a_ours - a_peer| [m/s^2];
-  - on the recording's still intervals (imucal.analysis.compare): RMS of |a| - g [m/s^2].
+  - on the recording's still intervals (imucal.analysis.compare): RMS of |a| - g [m/s^2];
+  - the gyroscope, in that same rotation (the board turns both sensors alike): max and RMS of
+    |omega_peer - omega_ours| [deg/s] over 20 000 directions at |omega| = 1 rad/s with a = 0, and at
+    rest over 20 000 directions of a at |a| = g; and the RMS over every sample of the Xsens log.
+    ArduPilot and PX4 read rad/s from their driver: raw / k with the sensitivity k the export states.
 The same calibration given effects (bias_temperature, scale_drift) checks that each says what it drops.
 Writes docs/export_formats.md (and prints it).
 
@@ -29,37 +34,66 @@ from imucal.calibration.frozen import Calibration  # noqa: E402
 from imucal.config.run import load_config  # noqa: E402
 from imucal.data.load import load_recording  # noqa: E402
 from imucal.data.static import detect_static  # noqa: E402
+from imucal.export.autopilot import gyro_fit  # noqa: E402
 from imucal.export.formats import FORMATS, ExportOptions, export  # noqa: E402
-from imucal.export.peers import read_peer  # noqa: E402
+from imucal.export.peers import read_imutk_calib, read_peer  # noqa: E402
+from imucal.gyro.run import gyro_on_accel_samples  # noqa: E402
 from imucal.files.output import write_text_atomic  # noqa: E402
 from imucal.model.effects import make_effect  # noqa: E402
-from imucal.pipeline import calibrate  # noqa: E402
+from imucal.pipeline import calibrate_imu  # noqa: E402
 
 CONFIG = ROOT / "configs" / "xsens-mti-imutk.yaml"
 NAMES = {"imutk": "x.calib", "madlab": "x.json", "matrix": "x.json", "kalibr": "imu.yaml",
          "ardupilot": "x.param", "px4": "x.params"}
 #: What each format can hold, from its definition (imucal/export/*.py cites each peer's source).
 HOLDS = {
-    "imutk": ("full matrix (T K) + offset", "no", "no (imu_tk's gyro file is separate)", "no"),
-    "madlab": ("full matrix (R_a^-1 K_a^-1) + offset", "no", "yes, written as identity", "no"),
-    "matrix": ("full matrix + offset", "no", "no", "no"),
+    "imutk": ("full matrix (T K) + offset", "no", "second .calib: T K + offset; no G_s term", "no"),
+    "madlab": ("full matrix (R_a^-1 K_a^-1) + offset", "no", "R_g^-1 K_g^-1, b_g, K_ga (= G_s), output deg/s", "no"),
+    "matrix": ("full matrix + offset", "no", "matrix, offset, acc_matrix (= D)", "no"),
     "kalibr": ("lower-triangular M (= ours, exactly); bias only as imucal's extra key (Kalibr estimates it "
-               "online)", "no", "M, A, C_gyro_i written as identity", "yes (`--data`: Allan deviation)"),
+               "online)", "no", "M, C_gyro_i, A (= G_s), exactly; bias as imucal's extra key",
+               "yes (`--data`: Allan deviation, both sensors)"),
     "ardupilot": ("offset + diagonal scale (no misalignment)", "INS_TCAL1_* exist; not exported",
-                  "no", "no"),
-    "px4": ("offset + diagonal scale (no misalignment)", "TC_A0_* exist; not exported", "no", "no"),
+                  "INS_GYROFFS only (rad/s)", "no"),
+    "px4": ("offset + diagonal scale (no misalignment)", "TC_A0_* exist; not exported",
+            "CAL_GYRO0_*OFF only (rad/s)", "no"),
 }
 
 
-def direction_error(cal, peer, n: int = 20000) -> tuple[float, float]:
-    u = np.random.default_rng(0).normal(size=(n, 3))
-    u /= np.linalg.norm(u, axis=1, keepdims=True)
+def unit_vectors(n: int, seed: int) -> np.ndarray:
+    u = np.random.default_rng(seed).normal(size=(n, 3))
+    return u / np.linalg.norm(u, axis=1, keepdims=True)
+
+
+def direction_error(cal, peer, n: int = 20000) -> tuple[float, float, np.ndarray]:
+    """max, RMS of |a_ours - a_peer R| at |a| = g, and R (rows: a_peer @ R ~ a_ours)."""
+    u = unit_vectors(n, 0)
     A, c = cal.linear_map()
     raw = np.linalg.solve(A, (cal.gravity * u - c).T).T
     ours, theirs = cal.apply(raw), peer.apply(raw)
     U, _, Vt = np.linalg.svd(theirs.T @ ours)
-    e = np.linalg.norm(theirs @ (U @ Vt) - ours, axis=1)
-    return float(e.max()), float(np.sqrt(np.mean(e**2)))
+    R = U @ Vt
+    e = np.linalg.norm(theirs @ R - ours, axis=1)
+    return float(e.max()), float(np.sqrt(np.mean(e**2))), R
+
+
+def gyro_errors(cal, peer, R: np.ndarray, k: float, raw_a: np.ndarray, raw_g: np.ndarray, n: int = 20000
+                ) -> tuple[float, float, float, float, float]:
+    """[deg/s]: max, RMS at |omega| = 1 rad/s (a = 0); max, RMS at rest (|a| = g); RMS on the log."""
+    C, c, D = cal.gyro.rate_map()
+    A, ca = cal.linear_map()
+
+    def err(omega: np.ndarray, a: np.ndarray) -> np.ndarray:
+        rg = np.linalg.solve(C, (omega - c + a @ D.T).T).T  # raw gyro imucal calibrates to omega
+        ra = np.linalg.solve(A, (a - ca).T).T
+        return np.degrees(np.linalg.norm(peer.gyro.apply(rg / k, peer.apply(ra)) @ R - omega, axis=1))
+
+    zero = np.zeros((n, 3))
+    e1, e2 = err(unit_vectors(n, 1), zero), err(zero, cal.gravity * unit_vectors(n, 2))
+    acc, omega = cal.apply_imu(raw_a, raw_g)
+    e3 = np.degrees(np.linalg.norm(peer.gyro.apply(raw_g / k, peer.apply(raw_a)) @ R - omega, axis=1))
+    rms = lambda e: float(np.sqrt(np.mean(e**2)))  # noqa: E731
+    return float(e1.max()), rms(e1), float(e2.max()), rms(e2), rms(e3)
 
 
 def with_effects(cal: Calibration) -> Calibration:
@@ -74,10 +108,13 @@ def with_effects(cal: Calibration) -> Calibration:
 
 def main() -> int:
     cfg = load_config(CONFIG)
-    cal = calibrate(cfg).calibration
+    gyro_file = str(cfg.base_dir / cfg.data.gyro_path)
+    cal = calibrate_imu(cfg, gyro_file=gyro_file).calibration
     rec = load_recording(cfg.data, cfg.base_dir)
+    raw_g = gyro_on_accel_samples(rec, gyro_file)
     iv = detect_static(rec.t, rec.raw, cfg.static, rec.temp, source=rec.source)
     eff = with_effects(cal)
+    fit = gyro_fit(cal)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for fmt in FORMATS:
@@ -85,29 +122,47 @@ def main() -> int:
             out = export(cal, fmt, ExportOptions(filename=name))
             path = Path(tmp) / name
             path.write_text(out.text)
-            peer = read_peer(path, fmt)
-            mx, rms = direction_error(cal, peer)
+            if out.gyro_text is not None:
+                (Path(tmp) / "gyro.calib").write_text(out.gyro_text)
+                peer = read_imutk_calib(path, Path(tmp) / "gyro.calib")
+            else:
+                peer = read_peer(path, fmt)
+            mx, rms, R = direction_error(cal, peer)
+            k = fit.sensitivity if fmt in ("ardupilot", "px4") else 1.0
+            g = gyro_errors(cal, peer, R, k, rec.raw, raw_g)
             cmp = compare(cal, peer, rec, iv, cal.gravity, ("ours", fmt))
             dropped = [n for n in export(eff, fmt, ExportOptions(filename=name)).notes if n.startswith("effects")]
-            rows.append((fmt, *HOLDS[fmt], mx, rms, float(cmp.rms[1]), float(cmp.rms[0]), bool(dropped)))
+            rows.append((fmt, *HOLDS[fmt], mx, rms, float(cmp.rms[1]), float(cmp.rms[0]), g, bool(dropped)))
     lines = ["# Export formats: what each holds, and what it loses for the Xsens MTi", "",
-             "Produced by `python scripts/export_table.py`: the Xsens recording (`configs/xsens-mti-imutk.yaml`) "
-             "calibrated, exported to each format, read back with imucal's strict reader, and applied to raw "
-             f"readings. g = {cal.gravity} m/s^2; {iv.n} still intervals.", "",
+             "Produced by `python scripts/export_table.py`: the Xsens recording (`configs/xsens-mti-imutk.yaml`, "
+             "accelerometer and gyroscope) calibrated, exported to each format, read back with imucal's strict "
+             f"reader, and applied to raw readings. g = {cal.gravity} m/s^2; {iv.n} still intervals.", "",
              "<!-- begin:table -->",
              "| format | map it holds | temperature terms | gyroscope | noise (Kalibr fields) | "
              "lost over all directions: max / RMS [m/s^2] | still intervals: RMS of abs(a) - g [m/s^2] (ours "
              f"{rows[0][8]:.5f}) |",
              "|---|---|---|---|---|---|---|"]
-    for fmt, holds, temp, gyro, noise, mx, rms, crms, _, _ in rows:
+    for fmt, holds, temp, gyro, noise, mx, rms, crms, _, _, _ in rows:
         lines.append(f"| `{fmt}` | {holds} | {temp} | {gyro} | {noise} | {mx:.2g} / {rms:.2g} | {crms:.5f} |")
+    lines += ["", "The gyroscope, in the accelerometer's best-aligned frame [deg/s]:", "",
+              "| format | lost at abs(omega) = 1 rad/s, all directions: max / RMS | lost at rest, abs(a) = g, all "
+              f"directions: max / RMS | on the Xsens log ({rec.n} samples): RMS |",
+              "|---|---|---|---|"]
+    for r in rows:
+        g = r[9]
+        lines.append(f"| `{r[0]}` | {g[0]:.2g} / {g[1]:.2g} | {g[2]:.2g} / {g[3]:.2g} | {g[4]:.2g} |")
     lines += ["", "Every format drops effects (temperature, drift, nonlinearity): the file holds the map at the "
               "effects' reference point and `imucal export` prints what was dropped (checked with the Xsens "
               f"calibration given bias_temperature and scale_drift terms: {sum(r[-1] for r in rows)} of {len(rows)} "
               "formats say so). `imucal codegen` keeps every effect.",
               "ArduPilot and PX4 apply their parameters to the driver's readings in m/s^2; the Xsens calibration's "
-              "input is raw counts, so their numbers reproduce it only on counts (the export says so).",
-              "Kalibr's row uses imucal's offset key; Kalibr itself estimates the bias online.",
+              "input is raw counts, so their numbers reproduce it only on counts (the export says so). Their gyro "
+              f"offsets are in rad/s for a driver sensitivity k = {fit.sensitivity:.6g} counts per rad/s (the single "
+              "value that best fits this calibration; the export states it).",
+              f"The Xsens gyroscope's g-sensitivity (G_s, all three rows selected) is {np.abs(cal.gyro.gsens).max():.2g} "
+              "(rad/s)/(m/s^2) at most: imu_tk, which has no such term, loses it at rest; madlab (K_ga), Kalibr (A) "
+              "and the matrix file (acc_matrix) hold it.",
+              "Kalibr's row uses imucal's offset keys; Kalibr itself estimates the biases online.",
               "<!-- end:table -->", ""]
     text = "\n".join(lines)
     write_text_atomic(ROOT / "docs" / "export_formats.md", text)

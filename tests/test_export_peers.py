@@ -224,7 +224,7 @@ def test_cli_export_prints_the_residual(xsens_file, run_cli, tmp_path):
     mx, rms = stated_residual((tmp_path / "x.param").read_text())
     assert r.code == 0 and f"is max {mx:.3g} m/s^2, RMS {rms:.3g} m/s^2" in r.out
     r = run_cli(["export", xsens_file, "--format", "px4", "--out", tmp_path / "y.params", "--data", "x.csv"])
-    assert r.code == 2 and "--data: --data and --config feed Kalibr's noise fields only" in r.err
+    assert r.code == 2 and "--data: --data, --gyro-data and --config feed Kalibr's noise fields only" in r.err
 
 
 def test_cli_compare(xsens, xsens_file, run_cli, tmp_path):

@@ -15,12 +15,22 @@ CAL_ACC0_ROT), not calibration, so the error is taken in the rotation R that bes
 (orthogonal Procrustes: the polar factor of B): d(u) = (R^T B - I) g u over unit directions u,
   max |d| = g ||R^T B - I||_2,   RMS |d| = g ||R^T B - I||_F / sqrt(3)  (uniform directions).
 Temperature terms (INS_TCAL1_*, TC_A0_*) are not exported: the file and the command say so.
+
+The gyroscope: both subtract an offset from the driver's reading [rad/s] in the sensor frame and
+hold nothing else:
+  ArduPilot  AP_InertialSensor_Backend::_rotate_and_correct_gyro: "gyro -= _imu._gyro_offset(instance)"
+             (after the sensor orientation, before the board rotation); INS_GYROFFS_X/Y/Z
+             (AP_InertialSensor.cpp: @Units: rad/s).
+  PX4        src/lib/sensor_calibration/Gyroscope.hpp, Correct(): _rotation * (data - _thermal_offset
+             - _offset); CAL_GYRO0_XOFF..ZOFF [rad/s].
+The offset written is s_g / k, k the driver's sensitivity (imucal.export.gyro.OffsetFit); scale,
+misalignment and g-sensitivity are lost, measured in the accelerometer's best-aligned frame R.
 """
 from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -30,7 +40,8 @@ from imucal.calibration.frozen import Calibration
 from imucal.constants import SI_ACCEL_UNIT
 from imucal.errors import ImucalError, short
 from imucal.export.formats import ExportOptions, Exported, affine, dropped_effects
-from imucal.export.peers import AffineCalibration, _text_number, checked
+from imucal.export.gyro import OffsetFit, offset_fit
+from imucal.export.peers import AffineCalibration, _text_number, checked, checked_gyro
 from imucal.files.inputs import read_input_text
 
 AXES = ("X", "Y", "Z")
@@ -38,6 +49,8 @@ ARDUPILOT_OFFSETS = tuple(f"INS_ACCOFFS_{a}" for a in AXES)
 ARDUPILOT_SCALES = tuple(f"INS_ACCSCAL_{a}" for a in AXES)
 PX4_OFFSETS = tuple(f"CAL_ACC0_{a}OFF" for a in AXES)
 PX4_SCALES = tuple(f"CAL_ACC0_{a}SCALE" for a in AXES)
+ARDUPILOT_GYRO = tuple(f"INS_GYROFFS_{a}" for a in AXES)
+PX4_GYRO = tuple(f"CAL_GYRO0_{a}OFF" for a in AXES)
 #: QGroundControl's parameter file: MAV_PARAM_TYPE_REAL32 for a float parameter.
 MAV_PARAM_TYPE_REAL32 = 9
 
@@ -51,6 +64,7 @@ class DiagonalFit:
     max_error: float  #: [m/s^2] over all directions at |a| = g
     rms_error: float  #: [m/s^2] over uniformly distributed directions at |a| = g
     angles_deg: tuple[float, float, float]  #: phi, psi, theta [deg], 90 for orthogonal axes
+    rotation: np.ndarray  #: R, the best-aligned frame: a_peer = R a_imucal to first order
 
     def sentence(self, what: str) -> str:
         ang = ", ".join(f"{a:.3f}" for a in self.angles_deg)
@@ -65,15 +79,24 @@ def diagonal_fit(cal: Calibration) -> DiagonalFit:
     b = cal.values[3:6]
     B = np.diag(1.0 / b) @ np.linalg.inv(A)  # a_peer = B a_ours
     U, _, Vt = np.linalg.svd(B)
-    D = (U @ Vt).T @ B - np.eye(3)  # R^T B - I, R the polar factor of B
+    R = U @ Vt  # the polar factor of B
+    D = R.T @ B - np.eye(3)
     g = float(cal.gravity)
     return DiagonalFit(offset=s, scale=1.0 / b, max_error=g * float(np.linalg.norm(D, 2)),
                        rms_error=g * float(np.linalg.norm(D, "fro")) / math.sqrt(3),
-                       angles_deg=tuple(math.degrees(v) for v in cal.values[6:9]))
+                       angles_deg=tuple(math.degrees(v) for v in cal.values[6:9]), rotation=R)
+
+
+def gyro_fit(cal: Calibration) -> OffsetFit | None:
+    """The offset-only gyroscope ArduPilot and PX4 hold, in the accelerometer's best-aligned frame."""
+    return None if cal.gyro is None else offset_fit(cal.gyro, diagonal_fit(cal).rotation, cal.gravity)
 
 
 def _notes(cal: Calibration, fit: DiagonalFit, what: str, units: str) -> tuple[str, ...]:
     notes = [fit.sentence(what)]
+    gfit = gyro_fit(cal)
+    if gfit is not None:
+        notes.append(gfit.sentence(what, cal.gyro.unit))
     if any(n in ("bias_temperature", "scale_temperature") for n, _ in cal.effects):
         notes.append(f"temperature terms ({'INS_TCAL1_*' if what == 'ArduPilot' else 'TC_A0_*'}) are not exported")
     notes += dropped_effects(cal)
@@ -92,16 +115,34 @@ def _header(cal: Calibration, title: str, formula: list[str], notes: tuple[str, 
     return lines
 
 
+def _gyro_header(cal: Calibration, fit: OffsetFit | None, label: str, formula: str) -> list[str]:
+    if fit is None:
+        return []
+    k = "" if fit.exact_unit else " (assumed: your driver's datasheet sensitivity replaces it)"
+    return [f"Gyroscope ({formula}):", f"{label} = s_g / k [rad/s], the driver's sensitivity "
+            f"k = {fit.sensitivity!r} {cal.gyro.unit} per rad/s{k}."]
+
+
+def _values(cal: Calibration, fit: DiagonalFit, acc_names: tuple[str, ...], gyro_names: tuple[str, ...]
+            ) -> list[tuple[str, float]]:
+    out = list(zip(acc_names, [*map(float, fit.offset), *map(float, fit.scale)]))
+    gfit = gyro_fit(cal)
+    if gfit is not None:
+        out += list(zip(gyro_names, map(float, gfit.offset)))
+    return out
+
+
 def to_ardupilot(cal: Calibration, opts: ExportOptions) -> Exported:
     """An ArduPilot parameter file (NAME,VALUE lines, as Mission Planner and MAVProxy load)."""
     fit = diagonal_fit(cal)
     notes = _notes(cal, fit, "ArduPilot", "INS_ACCOFFS and INS_ACCSCAL")
-    lines = _header(cal, "ArduPilot accelerometer calibration", [
+    lines = _header(cal, "ArduPilot accelerometer" + (" and gyroscope" if cal.gyro else "") + " calibration", [
         "ArduPilot corrects each axis in the sensor frame (AP_InertialSensor_Backend.cpp,",
         "_rotate_and_correct_accel): a = (raw - INS_ACCOFFS) * INS_ACCSCAL, then rotates to the body.",
-        f"INS_ACCOFFS = the shifts s_i [{cal.raw_unit}], INS_ACCSCAL = 1/b_i of the paper's model."], notes)
-    lines += [f"{n},{v!r}" for n, v in zip(ARDUPILOT_OFFSETS + ARDUPILOT_SCALES,
-                                            [*map(float, fit.offset), *map(float, fit.scale)])]
+        f"INS_ACCOFFS = the shifts s_i [{cal.raw_unit}], INS_ACCSCAL = 1/b_i of the paper's model.",
+        *_gyro_header(cal, gyro_fit(cal), "INS_GYROFFS", "_rotate_and_correct_gyro: omega = reading - INS_GYROFFS, "
+                      "reading = raw / k")], notes)
+    lines += [f"{n},{v!r}" for n, v in _values(cal, fit, ARDUPILOT_OFFSETS + ARDUPILOT_SCALES, ARDUPILOT_GYRO)]
     return Exported("\n".join(lines) + "\n", notes)
 
 
@@ -109,14 +150,18 @@ def to_px4(cal: Calibration, opts: ExportOptions) -> Exported:
     """A QGroundControl parameter file (vehicle, component, name, value, type; tab separated)."""
     fit = diagonal_fit(cal)
     notes = _notes(cal, fit, "PX4", "CAL_ACC0_*OFF and CAL_ACC0_*SCALE") + (
-        "set CAL_ACC0_ID to your accelerometer's device id (PX4 uses a calibration only for its device)",)
-    lines = _header(cal, "PX4 accelerometer calibration (QGroundControl parameter file)", [
+        "set CAL_ACC0_ID" + (" and CAL_GYRO0_ID" if cal.gyro else "") + " to your sensors' device ids (PX4 uses a "
+        "calibration only for its device)",)
+    lines = _header(cal, "PX4 accelerometer" + (" and gyroscope" if cal.gyro else "")
+                    + " calibration (QGroundControl parameter file)", [
         "PX4 corrects each axis in the sensor frame (src/lib/sensor_calibration/Accelerometer.hpp,",
         "Correct()): a = rotation * ((raw - thermal_offset - CAL_ACC0_*OFF) .* CAL_ACC0_*SCALE).",
-        f"CAL_ACC0_*OFF = the shifts s_i [{cal.raw_unit}], CAL_ACC0_*SCALE = 1/b_i of the paper's model."], notes)
+        f"CAL_ACC0_*OFF = the shifts s_i [{cal.raw_unit}], CAL_ACC0_*SCALE = 1/b_i of the paper's model.",
+        *_gyro_header(cal, gyro_fit(cal), "CAL_GYRO0_*OFF", "Gyroscope.hpp Correct(): omega = rotation * (reading - "
+                      "thermal_offset - CAL_GYRO0_*OFF), reading = raw / k")], notes)
     lines.append("# Vehicle-Id\tComponent-Id\tName\tValue\tType")
-    lines += [f"1\t1\t{n}\t{v!r}\t{MAV_PARAM_TYPE_REAL32}"
-              for n, v in zip(PX4_OFFSETS + PX4_SCALES, [*map(float, fit.offset), *map(float, fit.scale)])]
+    lines += [f"1\t1\t{n}\t{v!r}\t{MAV_PARAM_TYPE_REAL32}" for n, v in _values(cal, fit, PX4_OFFSETS + PX4_SCALES,
+                                                                                 PX4_GYRO)]
     return Exported("\n".join(lines) + "\n", notes)
 
 
@@ -125,7 +170,7 @@ _NAME = re.compile(r"[A-Z][A-Z0-9_]{0,31}\Z")
 
 
 def _params(pairs: list[tuple[int, str, str]], path: str, offsets: tuple[str, ...], scales: tuple[str, ...],
-            fmt: str) -> AffineCalibration:
+            gyro: tuple[str, ...], fmt: str) -> AffineCalibration:
     values: dict[str, float] = {}
     for line, name, tok in pairs:
         where = f"line {line}"
@@ -141,7 +186,16 @@ def _params(pairs: list[tuple[int, str, str]], path: str, offsets: tuple[str, ..
                           fix=f"the file needs {', '.join(offsets + scales)}")
     o = np.array([values[n] for n in offsets])
     k = np.array([values[n] for n in scales])
-    return checked(np.diag(k), o, path, "/".join(scales), fmt)
+    out = checked(np.diag(k), o, path, "/".join(scales), fmt)
+    held = [n for n in gyro if n in values]
+    if not held:
+        return out
+    if len(held) != 3:
+        raise ImucalError("missing", file=path, field=next(n for n in gyro if n not in values),
+                          fix=f"give all of {', '.join(gyro)} or none")
+    # omega = reading - offset, the reading in rad/s: what the file holds of a gyroscope
+    return replace(out, gyro=checked_gyro(np.eye(3), np.array([values[n] for n in gyro]), np.zeros((3, 3)),
+                                          path, gyro[0]))
 
 
 def read_ardupilot_params(path: str | Path) -> AffineCalibration:
@@ -157,7 +211,7 @@ def read_ardupilot_params(path: str | Path) -> AffineCalibration:
             raise ImucalError(f"{short(ln)} is not NAME,VALUE", file=p, field=f"line {i}",
                               fix="one parameter per line: NAME,VALUE")
         pairs.append((i, parts[0], parts[1]))
-    return _params(pairs, p, ARDUPILOT_OFFSETS, ARDUPILOT_SCALES, "ardupilot")
+    return _params(pairs, p, ARDUPILOT_OFFSETS, ARDUPILOT_SCALES, ARDUPILOT_GYRO, "ardupilot")
 
 
 def read_px4_params(path: str | Path) -> AffineCalibration:
@@ -173,4 +227,4 @@ def read_px4_params(path: str | Path) -> AffineCalibration:
             raise ImucalError(f"{short(ln)} is not vehicle, component, name, value, type", file=p,
                               field=f"line {i}", fix="one parameter per line as QGroundControl saves them")
         pairs.append((i, parts[2], parts[3]))
-    return _params(pairs, p, PX4_OFFSETS, PX4_SCALES, "px4")
+    return _params(pairs, p, PX4_OFFSETS, PX4_SCALES, PX4_GYRO, "px4")

@@ -1,18 +1,24 @@
 """Export a calibration to the formats the peers' tools read (issue 14).
 
 The paper's model is an affine map: the Theorem's a = A raw + c (A lower triangular, c = -A s)
-is factored into each peer's convention, exactly where the peer holds a full matrix:
+is factored into each peer's convention, exactly where the peer holds a full matrix; the
+gyroscope's omega = C raw_g + c_g - D a likewise (imucal.export.gyro):
 
   imutk      imu_tk's .calib text: a = T K (raw - b), T unit-diagonal misalignment, K diagonal
              scale, b bias (imu_tk/calibration.h, CalibratedTriad_::load/save layout: T, K, b).
+             The gyroscope goes to a second .calib, as imu_tk writes it (test_imu_calib.cpp:
+             acc and gyro files), omega = T_g K_g (raw_g - b_g); imu_tk has no g-sensitivity.
   madlab     mad-lab-fau/imucal's FerrarisCalibrationInfo JSON, format 2.0:
-             a = R_a^-1 K_a^-1 (raw - b_a), K_a diagonal sensitivities, R_a rows unit vectors.
-             The gyroscope fields hold the identity (imucal's file holds no gyroscope yet).
-  matrix     plain JSON (or CSV by the file's ending) of the matrix and offset: a = matrix raw + offset.
+             a = R_a^-1 K_a^-1 (raw - b_a),  gyr = R_g^-1 K_g^-1 (gyr_raw - K_ga a - b_g)
+             (ferraris_calibration_info.py, _calibrate_acc, _calibrate_gyr, _calibrate_gyr_offsets),
+             gyr in deg/s (FerrarisCalibration.OUT_GYR_UNIT); rows of R_a, R_g unit vectors.
+  matrix     plain JSON (or CSV by the file's ending) of the matrices and offsets: a = matrix raw +
+             offset; omega = matrix raw_g + offset - acc_matrix a.
   kalibr     Kalibr's imu.yaml with scale-misalignment intrinsics (imucal.export.kalibr): M = A^-1
-             exactly; Kalibr's bias is estimated online, not an intrinsic.
+             exactly, the gyroscope's M, A, C_gyro_i exactly; Kalibr's biases are estimated online.
   ardupilot  ArduPilot parameters, px4 PX4 parameters (imucal.export.autopilot): offset and
-             diagonal scale only; the misalignment they cannot hold is measured and stated.
+             diagonal scale of the accelerometer, the gyroscope's offset only; what they cannot
+             hold is measured and stated.
 
 Effects (temperature, drift, nonlinearity) are not affine: every format gets the map at the
 effects' reference point, and the export says what it drops (``Exported.notes``).
@@ -26,18 +32,22 @@ from typing import Callable
 import numpy as np
 
 from imucal.calibration.frozen import Calibration
-from imucal.constants import SI_ACCEL_UNIT
+from imucal.constants import SI_ACCEL_UNIT, SI_RATE_UNIT
 from imucal.errors import ImucalError
+from imucal.export.gyro import MADLAB_GYR_UNIT, forward, gsens_sentence, imutk_factors, madlab_factors
 
 
 @dataclass(frozen=True)
 class KalibrNoise:
-    """Kalibr's accelerometer noise fields, from a still segment (imucal.analysis.noise)."""
+    """Kalibr's noise fields, from a still segment (imucal.analysis.noise); the gyroscope's when
+    the calibration and the data have one."""
 
     accelerometer_noise_density: float  #: [m/s^2/sqrt(Hz)]
     accelerometer_random_walk: float | None  #: [m/s^3/sqrt(Hz)]; None when the curve shows no +1/2 slope
     update_rate: float  #: [Hz]
     segment: str  #: which samples, for the file's comment
+    gyroscope_noise_density: float | None = None  #: [rad/s/sqrt(Hz)]; None without gyro data
+    gyroscope_random_walk: float | None = None  #: [rad/s^2/sqrt(Hz)]; None without gyro data or +1/2 slope
 
 
 @dataclass(frozen=True)
@@ -52,6 +62,8 @@ class Exported:
     text: str
     #: what the format cannot hold, with the error that leaves (printed by `imucal export`)
     notes: tuple[str, ...] = ()
+    #: the gyroscope's own file, for formats that keep it apart (imu_tk)
+    gyro_text: str | None = None
 
 
 def affine(cal: Calibration) -> tuple[np.ndarray, np.ndarray]:
@@ -81,42 +93,74 @@ def _num(x: float) -> str:
     return repr(float(x))
 
 
+def _calib_text(T: np.ndarray, K: np.ndarray, b: np.ndarray) -> str:
+    rows = [" ".join(_num(v) for v in r) for r in T] + [""] + [" ".join(_num(v) for v in r) for r in K]
+    return "\n".join(rows + [""] + [_num(v) for v in b]) + "\n"
+
+
 def to_imutk(cal: Calibration, opts: ExportOptions) -> Exported:
-    """imu_tk's .calib: T (3 lines), blank, K (3 lines), blank, b (3 lines)."""
+    """imu_tk's .calib: T (3 lines), blank, K (3 lines), blank, b (3 lines); the gyroscope's in
+    its own file (``gyro_text``), the same layout."""
     A, s = affine(cal)
     K = np.diag(np.diag(A))  # T has a unit diagonal, so K takes A's diagonal
-    T = A @ np.linalg.inv(K)
-    rows = [" ".join(_num(v) for v in r) for r in T] + [""] + [" ".join(_num(v) for v in r) for r in K]
-    return Exported("\n".join(rows + [""] + [_num(v) for v in s]) + "\n", dropped_effects(cal))
+    notes = dropped_effects(cal)
+    gyro = None
+    if cal.gyro is not None:
+        gyro = _calib_text(*imutk_factors(cal.gyro))
+        if cal.gyro.uses_gsens:
+            notes += (gsens_sentence("imu_tk", cal.gyro, cal.gravity),)
+    return Exported(_calib_text(A @ np.linalg.inv(K), K, s), notes, gyro)
 
 
 def to_madlab(cal: Calibration, opts: ExportOptions) -> Exported:
-    """mad-lab-fau/imucal FerrarisCalibrationInfo JSON (accelerometer; gyroscope identity)."""
+    """mad-lab-fau/imucal FerrarisCalibrationInfo JSON (gyroscope identity when the calibration has none)."""
     A, s = affine(cal)
     Minv = np.linalg.inv(A)  # raw - b = K R a
     k = np.linalg.norm(Minv, axis=1)
-    notes = dropped_effects(cal)
+    notes = eff = dropped_effects(cal)
+    if cal.gyro is None:
+        gyro = {"from_gyr_unit": "a.u.", "K_g": np.eye(3), "R_g": np.eye(3), "K_ga": np.zeros((3, 3)),
+                "b_g": np.zeros(3)}
+        what = "no gyroscope calibration (identity)"
+        notes += ("gyroscope fields are the identity (this calibration has no gyroscope)",)
+    else:
+        K_g, R_g, b_g, K_ga = madlab_factors(cal.gyro)
+        gyro = {"from_gyr_unit": cal.gyro.unit, "K_g": K_g, "R_g": R_g, "K_ga": K_ga, "b_g": b_g}
+        what = f"gyroscope output in {MADLAB_GYR_UNIT}, K_ga [{cal.gyro.unit} per m/s^2]"
     d = {
-        "acc_unit": SI_ACCEL_UNIT, "gyr_unit": "deg/s", "from_acc_unit": cal.raw_unit, "from_gyr_unit": "a.u.",
-        "comment": " ".join(("exported by imucal; no gyroscope calibration (identity)",) + notes),
+        "acc_unit": SI_ACCEL_UNIT, "gyr_unit": MADLAB_GYR_UNIT, "from_acc_unit": cal.raw_unit,
+        "from_gyr_unit": gyro["from_gyr_unit"], "comment": " ".join((f"exported by imucal; {what}",) + eff),
         "K_a": np.diag(k).tolist(), "R_a": (Minv / k[:, None]).tolist(), "b_a": s.tolist(),
-        "K_g": np.eye(3).tolist(), "R_g": np.eye(3).tolist(), "K_ga": np.zeros((3, 3)).tolist(),
-        "b_g": [0.0, 0.0, 0.0], "cal_type": "Ferraris", "_format_version": "2.0",
+        **{key: np.asarray(gyro[key]).tolist() for key in ("K_g", "R_g", "K_ga", "b_g")},
+        "cal_type": "Ferraris", "_format_version": "2.0",
     }
-    return Exported(json.dumps(d, indent=4) + "\n", notes + ("gyroscope fields are the identity",))
+    return Exported(json.dumps(d, indent=4) + "\n", notes)
+
+
+#: The gyroscope's equation in imucal's matrix format.
+MATRIX_GYRO_EQUATION = "omega = matrix @ raw + offset - acc_matrix @ a"
 
 
 def to_matrix(cal: Calibration, opts: ExportOptions) -> Exported:
     A, s = affine(cal)
     c = -A @ s
     notes = dropped_effects(cal)
+    g = None if cal.gyro is None else forward(cal.gyro)
     if opts.filename.lower().endswith(".csv"):
         lines = ["# a = matrix @ raw + offset; columns m1,m2,m3,offset; "
                  f"raw in {cal.raw_unit}, a in {SI_ACCEL_UNIT}"] + [f"# {n}" for n in notes]
         lines += [",".join(_num(v) for v in (*A[i], c[i])) for i in range(3)]
+        if g is not None:
+            lines.append(f"# gyroscope: {MATRIX_GYRO_EQUATION}; columns m1,m2,m3,offset,acc_m1,acc_m2,acc_m3; "
+                         f"raw in {cal.gyro.unit}, omega in {SI_RATE_UNIT}, a in {SI_ACCEL_UNIT}")
+            cg = -g.C @ g.s
+            lines += [",".join(_num(v) for v in (*g.C[i], cg[i], *g.D[i])) for i in range(3)]
         return Exported("\n".join(lines) + "\n", notes)
     d = {"format": "imucal-affine", "equation": "a = matrix @ raw + offset", "input_unit": cal.raw_unit,
          "output_unit": SI_ACCEL_UNIT, "matrix": A.tolist(), "offset": c.tolist()}
+    if g is not None:
+        d["gyroscope"] = {"equation": MATRIX_GYRO_EQUATION, "input_unit": cal.gyro.unit, "output_unit": SI_RATE_UNIT,
+                          "matrix": g.C.tolist(), "offset": (-g.C @ g.s).tolist(), "acc_matrix": g.D.tolist()}
     if notes:
         d["note"] = " ".join(notes)
     return Exported(json.dumps(d, indent=2) + "\n", notes)
@@ -142,12 +186,17 @@ def _px4(cal: Calibration, opts: ExportOptions) -> Exported:
 
 #: Format name -> (writer, what it is).
 FORMATS: dict[str, tuple[Callable[[Calibration, ExportOptions], Exported], str]] = {
-    "imutk": (to_imutk, "imu_tk .calib text (a = T K (raw - b))"),
-    "madlab": (to_madlab, "mad-lab-fau/imucal Ferraris JSON 2.0 (a = R_a^-1 K_a^-1 (raw - b_a))"),
-    "matrix": (to_matrix, "JSON matrix and offset (a = matrix raw + offset); CSV when the file ends in .csv"),
-    "kalibr": (_kalibr, "Kalibr imu.yaml, scale-misalignment intrinsics (raw = M a + bias)"),
-    "ardupilot": (_ardupilot, "ArduPilot parameters INS_ACCOFFS/INS_ACCSCAL (a = (raw - offset) * scale)"),
-    "px4": (_px4, "PX4 parameters CAL_ACC0_*OFF/*SCALE (a = (raw - offset) * scale)"),
+    "imutk": (to_imutk, "imu_tk .calib text (a = T K (raw - b)); the gyroscope in a second .calib"),
+    "madlab": (to_madlab, "mad-lab-fau/imucal Ferraris JSON 2.0 (a = R_a^-1 K_a^-1 (raw - b_a), "
+                          "gyr = R_g^-1 K_g^-1 (raw_g - K_ga a - b_g))"),
+    "matrix": (to_matrix, "JSON matrix and offset (a = matrix raw + offset; omega = matrix raw_g + offset - "
+                          "acc_matrix a); CSV when the file ends in .csv"),
+    "kalibr": (_kalibr, "Kalibr imu.yaml, scale-misalignment intrinsics (raw = M a + bias; "
+                        "raw_g = M C_gyro_i omega + A C_gyro_i a + bias)"),
+    "ardupilot": (_ardupilot, "ArduPilot parameters INS_ACCOFFS/INS_ACCSCAL (a = (raw - offset) * scale), "
+                              "INS_GYROFFS (omega = reading - offset)"),
+    "px4": (_px4, "PX4 parameters CAL_ACC0_*OFF/*SCALE (a = (raw - offset) * scale), CAL_GYRO0_*OFF "
+                  "(omega = reading - offset)"),
 }
 
 

@@ -10,14 +10,26 @@ The Theorem's a = A (raw - s) has A lower triangular too, so M = A^-1 exactly, i
 estimates online under ``accelerometer_random_walk`` (IccImu.initBiasSplines), not an intrinsic:
 imucal's shift s is written beside it as ``imucal_accelerometer_offset`` (Kalibr reads only the
 keys it knows) so the file reads back whole.
-Noise fields (kalibr_common/ConfigReader.py, ImuParameters.getAccelerometerStatistics; Kalibr
-refuses values <= 0): accelerometer_noise_density [m/s^2/sqrt(Hz)] and accelerometer_random_walk
-[m/s^3/sqrt(Hz)] from imucal.analysis.noise on a still segment, else null with how to get them.
+The gyroscope (IccScaledMisalignedImu.addGyroscopeErrorTerms):
+    measurement = M_gyro (C_gyro_b w_b) + Ma (C_gyro_b a_b) + b_g,   C_gyro_b = C_gyro_i C_i_b,
+M_gyro lower triangular (the same MatrixBasicDv pattern), C_gyro_i a rotation (RotationQuaternionDv),
+Ma = ``A`` full [(rad/s)/(m/s^2)] (printDetails), a_b the specific force. Like M_accel, M_gyro is
+the forward map (reading per true rate), the inverse of an apply map. With omega = C_i_b w_b and
+a = C_i_b a_b in the accelerometer's frame (imucal's output frame), imucal's raw - s_g = P omega +
+F a factors exactly: P = M_gyro C_gyro_i, A = F C_gyro_i^T (imucal.export.gyro.kalibr_factors);
+s_g is written as ``imucal_gyroscope_offset`` (Kalibr estimates b_g online too).
+Kalibr writes these intrinsics in its results and starts its own estimate from the identity; it
+does not read them as priors.
+Noise fields (kalibr_common/ConfigReader.py, getAccelerometerStatistics, getGyroStatistics; Kalibr
+refuses values <= 0): accelerometer_noise_density [m/s^2/sqrt(Hz)], accelerometer_random_walk
+[m/s^3/sqrt(Hz)], gyroscope_noise_density [rad/s/sqrt(Hz)], gyroscope_random_walk
+[rad/s^2/sqrt(Hz)] from imucal.analysis.noise on a still segment, else null with how to get them.
 """
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 import yaml
@@ -26,36 +38,53 @@ from imucal import __version__
 from imucal.calibration.frozen import Calibration
 from imucal.errors import ImucalError, short
 from imucal.export.formats import ExportOptions, Exported, KalibrNoise, affine, dropped_effects
-from imucal.export.peers import AffineCalibration, _keys, checked, number, numbers
+from imucal.export.gyro import kalibr_factors
+from imucal.export.peers import AffineCalibration, GyroMap, _keys, checked, checked_gyro, number, numbers
 from imucal.files.yamlio import read_yaml
 
 NOISE_FIELDS = ("accelerometer_noise_density", "accelerometer_random_walk", "gyroscope_noise_density",
                 "gyroscope_random_walk")
 #: The keys of Kalibr's IMU configuration (ConfigReader.ImuParameters, IccSensors.py) and imucal's one.
 KALIBR_FIELDS = NOISE_FIELDS + ("update_rate", "rostopic", "model", "accelerometers", "gyroscopes", "T_i_b",
-                                "time_offset", "imucal_accelerometer_offset")
+                                "time_offset", "imucal_accelerometer_offset", "imucal_gyroscope_offset")
+GYRO_FIELDS = ("M", "A", "C_gyro_i")
+#: How far C_gyro_i may be from a rotation (Kalibr writes it from a unit quaternion).
+ROTATION_TOL = 1e-6
 MODEL = "scale-misalignment"
 
 
-def still_noise(cal: Calibration, t: np.ndarray, raw: np.ndarray, rate: float) -> KalibrNoise:
-    """Kalibr's accelerometer noise fields from the longest still interval (or the whole log when
-    it is all still, as `imucal noise` chooses), calibrated to m/s^2; the worst axis, as Kalibr
-    takes one number per sensor."""
+def still_noise(cal: Calibration, t: np.ndarray, raw: np.ndarray, rate: float,
+                gyro_raw: np.ndarray | None = None) -> KalibrNoise:
+    """Kalibr's noise fields from the longest still interval (or the whole log when it is all
+    still, as `imucal noise` chooses), calibrated to m/s^2 and, with ``gyro_raw`` (the gyroscope on
+    the same samples) and a gyroscope calibration, to rad/s; the worst axis, as Kalibr takes one
+    number per sensor."""
     from imucal.analysis.noise import allan_deviation, estimate
     from imucal.data.static import detect_static
 
     iv = detect_static(t, raw)
-    y, what = raw, "the whole log"
+    sel, what = slice(None), "the whole log"
     if iv.n and int(iv.n_samples.max()) < 0.9 * raw.shape[0]:
         k = int(np.argmax(iv.n_samples))
-        y, what = raw[iv.start[k]:iv.end[k]], f"the longest still interval, {iv.t_start[k]:.1f}..{iv.t_end[k]:.1f} s"
+        sel = slice(iv.start[k], iv.end[k])
+        what = f"the longest still interval, {iv.t_start[k]:.1f}..{iv.t_end[k]:.1f} s"
     A, s = affine(cal)  # the map at the effects' reference point: slow effects do not change the noise
-    curve = allan_deviation((y - s) @ A.T, rate)
-    est = [estimate(curve, j) for j in range(3)]
-    rw = [e.random_walk for e in est]
-    return KalibrNoise(accelerometer_noise_density=max(e.white_density for e in est),
-                       accelerometer_random_walk=max(rw) if all(np.isfinite(rw)) else None,
-                       update_rate=rate, segment=f"{what} ({y.shape[0]} samples)")
+    acc = (raw[sel] - s) @ A.T
+    n = acc.shape[0]
+
+    def worst(y: np.ndarray) -> tuple[float, float | None]:
+        est = [estimate(allan_deviation(y, rate), j) for j in range(3)]
+        rw = [e.random_walk for e in est]
+        return max(e.white_density for e in est), (max(rw) if all(np.isfinite(rw)) else None)
+
+    acc_white, acc_rw = worst(acc)
+    gyro_white = gyro_rw = None
+    if gyro_raw is not None and cal.gyro is not None:
+        gyro_white, gyro_rw = worst(cal.gyro.apply(gyro_raw[sel], acc))
+        what += ", gyroscope on the same samples"
+    return KalibrNoise(accelerometer_noise_density=acc_white, accelerometer_random_walk=acc_rw,
+                       update_rate=rate, segment=f"{what} ({n} samples)",
+                       gyroscope_noise_density=gyro_white, gyroscope_random_walk=gyro_rw)
 
 
 def _flow(x: Any) -> str:
@@ -68,10 +97,12 @@ def to_kalibr(cal: Calibration, opts: ExportOptions) -> Exported:
     M = np.linalg.inv(A)  # lower triangular, as Kalibr's M_accel
     M[np.triu_indices(3, 1)] = 0.0  # structural zeros (the inverse of a triangular matrix), not round-off
     n = opts.noise
+    g = cal.gyro
     notes = list(dropped_effects(cal))
-    notes.append("Kalibr estimates the accelerometer bias online; imucal's shift is written as "
-                 "imucal_accelerometer_offset, which Kalibr does not read")
-    notes.append("gyroscopes: identity (imucal's calibration file holds no gyroscope)")
+    notes.append("Kalibr estimates the biases online; imucal's shifts are written as imucal_accelerometer_offset"
+                 + ("" if g is None else " and imucal_gyroscope_offset") + ", which Kalibr does not read")
+    if g is None:
+        notes.append("gyroscopes: identity (this calibration has no gyroscope)")
     how = ("run `imucal noise --data STILL_LOG --calibration CAL` (or `imucal export ... --data LOG`) and copy "
            "its kalibr fields; Kalibr refuses null")
     lines = [f"# Kalibr IMU configuration, exported by imucal {__version__} "
@@ -79,30 +110,51 @@ def to_kalibr(cal: Calibration, opts: ExportOptions) -> Exported:
              "# Kalibr's scale-misalignment model (kalibr_imu_camera_calibration/IccSensors.py,",
              "# IccScaledMisalignedImu): measurement = M (C_i_b f) + b_a, M lower triangular.",
              f"# accelerometers.M = imucal's apply matrix inverted, exactly [{cal.raw_unit} per m/s^2];",
-             "# a = M^-1 (measurement - b_a).", *[f"# NOTE: {x}." for x in notes]]
+             "# a = M^-1 (measurement - b_a)."]
+    if g is not None:
+        lines += ["# gyroscope: measurement = M C_gyro_i omega + A C_gyro_i a + b_g (addGyroscopeErrorTerms),",
+                  "# omega and a in the accelerometer's frame; M lower triangular, C_gyro_i a rotation,",
+                  f"# A the g-sensitivity [{g.unit} per m/s^2]; gyroscopes.M [{g.unit} per rad/s] (Kalibr's",
+                  "# rad/s when the raw unit is).",
+                  "# omega = (M C_gyro_i)^-1 (measurement - b_g - A C_gyro_i a): imucal's gyroscope, exactly.",
+                  "# Kalibr writes these intrinsics in its results; it does not read them as a starting point."]
+    lines += [f"# NOTE: {x}." for x in notes]
+    noise: dict[str, Any] = {k: None for k in NOISE_FIELDS}
     if n is None:
         lines.append(f"# Noise: no still segment was given: {how}.")
-        noise = {k: None for k in NOISE_FIELDS}
     else:
         lines.append(f"# Noise: imucal noise (overlapping Allan deviation, worst axis) on {n.segment}.")
-        noise = {"accelerometer_noise_density": n.accelerometer_noise_density,
-                 "accelerometer_random_walk": n.accelerometer_random_walk,
-                 "gyroscope_noise_density": None, "gyroscope_random_walk": None}
-        if n.accelerometer_random_walk is None:
-            lines.append("# accelerometer_random_walk: the curve shows no +1/2 slope (record a longer still log).")
-            notes.append("accelerometer_random_walk is null: the still segment shows no random walk (record a "
-                         "longer still log and run `imucal noise`); Kalibr refuses null")
-        lines.append("# gyroscope noise: not estimated by this export (imucal's calibration holds no gyroscope).")
+        noise.update(accelerometer_noise_density=n.accelerometer_noise_density,
+                     accelerometer_random_walk=n.accelerometer_random_walk,
+                     gyroscope_noise_density=n.gyroscope_noise_density,
+                     gyroscope_random_walk=n.gyroscope_random_walk)
+        for sensor, white, rw in (("accelerometer", n.accelerometer_noise_density, n.accelerometer_random_walk),
+                                  ("gyroscope", n.gyroscope_noise_density, n.gyroscope_random_walk)):
+            if white is None:
+                why = ("this calibration has no gyroscope" if g is None else
+                       "no gyroscope data on the still segment (give --gyro-data, or gx, gy, gz in --data)")
+                lines.append(f"# {sensor} noise: not estimated: {why}.")
+                notes.append(f"{sensor}_noise_density and {sensor}_random_walk are null: {why}; Kalibr refuses null")
+            elif rw is None:
+                lines.append(f"# {sensor}_random_walk: the curve shows no +1/2 slope (record a longer still log).")
+                notes.append(f"{sensor}_random_walk is null: the still segment shows no random walk (record a "
+                             "longer still log and run `imucal noise`); Kalibr refuses null")
     for k in NOISE_FIELDS:
         lines.append(f"{k}: {_flow(noise[k])}")
     lines.append(f"rostopic: {_flow(opts.rostopic)}")
     rate = None if n is None else n.update_rate
     lines.append(f"update_rate: {_flow(rate)}" + ("  # Hz: give --data LOG, or write your IMU's rate" if rate is None
                                                   else "  # Hz"))
+    if g is None:
+        Mg, Cg, Ag = np.eye(3), np.eye(3), np.zeros((3, 3))
+    else:
+        Mg, Cg, Ag = kalibr_factors(g)
     lines += [f"model: {MODEL}", "accelerometers:", f"  M: {_flow(M.tolist())}", "gyroscopes:",
-              f"  M: {_flow(np.eye(3).tolist())}", f"  A: {_flow(np.zeros((3, 3)).tolist())}",
-              f"  C_gyro_i: {_flow(np.eye(3).tolist())}",
+              f"  M: {_flow(Mg.tolist())}", f"  A: {_flow(Ag.tolist())}", f"  C_gyro_i: {_flow(Cg.tolist())}",
               f"imucal_accelerometer_offset: {_flow(s.tolist())}  # b_a = s [{cal.raw_unit}], not a Kalibr key"]
+    if g is not None:
+        lines.append(f"imucal_gyroscope_offset: {_flow(np.asarray(g.bias, float).tolist())}  # b_g = s_g [{g.unit}], "
+                     "not a Kalibr key")
     if n is None:
         notes.append(f"noise fields are null: {how}")
     return Exported("\n".join(lines) + "\n", tuple(notes))
@@ -130,7 +182,7 @@ def read_kalibr_yaml(path: str | Path) -> AffineCalibration:
     if d["model"] != MODEL:
         raise ImucalError(f"model {short(d['model'])} is not {MODEL!r}", file=p, field="model",
                           fix="only the scale-misalignment intrinsics hold an accelerometer matrix")
-    acc = _keys(d["accelerometers"], ("M",), ("M",), p, "Kalibr's accelerometers section")
+    acc = _keys(d["accelerometers"], ("M",), ("M",), p, "Kalibr's accelerometers section", "accelerometers")
     M = numbers(acc["M"], (3, 3), p, "accelerometers.M")
     if np.any(M[np.triu_indices(3, 1)] != 0):
         raise ImucalError("is not lower triangular (Kalibr's M_accel is)", file=p, field="accelerometers.M")
@@ -143,4 +195,29 @@ def read_kalibr_yaml(path: str | Path) -> AffineCalibration:
         raise ImucalError(f"{short(topic)} is not a topic name", file=p, field="rostopic")
     extra.update(rostopic=topic, offset_held=held)
     checked(M, o, p, "accelerometers.M", "kalibr")
-    return checked(np.linalg.inv(M), o, p, "accelerometers.M", "kalibr", extra)
+    if "gyroscopes" not in d and "imucal_gyroscope_offset" in d:
+        raise ImucalError("is given without a gyroscopes section", file=p, field="imucal_gyroscope_offset",
+                          fix="add gyroscopes: {M, A, C_gyro_i} or drop the offset")
+    gyro = _kalibr_gyro(d, p, extra) if "gyroscopes" in d else None
+    return replace(checked(np.linalg.inv(M), o, p, "accelerometers.M", "kalibr", extra), gyro=gyro)
+
+
+def _kalibr_gyro(d: Mapping, p: str, extra: dict[str, Any]) -> GyroMap:
+    """omega = (M C)^-1 (measurement - b_g) - (M C)^-1 A C a (module docstring); b_g is
+    imucal_gyroscope_offset when present, else zero (``extra['gyro_offset_held']``)."""
+    gy = _keys(d["gyroscopes"], GYRO_FIELDS, GYRO_FIELDS, p, "Kalibr's gyroscopes section", "gyroscopes")
+    M = numbers(gy["M"], (3, 3), p, "gyroscopes.M")
+    A = numbers(gy["A"], (3, 3), p, "gyroscopes.A")
+    R = numbers(gy["C_gyro_i"], (3, 3), p, "gyroscopes.C_gyro_i")
+    if np.any(M[np.triu_indices(3, 1)] != 0):
+        raise ImucalError("is not lower triangular (Kalibr's M_gyro is)", file=p, field="gyroscopes.M")
+    dev = float(np.abs(R @ R.T - np.eye(3)).max())
+    if not (dev <= ROTATION_TOL and np.linalg.det(R) > 0):
+        raise ImucalError(f"is not a rotation (|C C^T - I| = {dev:.3g}, det {np.linalg.det(R):.3g})", file=p,
+                          field="gyroscopes.C_gyro_i", fix="Kalibr writes a rotation matrix here")
+    held = "imucal_gyroscope_offset" in d
+    b = numbers(d["imucal_gyroscope_offset"], (3,), p, "imucal_gyroscope_offset") if held else np.zeros(3)
+    extra["gyro_offset_held"] = held
+    checked(M, b, p, "gyroscopes.M", "kalibr")
+    C = np.linalg.inv(M @ R)
+    return checked_gyro(C, b, C @ A @ R, p, "gyroscopes.M")

@@ -1,4 +1,5 @@
-"""Other tools' calibration files read back, strictly, as one affine map a = M (raw - o).
+"""Other tools' calibration files read back, strictly, as one affine map a = M (raw - o), and the
+gyroscope part where the file holds one, omega = C (raw_g - o_g) - D a [rad/s] (GyroMap).
 
 Every peer model here is affine, a = M (raw - o). Inverting, raw - o = M^-1 a, and row i of
 M^-1 is b_i e_i^T (Eq. theModel with Lemma 1: raw_i = s_i + b_i e_i . a). Hence
@@ -16,7 +17,7 @@ import io
 import json
 import math
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
@@ -33,6 +34,24 @@ MAX_CONDITION = 1e12
 
 
 @dataclass(frozen=True)
+class GyroMap:
+    """omega = C (raw - o) - D a [rad/s], a [m/s^2] the same file's calibrated acceleration."""
+
+    C: np.ndarray  #: [rad/s per raw]
+    o: np.ndarray  #: [raw]
+    D: np.ndarray  #: [(rad/s) per (m/s^2)]; zero where the format has no g-sensitivity
+
+    def apply(self, raw: np.ndarray, acc: np.ndarray | None = None) -> np.ndarray:
+        w = (np.asarray(raw, float) - self.o) @ self.C.T
+        if np.any(self.D != 0):
+            if acc is None:
+                raise ImucalError("this gyroscope calibration has a g-sensitivity", field="acc",
+                                  fix="pass the calibrated acceleration of the same samples")
+            w = w - np.asarray(acc, float) @ self.D.T
+        return w
+
+
+@dataclass(frozen=True)
 class AffineCalibration:
     """a = M (raw - o): a peer's calibration, with the nine parameters it implies."""
 
@@ -42,6 +61,7 @@ class AffineCalibration:
     fmt: str = ""
     #: what the file holds beside the map (noise densities, rate, topic, temperature terms)
     extra: Mapping[str, Any] = field(default_factory=dict)
+    gyro: GyroMap | None = None  #: the gyroscope part, when the file holds one
 
     def apply(self, raw: np.ndarray) -> np.ndarray:
         return (np.asarray(raw, float) - self.o) @ self.M.T
@@ -102,9 +122,16 @@ def checked(M: np.ndarray, o: np.ndarray, path: str, field_: str, fmt: str,
     return AffineCalibration(M=M, o=o, source=path, fmt=fmt, extra=dict(extra or {}))
 
 
-def _keys(d: Any, required: tuple[str, ...], allowed: tuple[str, ...], path: str, what: str) -> Mapping:
+def checked_gyro(C: np.ndarray, o: np.ndarray, D: np.ndarray, path: str, field_: str) -> GyroMap:
+    """A gyroscope map, refused when its matrix is singular or ill-conditioned."""
+    checked(C, o, path, field_, "")
+    return GyroMap(C=C, o=o, D=D)
+
+
+def _keys(d: Any, required: tuple[str, ...], allowed: tuple[str, ...], path: str, what: str,
+          where: str = "format") -> Mapping:
     if not isinstance(d, Mapping):
-        raise ImucalError(f"is not {what} (top level is not a mapping)", file=path, field="format")
+        raise ImucalError(f"is not {what} (not a mapping)", file=path, field=where)
     unknown = [k for k in d if k not in allowed]
     if unknown:
         raise ImucalError(f"unknown field {short(str(unknown[0]))}", file=path, field=str(unknown[0])[:40],
@@ -136,15 +163,26 @@ def _json(path: str, field_: str) -> Any:
 
 
 # --- readers --------------------------------------------------------------------------------
-def read_imutk_calib(path: str | Path) -> AffineCalibration:
-    """imu_tk's .calib text: T (3x3), blank, K (3x3), blank, b (3 lines); a = T K (raw - b)."""
-    p = str(path)
-    nums = [_text_number(x, p, "calib") for x in read_input_text(path, field="imu_tk calib").split()]
+def _imutk_triad(path: str) -> tuple[np.ndarray, np.ndarray]:
+    """T K and b of one imu_tk .calib text: T (3x3), blank, K (3x3), blank, b (3 lines)."""
+    nums = [_text_number(x, path, "calib") for x in read_input_text(path, field="imu_tk calib").split()]
     if len(nums) != 21:
-        raise ImucalError(f"expected 21 numbers (T, K, b), found {len(nums)}", file=p, field="calib")
+        raise ImucalError(f"expected 21 numbers (T, K, b), found {len(nums)}", file=path, field="calib")
     T = np.array(nums[:9]).reshape(3, 3)
     K = np.array(nums[9:18]).reshape(3, 3)
-    return checked(T @ K, np.array(nums[18:]), p, "calib", "imutk")
+    return T @ K, np.array(nums[18:])
+
+
+def read_imutk_calib(path: str | Path, gyro_path: str | Path | None = None) -> AffineCalibration:
+    """imu_tk's .calib text: a = T K (raw - b); with ``gyro_path``, its gyroscope .calib (imu_tk
+    keeps it in a second file): omega = T_g K_g (raw_g - b_g), no g-sensitivity."""
+    p = str(path)
+    TK, b = _imutk_triad(p)
+    out = checked(TK, b, p, "calib", "imutk")
+    if gyro_path is None:
+        return out
+    C, o = _imutk_triad(str(gyro_path))
+    return replace(out, gyro=checked_gyro(C, o, np.zeros((3, 3)), str(gyro_path), "calib"))
 
 
 def read_tomisuarez_params(path: str | Path) -> AffineCalibration:
@@ -168,41 +206,85 @@ MADLAB_FIELDS = ("acc_unit", "gyr_unit", "from_acc_unit", "from_gyr_unit", "comm
                  "K_g", "R_g", "K_ga", "b_g", "cal_type", "_format_version")
 
 
+#: The gyroscope's fields of a mad-lab-fau/imucal Ferraris file, and the output units imucal converts.
+MADLAB_GYRO = ("K_g", "R_g", "b_g", "K_ga")
+MADLAB_RATE_UNITS = {"deg/s": math.pi / 180.0, "rad/s": 1.0}
+
+
 def read_madlab_calibration(path: str | Path) -> AffineCalibration:
-    """mad-lab-fau/imucal calibration JSON (accelerometer part): a = R_a^-1 K_a^-1 (raw - b_a)."""
+    """mad-lab-fau/imucal calibration JSON: a = R_a^-1 K_a^-1 (raw - b_a) and, when the file has
+    them, gyr = R_g^-1 K_g^-1 (gyr_raw - K_ga a - b_g) in ``gyr_unit`` (ferraris_calibration_info.py)."""
     p = str(path)
     d = _keys(_json(p, "calibration"), ("K_a", "R_a", "b_a", "cal_type"), MADLAB_FIELDS, p,
               "a mad-lab-fau/imucal calibration")
-    if d["cal_type"] not in ("Ferraris", "TurnTable"):
-        raise ImucalError(f"cal_type {short(d['cal_type'])} is not Ferraris or TurnTable", file=p, field="cal_type")
+    if d["cal_type"] not in ("Ferraris", "Turntable"):  # FerrarisCalibrationInfo / TurntableCalibrationInfo.CAL_TYPE
+        raise ImucalError(f"cal_type {short(d['cal_type'])} is not Ferraris or Turntable", file=p, field="cal_type")
     K, R = numbers(d["K_a"], (3, 3), p, "K_a"), numbers(d["R_a"], (3, 3), p, "R_a")
     b = numbers(d["b_a"], (3,), p, "b_a")
     for name, m in (("K_a", K), ("R_a", R)):
         checked(m, b, p, name, "madlab")
-    return checked(np.linalg.inv(R) @ np.linalg.inv(K), b, p, "K_a/R_a", "madlab")
+    out = checked(np.linalg.inv(R) @ np.linalg.inv(K), b, p, "K_a/R_a", "madlab")
+    held = [k for k in MADLAB_GYRO if k in d]
+    if not held:
+        return out
+    if len(held) != len(MADLAB_GYRO):
+        raise ImucalError("missing", file=p, field=next(k for k in MADLAB_GYRO if k not in d),
+                          fix=f"a gyroscope part needs {', '.join(MADLAB_GYRO)}")
+    unit = d.get("gyr_unit", "deg/s")  # FerrarisCalibrationInfo's default
+    if unit not in MADLAB_RATE_UNITS:
+        raise ImucalError(f"gyr_unit {short(unit)} is not one of {', '.join(MADLAB_RATE_UNITS)}", file=p,
+                          field="gyr_unit", fix="the calibrated rate's unit: deg/s (Ferraris) or rad/s")
+    Kg, Rg = numbers(d["K_g"], (3, 3), p, "K_g"), numbers(d["R_g"], (3, 3), p, "R_g")
+    bg, Kga = numbers(d["b_g"], (3,), p, "b_g"), numbers(d["K_ga"], (3, 3), p, "K_ga")
+    for name, m in (("K_g", Kg), ("R_g", Rg)):
+        checked(m, bg, p, name, "madlab")
+    C = MADLAB_RATE_UNITS[unit] * np.linalg.inv(Rg) @ np.linalg.inv(Kg)  # to rad/s
+    return replace(out, gyro=checked_gyro(C, bg, C @ Kga, p, "K_g/R_g"))
 
 
-MATRIX_FIELDS = ("format", "equation", "input_unit", "output_unit", "matrix", "offset", "note")
+MATRIX_FIELDS = ("format", "equation", "input_unit", "output_unit", "matrix", "offset", "note", "gyroscope")
+MATRIX_GYRO_FIELDS = ("equation", "input_unit", "output_unit", "matrix", "offset", "acc_matrix")
+
+
+def _matrix_gyro(C: np.ndarray, c: np.ndarray, D: np.ndarray, p: str, field_: str) -> GyroMap:
+    checked(C, c, p, field_, "matrix")
+    return checked_gyro(C, -np.linalg.solve(C, c), D, p, field_)  # omega = C raw + c - D a
 
 
 def read_matrix(path: str | Path) -> AffineCalibration:
-    """imucal's plain matrix: JSON {matrix, offset} or CSV rows m1,m2,m3,offset; a = matrix raw + offset."""
+    """imucal's plain matrix: JSON {matrix, offset[, gyroscope]} or CSV rows m1,m2,m3,offset (then,
+    for the gyroscope, m1,m2,m3,offset,acc_m1,acc_m2,acc_m3); a = matrix raw + offset,
+    omega = matrix raw_g + offset - acc_matrix a."""
     p = str(path)
+    gyro = None
     if p.lower().endswith(".csv"):
         rows = [ln for ln in read_input_text(p, field="matrix").splitlines()
                 if ln.strip() and not ln.lstrip().startswith("#")]
-        if len(rows) != 3 or any(len(r.split(",")) != 4 for r in rows):
-            raise ImucalError(f"expected 3 rows of 4 numbers (m1,m2,m3,offset), found {len(rows)} row(s)",
-                              file=p, field="matrix")
-        v = np.array([[_text_number(x, p, "matrix") for x in r.split(",")] for r in rows])
-        A, c = v[:, :3], v[:, 3]
+        widths = [len(r.split(",")) for r in rows]
+        if widths not in ([4] * 3, [4] * 3 + [7] * 3):
+            raise ImucalError(f"expected 3 rows of 4 numbers (m1,m2,m3,offset), then optionally 3 rows of 7 "
+                              f"(the gyroscope), found rows of {short(widths)} numbers", file=p, field="matrix")
+        v = [[_text_number(x, p, "matrix") for x in r.split(",")] for r in rows]
+        a = np.array(v[:3])
+        A, c = a[:, :3], a[:, 3]
+        if len(v) == 6:
+            g = np.array(v[3:])
+            gyro = _matrix_gyro(g[:, :3], g[:, 3], g[:, 4:], p, "matrix")
     else:
         d = _keys(_json(p, "matrix"), ("format", "matrix", "offset"), MATRIX_FIELDS, p, "an imucal matrix file")
         if d["format"] != "imucal-affine":
             raise ImucalError(f"format {short(d['format'])} is not 'imucal-affine'", file=p, field="format")
         A, c = numbers(d["matrix"], (3, 3), p, "matrix"), numbers(d["offset"], (3,), p, "offset")
+        if "gyroscope" in d:
+            g = _keys(d["gyroscope"], ("matrix", "offset", "acc_matrix"), MATRIX_GYRO_FIELDS, p,
+                      "the matrix file's gyroscope section", "gyroscope")
+            if g.get("output_unit", "rad/s") != "rad/s":
+                raise ImucalError(f"{short(g['output_unit'])} is not rad/s", file=p, field="gyroscope.output_unit")
+            gyro = _matrix_gyro(numbers(g["matrix"], (3, 3), p, "gyroscope.matrix"),
+                                numbers(g["offset"], (3,), p, "gyroscope.offset"),
+                                numbers(g["acc_matrix"], (3, 3), p, "gyroscope.acc_matrix"), p, "gyroscope.matrix")
     checked(A, c, p, "matrix", "matrix")
-    return checked(A, -np.linalg.solve(A, c), p, "matrix", "matrix")  # a = A (raw - o), o = -A^-1 c
+    return replace(checked(A, -np.linalg.solve(A, c), p, "matrix", "matrix"), gyro=gyro)  # a = A (raw - o)
 
 
 def read_kalibr(path: str | Path) -> AffineCalibration:
