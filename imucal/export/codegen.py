@@ -38,6 +38,7 @@ import casadi as ca
 import numpy as np
 
 from imucal import __version__
+from imucal.calibration.fields import UNIT_PATTERN
 from imucal.calibration.frozen import OUTPUT_FRAME, Calibration, check_text_fields
 from imucal.calibration.gyro import OUTPUT_UNIT as GYRO_UNIT, GyroCalibration
 from imucal.constants import SI_ACCEL_UNIT
@@ -454,6 +455,10 @@ def generate_c(cal: Calibration, prefix: str = DEFAULT_PREFIX, precision: str = 
     check_prefix(prefix)
     check_precision(precision)
     check_text_fields(cal, str(source) if source is not None else "<calibration>")
+    if cal.gyro is not None and (not isinstance(cal.gyro.unit, str) or not UNIT_PATTERN.match(cal.gyro.unit)
+                                 or "//" in cal.gyro.unit):  # as the loader and check_text_fields do
+        raise ImucalError(f"{short(cal.gyro.unit)} is not a unit", field="gyroscope.units.input",
+                          fix="write e.g. rad/s, deg/s or counts")
     real = precision
     effects = tuple(n for n, _ in cal.effects)
     model = _model(cal) if effects else None
@@ -648,8 +653,9 @@ def _header(c: _Context, k_apply: Kernel | None, k_cov: Kernel | None, k_gyro: K
             f"void {p}_apply_cov(const {real} raw[3], const {real} cov[{P}_N_COV], {real} acc[3]);", "",
             f"/* {p}_apply_cov over n samples: raw as x y z x y z ..., cov as n rows of {P}_N_COV. */",
             f"void {p}_apply_cov_batch(const {real} *raw, const {real} *cov, {real} *acc, size_t n);", ""]
-    out += [f"#define {P}_HAS_GYRO {int(k_gyro is not None)} /* 1: {p}_apply_gyro and {p}_apply_imu"
-            f"{'_cov' if c.covariates else ''} exist */", ""]
+    out += [f"#define {P}_HAS_GYRO 1 /* a gyroscope part: {p}_apply_gyro, {p}_apply_imu"
+            f"{'_cov' if c.covariates else ''} below */" if k_gyro is not None else
+            f"#define {P}_HAS_GYRO 0 /* accelerometer only: no gyroscope functions */", ""]
     out += [f"/* Index of each known covariate in cov, or -1 when this calibration does not use it. */",
             *(f"#define {P}_COV_{n.upper()} {c.covariates.index(n) if n in c.covariates else -1}"
               f" /* {n} [{u}] */" for n, u in COVARIATE_UNITS.items()), ""]
