@@ -16,6 +16,8 @@ from __future__ import annotations
 import ctypes
 import dataclasses
 import re
+import shutil
+import subprocess
 
 import casadi as ca
 import numpy as np
@@ -28,7 +30,7 @@ from imucal.cli.main import main
 from imucal.errors import ImucalError
 from imucal.export.codegen import (apply_gyro_function, float_error_bound, generate_c,
                                    gyro_float_error_bound, write_c)
-from test_codegen import GCC, compile_shared, python_error_bound
+from test_codegen import EMBEDDED, EXAMPLE, GCC, SANITIZE, STRICT, compile_shared, python_error_bound
 
 pytestmark = pytest.mark.skipif(GCC is None, reason="gcc not found: cannot compile generated C")
 
@@ -396,3 +398,88 @@ def test_gyro_unit_payload_in_file_is_refused_in_one_line(synthetic, tmp_path, c
     assert not (tmp_path / "gen").exists()
     with pytest.raises(ImucalError):
         load_calibration(bad)
+
+
+# --- the example program ----------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def example(xsens, tmp_path_factory):
+    """examples/codegen/example.c against the Xsens files, under ASan and UBSan."""
+    cal, path, _, _ = xsens
+    d = tmp_path_factory.mktemp("gyro_example")
+    write_c(cal, d, precision="float", source=path)
+    exe = d / "imucal_example_asan"
+    subprocess.run([GCC, *STRICT, *EMBEDDED, *SANITIZE, f"-I{d}", "-o", str(exe), str(EXAMPLE / "example.c"),
+                    str(d / "imucal.c"), "-lm"], check=True, capture_output=True, text=True)
+    return exe
+
+
+def _csv(header: str, rows: np.ndarray) -> str:
+    return header + "\n" + "\n".join(",".join(f"{x:.9g}" for x in r) for r in rows) + "\n"
+
+
+def test_example_reads_gx_gy_gz_and_matches_the_library_and_python(xsens, xsens_libs, example):
+    cal, _, raw_a, raw_g = xsens
+    t = np.loadtxt(real_file("xsens-mti-imutk", "xsens_acc.mat"))[:, :1]
+    res = subprocess.run([str(example)], input=_csv("t,ax,ay,az,gx,gy,gz", np.hstack([t, raw_a, raw_g])),
+                         capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    lines = res.stdout.splitlines()
+    assert lines[0] == "t,ax,ay,az,gx,gy,gz" and len(lines) == raw_a.shape[0] + 1
+    out = np.loadtxt(lines[1:], delimiter=",")
+    acc, omega = xsens_libs["float"].imu_batch(raw_a, raw_g)
+    assert np.array_equal(out[:, 1:4].astype(np.float32), acc)  # 9 digits: float round-trips
+    assert np.array_equal(out[:, 4:].astype(np.float32), omega)
+    acc_ref, omega_ref = cal.apply_imu(raw_a, raw_g)
+    assert np.all(np.abs(out[:, 4:] - omega_ref) <= imu_bound(cal, raw_a, raw_g, acc_ref, "float"))
+    # other names and order (imucal's loader names): gyro_z, wy ...; run-time accelerometer parameters
+    rows = np.hstack([raw_g[:500, 2:3], raw_a[:500], raw_g[:500, 1:2], raw_g[:500, :1]])
+    params = [repr(float(v)) for v in cal.values[:9]]
+    res = subprocess.run([str(example), *params], input=_csv("gyro_z,x,y,z,wy,gx", rows), capture_output=True,
+                         text=True, timeout=60)
+    assert res.returncode == 0, res.stderr
+    lines = res.stdout.splitlines()
+    assert lines[0] == "ax,ay,az,gx,gy,gz"
+    out = np.loadtxt(lines[1:], delimiter=",")
+    acc_c = out[:, :3]  # from NAME_prepare + NAME_apply_coeffs (float parameters, float trig)
+    ref = cal.gyro.apply(raw_g[:500], acc_c)  # the gyro on the acc the program used
+    e_in = np.abs(acc_c) * 2.0**-24  # acc printed with 9 digits: within half a float ULP
+    bound = (gyro_float_error_bound(cal.gyro, raw_g[:500], acc_c, "float", acc_error=e_in)
+             + python_gyro_bound(cal, raw_g[:500], acc_c, np.zeros_like(acc_c)))
+    assert np.all(np.abs(out[:, 3:] - ref) <= bound)
+
+
+def test_example_gyro_columns_errors_and_notes(example, counts_run, tmp_path):
+    res = subprocess.run([str(example)], input="t,ax,ay,az,gx,gy\n0,1,2,3,4,5\n", capture_output=True, text=True,
+                         timeout=30)
+    assert res.returncode == 1 and "line 1: header names some but not all of gx, gy, gz" in res.stderr
+    # an accelerometer-only calibration: the gyro columns are ignored, with a note
+    write_c(counts_run.calibration, tmp_path, precision="double")
+    exe = tmp_path / "acc_only"
+    subprocess.run([GCC, *STRICT, *EMBEDDED, f"-I{tmp_path}", "-o", str(exe), str(EXAMPLE / "example.c"),
+                    str(tmp_path / "imucal.c"), "-lm"], check=True, capture_output=True, text=True)
+    res = subprocess.run([str(exe)], input="t,ax,ay,az,gx,gy,gz\n0,100,-200,16000,1,2,3\n", capture_output=True,
+                         text=True, timeout=30)
+    assert res.returncode == 0
+    assert "note: the calibration has no gyroscope part; gx, gy, gz ignored" in res.stderr
+    lines = res.stdout.splitlines()
+    assert lines[0] == "t,ax,ay,az" and len(lines[1].split(",")) == 4
+    np.testing.assert_allclose([float(x) for x in lines[1].split(",")[1:]],
+                               counts_run.calibration.apply(np.array([100.0, -200.0, 16000.0])), rtol=1e-13)
+
+
+def test_makefile_builds_the_gyro_example(xsens, tmp_path):
+    make = shutil.which("make")
+    if make is None:
+        pytest.skip("make not found")
+    cal, _, raw_a, raw_g = xsens
+    gen, out = tmp_path / "gen", tmp_path / "build"
+    write_c(cal, gen, prefix="imu_b", precision="double")
+    res = subprocess.run([make, "-C", str(EXAMPLE), f"GEN={gen}", f"OUT={out}", "PREFIX=imu_b"],
+                         capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    res = subprocess.run([str(out / "imu_b_example")], input=_csv("ax,ay,az,gx,gy,gz", np.hstack([raw_a, raw_g])[:300]),
+                         capture_output=True, text=True, timeout=30)
+    assert res.returncode == 0, res.stderr
+    got = np.loadtxt(res.stdout.splitlines()[1:], delimiter=",")
+    acc_ref, omega_ref = cal.apply_imu(raw_a[:300], raw_g[:300])
+    assert np.all(np.abs(got[:, 3:] - omega_ref) <= imu_bound(cal, raw_a[:300], raw_g[:300], acc_ref, "double"))
