@@ -285,7 +285,6 @@ def test_without_g_sensitivity_acc_is_not_read(synthetic, tmp_path):
     rg = rng.integers(-32768, 32768, (5000, 3)).astype(float)
     omega = lib.gyro_batch(rg, None)  # acc may be NULL
     ref = cal.gyro.apply(rg)
-    C, _, _ = cal.gyro.rate_map()
     bound = gyro_float_error_bound(cal.gyro, rg, np.zeros_like(rg), "double") + python_gyro_bound(
         cal, rg, np.zeros_like(rg), np.zeros_like(rg))
     assert np.all(np.abs(omega - ref) <= bound)
@@ -356,7 +355,6 @@ def test_effects_with_covariates_give_apply_imu_cov(synthetic, tmp_path):
         fn(ra[k].ctypes.data, rg[k].ctypes.data, temp[k:k + 1].ctypes.data, acc.ctypes.data, omega.ctypes.data)
         assert np.allclose(acc, acc_ref[k], rtol=1e-12, atol=1e-12)
         got.append(omega.copy())
-    C, _, D = cal.gyro.rate_map()
     acc_err = 1e-12 * (1 + np.abs(acc_ref))  # the effect model's C against Python's (asserted above)
     bound = gyro_float_error_bound(cal.gyro, rg, acc_ref, "double", acc_error=acc_err) + python_gyro_bound(
         cal, rg, acc_ref, np.zeros_like(acc_ref))
@@ -484,3 +482,12 @@ def test_makefile_builds_the_gyro_example(xsens, tmp_path):
     got = np.loadtxt(res.stdout.splitlines()[1:], delimiter=",")
     acc_ref, omega_ref = cal.apply_imu(raw_a[:300], raw_g[:300])
     assert np.all(np.abs(got[:, 3:] - omega_ref) <= imu_bound(cal, raw_a[:300], raw_g[:300], acc_ref, "double"))
+
+
+def test_cli_codegen_of_a_calibration_with_gyro(xsens, tmp_path, capsys):
+    _, path, _, _ = xsens
+    assert main(["codegen", str(path), "--out", str(tmp_path / "fw"), "--prefix", "imu", "--precision", "double"]) == 0
+    assert "wrote" in capsys.readouterr().out
+    h = (tmp_path / "fw" / "imu.h").read_text()
+    assert "void imu_apply_imu_u16(const uint16_t raw_a[3], const uint16_t raw_g[3], double acc[3], " in h
+    assert "#define IMU_HAS_GYRO 1" in h

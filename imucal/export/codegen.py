@@ -754,7 +754,10 @@ def _gyro_doc(c: _Context, k: Kernel) -> list[str]:
     dirs = fit.get("rms_direction_error_deg")
     dirs = dirs if isinstance(dirs, Mapping) else {}
     std = gy.std
-    wrap = lambda text: textwrap.wrap(text, 94, initial_indent=" *   ", subsequent_indent=" *     ")  # noqa: E731
+
+    def wrap(text: str) -> list[str]:
+        return textwrap.wrap(text, 94, initial_indent=" *   ", subsequent_indent=" *     ")
+
     lines = [
         " *",
         " * Gyroscope (imucal.gyro.model): raw_g = s_g + B_g (M_g omega + G_s a), applied as",
@@ -776,7 +779,7 @@ def _gyro_doc(c: _Context, k: Kernel) -> list[str]:
         f" *   fit: rms gravity-direction error over the motions {_fmt(dirs.get('after'), '.3g')} deg after "
         f"calibration, {_fmt(dirs.get('before'), '.3g')} deg before;",
         f" *   {real} arithmetic: |error| per axis <= 8u |C| |raw_g - s_g| + u |C| |s_g| + 7u |D| |a|,",
-        f" *   i.e. <= {rest:.2g} rad/s at rest with |a| = g, plus {per_rate:.2g} |omega| while rotating.",
+        f" *   i.e. <= {rest:.2g} rad/s at rest with |a| = g, plus {per_rate:.2g} max_j |omega_j| while rotating.",
         " *",
         f" * Cost of {p}_apply_gyro: {k.ops}; no branch, no heap, no",
         " * mutable static state.",
