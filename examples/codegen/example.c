@@ -1,4 +1,5 @@
-/* example.c: calibrated acceleration from an imucal CSV on stdin, using the two files that
+/* example.c: calibrated acceleration (and angular rate, when the calibration has a gyroscope
+ * part and the input has gx, gy, gz) from an imucal CSV on stdin, using the two files that
  * `imucal codegen` writes.
  *
  *   imucal codegen calibration.yaml --out gen --prefix NAME
@@ -13,13 +14,17 @@
  *       run-time parameters, as firmware would read them from flash (NAME_prepare and
  *       NAME_apply_coeffs; base model only)
  *
- * Input: imucal's layout. A header line names the columns (t, ax, ay, az, temp; also x y z,
- * acc_x ..., time, temperature), in any order, separated by commas, spaces, tabs or semicolons.
+ * Input: imucal's layout. A header line names the columns (t, ax, ay, az, gx, gy, gz, temp; also
+ * x y z, acc_x ..., gyro_x ..., wx ..., time, temperature), in any order, separated by commas,
+ * spaces, tabs or semicolons. Gyroscope columns are read by header only.
  * Without a header, the columns are taken as imucal reads them: 3 columns ax ay az, 4 columns
  * t ax ay az, 5 or more t ax ay az temp. Lines starting with # are skipped.
  * Output: a header line, then t (when the input has one, as it was) and ax,ay,az in m/s^2 in
- * the Theorem's orthonormal frame, printed with enough digits to round-trip (9 for float, 17
- * for double).
+ * the Theorem's orthonormal frame, then gx,gy,gz in rad/s in the same frame when the calibration
+ * has a gyroscope part and the input has gx, gy, gz (NAME_apply_gyro with the calibrated
+ * acceleration of the same sample; the input's gyro columns are ignored, with a note on stderr,
+ * when the calibration has no gyroscope), printed with enough digits to round-trip (9 for
+ * float, 17 for double).
  * Exit status: 0 on success, 1 on a malformed line or header, 2 on invalid parameters.
  */
 #include <ctype.h>
@@ -44,7 +49,7 @@ typedef FN(_real) real;
 #define N_COV MACRO(_N_COV)
 #define MAX_COLS 64
 
-enum { COL_T, COL_AX, COL_AY, COL_AZ, COL_TEMP, N_ROLES };
+enum { COL_T, COL_AX, COL_AY, COL_AZ, COL_TEMP, COL_GX, COL_GY, COL_GZ, N_ROLES };
 
 /* Split line into at most MAX_COLS fields in place; returns how many. */
 static int split(char *line, char **field)
@@ -82,7 +87,8 @@ static int role_of(const char *name)
 {
   static const char *const names[N_ROLES][4] = {
     {"t", "time", "timestamp", NULL}, {"ax", "x", "acc_x", "accx"}, {"ay", "y", "acc_y", "accy"},
-    {"az", "z", "acc_z", "accz"}, {"temp", "temperature", "t_c", NULL}};
+    {"az", "z", "acc_z", "accz"}, {"temp", "temperature", "t_c", NULL},
+    {"gx", "gyro_x", "gyrx", "wx"}, {"gy", "gyro_y", "gyry", "wy"}, {"gz", "gyro_z", "gyrz", "wz"}};
   char low[32];
   size_t i;
   int r, k;
@@ -100,16 +106,17 @@ int main(int argc, char **argv)
   char line[4096];
   char *field[MAX_COLS];
   long lineno = 0;
-  int col[N_ROLES] = {-1, -1, -1, -1, -1};
-  int have_layout = 0, r;
+  int col[N_ROLES];
+  int have_layout = 0, gyro = 0, r;
 #if N_COV > 0 && MACRO(_COV_TIME) >= 0
   double t0 = 0.0;
   int have_t0 = 0;
 #endif
   int baked = argc == 1;
-  const char *fmt = sizeof(real) == sizeof(float) ? "%.9g,%.9g,%.9g\n" : "%.17g,%.17g,%.17g\n";
+  const char *fmt = sizeof(real) == sizeof(float) ? "%.9g,%.9g,%.9g" : "%.17g,%.17g,%.17g";
   FN(_coeffs) coeffs;
 
+  for (r = 0; r < N_ROLES; ++r) col[r] = -1;
   if (!baked) {
     real params[9];
     int i, rc;
@@ -141,7 +148,17 @@ int main(int argc, char **argv)
           fprintf(stderr, "%s: line %ld: header names no ax, ay, az columns\n", argv[0], lineno);
           return 1;
         }
-        printf(col[COL_T] >= 0 ? "t,ax,ay,az\n" : "ax,ay,az\n");
+        gyro = col[COL_GX] >= 0 && col[COL_GY] >= 0 && col[COL_GZ] >= 0;
+        if (!gyro && (col[COL_GX] >= 0 || col[COL_GY] >= 0 || col[COL_GZ] >= 0)) {
+          fprintf(stderr, "%s: line %ld: header names some but not all of gx, gy, gz\n", argv[0], lineno);
+          return 1;
+        }
+        if (gyro && !MACRO(_HAS_GYRO)) {
+          fprintf(stderr, "%s: note: the calibration has no gyroscope part; gx, gy, gz ignored\n", argv[0]);
+          gyro = 0;
+          col[COL_GX] = col[COL_GY] = col[COL_GZ] = -1;
+        }
+        printf("%s%s\n", col[COL_T] >= 0 ? "t,ax,ay,az" : "ax,ay,az", gyro ? ",gx,gy,gz" : "");
         continue;
       }
       if (n == 3) { /* no header: imucal's default layout by column count */
@@ -191,6 +208,16 @@ int main(int argc, char **argv)
     }
     if (col[COL_T] >= 0) printf("%s,", field[col[COL_T]]); /* the time as it was */
     printf(fmt, (double)acc[0], (double)acc[1], (double)acc[2]);
+#if MACRO(_HAS_GYRO)
+    if (gyro) {
+      real omega[3];
+      for (i = 0; i < 3; ++i) raw[i] = (real)v[COL_GX + i];
+      FN(_apply_gyro)(raw, acc, omega); /* acc: the calibrated acceleration of this sample */
+      putchar(',');
+      printf(fmt, (double)omega[0], (double)omega[1], (double)omega[2]);
+    }
+#endif
+    putchar('\n');
   }
   return 0;
 }

@@ -8,7 +8,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("codegen", help="generate C code that applies a calibration on a microcontroller",
                        description="Write DIR/NAME.h and DIR/NAME.c: NAME_apply (this calibration baked "
                                    "in), NAME_prepare and NAME_apply_coeffs (parameters at run time) and "
-                                   "batch forms; 6 multiplies and 6 additions per sample. "
+                                   "batch forms; 6 multiplies and 6 additions per sample. With a gyroscope part, also "
+                                   "NAME_apply_gyro and NAME_apply_imu (rad/s, the accelerometer's frame). "
                                    "See docs/codegen.md.")
     p.add_argument("calibration", help="calibration.yaml written by `imucal calibrate`")
     p.add_argument("--out", required=True, help="output directory for NAME.h and NAME.c")
