@@ -15,6 +15,7 @@ import json
 import os
 import re
 import shutil
+import signal
 import stat
 import tempfile
 from pathlib import Path
@@ -193,6 +194,25 @@ def _write_error(dest: Path, exc: OSError) -> ImucalError:
                        fix="free space or choose another output folder; nothing was written")
 
 
+@contextlib.contextmanager
+def _signals_deferred():
+    """Hold SIGINT and SIGTERM until the block ends (the handler then runs, raising as usual).
+
+    A signal between mkdtemp's mkdir and the registration of the new folder would leave a
+    staging folder that no cleanup knows about.
+    """
+    sigs = {signal.SIGINT, signal.SIGTERM}
+    try:
+        old = signal.pthread_sigmask(signal.SIG_BLOCK, sigs)
+    except (AttributeError, OSError, ValueError):  # platform without it: best effort
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
 class OutputSet:
     """Stage several output files and publish them together.
 
@@ -216,7 +236,8 @@ class OutputSet:
             self._created.extend(_make_parent(dest))
             remove_stale_staging(parent)
             try:
-                self._tmpdirs[parent] = Path(tempfile.mkdtemp(prefix=f".imucal-{os.getpid()}-", dir=parent))
+                with _signals_deferred():  # made and registered for cleanup as one step
+                    self._tmpdirs[parent] = Path(tempfile.mkdtemp(prefix=f".imucal-{os.getpid()}-", dir=parent))
             except OSError as exc:
                 raise _write_error(dest, exc) from None
         tmp = self._tmpdirs[parent] / dest.name
