@@ -1,4 +1,5 @@
-"""`imucal calibrate CONFIG.yaml | --data FILE`: fit, then write calibration.yaml, report.txt, figures."""
+"""`imucal calibrate CONFIG.yaml | --data FILE`: fit, then write calibration.yaml, report.txt, report.html,
+figures."""
 from __future__ import annotations
 
 import argparse
@@ -9,7 +10,7 @@ from imucal.cli.commands import options
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("calibrate", help="fit the 9-parameter model to a static multi-pose recording",
                        description="Fit shifts, scales and axis angles (Nakov & Ivanov) to a recording. "
-                                   "Writes DIR/calibration.yaml, DIR/report.txt and figures.")
+                                   "Writes DIR/calibration.yaml, DIR/report.txt, DIR/report.html and figures.")
     p.add_argument("config", nargs="?", help="YAML run file (see configs/)")
     options.add_data_options(p)
     options.add_gravity_options(p)
@@ -19,7 +20,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "gyro columns gx, gy, gz in --data are used without it")
     p.add_argument("--out", help="output directory (default: config output.dir, else ./out)")
     p.add_argument("--json", help="also write a machine-readable summary to this file")
-    p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    p.add_argument("--no-figures", action="store_true", help="skip the PNG figures (report.html then has none)")
     p.add_argument("--quiet", action="store_true", help="print only where the files went")
     p.set_defaults(run=run)
 
@@ -44,6 +45,7 @@ def run(args: argparse.Namespace) -> int:
     import yaml
 
     from imucal.gyro.run import calibrate_gyro
+    from imucal.report.html import calibration_html, render_png
     from imucal.report.text import fit_report, summary
 
     cfg = _config(args)
@@ -58,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
     figures = cfg.output.figures and not args.no_figures
     gyro_file = args.gyro_data or options.data_path(cfg, gyro=True)
     inputs = [args.config, options.data_path(cfg), gyro_file]
-    outputs = [out / "calibration.yaml", out / "report.txt", out / "gyro.yaml", args.json,
+    outputs = [out / "calibration.yaml", out / "report.txt", out / "report.html", out / "gyro.yaml", args.json,
                *([out / n for n in FIGURES] if figures else [])]
     check_outputs(inputs, outputs)  # fail before the work, not after it
     result = calibrate(cfg)
@@ -68,12 +70,15 @@ def run(args: argparse.Namespace) -> int:
     if gyro is not None:
         text += "[[Gyroscope]]  (provisional: apply and codegen do not use it yet)\n" + gyro.report() + "\n"
         js["gyro"] = gyro.to_dict()
+    pngs = {name: render_png(fn, result) for name, fn in FIGURES.items()} if figures else {}
+    page = calibration_html(result, pngs, None if gyro is None else
+                            "Gyroscope (provisional: apply and codegen do not use it yet)\n" + gyro.report())
     with OutputSet(inputs) as o:
         o.call(out / "calibration.yaml", result.calibration.save)
         o.text(out / "report.txt", text)
-        if figures:
-            for name, fn in FIGURES.items():
-                o.call(out / name, lambda p, fn=fn: fn(result, p))
+        o.text(out / "report.html", page)
+        for name, png in pngs.items():
+            o.bytes(out / name, png)
         if gyro is not None:
             o.text(out / "gyro.yaml", yaml.safe_dump({"format": "imucal-gyro-calibration", "format_version": 0,
                                                       **gyro.to_dict()}, sort_keys=False))
@@ -87,7 +92,8 @@ def run(args: argparse.Namespace) -> int:
         print(text.split("[[Static intervals]]")[0].rstrip())
     if gyro is not None and not args.quiet:
         print(gyro.report())
-    print(f"wrote {out / 'calibration.yaml'}, {out / 'report.txt'}" + (f", {out / 'gyro.yaml'}" if gyro else "")
+    print(f"wrote {out / 'calibration.yaml'}, {out / 'report.txt'}, {out / 'report.html'}"
+          + (f", {out / 'gyro.yaml'}" if gyro else "")
           + (", figures" if figures else "") + (f", {args.json}" if args.json else ""))
     ok = result.result.success and (gyro is None or gyro.success)
     return 0 if ok else 1  # EXIT_NOT_CONVERGED: the files say which fit
