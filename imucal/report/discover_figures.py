@@ -16,6 +16,7 @@ import numpy as np
 from imucal.analysis.discover import Discovery
 from imucal.solve.stats import chi2_sf
 from imucal.model.effects import AXIS_NAMES
+from imucal.report.figures import plain
 
 
 def _plt():
@@ -99,7 +100,7 @@ def residuals_figure(d: Discovery, path: str | Path) -> None:
     else:
         gap = (f"chi2/dof {d.base.result.redchi:.3g}, RMS {d.rms_before * 1e3:.3g} mm/s^2 (noise alone "
                f"{d.rms_noise * 1e3:.3g}); no effect added")
-    fig.suptitle(f"{Path(d.base.recording.source).name}: {iv.n} static intervals; residual of each interval mean "
+    fig.suptitle(f"{plain(Path(d.base.recording.source).name)}: {iv.n} static intervals; residual of each interval mean "
                  f"over its noise sigma\n{gap}", fontsize=11)
     fig.tight_layout(rect=(0, 0.04, 1, 1))
     fig.savefig(path, format="png")

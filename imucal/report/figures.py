@@ -21,6 +21,11 @@ def _plt():
     return plt
 
 
+def plain(text: str) -> str:
+    """User text shown literally in a figure: dollar signs would start matplotlib's mathtext."""
+    return text.replace("$", r"\$")
+
+
 def residual_figure(run: CalibrationRun, path: str | Path) -> None:
     plt = _plt()
     res, iv = run.result, run.intervals
@@ -34,7 +39,7 @@ def residual_figure(run: CalibrationRun, path: str | Path) -> None:
     ax.axhspan(-rms, rms, color="tab:orange", alpha=0.15, label=f"RMS = {rms:.3g} mm/s^2")
     ax.set_xlabel("static interval, as numbered in the report [#]")
     ax.set_ylabel("residual |a| - g  [mm/s^2]")
-    ax.set_title(f"Residual per interval ({res.model_name}, reduced chi-square {res.redchi:.3g})")
+    ax.set_title(f"Residual per interval ({plain(res.model_name)}, reduced chi-square {res.redchi:.3g})")
     ax.legend(loc="best", fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()
