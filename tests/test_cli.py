@@ -30,8 +30,8 @@ def cli_counts(counts_recording, tmp_path_factory):
 def test_calibrate_writes_its_files(cli_counts):
     code, out, js = cli_counts
     assert code == 0
-    assert sorted(p.name for p in out.iterdir()) == ["calibration.yaml", "directions.png", "report.txt",
-                                                      "residuals.png"]
+    assert sorted(p.name for p in out.iterdir()) == ["calibration.yaml", "directions.png", "report.html",
+                                                      "report.txt", "residuals.png"]
     for fig in ("directions.png", "residuals.png"):
         assert (out / fig).read_bytes()[:8] == PNG
     assert js.exists()
