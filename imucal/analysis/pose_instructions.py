@@ -22,10 +22,12 @@ from itertools import product
 import numpy as np
 
 AXES = "XYZ"
-#: A down direction within this angle of a face normal, edge or corner bisector is named as it [deg].
+#: A down direction within this angle of a face normal, edge or corner bisector is named as it [deg]
+#: (nobody sets a board down better than that by hand).
 SNAP_DEG = 0.5
-#: A tilt axis within this angle of a board axis is named as that axis [deg].
-AXIS_SNAP_DEG = 0.5
+#: A tilt axis within this angle of a board axis is named as that axis [deg]: the angles are printed
+#: to 0.1 deg, so the words are as exact as the numbers.
+AXIS_SNAP_DEG = 0.05
 
 
 def _signed(v: np.ndarray) -> str:
