@@ -11,9 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-matplotlib = pytest.importorskip("matplotlib")
-from matplotlib.figure import Figure  # noqa: E402
+from matplotlib.figure import Figure
 
 ROOT = Path(__file__).resolve().parents[1]
 UNIT = re.compile(r"\[[^\[\]]+\]")
