@@ -137,3 +137,9 @@ def test_report_html_is_never_an_input(tmp_path, run_cli, counts_recording):
     shutil.copyfile(counts_recording.path, data)
     r = run_cli(["calibrate", "--data", data, "--out", out, "--no-figures"])
     assert r.code == 2 and "would overwrite the input" in r.err and "report.html" in r.err
+
+
+def test_extra_sections_are_escaped(counts_run):
+    page = calibration_html(counts_run, extra={"Gyro <i>": "bias 1 < 2 & </pre><script>"})
+    assert "<h2>Gyro &lt;i&gt;</h2>" in page and "<pre>bias 1 &lt; 2 &amp; &lt;/pre&gt;&lt;script&gt;</pre>" in page
+    assert page.index("Gyro &lt;i&gt;") < page.index('id="figures"')

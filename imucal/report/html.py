@@ -255,15 +255,15 @@ def _calibration_sections(run: CalibrationRun) -> list[tuple[str, str, str]]:
 
 
 def calibration_html(run: CalibrationRun, figures: Mapping[str, bytes] | None = None,
-                     extra: str | None = None) -> str:
+                     extra: Mapping[str, str] | None = None) -> str:
     """The page of ``imucal calibrate``: verdict, parameters, statistics, residuals, figures.
 
-    ``figures`` maps file names to PNG bytes; ``extra`` is more plain text (e.g. the gyroscope
-    report), shown preformatted and escaped."""
+    ``figures`` maps file names to PNG bytes; ``extra`` maps headings to more plain text (e.g. the
+    gyroscope report), shown preformatted and escaped."""
     title = f"imucal calibration: {Path(run.recording.source).name}"
     sections = [("verdict", "", _verdict_html(verdict(run))), *_calibration_sections(run)]
-    if extra:
-        sections.append(("more", "More", f"<pre>{esc(extra)}</pre>"))
+    for k, (head, text) in enumerate((extra or {}).items()):
+        sections.append((f"extra{k}", esc(head), f"<pre>{esc(text)}</pre>"))
     sections.append(("figures", "Figures", _figures_html(figures or {}, CAPTIONS)))
     return _page(title, sections)
 

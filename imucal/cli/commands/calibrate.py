@@ -72,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
         js["gyro"] = gyro.to_dict()
     pngs = {name: render_png(fn, result) for name, fn in FIGURES.items()} if figures else {}
     page = calibration_html(result, pngs, None if gyro is None else
-                            "Gyroscope (provisional: apply and codegen do not use it yet)\n" + gyro.report())
+                            {"Gyroscope (provisional: apply and codegen do not use it yet)": gyro.report()})
     with OutputSet(inputs) as o:
         o.call(out / "calibration.yaml", result.calibration.save)
         o.text(out / "report.txt", text)
