@@ -9,9 +9,18 @@ import io
 import re
 from pathlib import Path
 
+import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 from matplotlib.figure import Figure
+
+from imucal.analysis import drift, error_map
+from imucal.analysis.discover import discover
+from imucal.analysis.pose_instructions import instructions
+from imucal.analysis.simulate import cube_directions, draw_effect_case
+from imucal.config.run import config_from_dict
+from imucal.report import discover_figures, figures, pose_figures
+from imucal.report.figures import directions_figure
 
 ROOT = Path(__file__).resolve().parents[1]
 UNIT = re.compile(r"\[[^\[\]]+\]")
@@ -85,10 +94,6 @@ def axis_problems(fig: Figure) -> list[str]:
 @pytest.fixture(scope="module")
 def discoveries(tmp_path_factory):
     """One discovery that adds an effect (temperature column), one clean without temperature."""
-    from imucal.analysis.discover import discover
-    from imucal.analysis.simulate import draw_effect_case
-    from imucal.config.run import config_from_dict
-
     tmp = tmp_path_factory.mktemp("figs")
     out = []
     for name, case in (("effect", draw_effect_case(7001, effect="bias_temperature", snr=80.0)),
@@ -101,11 +106,6 @@ def discoveries(tmp_path_factory):
 
 
 def test_every_figure_function_is_checked(counts_run, discoveries, drawn):
-    from imucal.analysis import drift, error_map
-    from imucal.analysis.pose_instructions import instructions
-    from imucal.analysis.simulate import cube_directions
-    from imucal.report import discover_figures, figures, pose_figures
-
     checked: dict[str, list[Figure]] = {}
 
     def check(fn, *args, **kw):
@@ -132,8 +132,6 @@ def test_every_figure_function_is_checked(counts_run, discoveries, drawn):
 
 
 def test_the_check_catches_an_axis_without_a_unit():
-    import matplotlib.pyplot as plt
-
     fig, (a, b) = plt.subplots(1, 2)
     a.set_xlabel("time [s]")
     a.set_ylabel("acceleration")  # no unit
@@ -147,8 +145,6 @@ def test_the_check_catches_an_axis_without_a_unit():
 
 
 def test_directions_figure_is_titled_labelled_and_numbered(counts_run, drawn):
-    from imucal.report.figures import directions_figure
-
     (fig,) = drawn(directions_figure, counts_run)
     assert "projection" in fig._suptitle.get_text()
     texts = [t.get_text() for ax in fig.axes for t in ax.texts]

@@ -8,8 +8,12 @@ import shutil
 import subprocess
 from pathlib import Path
 
-import numpy as np
+import matplotlib.image as mpimg
 import pytest
+
+from imucal.cli.main import main
+from imucal.config.run import config_from_dict
+from imucal.pipeline import calibrate
 
 CHROMIUM = next((shutil.which(n) for n in ("chromium", "chromium-browser", "google-chrome") if shutil.which(n)),
                 None)
@@ -34,18 +38,12 @@ def _console_errors(stderr: str) -> list[str]:
 
 
 def _screenshot_std(png: Path) -> float:
-    import matplotlib.image as mpimg
-
     img = mpimg.imread(png)[..., :3]
     return float(img.std())
 
 
 @pytest.fixture(scope="module")
 def calibrated(counts_recording, tmp_path_factory):
-    from imucal.cli.main import main
-    from imucal.config.run import config_from_dict
-    from imucal.pipeline import calibrate
-
     out = tmp_path_factory.mktemp("browser") / "out"
     assert main(["calibrate", "--data", str(counts_recording.path), "--out", str(out), "--quiet"]) == 0
     run = calibrate(config_from_dict({"data": {"path": str(counts_recording.path)}}))

@@ -8,11 +8,16 @@ import io
 import math
 import re
 import shutil
+from dataclasses import replace
 
+import matplotlib.image as mpimg
 import numpy as np
 import pytest
 
-from imucal.analysis.simulate import cube_directions, mems_counts_sensor
+from imucal.analysis.simulate import PosePlan, cube_directions, mems_counts_sensor, simulate
+from imucal.cli.main import main
+from imucal.config.run import config_from_dict
+from imucal.pipeline import calibrate
 from imucal.report.html import calibration_html, chi2_consistent, verdict
 from imucal.solve.stats import chi2_sf
 
@@ -27,8 +32,6 @@ def _images(page: str) -> list[bytes]:
 @pytest.fixture(scope="module")
 def cli_page(counts_recording, tmp_path_factory):
     """calibrate through the CLI, on a copy of the counts recording named EVIL, with an evil unit."""
-    from imucal.cli.main import main
-
     root = tmp_path_factory.mktemp("html")
     data = root / EVIL
     shutil.copyfile(counts_recording.path, data)
@@ -60,8 +63,6 @@ def test_report_html_needs_no_network_and_runs_no_script(cli_page):
     imgs = _images(page)
     assert len(imgs) == 2  # residuals.png and directions.png, the same bytes as the files
     assert imgs == [(out / "residuals.png").read_bytes(), (out / "directions.png").read_bytes()]
-    import matplotlib.image as mpimg
-
     for png in imgs:  # they decode as pictures
         assert mpimg.imread(io.BytesIO(png), format="png").shape[0] > 100
 
@@ -94,14 +95,9 @@ def test_chi2_consistency_rule():
     assert chi2_consistent(1.0, 0)[0] is None and math.isnan(chi2_consistent(1.0, 0)[1])
 
 
-def test_poor_fit_is_flagged_in_the_verdict(sim_csv, tmp_path):
+def test_poor_fit_is_flagged_in_the_verdict(tmp_path):
     """A scale that changes with time (drift the base model lacks) gives a poor fit: the verdict
     says CHECK, the residual check fails and the page carries the discover hint."""
-    from imucal.analysis.simulate import PosePlan, simulate
-    from imucal.config.run import config_from_dict
-    from imucal.pipeline import calibrate
-    from dataclasses import replace
-
     rng = np.random.default_rng(11)
     sensor = mems_counts_sensor(rng)
     plan = PosePlan(cube_directions(), hold=3.0, transition=1.5, rate=100.0)
