@@ -30,8 +30,8 @@ def cli_counts(counts_recording, tmp_path_factory):
 def test_calibrate_writes_its_files(cli_counts):
     code, out, js = cli_counts
     assert code == 0
-    assert sorted(p.name for p in out.iterdir()) == ["calibration.yaml", "directions.png", "report.txt",
-                                                      "residuals.png"]
+    assert sorted(p.name for p in out.iterdir()) == ["calibration.yaml", "directions.png", "report.html",
+                                                      "report.txt", "residuals.png"]
     for fig in ("directions.png", "residuals.png"):
         assert (out / fig).read_bytes()[:8] == PNG
     assert js.exists()
@@ -77,7 +77,7 @@ def test_calibrate_prints_a_summary(run_cli, counts_recording, tmp_path):
     r = run_cli(["calibrate", "--data", counts_recording.path, "--out", tmp_path / "o", "--no-figures"])
     assert r.code == 0 and r.err == ""
     assert "[[Variables]]" in r.out and "wrote" in r.out
-    assert sorted(p.name for p in (tmp_path / "o").iterdir()) == ["calibration.yaml", "report.txt"]
+    assert sorted(p.name for p in (tmp_path / "o").iterdir()) == ["calibration.yaml", "report.html", "report.txt"]
     q = run_cli(["calibrate", "--data", counts_recording.path, "--out", tmp_path / "q", "--no-figures", "--quiet"])
     assert q.code == 0 and q.out.strip().startswith("wrote") and len(q.out.strip().splitlines()) == 1
 
@@ -96,7 +96,7 @@ def test_calibrate_from_yaml_config(run_cli, si_recording, tmp_path):
     r = run_cli(["calibrate", cfg, "--json", tmp_path / "s.json", "--quiet"])
     assert r.code == 0, r.err
     out = tmp_path / "results"  # relative to the YAML file, not the working directory
-    assert sorted(p.name for p in out.iterdir()) == ["calibration.yaml", "report.txt"]
+    assert sorted(p.name for p in out.iterdir()) == ["calibration.yaml", "report.html", "report.txt"]
     d = json.loads((tmp_path / "s.json").read_text())
     assert d["gravity"] == normal_gravity(45.5, 20.0)
     assert d["raw_unit"] == "counts"

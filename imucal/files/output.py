@@ -251,6 +251,13 @@ class OutputSet:
         except OSError as exc:
             raise _write_error(Path(dest), exc) from None
 
+    def bytes(self, dest: str | os.PathLike, data: bytes) -> None:
+        tmp = self._stage(dest)
+        try:
+            tmp.write_bytes(data)
+        except OSError as exc:
+            raise _write_error(Path(dest), exc) from None
+
     def json(self, dest: str | os.PathLike, obj: Any) -> None:
         self.text(dest, json.dumps(obj, indent=2, allow_nan=True) + "\n")
 

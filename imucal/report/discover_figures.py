@@ -16,6 +16,7 @@ import numpy as np
 from imucal.analysis.discover import Discovery
 from imucal.solve.stats import chi2_sf
 from imucal.model.effects import AXIS_NAMES
+from imucal.report.figures import plain
 
 
 def _plt():
@@ -49,7 +50,7 @@ def residuals_figure(d: Discovery, path: str | Path) -> None:
     fig, axes = plt.subplots(2, 3, figsize=(13, 7.6), dpi=100)
     panels = [(axes[0, 0], iv.t_mid, "time of the interval [s]"),
               (axes[0, 1], iv.temp, "mean temperature of the interval [degC]")]
-    panels += [(axes[1, i], dirs[:, i], f"gravity component along axis {AXIS_NAMES[i]} (unit vector)")
+    panels += [(axes[1, i], dirs[:, i], f"gravity component along axis {AXIS_NAMES[i]} [g]")
                for i in range(3)]
     lim = max(BAND * 1.5, float(np.nanmax(np.abs(np.concatenate([before, after])))) * 1.1)
     for ax, x, label in panels:
@@ -66,7 +67,7 @@ def residuals_figure(d: Discovery, path: str | Path) -> None:
         ax.set_xlabel(label)
         ax.set_ylim(-lim, lim)
         ax.grid(alpha=0.3)
-        ax.set_ylabel("(|a| - g) / sigma")
+        ax.set_ylabel("residual (|a| - g) / σ  [σ]")
     # What the effects explain, interval by interval.
     ax = axes[0, 2]
     if changed:
@@ -75,9 +76,9 @@ def residuals_figure(d: Discovery, path: str | Path) -> None:
         lo, hi = float(min(explained.min(), before.min())), float(max(explained.max(), before.max()))
         ax.plot([lo, hi], [lo, hi], color="tab:blue", lw=1, label="base residual = explained part")
         ax.plot(explained, before, "o", ms=5, mfc="none", color="tab:red")
-        ax.set_xlabel("part explained by " + ", ".join(e.label for e in d.effects) + "  / sigma")
+        ax.set_xlabel("part explained by " + ", ".join(e.label for e in d.effects) + "  [σ]")
         ax.legend(fontsize=7, loc="upper left")
-        ax.set_ylabel("base residual / sigma")
+        ax.set_ylabel("base residual (|a| - g) / σ  [σ]")
     else:  # nothing added: how the residuals compare with the noise they should have
         edges = np.linspace(-lim, lim, 25)
         ax.hist(before, bins=edges, color="tab:red", alpha=0.6, label="residual / sigma")
@@ -85,8 +86,8 @@ def residuals_figure(d: Discovery, path: str | Path) -> None:
         width = edges[1] - edges[0]
         ax.plot(z, before.size * width * np.exp(-z**2 / 2) / np.sqrt(2 * np.pi), color="k", lw=1,
                 label="noise alone: N(0, 1)")
-        ax.set_xlabel("(|a| - g) / sigma  (no effect added)")
-        ax.set_ylabel("intervals")
+        ax.set_xlabel("residual (|a| - g) / σ, no effect added  [σ]")
+        ax.set_ylabel("static intervals per bin [count]")
         ax.legend(fontsize=7, loc="upper left")
     ax.grid(alpha=0.3)
     h, lab = axes[1, 0].get_legend_handles_labels()
@@ -99,7 +100,7 @@ def residuals_figure(d: Discovery, path: str | Path) -> None:
     else:
         gap = (f"chi2/dof {d.base.result.redchi:.3g}, RMS {d.rms_before * 1e3:.3g} mm/s^2 (noise alone "
                f"{d.rms_noise * 1e3:.3g}); no effect added")
-    fig.suptitle(f"{Path(d.base.recording.source).name}: {iv.n} static intervals; residual of each interval mean "
+    fig.suptitle(f"{plain(Path(d.base.recording.source).name)}: {iv.n} static intervals; residual of each interval mean "
                  f"over its noise sigma\n{gap}", fontsize=11)
     fig.tight_layout(rect=(0, 0.04, 1, 1))
     fig.savefig(path, format="png")
@@ -160,7 +161,8 @@ def candidates_figure(d: Discovery, path: str | Path, top: int = 14) -> None:
                 fontsize=7, va="center", ha="right")
         ax.set_ylim(-1.4, len(cs) - 0.5)
         ax.set_xlim(min(0.5, min(vals) * 0.8 if min(vals) > 0 else 0.5), max(max(vals), crit) * 3)
-        ax.set_xlabel("likelihood-ratio statistic (chi-square removed / misfit scale)")
+        ax.set_xlabel("likelihood-ratio statistic: chi-square removed / misfit scale  [1]")
+        ax.set_ylabel("candidate effect and its axes")
         chosen = s.chosen.label if s.chosen else "none significant"
         ax.set_title(f"Round {s.index}: {M} candidates; added: {chosen}\n(ranked by chi-square left + "
                      f"{d.settings.penalty:.3g} per coefficient; the best are fitted in full)", fontsize=9)
@@ -194,10 +196,11 @@ def gap_figure(d: Discovery, path: str | Path) -> None:
     a2.axhline(1.0, color="k", ls="--", lw=1, label="1 = at noise level")
     crit = _critical_lr(max(f.dof, 1), d.settings.alpha_noise) / max(f.dof, 1)
     a2.axhline(crit, color="tab:gray", ls=":", lw=1.2, label=f"p = {d.settings.alpha_noise:g} limit ({f.dof} dof)")
-    a2.set_ylabel("chi-square per degree of freedom")
+    a2.set_ylabel("chi-square per degree of freedom  [1]")
     for ax, top in ((a1, max(max(rms), d.rms_noise) * 1e3), (a2, max(max(red), crit))):
         ax.set_xticks(x)
         ax.set_xticklabels(labels, fontsize=8)
+        ax.set_xlabel("model")
         ax.set_xlim(-0.6, len(x) - 0.4)
         if ax is a2 and top > 30:
             ax.set_yscale("log")

@@ -3,7 +3,11 @@ from __future__ import annotations
 
 import math
 
-from imucal.pipeline import CalibrationRun
+import numpy as np
+
+from imucal.model.sensor import build_model
+from imucal.pipeline import CalibrationRun, fit_data
+from imucal.solve.fit import jacobian_rows
 
 #: Correlations above this are listed.
 CORREL_MIN = 0.3
@@ -17,6 +21,17 @@ def t_quantile_975(dof: int) -> float:
     v = float(dof)
     return (z + (z**3 + z) / (4 * v) + (5 * z**5 + 16 * z**3 + 3 * z) / (96 * v**2)
             + (3 * z**7 + 19 * z**5 + 17 * z**3 - 15 * z) / (384 * v**3))
+
+
+def interval_residuals(run: CalibrationRun) -> tuple[np.ndarray, np.ndarray]:
+    """|a| - g at each interval mean and its noise sigma [m/s^2] (sigma NaN when the fit was on samples)."""
+    res = run.result
+    if res.mode == "means":
+        return res.residuals, res.sigma
+    model = build_model(run.calibration.effect_objects())
+    d = fit_data(model, run.intervals, run.recording, "means", None)
+    r = jacobian_rows(d, res.params, model, res.gravity, residuals=True)
+    return r, np.full_like(r, np.nan)
 
 
 def _fmt(v: float) -> str:

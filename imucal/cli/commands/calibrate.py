@@ -1,4 +1,5 @@
-"""`imucal calibrate CONFIG.yaml | --data FILE`: fit, then write calibration.yaml, report.txt, figures."""
+"""`imucal calibrate CONFIG.yaml | --data FILE`: fit, then write calibration.yaml, report.txt, report.html,
+figures."""
 from __future__ import annotations
 
 import argparse
@@ -9,14 +10,14 @@ from imucal.cli.commands import options
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("calibrate", help="fit the 9-parameter model to a static multi-pose recording",
                        description="Fit shifts, scales and axis angles (Nakov & Ivanov) to a recording. "
-                                   "Writes DIR/calibration.yaml, DIR/report.txt and figures.")
+                                   "Writes DIR/calibration.yaml, DIR/report.txt, DIR/report.html and figures.")
     p.add_argument("config", nargs="?", help="YAML run file (see configs/)")
     options.add_data_options(p, gyro=True)
     options.add_gravity_options(p)
     options.add_model_options(p)
     p.add_argument("--out", help="output directory (default: config output.dir, else ./out)")
     p.add_argument("--json", help="also write a machine-readable summary to this file")
-    p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    p.add_argument("--no-figures", action="store_true", help="skip the PNG figures (report.html then has none)")
     p.add_argument("--quiet", action="store_true", help="print only where the files went")
     p.set_defaults(run=run)
 
@@ -38,6 +39,7 @@ def run(args: argparse.Namespace) -> int:
 
     from imucal.files.output import OutputSet, check_outputs
     from imucal.pipeline import calibrate_imu
+    from imucal.report.html import calibration_html, render_png
     from imucal.report.text import fit_report, summary
 
     cfg = _config(args)
@@ -52,19 +54,21 @@ def run(args: argparse.Namespace) -> int:
     figures = cfg.output.figures and not args.no_figures
     gyro_file = args.gyro_data or options.data_path(cfg, gyro=True)
     inputs = [args.config, options.data_path(cfg), gyro_file]
-    outputs = [out / "calibration.yaml", out / "report.txt", args.json,
+    outputs = [out / "calibration.yaml", out / "report.txt", out / "report.html", args.json,
                *([out / n for n in FIGURES] if figures else [])]
     check_outputs(inputs, outputs)  # fail before the work, not after it
     result = calibrate_imu(cfg, gyro_file=None if gyro_file is None else str(gyro_file))
     gyro = result.gyro  # None when the recording has no gyroscope
     text = fit_report(result)
     js = summary(result)
+    pngs = {name: render_png(fn, result) for name, fn in FIGURES.items()} if figures else {}
+    page = calibration_html(result, pngs, None if gyro is None else {"Gyroscope": gyro.report()})
     with OutputSet(inputs) as o:
         o.call(out / "calibration.yaml", result.calibration.save)
         o.text(out / "report.txt", text)
-        if figures:
-            for name, fn in FIGURES.items():
-                o.call(out / name, lambda p, fn=fn: fn(result, p))
+        o.text(out / "report.html", page)
+        for name, png in pngs.items():
+            o.bytes(out / name, png)
         if args.json:
             o.json(args.json, js)
     import sys
@@ -76,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
     if gyro is not None and not args.quiet:
         print(gyro.report())
     print(f"wrote {out / 'calibration.yaml'}" + (" (accelerometer and gyroscope)" if gyro else "")
-          + f", {out / 'report.txt'}"
+          + f", {out / 'report.txt'}, {out / 'report.html'}"
           + (", figures" if figures else "") + (f", {args.json}" if args.json else ""))
     ok = result.result.success and (gyro is None or gyro.success)
     return 0 if ok else 1  # EXIT_NOT_CONVERGED: the files say which fit

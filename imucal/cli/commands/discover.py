@@ -11,14 +11,16 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Fit the paper's 9-parameter model, test the residual of the interval means "
                                    "against their noise (chi-square), and while it disagrees add the candidate "
                                    "effect (temperature, drift, nonlinearity) that is significant by a "
-                                   "likelihood-ratio test. Prints the report; --json, --plot and --out write files.")
+                                   "likelihood-ratio test. Prints the report; --json, --plot and --out write files "
+                                   "(report.html goes into --out DIR, else into --plot DIR).")
     p.add_argument("--config", help="YAML run file (data, static, gravity, fit sections); --data overrides its path")
     options.add_data_options(p)
     options.add_gravity_options(p)
     options.add_model_options(p, mode=False)  # discovery works on interval means
     p.add_argument("--json", help="write the machine-readable summary here")
     p.add_argument("--plot", metavar="DIR", help="write the figures into DIR")
-    p.add_argument("--out", metavar="DIR", help="write the final calibration.yaml and report.txt into DIR")
+    p.add_argument("--out", metavar="DIR", help="write the final calibration.yaml, report.txt and report.html "
+                                                "(figures embedded) into DIR")
     p.add_argument("--candidates", nargs="+", metavar="EFFECT",
                    help="terms to try (default: the whole grammar: bias_/scale_ x temperature, temperature2, "
                         "temperature3, drift, drift2, warmup; scale_nonlinearity, scale_nonlinearity3, "
@@ -44,30 +46,29 @@ def run(args: argparse.Namespace) -> int:
     from imucal.analysis.discover import DiscoverSettings, discover
     from imucal.model.effects import EFFECTS
     from imucal.files.output import OutputSet, check_outputs
+    from imucal.report.discover_figures import FIGURES
+    from imucal.report.html import discovery_html, render_png
 
     cfg = _config(args)
     inputs = [args.config, options.data_path(cfg)]
-    plot_names = []
-    if args.plot:
-        from imucal.report.discover_figures import FIGURES as PLOTS
-
-        plot_names = [Path(args.plot) / n for n in PLOTS]
+    plot_names = [Path(args.plot) / n for n in FIGURES] if args.plot else []
     outs = [Path(args.out) / "calibration.yaml", Path(args.out) / "report.txt"] if args.out else []
-    check_outputs(inputs, [args.json, *plot_names, *outs])
+    page_dir = args.out or args.plot  # report.html beside the other outputs
+    page_path = Path(page_dir) / "report.html" if page_dir else None
+    check_outputs(inputs, [args.json, *plot_names, *outs, page_path])
     settings = DiscoverSettings(candidates=tuple(args.candidates or EFFECTS), alpha_noise=args.alpha,
                                 alpha_effect=args.alpha, max_effects=args.max_effects)
     result = discover(cfg, settings)
     text = result.report()
     written = []
+    pngs = {name: render_png(fn, result) for name, fn in FIGURES.items()} if page_dir else {}
     with OutputSet(inputs) as o:
         if args.json:
             o.json(args.json, result.to_json())
             written.append(args.json)
         if args.plot:
-            from imucal.report.discover_figures import FIGURES
-
-            for name, fn in FIGURES.items():
-                o.call(Path(args.plot) / name, lambda p, fn=fn: fn(result, p))
+            for name, png in pngs.items():
+                o.bytes(Path(args.plot) / name, png)
             written.append(f"{args.plot}/ ({len(FIGURES)} figures)")
         if args.out:
             from imucal.report.text import fit_report
@@ -76,6 +77,9 @@ def run(args: argparse.Namespace) -> int:
             o.call(out / "calibration.yaml", result.final.calibration.save)
             o.text(out / "report.txt", fit_report(result.final) + "\n" + text)
             written.append(f"{out / 'calibration.yaml'}, {out / 'report.txt'}")
+        if page_path is not None:
+            o.text(page_path, discovery_html(result, pngs))
+            written.append(str(page_path))
     print(f"verdict: {result.verdict}" if args.quiet else text.rstrip())
     if written:
         print("wrote " + ", ".join(written))

@@ -25,13 +25,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scheme", help="score a named scheme: faces, edges, corners, faces+edges, cube-24, "
                                     "wedge-24, cube-26")
     p.add_argument("--no-compare", action="store_true", help="skip the comparison with common schemes")
-    p.add_argument("--json", metavar="OUT", help="write the plan (poses, predicted std, comparison) as JSON")
+    p.add_argument("--json", metavar="OUT", help="write the plan (poses, instructions, predicted std, comparison) "
+                                                 "as JSON")
+    p.add_argument("--plot", metavar="PNG", help="draw the board in every pose (with its instruction) into this PNG")
     p.set_defaults(run=run)
 
 
 #: Keys of a plan file: only "poses" is read; the rest are what plan-poses --json writes beside it
 #: (its results; scoring uses this command's options).
-PLAN_KEYS = ("format", "format_version", "poses", "criterion", "n", "n_distinct", "noise_m_s2", "free",
+PLAN_KEYS = ("format", "format_version", "poses", "instructions", "criterion", "n", "n_distinct", "noise_m_s2", "free",
              "criterion_value", "log_det_fisher", "predicted_std", "label", "comparison", "random")
 #: Largest plan file read (a plan of 10000 poses is about 0.5 MB).
 MAX_PLAN_BYTES = 4 << 20
@@ -93,20 +95,6 @@ def _read_plan(path: str):
     return np.array(obj, float)
 
 
-def _nearest_cube(u) -> str:
-    import numpy as np
-
-    from imucal.analysis.simulate import cube_directions
-
-    C = cube_directions("faces+edges+corners")
-    j = int(np.argmax(C @ u))
-    v = np.round(C[j] * np.sqrt(np.count_nonzero(C[j]))).astype(int)
-    name = "".join(f"{'+' if x > 0 else '-'}{a}" for x, a in zip(v, "xyz") if x != 0)
-    kind = {1: "face", 2: "edge", 3: "corner"}[int(np.count_nonzero(v))]
-    ang = float(np.degrees(np.arccos(np.clip(C[j] @ u, -1, 1))))
-    return f"{kind} {name}" + (f" +{ang:.1f} deg" if ang >= 0.05 else "")
-
-
 def _units(name: str) -> tuple[float, str]:
     """Display factor and unit for the ideal SI sensor the design is evaluated at."""
     if name.startswith("s"):
@@ -119,15 +107,17 @@ def _units(name: str) -> tuple[float, str]:
 def format_design(design, comparison=None) -> str:
     import math
 
+    from imucal.analysis.pose_instructions import instructions
+
     L = []
     d = design
     what = {"D": "log det F, larger is better", "A": "trace F^-1, smaller is better",
             "E": "smallest eigenvalue of F, larger is better"}[d.criterion]
     L.append(f"[[Pose plan]] {d.label or 'plan'}: {d.n} orientations ({d.n_distinct} distinct), "
              f"{len(d.free)} parameters, criterion {d.criterion}")
-    L.append("    gravity direction in the sensor frame (unit vector), nearest cube direction")
-    for k, u in enumerate(d.directions):
-        L.append(f"    {k + 1:3d}  {u[0]:+.4f} {u[1]:+.4f} {u[2]:+.4f}   {_nearest_cube(u)}")
+    L.append("    up direction in the sensor frame (the reading a/|a|, unit vector), and how to set the board down")
+    for k, (u, inst) in enumerate(zip(d.directions, instructions(d.directions))):
+        L.append(f"    {k + 1:3d}  {u[0]:+.4f} {u[1]:+.4f} {u[2]:+.4f}   {inst.text}")
     L.append(f"[[Predicted standard errors]] noise {d.noise:g} m/s^2 per interval mean, ideal sensor "
              "(s in m/s^2, b relative)")
     for n, v in d.std.items():
@@ -152,12 +142,13 @@ def run(args: argparse.Namespace) -> int:
     from imucal.analysis.design import (BASE_NAMES, DEFAULT_NOISE, SIX_NAMES, compare, evaluate, optimal_design,
                           scheme_directions)
     from imucal.errors import ImucalError
-    from imucal.files.output import check_outputs, write_json_atomic
+    from imucal.analysis.pose_instructions import instructions
+    from imucal.files.output import OutputSet, check_outputs
 
     from imucal.config.limits import check_seed
 
     check_seed(args.seed, "--seed")
-    check_outputs([args.evaluate], [args.json])
+    check_outputs([args.evaluate], [args.json, args.plot])
     free = SIX_NAMES if args.fix_angles else BASE_NAMES
     noise = DEFAULT_NOISE if args.noise is None else args.noise
     given = [x for x in (args.n is not None, bool(args.evaluate), bool(args.scheme)) if x]
@@ -172,12 +163,24 @@ def run(args: argparse.Namespace) -> int:
         design = optimal_design(args.n, args.criterion, noise, free=free, seed=args.seed)
     comp = None if args.no_compare else compare(design, seed=args.seed)
     print(format_design(design, comp))
-    if args.json:
-        obj = design.to_json()
-        if comp is not None:
-            obj["comparison"] = [{"label": o.label, "criterion_value": o.value, "log_det_fisher": o.log_det_fisher,
-                                  "predicted_std": o.std} for o in comp.others]
-            obj["random"] = {"n_sets": comp.n_random, "median": comp.random_median, "best": comp.random_best}
-        write_json_atomic(args.json, obj)
-        print(f"wrote {args.json}")
+    insts = instructions(design.directions)
+    with OutputSet([args.evaluate]) as o:
+        if args.json:
+            obj = design.to_json()
+            obj["instructions"] = [inst.numbered(k + 1) for k, inst in enumerate(insts)]
+            if comp is not None:
+                obj["comparison"] = [{"label": other.label, "criterion_value": other.value,
+                                      "log_det_fisher": other.log_det_fisher, "predicted_std": other.std}
+                                     for other in comp.others]
+                obj["random"] = {"n_sets": comp.n_random, "median": comp.random_median, "best": comp.random_best}
+            o.json(args.json, obj)
+        if args.plot:
+            from imucal.report.figures import plain
+            from imucal.report.pose_figures import poses_figure
+
+            o.call(args.plot, lambda p: poses_figure(insts, p, f"Pose plan: {plain(design.label or 'plan')}, "
+                                                                f"{design.n} orientations"))
+    for f in (args.json, args.plot):
+        if f:
+            print(f"wrote {f}")
     return 0

@@ -1,0 +1,307 @@
+"""One self-contained HTML page per run: the verdict first, then parameters, residuals, figures.
+
+The page needs nothing but itself: figures are inline base64 PNGs, the style is inline, there is
+no script, and a Content-Security-Policy forbids loading anything from elsewhere. Every piece of
+text that comes from the user (file names, units, config strings, effect labels) is escaped.
+Built from the same run object as the text report (imucal.report.text).
+"""
+from __future__ import annotations
+
+import base64
+import html
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable, Mapping
+
+import numpy as np
+
+from imucal.analysis.discover import Discovery
+from imucal.pipeline import POOR_FIT_P, POOR_FIT_REDCHI, CalibrationRun
+from imucal.report.text import interval_residuals, t_quantile_975
+from imucal.solve.stats import chi2_sf
+from imucal import __version__
+
+#: No network, no scripts: images only from data: URLs, styles only inline.
+CSP = "default-src 'none'; img-src data:; style-src 'unsafe-inline'"
+
+STYLE = """
+body{font-family:system-ui,-apple-system,'Segoe UI',Roboto,sans-serif;margin:1.5em auto;max-width:1100px;
+     padding:0 1em;color:#1d2125;line-height:1.4}
+h1{font-size:1.5em;margin-bottom:.2em} h2{font-size:1.2em;border-bottom:1px solid #ccd;padding-bottom:.2em;
+     margin-top:1.6em}
+.verdict{border-radius:6px;padding:.8em 1.1em;margin:1em 0;border:2px solid}
+.verdict h2{border:none;margin:0 0 .3em 0;font-size:1.35em}
+.pass{background:#e8f6ec;border-color:#2e8b57} .check{background:#fff6e0;border-color:#d49a00}
+.fail{background:#fdecea;border-color:#c0392b}
+td.ok{color:#2e7d32;font-weight:600} td.bad{color:#c0392b;font-weight:600} td.na{color:#777}
+table{border-collapse:collapse;margin:.5em 0;font-size:.92em}
+th,td{padding:.2em .7em;border-bottom:1px solid #e3e6ea;text-align:left}
+td.num,th.num{text-align:right;font-variant-numeric:tabular-nums;font-family:ui-monospace,monospace}
+tr.out td{background:#fdecea}
+figure{margin:1em 0} figure img{max-width:100%;border:1px solid #e3e6ea}
+figcaption{font-size:.9em;color:#555} pre{background:#f6f8fa;padding:.8em;overflow-x:auto;font-size:.85em}
+.meta{color:#555;font-size:.9em} ul.warn li{color:#8a5a00}
+"""
+
+
+def esc(text: object) -> str:
+    """HTML-escaped text (quotes too: safe inside attributes)."""
+    return html.escape(str(text), quote=True)
+
+
+def num(v: float, fmt: str = ".6g") -> str:
+    return "n/a" if v is None or not math.isfinite(v) else format(v, fmt)
+
+
+@dataclass(frozen=True)
+class Check:
+    """One line of the verdict: what was checked, whether it passed (None: cannot tell), details."""
+
+    what: str
+    ok: bool | None
+    detail: str
+
+
+@dataclass(frozen=True)
+class Verdict:
+    level: str  #: "pass", "check" (usable, but read the warnings) or "fail"
+    headline: str
+    checks: tuple[Check, ...]
+    warnings: tuple[str, ...]
+
+
+def chi2_consistent(chi2: float, dof: int) -> tuple[bool | None, float]:
+    """Whether chi-square on ``dof`` is consistent with the noise (the rule of imucal.pipeline.fit_warnings:
+    poor when reduced chi-square > POOR_FIT_REDCHI and p < POOR_FIT_P), and its p-value."""
+    if dof <= 0 or not math.isfinite(chi2):
+        return None, math.nan
+    p = chi2_sf(chi2, dof)
+    return not (chi2 / dof > POOR_FIT_REDCHI and p < POOR_FIT_P), p
+
+
+def verdict(run: CalibrationRun) -> Verdict:
+    """Pass/fail first: converged? residuals consistent with the noise? anything to warn about?"""
+    res, cal, obs = run.result, run.calibration, run.observability
+    consistent, p = chi2_consistent(res.chi2, res.dof)
+    dropped = cal.data.get("dropped_intervals", [])
+    rms = cal.fit["rms_residual"] * 1e3
+    checks = [
+        Check("IPOPT converged", res.success, f"{res.status_words}; {res.iterations} iterations"),
+        Check("residuals consistent with the noise", consistent,
+              "cannot be tested: 0 degrees of freedom" if consistent is None else
+              f"reduced chi-square {res.redchi:.3g} (chi-square {res.chi2:.4g} on {res.dof} dof, p = {p:.3g}; "
+              f"poor when above {POOR_FIT_REDCHI:g} with p < {POOR_FIT_P:g})"),
+        Check("every parameter determined by the poses", not obs.poorly_determined,
+              f"{obs.n_distinct} distinct orientations; Jacobian condition {obs.condition:.3g}"
+              + ("; poorly determined: " + ", ".join(obs.poorly_determined) if obs.poorly_determined else "")),
+        Check("no parameter at a bound", not res.at_bound,
+              "; ".join(f"{n} at its {b} bound" for n, b in res.at_bound.items()) or "all inside their bounds"),
+        Check("no static interval dropped", not dropped,
+              f"{len(dropped)} dropped because an axis was clipped" if dropped else
+              f"{run.intervals.n} static intervals used"),
+    ]
+    warnings = tuple(cal.fit.get("warnings", []))
+    if not res.success:
+        level, word = "fail", "FAIL: the solver did not converge"
+    elif any(c.ok is False for c in checks) or warnings:
+        level, word = "check", "CHECK: usable, read the warnings"
+    else:
+        level, word = "pass", "PASS"
+    headline = (f"{word} (RMS |a| - g {rms:.3g} mm/s² on {run.intervals.n} interval means, "
+                f"reduced chi-square {num(res.redchi, '.3g')})")
+    return Verdict(level, headline, tuple(checks), warnings)
+
+
+def _table(head: Iterable[str], rows: Iterable[Iterable[str]], numeric: Iterable[bool] = (),
+           row_class: Iterable[str] = ()) -> str:
+    """A table from already-escaped cells."""
+    numeric = list(numeric)
+    head = list(head)
+    cls = [' class="num"' if i < len(numeric) and numeric[i] else "" for i in range(len(head))]
+    out = ["<table><thead><tr>" + "".join(f"<th{c}>{h}</th>" for c, h in zip(cls, head)) + "</tr></thead><tbody>"]
+    rc = list(row_class)
+    for k, r in enumerate(rows):
+        attr = f' class="{rc[k]}"' if k < len(rc) and rc[k] else ""
+        out.append(f"<tr{attr}>" + "".join(f"<td{c}>{v}</td>" for c, v in zip(cls, r)) + "</tr>")
+    out.append("</tbody></table>")
+    return "\n".join(out)
+
+
+def _verdict_html(v: Verdict) -> str:
+    rows = []
+    for c in v.checks:
+        mark, cls = ("yes", "ok") if c.ok else (("no", "bad") if c.ok is False else ("n/a", "na"))
+        rows.append(f'<tr><td>{esc(c.what)}</td><td class="{cls}">{mark}</td><td>{esc(c.detail)}</td></tr>')
+    warn = ""
+    if v.warnings:
+        warn = "<p><b>Warnings</b></p><ul class=\"warn\">" + "".join(f"<li>{esc(w)}</li>" for w in v.warnings) + "</ul>"
+    return (f'<section class="verdict {v.level}" id="verdict"><h2>{esc(v.headline)}</h2>'
+            f"<table><tbody>{''.join(rows)}</tbody></table>{warn}</section>")
+
+
+def _parameters_html(run: CalibrationRun) -> str:
+    res = run.result
+    t = t_quantile_975(res.dof)
+    rows = []
+    for n, p in res.params.items():
+        sd = res.std.get(n, math.nan)
+        if p.fixed:
+            rows.append([esc(n), num(p.value, ".10g"), "fixed", "", esc(p.unit), num(res.initial[n].value, ".6g")])
+            continue
+        pct = abs(sd / p.value) * 100 if p.value and math.isfinite(sd) else math.nan
+        flag = f" (at {res.at_bound[n]} bound)" if n in res.at_bound else ""
+        rows.append([esc(n), num(p.value, ".10g"), num(sd, ".4g"), num(pct, ".3g"), esc(p.unit),
+                     num(res.initial[n].value, ".6g") + esc(flag)])
+    body = _table(["parameter", "value", "standard error", "error [%]", "unit", "initial value"], rows,
+                  [False, True, True, True, False, True])
+    angles = [n for n in ("phi", "psi", "theta") if n in res.params]
+    if angles:
+        body += _table(["angle", "value [deg]", "standard error [deg]", "from 90° [mrad]"],
+                       [[esc(n), num(math.degrees(res.params[n].value), ".5f"),
+                         num(math.degrees(res.std.get(n, math.nan)), ".3g"),
+                         num((res.params[n].value - math.pi / 2) * 1e3, ".4g")] for n in angles],
+                       [False, True, True, True])
+    body += (f"<p class=\"meta\">95 % intervals: value ± {num(t, '.3g')} × standard error (Student-t, "
+             f"{res.dof} dof; the errors are scaled by the reduced chi-square).</p>")
+    return body
+
+
+def _apply_html(run: CalibrationRun) -> str:
+    A, c = run.calibration.linear_map()
+    unit = esc(run.calibration.raw_unit)
+    rows = [[f"a<sub>{'xyz'[i]}</sub>"] + [num(v, "+.9e") for v in A[i]] + [num(c[i], "+.9e")] for i in range(3)]
+    return (f"<p>a = A raw + c, with a in m/s², raw in {unit}; A [(m/s²)/{unit}] is lower triangular "
+            "(the Theorem).</p>"
+            + _table(["", "A[:, x]", "A[:, y]", "A[:, z]", "c [m/s²]"], rows, [False, True, True, True, True]))
+
+
+def _residuals_html(run: CalibrationRun) -> str:
+    iv = run.intervals
+    r, s = interval_residuals(run)
+    rows, cls = [], []
+    for k in range(iv.n):
+        z = r[k] / s[k] if math.isfinite(s[k]) and s[k] > 0 else math.nan
+        rows.append([str(k), num(iv.t_start[k], ".2f"), num(iv.t_end[k], ".2f"),
+                     " ".join(num(v, "+.3f") for v in run.directions[k]),
+                     num(r[k] * 1e3, "+.4f"), num(s[k] * 1e3, ".4f"), num(z, "+.2f")])
+        cls.append("out" if math.isfinite(z) and abs(z) > 3 else "")
+    rms = float(np.sqrt(np.mean(r**2)))
+    return (f"<p>|a| − g at each interval mean; σ from the interval's own scatter. RMS {rms * 1e3:.4g} mm/s²; "
+            "rows beyond 3σ are shaded.</p>"
+            + _table(["#", "start [s]", "end [s]", "direction (unit vector)", "|a| − g [mm/s²]", "σ [mm/s²]",
+                      "residual / σ"], rows, [True, True, True, False, True, True, True], cls))
+
+
+def _statistics_html(run: CalibrationRun) -> str:
+    res, cal, iv, rec = run.result, run.calibration, run.intervals, run.recording
+    rows = [("model", esc(res.model_name)),
+            ("fit on", "interval means" if res.mode == "means" else f"{res.residuals.size} samples"),
+            ("static intervals", f"{iv.n} ({run.observability.n_distinct} distinct orientations)"),
+            ("free parameters", str(len(res.free_names))),
+            ("chi-square / dof", f"{num(res.chi2, '.6g')} / {res.dof}"),
+            ("reduced chi-square", f"{num(res.redchi, '.4g')} (1 = residuals at the noise of the means)"),
+            ("RMS |a| − g, interval means", f"{cal.fit['rms_residual'] * 1e3:.4g} mm/s²"),
+            ("RMS |a| − g, samples", f"{cal.fit['rms_residual_samples'] * 1e3:.4g} mm/s²"),
+            ("noise inflation", f"{iv.noise_inflation:.3g} (batch-means / white-noise variance)"),
+            ("gravity", f"{cal.gravity:.6f} m/s² ({esc(run.gravity_source)})"),
+            ("data", f"{esc(Path(rec.source).name)}: {rec.n} samples, {rec.duration:.1f} s, "
+                     f"{rec.sample_rate:.4g} Hz, raw unit {esc(cal.raw_unit)}"),
+            ("SHA-256", f"<code>{esc(rec.sha256)}</code>")]
+    if rec.time_note:
+        rows.append(("time", esc(rec.time_note)))
+    for d in cal.data.get("dropped_intervals", []):
+        rows.append(("dropped interval", f"{d['t_start']:.2f} – {d['t_end']:.2f} s: {esc(d['reason'])}"))
+    return _table(["", ""], [[a, b] for a, b in rows])
+
+
+def _figures_html(figures: Mapping[str, bytes], captions: Mapping[str, str]) -> str:
+    out = []
+    for name, png in figures.items():
+        data = base64.b64encode(png).decode("ascii")
+        cap = captions.get(name, name)
+        out.append(f'<figure><img alt="{esc(cap)}" src="data:image/png;base64,{data}">'
+                   f"<figcaption>{esc(name)}: {esc(cap)}</figcaption></figure>")
+    return "\n".join(out) if out else "<p class=\"meta\">Figures were not made for this run.</p>"
+
+
+CAPTIONS = {
+    "residuals.png": "residual |a| − g of each interval mean, with 2σ bars and the RMS band",
+    "directions.png": "gravity direction of each interval on the sphere (equal-area projection), numbered "
+                      "as in the residual table",
+    "discover_residuals.png": "normalised residual against time, temperature and orientation, before and "
+                              "after the effects found",
+    "discover_candidates.png": "likelihood-ratio statistic of each candidate effect against the threshold",
+    "discover_gap.png": "RMS and chi-square per dof before and after, against the noise",
+}
+
+
+def _page(title: str, sections: Iterable[tuple[str, str, str]]) -> str:
+    """sections: (id, escaped heading, html body)."""
+    body = "\n".join(f'<section id="{sid}"><h2>{head}</h2>\n{content}\n</section>' if head else content
+                     for sid, head, content in sections)
+    return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+            f"<meta http-equiv=\"Content-Security-Policy\" content=\"{CSP}\">"
+            "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">"
+            f"<title>{esc(title)}</title><style>{STYLE}</style></head>\n<body>\n<h1>{esc(title)}</h1>\n"
+            f"{body}\n<p class=\"meta\">imucal {esc(__version__)}</p>\n</body></html>\n")
+
+
+def _calibration_sections(run: CalibrationRun) -> list[tuple[str, str, str]]:
+    return [("parameters", "Parameters with standard errors", _parameters_html(run)),
+            ("statistics", "Fit statistics and data", _statistics_html(run)),
+            ("residuals", "Residuals per pose", _residuals_html(run)),
+            ("apply", "Apply map", _apply_html(run))]
+
+
+def calibration_html(run: CalibrationRun, figures: Mapping[str, bytes] | None = None,
+                     extra: Mapping[str, str] | None = None) -> str:
+    """The page of ``imucal calibrate``: verdict, parameters, statistics, residuals, figures.
+
+    ``figures`` maps file names to PNG bytes; ``extra`` maps headings to more plain text (e.g. the
+    gyroscope report), shown preformatted and escaped."""
+    title = f"imucal calibration: {Path(run.recording.source).name}"
+    sections = [("verdict", "", _verdict_html(verdict(run))), *_calibration_sections(run)]
+    for k, (head, text) in enumerate((extra or {}).items()):
+        sections.append((f"extra{k}", esc(head), f"<pre>{esc(text)}</pre>"))
+    sections.append(("figures", "Figures", _figures_html(figures or {}, CAPTIONS)))
+    return _page(title, sections)
+
+
+def discovery_html(d: Discovery, figures: Mapping[str, bytes] | None = None) -> str:
+    """The page of ``imucal discover``: its verdict, the gap, the effects, then the final calibration."""
+    b, f = d.base.result, d.final.result
+    v = verdict(d.final)
+    level = "pass" if d.consistent_after and v.level == "pass" else ("fail" if v.level == "fail" else "check")
+    head = (f'<section class="verdict {level}" id="verdict"><h2>{esc(d.verdict)}</h2>'
+            + _table(["", "base model", "final model"],
+                     [["model", esc(b.model_name), esc(f.model_name)],
+                      ["RMS |a| − g [mm/s²]", num(d.rms_before * 1e3, ".4g"), num(d.rms_after * 1e3, ".4g")],
+                      ["chi-square / dof", f"{num(b.chi2, '.4g')} / {b.dof}", f"{num(f.chi2, '.4g')} / {f.dof}"],
+                      ["p (chi-square)", num(d.p_before, ".3g"), num(d.p_after, ".3g")],
+                      ["consistent with the noise", "yes" if d.consistent_before else "no",
+                       "yes" if d.consistent_after else "no"]], [False, True, True])
+            + f"<p class=\"meta\">Noise of the means alone: RMS {d.rms_noise * 1e3:.4g} mm/s²; significance "
+              f"level {d.settings.alpha_noise:g}.</p></section>")
+    rows = []
+    for e in d.effects:
+        for n, val in e.coefficients.items():
+            rows.append([esc(e.label), esc(n), num(val, ".6g"), num(e.std.get(n, math.nan), ".3g"),
+                         esc(e.units.get(n, "")), num(e.lr, ".4g"), num(e.p_value, ".3g")])
+    effects = (_table(["effect", "coefficient", "value", "standard error", "unit", "LR", "p (adjusted)"], rows,
+                      [False, False, True, True, False, True, True]) if rows else "<p>None added.</p>")
+    title = f"imucal discover: {Path(d.base.recording.source).name}"
+    sections = [("verdict", "", head), ("fit", "", _verdict_html(v)), ("effects", "Effects found", effects),
+                *_calibration_sections(d.final),
+                ("discovery", "Discovery report (text)", f"<pre>{esc(d.report())}</pre>"),
+                ("figures", "Figures", _figures_html(figures or {}, CAPTIONS))]
+    return _page(title, sections)
+
+
+def render_png(fn, obj) -> bytes:
+    """PNG bytes of a figure function ``fn(obj, path_or_file)``."""
+    import io
+
+    buf = io.BytesIO()
+    fn(obj, buf)
+    return buf.getvalue()

@@ -1,0 +1,141 @@
+"""report.html (imucal.report.html): one self-contained page, verdict first, every number with its
+unit, figures inline, user text escaped; written by calibrate and discover beside their outputs."""
+from __future__ import annotations
+
+import base64
+import html
+import io
+import math
+import re
+import shutil
+from dataclasses import replace
+
+import matplotlib.image as mpimg
+import numpy as np
+import pytest
+
+from imucal.analysis.simulate import PosePlan, cube_directions, mems_counts_sensor, simulate
+from imucal.cli.main import main
+from imucal.config.run import config_from_dict
+from imucal.pipeline import calibrate
+from imucal.report.html import calibration_html, chi2_consistent, verdict
+from imucal.solve.stats import chi2_sf
+
+#: A file name an attacker could choose: markup, an entity, a quote and matplotlib's mathtext marker.
+EVIL = 'evil<script>alert(1)<img src=x onerror=alert(2)>&"$x_$.csv'
+
+
+def _images(page: str) -> list[bytes]:
+    return [base64.b64decode(m) for m in re.findall(r'src="data:image/png;base64,([A-Za-z0-9+/=]+)"', page)]
+
+
+@pytest.fixture(scope="module")
+def cli_page(counts_recording, tmp_path_factory):
+    """calibrate through the CLI, on a copy of the counts recording named EVIL, with an evil unit."""
+    root = tmp_path_factory.mktemp("html")
+    data = root / EVIL
+    shutil.copyfile(counts_recording.path, data)
+    out = root / "out"
+    code = main(["calibrate", "--data", str(data), "--out", str(out), "--unit", "<b>LSB</b>", "--quiet"])
+    return code, out, (out / "report.html").read_text(encoding="utf-8")
+
+
+def test_calibrate_writes_report_html_with_the_fitted_numbers(cli_page, counts_run):
+    code, out, page = cli_page
+    assert code == 0
+    assert page.startswith("<!DOCTYPE html>")
+    # The verdict comes first, then parameters, residuals, figures.
+    order = [page.index(f'id="{s}"') for s in ("verdict", "parameters", "residuals", "figures")]
+    assert order == sorted(order)
+    res = counts_run.result  # the same recording: the same fit
+    for n, p in res.params.items():
+        assert f"<td>{n}</td><td class=\"num\">{p.value:.10g}</td>" in page
+        assert f"{res.std[n]:.4g}" in page
+    assert f"{counts_run.calibration.fit['rms_residual'] * 1e3:.4g} mm/s²" in page
+    assert "[mm/s²]" in page and "m/s²" in page and "[deg]" in page
+
+
+def test_report_html_needs_no_network_and_runs_no_script(cli_page):
+    _, out, page = cli_page
+    assert "Content-Security-Policy" in page and "default-src 'none'" in page
+    assert not re.search(r"<script", page, re.I)
+    assert not re.search(r"""(src|href)=["']?(https?:|//|file:)""", page, re.I)
+    imgs = _images(page)
+    assert len(imgs) == 2  # residuals.png and directions.png, the same bytes as the files
+    assert imgs == [(out / "residuals.png").read_bytes(), (out / "directions.png").read_bytes()]
+    for png in imgs:  # they decode as pictures
+        assert mpimg.imread(io.BytesIO(png), format="png").shape[0] > 100
+
+
+def test_file_names_and_config_strings_are_escaped(cli_page):
+    _, _, page = cli_page
+    assert "<script" not in page and "<img src=x" not in page and "<b>LSB" not in page
+    assert html.escape(EVIL, quote=True) in page  # shown, as text
+    assert "&lt;b&gt;LSB&lt;/b&gt;/(m/s^2)" in page  # the unit of the scales, escaped
+
+
+def test_verdict_pass_on_a_clean_fit_and_check_when_warned(counts_run):
+    v = verdict(counts_run)
+    res = counts_run.result
+    p = chi2_sf(res.chi2, res.dof)
+    assert v.checks[0].ok is True
+    expected_ok = not (res.redchi > 2 and p < 1e-3)
+    assert v.checks[1].ok is expected_ok and f"p = {p:.3g}" in v.checks[1].detail
+    assert v.level == ("pass" if expected_ok and not v.warnings else "check")
+    assert v.headline.startswith("PASS" if v.level == "pass" else "CHECK")
+    page = calibration_html(counts_run)
+    assert page.index(html.escape(v.headline)) < page.index('id="parameters"')
+    assert "Figures were not made" in page
+
+
+def test_chi2_consistency_rule():
+    assert chi2_consistent(20.0, 20)[0] is True
+    ok, p = chi2_consistent(200.0, 20)
+    assert ok is False and p < 1e-3
+    assert chi2_consistent(1.0, 0)[0] is None and math.isnan(chi2_consistent(1.0, 0)[1])
+
+
+def test_poor_fit_is_flagged_in_the_verdict(tmp_path):
+    """A scale that changes with time (drift the base model lacks) gives a poor fit: the verdict
+    says CHECK, the residual check fails and the page carries the discover hint."""
+    rng = np.random.default_rng(11)
+    sensor = mems_counts_sensor(rng)
+    plan = PosePlan(cube_directions(), hold=3.0, transition=1.5, rate=100.0)
+    sim = simulate(sensor, plan, seed=3)
+    t = sim.t
+    raw = sim.raw * (1 + 5e-4 * (t / t[-1]))[:, None]  # 0.05 % scale drift over the log
+    path = tmp_path / "drift.csv"
+    path.write_text(replace(sim, raw=raw, sensor=replace(sensor, quantum=0.0)).to_csv_text())
+    run = calibrate(config_from_dict({"data": {"path": str(path)}}))
+    v = verdict(run)
+    assert v.level == "check" and v.checks[1].ok is False
+    page = calibration_html(run)
+    assert "class=\"verdict check\"" in page and "imucal discover" in page
+
+
+def test_discover_writes_report_html(tmp_path, run_cli, counts_recording):
+    data = tmp_path / EVIL
+    shutil.copyfile(counts_recording.path, data)
+    r = run_cli(["discover", "--data", data, "--plot", tmp_path / "plots", "--quiet"])
+    assert r.code == 0, r.err
+    page = (tmp_path / "plots" / "report.html").read_text(encoding="utf-8")
+    assert "<script" not in page and html.escape(EVIL, quote=True) in page
+    assert len(_images(page)) == 3
+    assert page.index('id="verdict"') < page.index('id="effects"') < page.index('id="parameters"')
+    r2 = run_cli(["discover", "--data", data, "--out", tmp_path / "o", "--quiet"])
+    assert r2.code == 0 and (tmp_path / "o" / "report.html").exists()
+
+
+def test_report_html_is_never_an_input(tmp_path, run_cli, counts_recording):
+    out = tmp_path / "o"
+    out.mkdir()
+    data = out / "report.html"
+    shutil.copyfile(counts_recording.path, data)
+    r = run_cli(["calibrate", "--data", data, "--out", out, "--no-figures"])
+    assert r.code == 2 and "would overwrite the input" in r.err and "report.html" in r.err
+
+
+def test_extra_sections_are_escaped(counts_run):
+    page = calibration_html(counts_run, extra={"Gyro <i>": "bias 1 < 2 & </pre><script>"})
+    assert "<h2>Gyro &lt;i&gt;</h2>" in page and "<pre>bias 1 &lt; 2 &amp; &lt;/pre&gt;&lt;script&gt;</pre>" in page
+    assert page.index("Gyro &lt;i&gt;") < page.index('id="figures"')
