@@ -83,15 +83,17 @@ def chi2_consistent(chi2: float, dof: int) -> tuple[bool | None, float]:
 def verdict(run: CalibrationRun) -> Verdict:
     """Pass/fail first: converged? residuals consistent with the noise? anything to warn about?"""
     res, cal, obs = run.result, run.calibration, run.observability
-    consistent, p = chi2_consistent(res.chi2, res.dof)
+    consistent, p = chi2_consistent(res.chi2_noise, res.dof)  # against the noise alone
     dropped = cal.data.get("dropped_intervals", [])
     rms = cal.fit["rms_residual"] * 1e3
     checks = [
         Check("IPOPT converged", res.success, f"{res.status_words}; {res.iterations} iterations"),
         Check("residuals consistent with the noise", consistent,
               "cannot be tested: 0 degrees of freedom" if consistent is None else
-              f"reduced chi-square {res.redchi:.3g} (chi-square {res.chi2:.4g} on {res.dof} dof, p = {p:.3g}; "
-              f"poor when above {POOR_FIT_REDCHI:g} with p < {POOR_FIT_P:g})"),
+              f"reduced chi-square {res.redchi_noise:.3g} (chi-square {res.chi2_noise:.4g} on {res.dof} dof, "
+              f"p = {p:.3g}; poor when above {POOR_FIT_REDCHI:g} with p < {POOR_FIT_P:g})"
+              + (f"; the weights include a between-interval excess of {res.excess ** 0.5:.3g} m/s^2 rms "
+                 "(bias_instability)" if res.excess > 0 else "")),
         Check("every parameter determined by the poses", not obs.poorly_determined,
               f"{obs.n_distinct} distinct orientations; Jacobian condition {obs.condition:.3g}"
               + ("; poorly determined: " + ", ".join(obs.poorly_determined) if obs.poorly_determined else "")),
