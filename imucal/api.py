@@ -18,6 +18,7 @@ from imucal.config.run import FitSettings, GravitySpec, RunConfig, config_from_d
 from imucal.data.load import DataSpec, Recording, infer_time_unit, TIME_UNITS, MIN_RATE_HZ, MAX_RATE_HZ
 from imucal.errors import ImucalError
 from imucal.pipeline import CalibrationRun, calibrate as _calibrate_config
+import dataclasses
 
 
 def _columns(acc: Any, t: Any, temp: Any) -> tuple[np.ndarray, Any, Any]:
@@ -89,7 +90,6 @@ def calibrate(acc: Any, t: Sequence[float] | None = None, temp: Sequence[float] 
         fit = FitSettings(mode=mode, weights=weights, angle_tolerance=fit.angle_tolerance,
                           fix=tuple(sorted(set(fit.fix) | ({"phi", "psi", "theta"} if fix_angles else set()))),
                           initial=fit.initial, effects=fit.effects)
-    import dataclasses
 
     cfg = dataclasses.replace(base, data=DataSpec(path=rec.source, unit=unit), gravity=grav, fit=fit)
     return _calibrate_config(cfg, recording=rec)

@@ -1,5 +1,6 @@
 """The one error type imucal raises for bad input: one line naming file, field and fix."""
 from __future__ import annotations
+import signal
 
 
 class ImucalError(Exception):
@@ -45,7 +46,6 @@ SIGNALS: list[int] = []
 
 def raise_if_signalled() -> None:
     """Raise the interrupt a signal asked for, if one arrived during the last solve."""
-    import signal
 
     if signal.SIGTERM in SIGNALS:
         raise Terminated()

@@ -25,6 +25,8 @@ from imucal.data.static import Intervals, detect_static
 from imucal.solve.stats import chi2_sf
 from imucal.gyro.result import GyroResult
 from imucal.gyro.run import calibrate_gyro
+from imucal.model.effects_registry import effects_from_specs
+from imucal.model.effects import prepare_parameters
 
 
 @dataclass(frozen=True)
@@ -215,7 +217,6 @@ def calibrate(config: RunConfig, recording: Recording | None = None) -> Calibrat
         raise ImucalError("only one static interval found: the log holds a single still pose", file=rec.source,
                           field="intervals", fix="record 12 to 50 orientations with movement between them")
     gravity, gsource = config.gravity.resolve()
-    from imucal.model.effects_registry import effects_from_specs
 
     model = build_model(effects_from_specs(config.fit.effects, src))
     angles_free = not set(ANGLE_NAMES) <= set(config.fit.fix)
@@ -223,7 +224,6 @@ def calibrate(config: RunConfig, recording: Recording | None = None) -> Calibrat
         guess, dirs, n_distinct = initial_guess(iv, gravity, angles_free, rec.source)
         params = make_parameters(guess, config, gravity, model, config.data.unit)
         if model.effects:  # covariate spread, enough intervals, reference temperature (imucal.model.effects)
-            from imucal.model.effects import prepare_parameters
 
             params = prepare_parameters(model.effects, params, {"temp": iv.temp, "time": iv.t_mid}, iv.n,
                                         rec.source)

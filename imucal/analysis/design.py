@@ -45,6 +45,9 @@ from imucal.config.limits import (MAX_DESIGN_GRID, MAX_DESIGN_POSES, MAX_RANDOM_
                      check_seed)
 from imucal.solve.observability import distinct_directions
 from imucal.model.parameters import ANGLE_NAMES, BASE_NAMES
+from imucal.analysis.simulate import frame_matrix
+from imucal.analysis.simulate import cube_directions
+from imucal.analysis.simulate import random_directions
 
 #: Design criteria: D (max log det F), A (min trace F^-1), E (max smallest eigenvalue of F).
 CRITERIA = ("D", "A", "E")
@@ -86,7 +89,6 @@ class DesignSensor:
 
 
 def _frame(angles: Sequence[float]) -> np.ndarray:
-    from imucal.analysis.simulate import frame_matrix  # E, Eq. (eq:125)
 
     return frame_matrix(np.asarray(angles, float))
 
@@ -181,7 +183,6 @@ def wedge_directions(tilt_deg: float = WEDGE_TILT_DEG) -> np.ndarray:
     Flat (tilt 0) this is the common "24-position" scheme, whose gravity directions are only the 6
     face normals; on the wedge the 24 directions are distinct.
     """
-    from imucal.analysis.simulate import cube_directions
 
     t = math.radians(tilt_deg)
     out = []
@@ -197,7 +198,6 @@ def wedge_directions(tilt_deg: float = WEDGE_TILT_DEG) -> np.ndarray:
 def scheme_directions(name: str) -> np.ndarray:
     """Named pose schemes: faces (6), edges (12), corners (8), faces+edges (18), cube-24 (6 faces x 4
     turns, flat: 6 distinct directions), wedge-24 (the same on a 30 deg wedge: 24 distinct), cube-26."""
-    from imucal.analysis.simulate import cube_directions
 
     if name == "cube-24":
         return np.repeat(cube_directions("faces"), 4, axis=0)
@@ -456,7 +456,6 @@ def best_cube_subset(n: int, criterion: str = "D", noise: float = DEFAULT_NOISE,
                      sensor: DesignSensor = DesignSensor(), gravity: float = STANDARD_GRAVITY,
                      free: Sequence[str] = BASE_NAMES, seed: int = 0, starts: int = 20) -> Design:
     """The best n distinct directions among the 26 of a cube (faces, edges, corners), by exchange."""
-    from imucal.analysis.simulate import cube_directions
 
     free = tuple(free)
     scorer, rowfn = _setup(n, criterion, sensor, gravity, free)
@@ -478,7 +477,6 @@ def optimal_design(n: int, criterion: str = "D", noise: float = DEFAULT_NOISE,
     as starting designs; the best three are polished by a pattern search on the sphere. The result
     therefore never scores below those schemes.
     """
-    from imucal.analysis.simulate import cube_directions
 
     free = tuple(free)
     scorer, rowfn = _setup(n, criterion, sensor, gravity, free)
@@ -505,7 +503,6 @@ def random_design(n: int, rng: np.random.Generator, criterion: str = "D", noise:
                   sensor: DesignSensor = DesignSensor(), gravity: float = STANDARD_GRAVITY,
                   free: Sequence[str] = BASE_NAMES) -> Design:
     """A design of n uniformly random directions (not checked for distinctness)."""
-    from imucal.analysis.simulate import random_directions
 
     return evaluate(random_directions(n, rng), criterion, noise, sensor, gravity, free, label="random",
                     check_distinct=False)

@@ -26,6 +26,9 @@ from typing import Any, Sequence
 import numpy as np
 
 from imucal.errors import ImucalError
+import casadi as ca
+from imucal.model.sensor import frame
+from imucal.data.static import detect_static
 
 #: The issue's table times [s].
 TABLE_TIMES = (1.0, 5.0, 10.0, 60.0)
@@ -99,9 +102,7 @@ def _stats(err: np.ndarray) -> tuple[float, float]:
 
 def calibration_cases(cal: Any, gravity: float, recording: Any = None) -> list[DriftCase]:
     """Raw, angles ignored and calibrated errors of one calibration (definitions at the top)."""
-    import casadi as ca
 
-    from imucal.model.sensor import frame
 
     v = {n: float(cal.params[n].value) for n in ("s1", "s2", "s3", "b1", "b2", "b3", "phi", "psi", "theta")}
     s = np.array([v["s1"], v["s2"], v["s3"]])
@@ -114,7 +115,6 @@ def calibration_cases(cal: Any, gravity: float, recording: Any = None) -> list[D
         calibrated = DriftCase("calibrated", abs(cal.rms_residual),
                                "RMS residual of the fit on its own data")
     else:
-        from imucal.data.static import detect_static
 
         iv = detect_static(recording.t, recording.raw, temp=recording.temp, source=recording.source)
         if iv.n == 0:

@@ -26,6 +26,8 @@ from imucal.constants import DEFAULT_ANGLE_TOL, RIGHT_ANGLE, STANDARD_GRAVITY
 from imucal.errors import ImucalError
 from imucal.model.sensor import gram_np, tbar
 from imucal.config.limits import MAX_STARTS, check_count, check_seed
+import casadi as ca
+from imucal.model.sensor import frame_inverse_transpose
 
 #: Smallest eigenvalue of G accepted anywhere in an angle box: below it the frame is (nearly)
 #: degenerate (axes close to coplanar; E^-T amplifies by 1/sqrt(lambda_min) >= 10).
@@ -209,9 +211,7 @@ def _linearised_frame(ang):
     The expansion is what sin(delta) ~ delta, cos(delta) ~ 1 gives after dropping products of
     deltas: [[1, 0, 0], [d_phi, 1, 0], [d_psi, d_theta, 1]], the linear models' misalignment matrix.
     """
-    import casadi as ca
 
-    from imucal.model.sensor import frame_inverse_transpose
 
     a = ca.SX.sym("a", 3)
     L = frame_inverse_transpose(a[0], a[1], a[2])
@@ -224,7 +224,6 @@ def _linearised_frame(ang):
 @lru_cache(maxsize=None)
 def _problem(kind: str):
     """Build one NLP once: variables x (scaled m) and u (angles = mid + half * u, u in [-1, 1])."""
-    import casadi as ca
 
     x, u, p = ca.SX.sym("x", 3), ca.SX.sym("u", 3), ca.SX.sym("p", 7)
     ang = p[:3] + p[3:6] * u  # p = [mid(3), half(3), objective scale]
@@ -358,7 +357,6 @@ def linearisation_samples(box: AngleBox, range_ms2: float, samples: int, seed: i
     |D m| is convex in m, so its max over the m-box is at one of the 8 m-vertices: sampling only
     the angles (seeded, plus the angle box's vertices) loses nothing in m.
     """
-    import casadi as ca
 
     a = ca.SX.sym("a", 3)
     L, L_lin = _linearised_frame(a)

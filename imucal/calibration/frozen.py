@@ -19,6 +19,8 @@ from imucal.calibration.fields import ACCELEROMETER
 from imucal.calibration.gyro import KIND as GYRO_KIND, GyroCalibration
 from imucal.errors import ImucalError
 from imucal.model.parameters import BASE_NAMES, Parameters
+from imucal.model.sensor import build_model
+from imucal.model.effects import make_effect
 
 
 
@@ -45,14 +47,12 @@ class Calibration:
     # --- the model -------------------------------------------------------------------------
     @property
     def model(self):
-        from imucal.model.sensor import build_model
 
         return build_model(self.effect_objects())
 
     def effect_objects(self) -> list:
         if not self.effects:
             return []
-        from imucal.model.effects import make_effect
 
         return [make_effect(name, axes) for name, axes in self.effects]
 
@@ -73,7 +73,6 @@ class Calibration:
 
         With effects, the map at covariates zero (reference temperature, t = 0).
         """
-        from imucal.model.sensor import build_model
 
         base = build_model()
         A, c = base.linear_map(self.values[: len(BASE_NAMES)])
@@ -129,12 +128,6 @@ class Calibration:
                 + (f", evaluated at each sample's {covs}" if covs else "")
                 + "; matrix and offset are the map with every effect term at zero"
                 + (f" ({covs} at their reference)" if covs else ""))
-
-    def generate_c(self, prefix: str = "imucal", precision: str = "float"):
-        """C source applying this calibration (see imucal.export.codegen.generate_c)."""
-        from imucal.export.codegen import generate_c
-
-        return generate_c(self, prefix=prefix, precision=precision)
 
     # --- files -------------------------------------------------------------------------------
     @classmethod

@@ -20,6 +20,8 @@ from imucal.model.gravity import normal_gravity
 from imucal.model.parameters import BASE_NAMES
 from imucal.data.static import StaticSettings
 from imucal.files.yamlio import check_structure, key_text
+from imucal.constants import STANDARD_GRAVITY
+from imucal.files.yamlio import read_yaml
 
 FIT_MODES = ("means", "samples")
 WEIGHTS = ("auto", "noise", "uniform")
@@ -59,7 +61,6 @@ class GravitySpec:
         if self.latitude is not None:
             return normal_gravity(self.latitude, self.height), (
                 f"WGS84 normal gravity at latitude {self.latitude} deg, height {self.height} m")
-        from imucal.constants import STANDARD_GRAVITY
 
         return STANDARD_GRAVITY, "standard gravity (no local value given)"
 
@@ -235,7 +236,6 @@ def config_from_dict(d: Any, path: str | None = None) -> RunConfig:
 
 
 def load_config(path: str | os.PathLike) -> RunConfig:
-    from imucal.files.yamlio import read_yaml
 
     d = read_yaml(path, "config", "pass a YAML run file (see configs/)")
     return config_from_dict(d, str(path))

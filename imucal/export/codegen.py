@@ -46,6 +46,8 @@ from imucal.constants import SI_ACCEL_UNIT
 from imucal.errors import ImucalError, short
 from imucal.files.inputs import read_input_bytes
 from imucal.model.parameters import BASE_NAMES, model_label
+from imucal.model.sensor import build_model, gram_det
+from imucal.files.output import OutputSet
 
 PRECISIONS = ("float", "double")
 DEFAULT_PREFIX = "imucal"
@@ -86,7 +88,6 @@ def _triangular(l: Sequence) -> ca.SX:
 
 def prepare_function() -> ca.Function:
     """params[9] -> (coeffs[9] = l[6], s[3]; Gram determinant), from the model's linear map."""
-    from imucal.model.sensor import build_model, gram_det
 
     p = ca.SX.sym("p", len(BASE_NAMES))
     A, _ = build_model().linear_map(p)  # Theorem: A = E^-T diag(1/b), lower triangular
@@ -497,7 +498,6 @@ def generate_c(cal: Calibration, prefix: str = DEFAULT_PREFIX, precision: str = 
 def write_c(cal: Calibration, out_dir: str | os.PathLike, prefix: str = DEFAULT_PREFIX,
             precision: str = "float", source: str | os.PathLike | None = None) -> list[Path]:
     """Generate and write ``out_dir/PREFIX.h`` and ``.c`` together; nothing is written on failure."""
-    from imucal.files.output import OutputSet
 
     gen = generate_c(cal, prefix, precision, source)
     out = Path(out_dir)

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from imucal.gyro.model import apply_rate, misalignment_entries
+from imucal.solve.ipopt import CONVERGED
 
 
 @dataclass(frozen=True)
@@ -38,7 +39,6 @@ class GyroResult:
     @property
     def success(self) -> bool:
         """IPOPT converged (imucal.solve.ipopt.CONVERGED)."""
-        from imucal.solve.ipopt import CONVERGED
 
         return self.status in CONVERGED
 

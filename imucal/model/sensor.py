@@ -25,6 +25,7 @@ import casadi as ca
 from imucal.model.geometry import (frame, frame_inverse_transpose, frame_np, geometry_function,  # noqa: F401
                                    gram, gram_det, gram_det_np, gram_np, tbar)
 from imucal.model.parameters import BASE_NAMES, Parameter, Parameters
+from imucal.model.parameters import base_parameters
 
 
 class Effect:
@@ -147,7 +148,6 @@ def _build(effects: tuple[Effect, ...], names: tuple[str, ...]) -> dict:
 
 @lru_cache(maxsize=64)
 def _cached(effects_key: tuple, effects: tuple[Effect, ...]) -> SensorModel:
-    from imucal.model.parameters import base_parameters
 
     names = BASE_NAMES + tuple(p.name for e in effects
                                for p in e.parameters(base_parameters([0, 0, 0], [1, 1, 1])))

@@ -17,6 +17,7 @@ from imucal.analysis.discover import Discovery
 from imucal.solve.stats import chi2_sf
 from imucal.model.effects import AXIS_NAMES
 from imucal.report.figures import plain
+import textwrap
 
 
 def _plt():
@@ -108,7 +109,6 @@ def residuals_figure(d: Discovery, path: str | Path) -> None:
 
 
 def _wrap(text: str, width: int) -> str:
-    import textwrap
 
     return "\n".join(textwrap.wrap(text, width))
 

@@ -21,6 +21,7 @@ from imucal.pipeline import POOR_FIT_P, POOR_FIT_REDCHI, CalibrationRun
 from imucal.report.text import interval_residuals, t_quantile_975
 from imucal.solve.stats import chi2_sf
 from imucal import __version__
+import io
 
 #: No network, no scripts: images only from data: URLs, styles only inline.
 CSP = "default-src 'none'; img-src data:; style-src 'unsafe-inline'"
@@ -302,7 +303,6 @@ def discovery_html(d: Discovery, figures: Mapping[str, bytes] | None = None) -> 
 
 def render_png(fn, obj) -> bytes:
     """PNG bytes of a figure function ``fn(obj, path_or_file)``."""
-    import io
 
     buf = io.BytesIO()
     fn(obj, buf)

@@ -6,6 +6,7 @@ tolerance means "a millionth of a standard error" for every parameter of every m
 ends optimal ("Solve_Succeeded") rather than stopping early at the looser level.
 """
 from __future__ import annotations
+from imucal.errors import raise_if_signalled
 
 #: IPOPT options shared by the means, samples and effects fits.
 OPTIONS = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
@@ -32,7 +33,6 @@ def run(solver, **args) -> tuple[dict, dict]:
     raised here again (imucal.errors.raise_if_signalled), so an interrupted run never reports a
     solver failure.
     """
-    from imucal.errors import raise_if_signalled
 
     sol = solver(**args)
     raise_if_signalled()

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import numpy as np
 
 
 def chi2_sf(x: float, k: int) -> float:
@@ -30,7 +31,6 @@ def between_excess(r, sigma, dof: int) -> float:
     sum r_k^2 / (sigma_k^2 + s^2) = dof (the random-effects moment equation that REML solves
     approximately; Paule & Mandel 1982, DerSimonian & Kacker 2007). 0 when the residuals are
     within their noise."""
-    import numpy as np
 
     r2, s2 = np.asarray(r, float) ** 2, np.asarray(sigma, float) ** 2
     if dof < 1 or np.sum(r2 / s2) <= dof:
