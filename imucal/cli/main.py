@@ -27,6 +27,7 @@ COMMANDS = {
     "plan-poses": "imucal.cli.commands.plan_poses",
     "export": "imucal.cli.commands.export",
     "noise": "imucal.cli.commands.noise",
+    "batch": "imucal.cli.commands.batch",
 }
 
 
