@@ -26,7 +26,7 @@ from imucal.fleet.manifest import FORMAT, FORMAT_VERSION
 DEFAULT_TOLERANCES = {"bias_abs_max": 0.5, "angle_deg_from_90_max": 0.5, "rms_max": 0.01}
 DEFECTS = ("bias", "angle")
 CORRUPTIONS = ("text in a number column", "cut after a few rows", "binary bytes")
-MANIFEST_FILE, TRUTH_FILE = "manifest.yaml", "truth.csv"
+MANIFEST_FILE, TRUTH_FILE, RECORDINGS = "manifest.yaml", "truth.csv", "recordings"
 
 
 @dataclass(frozen=True)
@@ -122,12 +122,14 @@ def _truth_row(u: SimUnit) -> dict:
     return row
 
 
-def write_fleet(units: list[SimUnit], out: Path, inputs: list[str], tolerances: dict | None = None) -> Path:
-    """One CSV per unit, truth.csv and manifest.yaml in ``out``, published together. The manifest's path."""
+def write_fleet(units: list[SimUnit], out: Path, inputs: list[str], tolerances: dict | None = None,
+                settings: dict | None = None) -> Path:
+    """One CSV per unit in ``out``/recordings (a folder manifest too), truth.csv and manifest.yaml (shared ``settings``: run-file sections) in
+    ``out``, published together. The manifest's path."""
     out = Path(out)
-    manifest = {"format": FORMAT, "format_version": FORMAT_VERSION, "settings": {},
+    manifest = {"format": FORMAT, "format_version": FORMAT_VERSION, "settings": dict(settings or {}),
                 "tolerances": dict(DEFAULT_TOLERANCES if tolerances is None else tolerances),
-                "units": [{"id": u.id, "data": f"{u.id}.csv"} for u in units]}
+                "units": [{"id": u.id, "data": f"{RECORDINGS}/{u.id}.csv"} for u in units]}
     buf = io.StringIO()
     rows = [_truth_row(u) for u in units]
     w = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
@@ -137,9 +139,9 @@ def write_fleet(units: list[SimUnit], out: Path, inputs: list[str], tolerances: 
         for u in units:
             text = u.config.run().to_csv_text()
             if u.corrupt:
-                o.call(out / f"{u.id}.csv", lambda p, t=text, c=u.corrupt: p.write_bytes(_damage(t, c)))
+                o.call(out / RECORDINGS / f"{u.id}.csv", lambda p, t=text, c=u.corrupt: p.write_bytes(_damage(t, c)))
             else:
-                o.text(out / f"{u.id}.csv", text)
+                o.text(out / RECORDINGS / f"{u.id}.csv", text)
         o.text(out / TRUTH_FILE, buf.getvalue())
         o.text(out / MANIFEST_FILE, "# imucal batch manifest.yaml --out DIR  (written by imucal simulate --fleet)\n"
                + yaml.safe_dump(manifest, sort_keys=False))

@@ -14,7 +14,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, help="output CSV (with --fleet: output folder)")
     p.add_argument("--seed", type=int, help="override the config's seed")
     p.add_argument("--truth", help="also write the true parameters (JSON)")
-    f = p.add_argument_group("fleet", "N units around the config's sensor: OUT/<unit>.csv, OUT/truth.csv and "
+    f = p.add_argument_group("fleet", "N units around the config's sensor: OUT/recordings/<unit>.csv, OUT/truth.csv and "
                                       "OUT/manifest.yaml for `imucal batch` (docs/fleet.md)")
     f.add_argument("--fleet", type=int, metavar="N", help="simulate N units instead of one recording")
     f.add_argument("--defective", type=int, default=0, metavar="K",
@@ -39,7 +39,7 @@ def _fleet(args: argparse.Namespace, cfg) -> int:
                        parse_spread(args.spread) if args.spread else Population())
     manifest = write_fleet(units, Path(args.out), [args.config])
     print(f"wrote {len(units)} units ({args.defective} defective, {args.corrupt} corrupt) to {args.out}: "
-          f"<unit>.csv, {TRUTH_FILE}, {MANIFEST_FILE}; run: imucal batch {manifest} --out RESULTS")
+          f"recordings/<unit>.csv, {TRUTH_FILE}, {MANIFEST_FILE}; run: imucal batch {manifest} --out RESULTS")
     return 0
 
 
