@@ -353,3 +353,26 @@ def test_simulate_fleet_options(tmp_path, run_cli):
     assert sorted(p.name for p in (tmp_path / "f").iterdir()) == ["manifest.yaml", "recordings", "truth.csv"]
     assert sorted(p.name for p in (tmp_path / "f" / "recordings").iterdir()) == ["unit1.csv", "unit2.csv", "unit3.csv"]
     assert len(load_manifest(tmp_path / "f" / "manifest.yaml").units) == 3
+
+
+def test_progress_bar_on_a_terminal_only(capsys):
+    from imucal.fleet.run import progress_bar
+
+    with progress_bar(2, enabled=True) as step:
+        step({"status": "ok"})
+        step({"status": "error"})
+    err = capsys.readouterr().err
+    assert "2/2" in err and "1 not ok" in err
+    with progress_bar(2) as step:  # stderr is not a terminal under pytest
+        step({"status": "ok"})
+    assert capsys.readouterr().err == ""
+
+
+def test_binary_file_is_a_unit_error(tmp_path, run_cli):
+    from imucal.fleet.population import _damage
+
+    (tmp_path / "U1.csv").write_bytes(_damage("", "binary bytes"))
+    r = run_cli(["batch", tmp_path, "--out", tmp_path / "res", "--workers", "1", "--no-figures"])
+    assert r.code == 0, r.err
+    assert "U1: fail: " in r.out and "is a binary file (NUL bytes)" in r.out
+    assert read_marker(tmp_path / "res" / "U1")["status"] == "error"

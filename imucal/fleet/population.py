@@ -19,7 +19,7 @@ import yaml
 from imucal.analysis.simulate import SimulationConfig, frame_matrix
 from imucal.config.limits import MAX_FLEET_UNITS, check_count
 from imucal.errors import ImucalError, short
-from imucal.files.output import OutputSet
+from imucal.files.output import OutputSet, check_outputs, write_bytes_atomic
 from imucal.fleet.manifest import FORMAT, FORMAT_VERSION
 
 #: Tolerances written into the simulated manifest (m/s^2 and degrees).
@@ -125,7 +125,7 @@ def _truth_row(u: SimUnit) -> dict:
 def write_fleet(units: list[SimUnit], out: Path, inputs: list[str], tolerances: dict | None = None,
                 settings: dict | None = None) -> Path:
     """One CSV per unit in ``out``/recordings (a folder manifest too), truth.csv and manifest.yaml (shared ``settings``: run-file sections) in
-    ``out``, published together. The manifest's path."""
+    ``out``; each recording is written atomically, the manifest last. The manifest's path."""
     out = Path(out)
     manifest = {"format": FORMAT, "format_version": FORMAT_VERSION, "settings": dict(settings or {}),
                 "tolerances": dict(DEFAULT_TOLERANCES if tolerances is None else tolerances),
@@ -135,13 +135,14 @@ def write_fleet(units: list[SimUnit], out: Path, inputs: list[str], tolerances: 
     w = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
     w.writeheader()
     w.writerows(rows)
+    recordings = [out / RECORDINGS / f"{u.id}.csv" for u in units]
+    for path in recordings:  # before any work; unit ids are distinct, so are the names
+        check_outputs(inputs, [path])
+    check_outputs(inputs, [out / TRUTH_FILE, out / MANIFEST_FILE])
+    for u, path in zip(units, recordings):  # one atomic file each; the manifest comes last
+        text = u.config.run().to_csv_text()
+        write_bytes_atomic(path, _damage(text, u.corrupt) if u.corrupt else text.encode())
     with OutputSet(inputs) as o:
-        for u in units:
-            text = u.config.run().to_csv_text()
-            if u.corrupt:
-                o.call(out / RECORDINGS / f"{u.id}.csv", lambda p, t=text, c=u.corrupt: p.write_bytes(_damage(t, c)))
-            else:
-                o.text(out / RECORDINGS / f"{u.id}.csv", text)
         o.text(out / TRUTH_FILE, buf.getvalue())
         o.text(out / MANIFEST_FILE, "# imucal batch manifest.yaml --out DIR  (written by imucal simulate --fleet)\n"
                + yaml.safe_dump(manifest, sort_keys=False))
