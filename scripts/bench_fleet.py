@@ -29,6 +29,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import yaml
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
@@ -39,18 +41,21 @@ from imucal.fleet.population import draw_fleet, write_fleet  # noqa: E402
 from imucal.model.parameters import BASE_NAMES  # noqa: E402
 from imucal.pipeline import calibrate  # noqa: E402
 
-VOLATILE = ("seconds", "skipped")
+VOLATILE = ("seconds", "cpu_seconds", "skipped")
 
 
-def batch(manifest: Path, out: Path, *extra: str) -> tuple[float, str]:
+def batch(manifest: Path, out: Path, *extra: str) -> tuple[float, str, float]:
+    """(wall time [s], stdout, CPUs busy on the whole machine meanwhile)."""
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    busy0 = busy_seconds()
     t0 = time.perf_counter()
     r = subprocess.run([sys.executable, "-m", "imucal", "batch", str(manifest), "--out", str(out), "--no-figures",
                         *extra], env=env, capture_output=True, text=True)
     wall = time.perf_counter() - t0
+    busy = (busy_seconds() - busy0) / wall
     if r.returncode != 0:
         raise SystemExit(f"batch failed ({r.returncode}): {r.stderr}")
-    return wall, r.stdout
+    return wall, r.stdout, busy
 
 
 def table(out: Path) -> dict[str, dict]:
@@ -89,9 +94,19 @@ def killed_and_resumed(manifest: Path, out: Path, n: int) -> tuple[int, int]:
     p.wait()
     time.sleep(0.5)
     done = len(list(out.glob("*/done.json")))
-    _, stdout = batch(manifest, out, "--workers", "2")
+    _, stdout, _ = batch(manifest, out, "--workers", "2")
     skipped = int(re.search(r"\((\d+) skipped", stdout).group(1))
     return done, skipped
+
+
+def busy_seconds() -> float:
+    """CPU seconds the whole machine has spent busy since boot (/proc/stat), or NaN."""
+    try:
+        f = [int(x) for x in Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:]]
+    except (OSError, ValueError):
+        return float("nan")
+    idle = f[3] + (f[4] if len(f) > 4 else 0)
+    return (sum(f[:8]) - idle) / os.sysconf("SC_CLK_TCK")
 
 
 def cpu_name() -> str:
@@ -114,7 +129,11 @@ def main() -> int:
         cfg = load_simulation_config(str(ROOT / "configs" / "fleet_example.yaml"))
         units = draw_fleet(cfg, n, n_def, n_bad)
         manifest = write_fleet(units, tmp / "sim", [], settings={"output": {"figures": False}})
-        manifest_fig = write_fleet(units, tmp / "simfig", [])
+        m = yaml.safe_load(manifest.read_text())  # the same recordings, with the unit figures
+        m["settings"] = {}
+        m["units"] = [{**u, "data": str(tmp / "sim" / u["data"])} for u in m["units"]]
+        manifest_fig = tmp / "manifest_figures.yaml"
+        manifest_fig.write_text(yaml.safe_dump(m))
         with open(tmp / "sim" / "truth.csv", newline="") as f:
             truth = {r["unit"]: r for r in csv.DictReader(f)}
         samples = sum(1 for _ in open(tmp / "sim" / "recordings" / f"{units[0].id}.csv")) - 1
@@ -129,17 +148,21 @@ def main() -> int:
                 with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
                                   silence_logs=50) as cluster:
                     up = time.perf_counter() - t0
-                    wall, _ = batch(man, out, "--scheduler", cluster.scheduler_address)
+                    wall, _, busy = batch(man, out, "--scheduler", cluster.scheduler_address)
                 label += f" (cluster start {up:.1f} s, not counted)"
             else:
-                wall, _ = batch(man, out, *extra)
+                wall, _, busy = batch(man, out, *extra)
             t = table(out)
             alarms = check(t, truth)
             if man == manifest:
                 tables[label] = stable(t)
-            per_unit = statistics.median(float(r["seconds"]) for r in t.values() if r["status"] == "ok")
-            rows.append((label, wall, per_unit))
-            print(f"{label}: {wall:.1f} s, {per_unit * 1e3:.0f} ms per unit", flush=True)
+            ok = [r for r in t.values() if r["status"] == "ok"]
+            per_unit = statistics.median(float(r["seconds"]) for r in ok)
+            cpu = statistics.median(float(r["cpu_seconds"]) for r in ok)
+            units_cpu = sum(float(r["cpu_seconds"]) for r in t.values()) / wall  # the units' own, in CPUs
+            rows.append((label, wall, per_unit, cpu, units_cpu, busy))
+            print(f"{label}: {wall:.1f} s, {per_unit * 1e3:.0f} ms per unit, {cpu * 1e3:.0f} ms CPU, "
+                  f"units {units_cpu:.2f} CPUs, machine busy {busy:.2f} CPUs", flush=True)
         first = next(iter(tables.values()))
         assert all(tb == first for tb in tables.values()), "the executors gave different tables"
         # every good unit equals a single-unit run of the library path `imucal calibrate` takes
@@ -157,12 +180,17 @@ def main() -> int:
     lines = [f"{n} simulated units ({samples} samples each: 18 poses, 3 s holds at 100 Hz; {n_def} defective, "
              f"{n_bad} with corrupt files) on {os.cpu_count()} CPUs ({cpu_name()}), Python "
              f"{platform.python_version()}; `python scripts/bench_fleet.py`. Wall time from the command's start "
-             "to the written report; per-unit cost: the median time a worker spends on one unit (hash, fit, files).",
+             "to the written report; per unit: the median wall and CPU time a worker spends on one unit (hash, fit, "
+             "files); units per CPU-hour: 3600 s over that CPU time, what one free core sustains; CPUs used: the units' CPU time over the wall time, and the whole machine's busy time over the "
+             "wall time (/proc/stat): other jobs share this machine, and where the machine is busy on all its CPUs "
+             "the wall times stretch while the CPU times stay.",
              "",
-             "| executor | wall time [s] | per-unit cost [ms] | units per hour |",
-             "|---|---:|---:|---:|"]
-    for label, wall, per_unit in rows:
-        lines.append(f"| {label} | {wall:.1f} | {per_unit * 1e3:.0f} | {n / wall * 3600:,.0f} |")
+             "| executor | wall time [s] | units per hour | per unit, wall [ms] | per unit, CPU [ms] "
+             "| units per CPU-hour | CPUs used by the units | CPUs busy, whole machine |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|"]
+    for label, wall, per_unit, cpu, units_cpu, busy in rows:
+        lines.append(f"| {label} | {wall:.1f} | {n / wall * 3600:,.0f} | {per_unit * 1e3:.0f} | {cpu * 1e3:.0f} "
+                     f"| {3600 / cpu:,.0f} | {units_cpu:.2f} | {busy:.2f} |")
     lines += ["",
               f"Every run: the {n - n_bad} readable units calibrated, the {n_bad} corrupt ones refused with their "
               f"one-line error, the {n_def} defective ones failed and flagged as outliers ({alarms} good unit(s) flagged "

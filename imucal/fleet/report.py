@@ -33,7 +33,7 @@ BIAS_COLS = ("bias_x", "bias_y", "bias_z")
 ANGLE_DEV_COLS = tuple(f"{a}_from_90_deg" for a in ANGLE_NAMES)
 COLUMNS = ("unit", "status", "verdict", "outlier", "reasons", "error", *BASE_NAMES,
            *(f"std_{n}" for n in BASE_NAMES), *BIAS_COLS, *ANGLE_DEV_COLS, "rms_residual", "rms_residual_samples",
-           "redchi", "n_intervals", "raw_unit", "seconds", "skipped", "input_sha256", "settings_hash")
+           "redchi", "n_intervals", "raw_unit", "seconds", "cpu_seconds", "skipped", "input_sha256", "settings_hash")
 
 
 @dataclass(frozen=True)
@@ -57,7 +57,7 @@ class FleetTable:
 def _row(rec: dict) -> dict:
     row = {c: None for c in COLUMNS}
     row.update(unit=rec["unit"], status=rec["status"], error=rec.get("error") or "",
-               seconds=rec.get("seconds"), skipped=bool(rec.get("skipped")),
+               seconds=rec.get("seconds"), cpu_seconds=rec.get("cpu_seconds"), skipped=bool(rec.get("skipped")),
                input_sha256=" ".join(f"{k}:{v}" for k, v in (rec.get("input_sha256") or {}).items()),
                settings_hash=rec.get("settings_hash"))
     s = rec.get("summary")

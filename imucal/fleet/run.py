@@ -66,11 +66,12 @@ def read_marker(folder: Path) -> dict | None:
 
 def calibrate_unit(unit: Unit, out: str) -> dict:
     """Calibrate one unit into ``out``/<unit id> (or skip it when its marker matches); its record."""
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     folder = Path(out) / unit.id
     record: dict[str, Any] = {"format": MARKER_FORMAT, "format_version": MARKER_VERSION, "unit": unit.id,
                               "status": INTERNAL, "error": "", "inputs": unit.inputs, "input_sha256": {},
-                              "settings_hash": unit.settings_hash, "seconds": 0.0, "summary": None}
+                              "settings_hash": unit.settings_hash, "seconds": 0.0, "cpu_seconds": 0.0,
+                              "summary": None}
     try:
         record["input_sha256"] = {role: file_sha256(p) for role, p in unit.inputs.items()}
         prev = read_marker(folder)
@@ -89,7 +90,8 @@ def calibrate_unit(unit: Unit, out: str) -> dict:
         record.update(error="out of memory")
     except Exception as exc:  # noqa: BLE001 - a bug in one unit must not stop the fleet
         record.update(error=f"{type(exc).__name__}: {short(str(exc), 200)}")
-    record["seconds"] = round(time.perf_counter() - t0, 4)
+    record["seconds"] = round(time.perf_counter() - t0, 4)  # wall time on the worker
+    record["cpu_seconds"] = round(time.process_time() - c0, 4)  # its CPU time (this process, all threads)
     if record["status"] != INTERNAL and record["input_sha256"]:
         write_json_atomic(folder / DONE_FILE, record)  # last: the unit is done
     return {**record, "skipped": False}
@@ -144,7 +146,7 @@ def _lost(unit: Unit, exc: BaseException) -> dict:
     """The record of a unit whose worker died (killed, out of memory): retried on the next run."""
     return {"unit": unit.id, "status": INTERNAL, "error": f"worker lost: {type(exc).__name__}: {short(str(exc), 120)}",
             "inputs": unit.inputs, "input_sha256": {}, "settings_hash": unit.settings_hash, "seconds": 0.0,
-            "summary": None, "skipped": False}
+            "cpu_seconds": 0.0, "summary": None, "skipped": False}
 
 
 def run_units(manifest: Manifest, out: str | Path, pool: cf.Executor,
