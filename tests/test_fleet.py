@@ -376,3 +376,16 @@ def test_binary_file_is_a_unit_error(tmp_path, run_cli):
     assert r.code == 0, r.err
     assert "U1: fail: " in r.out and "is a binary file (NUL bytes)" in r.out
     assert read_marker(tmp_path / "res" / "U1")["status"] == "error"
+
+
+def test_unreachable_scheduler_one_line(tmp_path, run_cli, monkeypatch):
+    pytest.importorskip("distributed", reason="dask.distributed (extra imucal-nlp[fleet]) not installed")
+    import imucal.fleet.run as fleet_run
+
+    monkeypatch.setattr(fleet_run, "SCHEDULER_TIMEOUT", "1s")
+    m = tmp_path / "m.yaml"
+    m.write_text("units: [{id: U1, data: a.csv}]\n")
+    r = run_cli(["batch", m, "--out", tmp_path / "res", "--scheduler", "tcp://127.0.0.1:9"])
+    assert r.code == 2 and r.err.count("\n") == 1, r.err
+    assert "--scheduler: cannot reach the scheduler 'tcp://127.0.0.1:9'" in r.err
+    assert not (tmp_path / "res").exists()

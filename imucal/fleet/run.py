@@ -35,6 +35,8 @@ MARKER_FORMAT, MARKER_VERSION = "imucal-fleet-unit", 1
 #: error (deterministic: kept as done), internal error (not kept: retried on the next run).
 OK, NOT_CONVERGED, ERROR, INTERNAL = "ok", "not converged", "error", "internal error"
 _CHUNK = 1 << 20
+#: How long to try to reach a dask scheduler before giving up.
+SCHEDULER_TIMEOUT = "10s"
 
 
 def file_sha256(path: str) -> str:
@@ -81,6 +83,9 @@ def calibrate_unit(unit: Unit, out: str) -> dict:
         if prev is not None:  # outdated: no marker stands beside files being replaced
             (folder / DONE_FILE).unlink(missing_ok=True)
         files = calibrate_files(unit.config, unit.config.data.gyro_path)
+        if files.summary["data"].get("sha256") != record["input_sha256"]["data"]:  # the loader's own hash
+            raise ImucalError("the file changed while the unit was calibrated", file=unit.config.data.path,
+                              field="data", fix="run the batch again when the recording is complete")
         with OutputSet(unit.inputs.values()) as o:
             stage_files(o, folder, files, unit.config.output.figures, folder / SUMMARY_FILE)
         record.update(status=OK if files.success else NOT_CONVERGED, summary=files.summary)
@@ -116,7 +121,7 @@ class _DaskPool:
             raise ImucalError("dask.distributed is not installed", field="--scheduler",
                               fix="pip install 'imucal-nlp[fleet]', or drop --scheduler to use local processes") from None
         try:
-            self.client = Client(address, timeout="10s")
+            self.client = Client(address, timeout=SCHEDULER_TIMEOUT)
         except (OSError, TimeoutError, ValueError) as exc:
             raise ImucalError(f"cannot reach the scheduler {short(address)}: {short(str(exc), 120)}",
                               field="--scheduler", fix="give a running scheduler's address, e.g. tcp://host:8786") \
