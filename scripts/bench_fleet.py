@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Fleet throughput on this machine (issue 13): `imucal batch` on simulated units.
 
-200 units from configs/fleet_example.yaml (3 defective, 2 corrupt files) are calibrated with
+200 units from configs/simulate_fleet.yaml (3 defective, 2 corrupt files) are calibrated with
 `imucal batch` (a subprocess each, wall time from start to the report) on local processes with
 1 and 2 workers and on a dask.distributed LocalCluster of 2 single-threaded worker processes,
 without per-unit figures, and once with them. Checks, on every run: every good unit calibrated,
@@ -126,7 +126,7 @@ def main() -> int:
 
     with tempfile.TemporaryDirectory() as tmpd:
         tmp = Path(tmpd)
-        cfg = load_simulation_config(str(ROOT / "configs" / "fleet_example.yaml"))
+        cfg = load_simulation_config(str(ROOT / "configs" / "simulate_fleet.yaml"))
         units = draw_fleet(cfg, n, n_def, n_bad)
         manifest = write_fleet(units, tmp / "sim", [], settings={"output": {"figures": False}})
         m = yaml.safe_load(manifest.read_text())  # the same recordings, with the unit figures

@@ -49,7 +49,7 @@ def _table(folder: Path) -> dict[str, dict]:
 def fleet(tmp_path_factory) -> Path:
     """The simulated fleet: OUT/<unit>.csv, truth.csv, manifest.yaml (no figures: fast)."""
     d = tmp_path_factory.mktemp("fleet")
-    cfg = load_simulation_config(str(ROOT / "configs" / "fleet_example.yaml"))
+    cfg = load_simulation_config(str(ROOT / "configs" / "simulate_fleet.yaml"))
     units = draw_fleet(cfg, N_UNITS, N_DEFECTIVE, N_CORRUPT)
     write_fleet(units, d / "sim", [], settings={"output": {"figures": False}})
     return d / "sim"
@@ -341,7 +341,7 @@ def test_missing_file_is_a_unit_error_not_a_batch_error(tmp_path, run_cli):
 
 
 def test_simulate_fleet_options(tmp_path, run_cli):
-    cfg = ROOT / "configs" / "fleet_example.yaml"
+    cfg = ROOT / "configs" / "simulate_fleet.yaml"
     r = run_cli(["simulate", cfg, "--out", tmp_path / "x.csv", "--defective", "1"])
     assert r.code == 2 and "need --fleet N" in r.err
     r = run_cli(["simulate", cfg, "--out", tmp_path / "f", "--fleet", "3", "--defective", "4"])
