@@ -297,6 +297,7 @@ BAD_MANIFESTS = [
     ("settings: {data: {path: x.csv}}\nunits: [{id: U1, data: a.csv}]", "settings.data.path: files are named per unit"),
     ("format_version: 2\nunits: [{id: U1, data: a.csv}]", "format_version 2 is not supported"),
     ("units: []", "no units"),
+    ("units: [{id: Fleet.csv, data: a.csv}]", "unit id 'Fleet.csv' is the name of a fleet report file"),
     ("folder: nowhere", "nowhere: folder: is not a folder"),
     ("- a\n- b", "top level must be a mapping"),
 ]
@@ -327,6 +328,8 @@ def test_bad_csv_manifest_and_options(tmp_path, run_cli):
     assert r.code == 2 and "--workers 0 must be an integer from 1" in r.err
     r = run_cli(["batch", m2, "--out", m2])
     assert r.code == 2 and "parent is not a directory" in r.err
+    r = run_cli(["batch", tmp_path, "--out", tmp_path / "."])
+    assert r.code == 2 and "--out: is the folder of recordings" in r.err
 
 
 def test_missing_file_is_a_unit_error_not_a_batch_error(tmp_path, run_cli):

@@ -45,6 +45,8 @@ FORMAT = "imucal-fleet-manifest"
 FORMAT_VERSION = 1
 #: A unit id names its output folder: letters, digits, '.', '_', '-', starting with a letter or digit.
 UNIT_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}\Z")
+#: Names the fleet report takes in DIR (imucal.fleet.report): no unit folder may take them.
+REPORT_NAMES = re.compile(r"fleet(\.(csv|txt|parquet)|_.*\.png)\Z", re.IGNORECASE)
 #: Run-file sections a manifest may set (output.dir is the batch's --out DIR/<unit>).
 SECTIONS = ("data", "static", "gravity", "fit", "output")
 #: Keys that name files: given per unit (data, gyro_data), never as shared settings.
@@ -113,6 +115,9 @@ def check_unit_id(uid: Any, path: str, where: str) -> str:
     if not isinstance(uid, str) or not UNIT_ID.match(uid):
         raise ImucalError(f"unit id {short(uid)} is not a safe folder name", file=path, field=where,
                           fix="use 1 to 64 letters, digits, '.', '_' or '-', starting with a letter or digit")
+    if REPORT_NAMES.match(uid):
+        raise ImucalError(f"unit id {short(uid)} is the name of a fleet report file", file=path, field=where,
+                          fix="give the unit another id")
     return uid
 
 

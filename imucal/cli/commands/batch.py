@@ -30,6 +30,7 @@ def run(args: argparse.Namespace) -> int:
 
     from imucal.config.limits import check_count
     from imucal.errors import ImucalError
+    from imucal.files.inputs import same_file
     from imucal.files.output import check_outputs
     from imucal.fleet.manifest import load_manifest
     from imucal.fleet.report import REPORT_CSV, REPORT_PARQUET, REPORT_TEXT, fleet_table, summary_text, write_report
@@ -42,6 +43,9 @@ def run(args: argparse.Namespace) -> int:
                               fix="the cluster sets the workers: drop --workers")
     out = Path(args.out)
     inputs = [args.manifest, args.config]
+    if Path(args.manifest).is_dir() and same_file(args.manifest, out):
+        raise ImucalError("is the folder of recordings", file=args.out, field="--out",
+                          fix="write the results to another folder (its fleet.csv would become a unit)")
     check_outputs(inputs, [out / REPORT_CSV, out / REPORT_TEXT, out / REPORT_PARQUET])
     manifest = load_manifest(args.manifest, args.config)
     n = len(manifest.units)
