@@ -320,6 +320,11 @@ def test_bad_csv_manifest_and_options(tmp_path, run_cli):
     r = run_cli(["batch", m, "--out", tmp_path / "res"])
     assert r.code == 2 and "header 'id,file' lacks unit and data" in r.err and r.err.count("\n") == 1
     m.write_text("unit,data,fit.speed\nU1,a.csv,1\n")
+    r = run_cli(["batch", m, "--out", tmp_path / "res"])
+    assert r.code == 2 and "header: unknown column 'fit.speed'" in r.err, r.err
+    m.write_text("unit,data,gravity.colour\nU1,a.csv,\n")  # an empty cell overrides nothing ...
+    r = run_cli(["batch", m, "--out", tmp_path / "res"])  # ... but the column is still checked
+    assert r.code == 2 and "unknown column 'gravity.colour'" in r.err, r.err
     m2 = tmp_path / "ok.yaml"
     m2.write_text("units: [{id: U1, data: a.csv}]\n")
     r = run_cli(["batch", m2, "--out", tmp_path / "res", "--workers", "2", "--scheduler", "tcp://x:1"])

@@ -36,7 +36,9 @@ import yaml
 
 from imucal import __version__
 from imucal.config.limits import MAX_FLEET_UNITS
-from imucal.config.run import RunConfig, config_from_dict
+from imucal.config.run import FitSettings, GravitySpec, OutputSettings, RunConfig, config_from_dict
+from imucal.data.load import DataSpec
+from imucal.data.static import StaticSettings
 from imucal.errors import ImucalError, short
 from imucal.files.inputs import read_input_text
 from imucal.files.yamlio import check_structure, key_text, read_yaml
@@ -51,6 +53,10 @@ REPORT_NAMES = re.compile(r"fleet(\.(csv|txt|parquet)|_.*\.png)\Z", re.IGNORECAS
 SECTIONS = ("data", "static", "gravity", "fit", "output")
 #: Keys that name files: given per unit (data, gyro_data), never as shared settings.
 FILE_KEYS = ("path", "gyro_path")
+#: The keys of each section (a CSV override column is checked against them even when all its cells are empty).
+SECTION_KEYS = {name: tuple(f.name for f in fields(cls)) for name, cls in (
+    ("data", DataSpec), ("static", StaticSettings), ("gravity", GravitySpec), ("fit", FitSettings),
+    ("output", OutputSettings))}
 TOP_KEYS = ("format", "format_version", "config", "settings", "tolerances", "units", "folder", "pattern")
 UNIT_KEYS = ("id", "data", "gyro_data", "settings")
 
@@ -187,8 +193,9 @@ def _csv_units(text: str, path: str) -> list[tuple[str, Any, Any, dict, str]]:
     if len(set(head)) != len(head):
         raise ImucalError("a column is named twice", file=path, field="header", fix="name each column once")
     for h in head:
-        if h not in ("unit", "data", "gyro_data") and (h.count(".") != 1 or h.split(".")[0] not in SECTIONS
-                                                       or h.split(".")[1] in FILE_KEYS):
+        sec, _, key = h.partition(".")
+        if h not in ("unit", "data", "gyro_data") and (sec not in SECTION_KEYS or key in FILE_KEYS
+                                                       or key not in SECTION_KEYS[sec]):
             raise ImucalError(f"unknown column {short(h)}", file=path, field="header",
                               fix="unit, data, gyro_data, or a run-file key such as gravity.value or fit.mode")
     out = []
