@@ -27,7 +27,7 @@ from imucal.analysis.simulate import load_simulation_config, simulation_from_dic
 from imucal.files.yamlio import read_yaml
 
 ROOT = Path(__file__).resolve().parents[1]
-RUN_CONFIGS = sorted(p for p in (ROOT / "configs").glob("*.yaml") if p.name != "simulate_example.yaml")
+RUN_CONFIGS = sorted(p for p in (ROOT / "configs").glob("*.yaml") if not p.name.startswith("simulate_"))
 SIM_CONFIG = ROOT / "configs" / "simulate_example.yaml"
 SETTINGS = settings(max_examples=200, deadline=None,
                     suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])

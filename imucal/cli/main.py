@@ -29,6 +29,7 @@ COMMANDS = {
     "export": "imucal.cli.commands.export",
     "noise": "imucal.cli.commands.noise",
     "compare": "imucal.cli.commands.compare",
+    "batch": "imucal.cli.commands.batch",
 }
 
 

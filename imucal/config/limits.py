@@ -20,6 +20,8 @@ MAX_DESIGN_POSES = 1000
 #: Candidate directions of the design grid, and random sets a design is compared with.
 MAX_DESIGN_GRID = 100_000
 MAX_RANDOM_SETS = 10_000
+#: Units of one fleet manifest (imucal batch); a production day is thousands.
+MAX_FLEET_UNITS = 1_000_000
 #: Largest seed numpy's generators take.
 MAX_SEED = 2**63 - 1
 

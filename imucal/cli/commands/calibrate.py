@@ -35,44 +35,26 @@ def _config(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
+    import os
+    import sys
     from pathlib import Path
 
     from imucal.files.output import OutputSet, check_outputs
-    from imucal.pipeline import calibrate_imu
-    from imucal.report.html import calibration_html, render_png
-    from imucal.report.text import fit_report, summary
+    from imucal.report.run_files import calibrate_files, output_paths, stage_files
 
     cfg = _config(args)
     out = Path(args.out or cfg.output.dir)
     if args.out is None and cfg.source:
         out = cfg.base_dir / cfg.output.dir if not Path(cfg.output.dir).is_absolute() else out
-    import os
-
-    from imucal.report.figures import FIGURES
-
     out = Path(os.path.normpath(out))
     figures = cfg.output.figures and not args.no_figures
     gyro_file = args.gyro_data or options.data_path(cfg, gyro=True)
     inputs = [args.config, options.data_path(cfg), gyro_file]
-    outputs = [out / "calibration.yaml", out / "report.txt", out / "report.html", args.json,
-               *([out / n for n in FIGURES] if figures else [])]
-    check_outputs(inputs, outputs)  # fail before the work, not after it
-    result = calibrate_imu(cfg, gyro_file=None if gyro_file is None else str(gyro_file))
-    gyro = result.gyro  # None when the recording has no gyroscope
-    text = fit_report(result)
-    js = summary(result)
-    pngs = {name: render_png(fn, result) for name, fn in FIGURES.items()} if figures else {}
-    page = calibration_html(result, pngs, None if gyro is None else {"Gyroscope": gyro.report()})
+    check_outputs(inputs, [*output_paths(out, figures), args.json])  # fail before the work, not after it
+    files = calibrate_files(cfg, gyro_file)
     with OutputSet(inputs) as o:
-        o.call(out / "calibration.yaml", result.calibration.save)
-        o.text(out / "report.txt", text)
-        o.text(out / "report.html", page)
-        for name, png in pngs.items():
-            o.bytes(out / name, png)
-        if args.json:
-            o.json(args.json, js)
-    import sys
-
+        stage_files(o, out, files, figures, args.json)
+    result, gyro, text = files.run, files.gyro, files.text
     for w in result.calibration.fit.get("warnings", []):
         sys.stderr.write(f"imucal: warning: {w}\n")
     if not args.quiet:
@@ -82,5 +64,4 @@ def run(args: argparse.Namespace) -> int:
     print(f"wrote {out / 'calibration.yaml'}" + (" (accelerometer and gyroscope)" if gyro else "")
           + f", {out / 'report.txt'}, {out / 'report.html'}"
           + (", figures" if figures else "") + (f", {args.json}" if args.json else ""))
-    ok = result.result.success and (gyro is None or gyro.success)
-    return 0 if ok else 1  # EXIT_NOT_CONVERGED: the files say which fit
+    return 0 if files.success else 1  # EXIT_NOT_CONVERGED: the files say which fit

@@ -1,0 +1,64 @@
+"""`imucal batch MANIFEST --out DIR`: calibrate a fleet of units, resumably, and report on it."""
+from __future__ import annotations
+
+import argparse
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("batch", help="calibrate a fleet of units listed in a manifest (processes or a Dask cluster)",
+                       description="Calibrate every unit of a manifest (YAML or CSV, or a folder of recordings) "
+                                   "as `imucal calibrate` would, each into DIR/<unit id>/, then write the fleet "
+                                   "report DIR/fleet.csv (and fleet.parquet with pyarrow), DIR/fleet.txt and "
+                                   "histograms DIR/fleet_*.png. A rerun skips units already done with the same "
+                                   "inputs and settings. See docs/fleet.md.")
+    p.add_argument("manifest", help="fleet manifest (YAML or CSV) or a folder of recordings (*.csv)")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder: DIR/<unit id>/ and DIR/fleet.*")
+    p.add_argument("--config", metavar="RUN.yaml",
+                   help="shared settings: an `imucal calibrate` run file (its data.path is not used)")
+    p.add_argument("--workers", type=int, metavar="N", help="worker processes (default: one per CPU)")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="run on a dask.distributed cluster, e.g. tcp://host:8786 (extra imucal-nlp[fleet]); "
+                        "every worker must see the recordings and DIR at the same paths")
+    p.add_argument("--no-figures", action="store_true",
+                   help="skip the fleet histograms (unit figures follow the settings' output.figures)")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    import sys
+    from pathlib import Path
+
+    from imucal.config.limits import check_count
+    from imucal.errors import ImucalError
+    from imucal.files.inputs import same_file
+    from imucal.files.output import check_outputs
+    from imucal.fleet.manifest import load_manifest
+    from imucal.fleet.report import REPORT_CSV, REPORT_PARQUET, REPORT_TEXT, fleet_table, summary_text, write_report
+    from imucal.fleet.run import executor, progress_bar, run_units
+
+    if args.workers is not None:
+        check_count(args.workers, "--workers", 1, 4096)
+        if args.scheduler is not None:
+            raise ImucalError("--workers and --scheduler both given", field="--workers",
+                              fix="the cluster sets the workers: drop --workers")
+    out = Path(args.out)
+    inputs = [args.manifest, args.config]
+    if Path(args.manifest).is_dir() and same_file(args.manifest, out):
+        raise ImucalError("is the folder of recordings", file=args.out, field="--out",
+                          fix="write the results to another folder (its fleet.csv would become a unit)")
+    check_outputs(inputs, [out / REPORT_CSV, out / REPORT_TEXT, out / REPORT_PARQUET])
+    manifest = load_manifest(args.manifest, args.config)
+    n = len(manifest.units)
+    try:
+        with executor(args.workers, args.scheduler) as pool, progress_bar(n) as step:
+            records = run_units(manifest, out, pool, step)
+    except KeyboardInterrupt:
+        sys.stderr.write(f"imucal: batch stopped: finished units are kept in {out}; "
+                         "rerun the same command to resume\n")
+        raise
+    table = fleet_table(records, manifest.tolerances)
+    written = write_report(table, out, [p for p in inputs if p is not None], figures=not args.no_figures)
+    print(summary_text(table), end="")
+    print(f"wrote {n} unit folders and " + ", ".join(str(p) for p in written[:3])
+          + (f" and {len(written) - 3} histograms" if len(written) > 3 else ""))
+    return 0
