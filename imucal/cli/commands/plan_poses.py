@@ -89,10 +89,19 @@ def _read_plan(path: str):
         raise ImucalError(f"{len(obj)} poses, above the limit of {MAX_SIM_POSES}", file=path, field="poses",
                           fix="a calibration needs tens of poses")
     if not isinstance(obj, list) or not obj or not all(
-            isinstance(r, list) and len(r) == 3 and all(isinstance(x, (int, float)) and not isinstance(x, bool)
-                                                        and math.isfinite(x) for x in r) for r in obj):
+            isinstance(r, list) and len(r) == 3 and all(_finite_number(x) for x in r) for r in obj):
         raise ImucalError("poses must be a non-empty list of [gx, gy, gz] numbers", file=path, field="poses")
     return np.array(obj, float)
+
+
+def _finite_number(x: object) -> bool:
+    """A finite int or float (an integer too large for a float, e.g. 10**400, is not)."""
+    if isinstance(x, bool) or not isinstance(x, (int, float)):
+        return False
+    try:
+        return math.isfinite(x)
+    except OverflowError:
+        return False
 
 
 def _units(name: str) -> tuple[float, str]:
