@@ -6,6 +6,7 @@ refuses plans whose gravity directions cannot determine the parameters.
 from __future__ import annotations
 
 import argparse
+import math
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -43,7 +44,6 @@ def _read_plan(path: str):
     """The gravity directions of a pose plan: a JSON list of [gx, gy, gz], or an object with 'poses'
     (plan-poses --json output). Duplicate and unknown keys are refused, like in the YAML files."""
     import json
-    import math
 
     import numpy as np
 
@@ -114,7 +114,6 @@ def _units(name: str) -> tuple[float, str]:
 
 
 def format_design(design, comparison=None) -> str:
-    import math
 
     from imucal.analysis.pose_instructions import instructions
 
