@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import ast
 import io
+import functools
 import re
 from pathlib import Path
 
@@ -124,6 +125,18 @@ def test_every_figure_function_is_checked(counts_run, discoveries, drawn):
     check(drift.plot_drift, rep, 60.0)
     dirs = np.vstack([cube_directions("faces+edges+corners")[:4], [[0.3, 0.5, 0.8]]])
     check(pose_figures.poses_figure, instructions(dirs / np.linalg.norm(dirs, axis=1, keepdims=True)))
+
+    from imucal.fleet import report as fleet_report
+
+    rows = [{"status": fleet_report.OK, "verdict": "pass" if k else "fail", "outlier": "", "raw_unit": "counts",
+             **{n: 1.0 + 0.01 * k for n in fleet_report.HISTOGRAMS}} for k in range(12)]
+    table = fleet_report.FleetTable(rows, None)
+    def histogram(table, path, name):  # draw() passes the path second
+        fleet_report.histogram(table, name, path)
+
+    functools.update_wrapper(histogram, fleet_report.histogram)
+    for name in ("s1", "b2", "theta", "rms_residual"):
+        check(histogram, table, name)
 
     assert set(checked) == figure_functions(), "a figure function is not checked here"
     problems = [p for figs in checked.values() for f in figs for p in axis_problems(f)]

@@ -171,9 +171,11 @@ def histogram(table: FleetTable, name: str, path: Path) -> None:
             label=f"{x.size} converged units")
     if bad.size:
         ax.plot(bad, np.zeros_like(bad), "v", color="#cc3311", ms=9, label=f"{bad.size} failing or outlier")
-    unit = {"phi": "rad", "psi": "rad", "theta": "rad"}.get(name, "")
-    ax.set_xlabel(f"{name} [{unit}]" if unit else name)
-    ax.set_ylabel("units")
+    raw = next((str(r["raw_unit"]) for r in ok if r.get("raw_unit")), "raw")
+    unit = {"phi": "rad", "psi": "rad", "theta": "rad", "rms_residual": "m/s^2"}.get(
+        name, raw if name.startswith("s") else f"{raw}/(m/s^2)")
+    ax.set_xlabel(f"{name} [{unit}]")
+    ax.set_ylabel("units calibrated [#]")
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, format="png")
