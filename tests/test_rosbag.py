@@ -273,6 +273,41 @@ def test_a_missing_rosbags_extra_is_named(tmp_path, run_cli, monkeypatch):
     assert "install imucal-nlp[ros]" in r.err and "a.bag" in r.err
 
 
+def test_the_yaml_data_topic_reads_a_bag(si_bags, run_cli, tmp_path):
+    bags, _, _, _ = si_bags
+    cfg = tmp_path / "run.yaml"
+    cfg.write_text(f"data:\n  path: {bags[2]}\n  topic: /imu\n")
+    r = run_cli(["noise", "--config", cfg, "--data", bags[2]])
+    assert r.code == 0, r.err
+    cfg.write_text(f"data:\n  path: {bags[2]}\n  topic: [/imu]\n")
+    r = run_cli(["noise", "--config", cfg, "--data", bags[2]])
+    assert r.code == 2 and "data.topic" in r.err
+
+
 def test_topic_is_refused_for_a_text_recording(si_recording, run_cli):
     r = run_cli(["noise", "--data", si_recording.path, "--topic", "/imu"])
     assert r.code == 2 and "topic applies to ROS bags only" in r.err
+
+
+@pytest.mark.slow
+def test_a_real_ros_recording_with_its_gyro_calibrates_as_from_text(run_cli, tmp_path):
+    """GetOverMassif's data2 (exported from a ROS 2 bag, m/s^2 and rad/s) back into a bag: the
+    accelerometer and the gyroscope come out as from the same samples in a CSV."""
+    from conftest import real_file
+
+    acc = np.loadtxt(real_file("ros-imu-getovermassif", "data2", "acc_data.txt"))
+    gyr = np.loadtxt(real_file("ros-imu-getovermassif", "data2", "gyro_data.txt"))
+    assert np.array_equal(acc[:, 0], gyr[:, 0])
+    ns = T0_SEC * 10**9 + np.round(acc[:, 0] * 1e9).astype(np.int64)
+    t = (ns - ns[0]) * 1e-9
+    bag = write_bag(tmp_path / "real", 2, {"/imu": imu_topic(2, t, acc[:, 1:], gyr[:, 1:], stamps_ns=ns)})
+    csv = tmp_path / "real.csv"
+    np.savetxt(csv, np.column_stack([t, acc[:, 1:], gyr[:, 1:]]), delimiter=",", fmt="%.17g",
+               header="t,ax,ay,az,gx,gy,gz", comments="")
+    keys = ("params", "std", "matrix", "offset", "rms_residual", "n_intervals", "gyro")
+    js = [_calibrate(run_cli, d, tmp_path / n, "--gravity", "9.81744", *x)
+          for d, n, x in ((csv, "c", ()), (bag, "b", ("--topic", "/imu")))]
+    want, got = (_numbers({k: j[k] for k in keys}) for j in js)
+    assert any(k.startswith(".gyro") for k in want) and set(got) == set(want)
+    for k in want:
+        assert got[k] == pytest.approx(want[k], rel=1e-9, abs=1e-12), k
