@@ -11,11 +11,15 @@ from __future__ import annotations
 import hashlib
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from imucal.errors import ImucalError
 from imucal.files.inputs import max_data_bytes, open_regular
+
+if TYPE_CHECKING:
+    from imucal.data.load import Recording
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
 TEMP_TYPE = "sensor_msgs/msg/Temperature"
@@ -59,7 +63,7 @@ def _stamp_ns(msg: object) -> int:
     return int(s.sec) * 1_000_000_000 + int(s.nanosec)
 
 
-def read_bag(path: str | os.PathLike, topic: str | None, temp_topic: str | None = None):
+def read_bag(path: str | os.PathLike, topic: str | None, temp_topic: str | None = None) -> Recording:
     """The Recording (imucal.data.load.Recording) of the IMU messages on ``topic``."""
     from imucal.data.load import MAX_ABS_VALUE, MAX_RATE_HZ, MIN_RATE_HZ, Recording  # load imports this module
 
@@ -67,7 +71,7 @@ def read_bag(path: str | os.PathLike, topic: str | None, temp_topic: str | None 
     if not path.exists():
         raise ImucalError("file not found", file=str(path), field="data.path",
                           fix="check the path of the bag (a .bag file or a ROS 2 bag folder)")
-    try:
+    try:  # the optional extra: imported only when a bag is read
         from rosbags.highlevel import AnyReader
         from rosbags.typesys import Stores, get_typestore
     except ImportError:
@@ -149,7 +153,7 @@ def read_bag(path: str | os.PathLike, topic: str | None, temp_topic: str | None 
                      t_source=ns * 1e-9, time_unit="s", time_note=note, time_column="t")
 
 
-def _temperature(reader, path: Path, topic: str) -> tuple[np.ndarray, np.ndarray]:
+def _temperature(reader: object, path: Path, topic: str) -> tuple[np.ndarray, np.ndarray]:
     """(stamps [ns], temperature [deg C]) of the Temperature messages on ``topic``."""
     conns = [c for c in reader.connections if c.topic == topic]
     found = ", ".join(sorted({c.topic for c in reader.connections if c.msgtype == TEMP_TYPE})) or "none"
