@@ -13,6 +13,7 @@ import numpy as np
 
 from imucal.constants import TIME_UNIT_CHOICES, TIME_UNITS
 from imucal.errors import ImucalError, short
+from imucal.data.rosbag import is_bag, read_bag
 from imucal.files.inputs import max_data_bytes, open_regular
 
 FORMATS = ("auto", "csv", "whitespace")
@@ -47,6 +48,9 @@ class DataSpec:
     saturation: dict | None = None
     #: a gyroscope recording on the same time base (imu_tk's second file), calibrated beside
     gyro_path: str | None = None
+    #: ROS bags: the sensor_msgs/msg/Imu topic, and optionally a sensor_msgs/msg/Temperature one
+    topic: str | None = None
+    temp_topic: str | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.path, (str, os.PathLike)) or not str(self.path):
@@ -94,6 +98,11 @@ class DataSpec:
                               fix="give each role its own column")
         if self.saturation is not None:
             rails(self.saturation)  # validated here, used by static detection
+        for name in ("topic", "temp_topic"):
+            v = getattr(self, name)
+            if v is not None and not (isinstance(v, str) and v and len(v) <= 1000):
+                raise ImucalError(f"{name} {short(v)} must be a ROS topic name", field=f"data.{name}",
+                                  fix="e.g. topic: /imu")
         if self.gyro_path is not None and not (isinstance(self.gyro_path, str) and self.gyro_path):
             raise ImucalError(f"gyro_path {short(self.gyro_path)} must be a file name", field="data.gyro_path",
                               fix="give the gyroscope recording's path as text")
@@ -345,6 +354,19 @@ def infer_time_unit(stamps: np.ndarray) -> tuple[str, str]:
     return unit, note + ")"
 
 
+def _check_bag_spec(spec: DataSpec, path: Path) -> None:
+    """Options of text files are refused for a bag (its messages name their fields and units)."""
+    given = [n for n, v in (("columns", spec.columns), ("sample_rate", spec.sample_rate),
+                            ("delimiter", spec.delimiter), ("skip_rows", spec.skip_rows),
+                            ("gyro_path", spec.gyro_path)) if v]
+    given += [n for n, v, d in (("format", spec.format, "auto"), ("time_unit", spec.time_unit, "auto")) if v != d]
+    if spec.unit not in ("raw", "m/s^2"):
+        given.append("unit")
+    if given:
+        raise ImucalError(f"{given[0]} does not apply to a ROS bag", file=str(path), field=f"data.{given[0]}",
+                          fix="drop it: the Imu messages give time [s], acceleration [m/s^2] and rate [rad/s]")
+
+
 def load_recording(spec: DataSpec | str | os.PathLike, base_dir: str | os.PathLike | None = None
                    ) -> Recording:
     """Read a recording described by ``spec`` (a DataSpec or just a path with defaults)."""
@@ -353,6 +375,13 @@ def load_recording(spec: DataSpec | str | os.PathLike, base_dir: str | os.PathLi
     path = Path(spec.path)
     if base_dir is not None and not path.is_absolute():
         path = Path(base_dir) / path
+    if is_bag(path):
+        _check_bag_spec(spec, path)
+        return read_bag(path, spec.topic, spec.temp_topic)
+    for name in ("topic", "temp_topic"):
+        if getattr(spec, name) is not None:
+            raise ImucalError(f"{name} applies to ROS bags only", file=str(path), field=f"data.{name}",
+                              fix="give a .bag file or a ROS 2 bag folder, or drop the topic")
     text, sha = _read_text(path)
     lines = text.splitlines()[spec.skip_rows:]
     first_lineno = spec.skip_rows + 1

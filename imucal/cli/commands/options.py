@@ -24,7 +24,11 @@ if TYPE_CHECKING:
 def add_data_options(p: argparse.ArgumentParser, data_required: bool = False, gyro: bool = False) -> None:
     g = p.add_argument_group("data")
     g.add_argument("--data", required=data_required, metavar="FILE",
-                   help="recording (CSV with header, or whitespace text: t x y z)")
+                   help="recording (CSV with header, or whitespace text: t x y z), or a ROS bag "
+                        "(.bag file or ROS 2 bag folder) with --topic")
+    g.add_argument("--topic", metavar="TOPIC", help="ROS bags: the sensor_msgs/Imu topic (e.g. /imu)")
+    g.add_argument("--temp-topic", metavar="TOPIC",
+                   help="ROS bags: a sensor_msgs/Temperature topic, interpolated onto the IMU stamps")
     g.add_argument("--columns", metavar="MAP",
                    help="column roles, 0-based indices or header names: t=0,ax=4,ay=5,az=6 "
                         "(roles t, ax, ay, az, gx, gy, gz, temp)")
@@ -87,7 +91,8 @@ def run_config(args: argparse.Namespace, config: str | None = None, data_overrid
     over = {}
     if getattr(args, "columns", None):
         over["columns"] = parse_columns(args.columns)
-    for opt, key in (("time_unit", "time_unit"), ("sample_rate", "sample_rate"), ("unit", "unit")):
+    for opt, key in (("time_unit", "time_unit"), ("sample_rate", "sample_rate"), ("unit", "unit"),
+                     ("topic", "topic"), ("temp_topic", "temp_topic")):
         if getattr(args, opt, None) is not None:
             over[key] = getattr(args, opt)
     data = dataclasses.replace(cfg.data, **over) if over else cfg.data

@@ -1,0 +1,180 @@
+"""ROS bags in: ``sensor_msgs/msg/Imu`` (and ``sensor_msgs/msg/Temperature``) from ROS 1 ``.bag``
+files and ROS 2 bag folders (metadata.yaml + .db3/.mcap), read with the optional ``rosbags``
+library (``pip install imucal-nlp[ros]``) into the same Recording the text loader builds.
+
+Units are ROS's (REP 103): linear_acceleration [m/s^2], angular_velocity [rad/s]. A driver that
+has no gyroscope marks it as REP 145 says, angular_velocity_covariance[0] = -1; the recording then
+has no gyro channel.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from imucal.errors import ImucalError
+from imucal.files.inputs import max_data_bytes, open_regular
+
+if TYPE_CHECKING:
+    from imucal.data.load import Recording
+
+IMU_TYPE = "sensor_msgs/msg/Imu"
+TEMP_TYPE = "sensor_msgs/msg/Temperature"
+_INSTALL = "install the ROS extra: pip install imucal-nlp[ros]"
+
+
+def is_bag(path: str | os.PathLike) -> bool:
+    """A ROS 1 bag (``.bag`` file) or a ROS 2 bag folder (holding metadata.yaml)."""
+    p = Path(path)
+    return p.suffix == ".bag" or (p.is_dir() and (p / "metadata.yaml").is_file())
+
+
+def _bag_files(path: Path) -> list[Path]:
+    """The files that make up the bag, in a fixed order (for the checksum)."""
+    if path.is_dir():
+        return sorted(q for q in path.iterdir() if q.name == "metadata.yaml" or q.suffix in (".db3", ".mcap"))
+    return [path]
+
+
+def _sha256(files: list[Path]) -> str:
+    """SHA-256 of the bag: the file itself, or each file's name and content for a folder."""
+    h = hashlib.sha256()
+    limit, total = max_data_bytes(), 0
+    for q in files:
+        fd, size = open_regular(q, field="data.path", max_bytes=limit - total,
+                                fix="check the path of the bag (a .bag file or a ROS 2 bag folder)")
+        total += size
+        if len(files) > 1:
+            h.update(q.name.encode() + b"\0")
+        try:
+            with os.fdopen(fd, "rb") as f:
+                for block in iter(lambda: f.read(1 << 20), b""):
+                    h.update(block)
+        except OSError as exc:
+            raise ImucalError(f"cannot read: {exc.strerror or exc}", file=str(q), field="data.path") from None
+    return h.hexdigest()
+
+
+def _stamp_ns(msg: object) -> int:
+    s = msg.header.stamp  # type: ignore[attr-defined]
+    return int(s.sec) * 1_000_000_000 + int(s.nanosec)
+
+
+def read_bag(path: str | os.PathLike, topic: str | None, temp_topic: str | None = None) -> Recording:
+    """The Recording (imucal.data.load.Recording) of the IMU messages on ``topic``."""
+    from imucal.data.load import MAX_ABS_VALUE, MAX_RATE_HZ, MIN_RATE_HZ, Recording  # load imports this module
+
+    path = Path(path)
+    if not path.exists():
+        raise ImucalError("file not found", file=str(path), field="data.path",
+                          fix="check the path of the bag (a .bag file or a ROS 2 bag folder)")
+    try:  # the optional extra: imported only when a bag is read
+        from rosbags.highlevel import AnyReader
+        from rosbags.typesys import Stores, get_typestore
+    except ImportError:
+        raise ImucalError("reading ROS bags needs the rosbags library", file=str(path), field="data.path",
+                          fix=_INSTALL) from None
+    files = _bag_files(path)
+    sha = _sha256(files)
+    where = "data.path"
+    try:
+        with AnyReader([path], default_typestore=get_typestore(Stores.LATEST)) as reader:
+            imu_topics = sorted({c.topic for c in reader.connections if c.msgtype == IMU_TYPE})
+            present = ", ".join(imu_topics) or "none"
+            if not topic:
+                raise ImucalError("a ROS bag needs the IMU topic to read", file=str(path), field="data.topic",
+                                  fix=f"give --topic (data.topic); IMU topics in the bag: {present}")
+            conns = [c for c in reader.connections if c.topic == topic]
+            if not conns:
+                raise ImucalError(f"topic {topic} is not in the bag", file=str(path), field="data.topic",
+                                  fix=f"IMU topics in the bag: {present}")
+            bad = sorted({c.msgtype for c in conns if c.msgtype != IMU_TYPE})
+            if bad:
+                raise ImucalError(f"topic {topic} carries {bad[0]}, not {IMU_TYPE}", file=str(path),
+                                  field="data.topic", fix=f"IMU topics in the bag: {present}")
+            where = f"topic {topic}"
+            stamps, recv, acc, gyr, no_gyro, no_acc = [], [], [], [], True, False
+            for conn, t_recv, data in reader.messages(connections=conns):
+                m = reader.deserialize(data, conn.msgtype)
+                stamps.append(_stamp_ns(m))
+                recv.append(int(t_recv))
+                a, w = m.linear_acceleration, m.angular_velocity
+                acc.append((a.x, a.y, a.z))
+                gyr.append((w.x, w.y, w.z))
+                no_gyro = no_gyro and float(m.angular_velocity_covariance[0]) == -1.0
+                no_acc = no_acc or float(m.linear_acceleration_covariance[0]) == -1.0
+            temp = None
+            if temp_topic:
+                temp = _temperature(reader, path, temp_topic)
+    except ImucalError:
+        raise
+    except Exception as exc:  # rosbags raises many types on a corrupt bag (its own, struct, KeyError, sqlite)
+        text = " ".join(str(exc).split())[:160] or type(exc).__name__
+        raise ImucalError(f"cannot read the bag ({type(exc).__name__}: {text})", file=str(path), field=where,
+                          fix="check that the bag is complete (ROS 1: rosbag reindex; ROS 2: ros2 bag reindex)"
+                          ) from None
+    if not stamps:
+        raise ImucalError(f"topic {topic} holds no messages", file=str(path), field="data.topic",
+                          fix=f"record IMU messages on it, or choose another: {present}")
+    if no_acc:
+        raise ImucalError("linear_acceleration is marked as not measured (covariance[0] = -1)", file=str(path),
+                          field=f"{topic}.linear_acceleration", fix="record a topic with accelerometer data")
+    ns = np.array(stamps, dtype=np.int64)
+    note = "header.stamp of each message [s]"
+    if not ns.any():
+        ns = np.array(recv, dtype=np.int64)
+        note = "every header.stamp is zero: the bag's receive time of each message [s]"
+    d = np.diff(ns)
+    if (d <= 0).any():
+        k = int(np.flatnonzero(d <= 0)[0]) + 1
+        raise ImucalError(f"stamps are not strictly increasing at message {k} "
+                          f"({ns[k - 1]} ns then {ns[k]} ns)", file=str(path), field=f"{topic}.header.stamp",
+                          fix="drop duplicate or reordered messages before calibrating")
+    raw = np.array(acc, float)
+    gyro = None if no_gyro else np.array(gyr, float)
+    for name, arr in (("linear_acceleration", raw), ("angular_velocity", gyro)):
+        if arr is not None and not (np.isfinite(arr).all() and (np.abs(arr) <= MAX_ABS_VALUE).all()):
+            k = int(np.flatnonzero(~(np.isfinite(arr) & (np.abs(arr) <= MAX_ABS_VALUE)).all(axis=1))[0])
+            raise ImucalError(f"message {k} holds NaN, Inf or a corrupt value", file=str(path),
+                              field=f"{topic}.{name}", fix="drop the corrupt messages before calibrating")
+    t = (ns - ns[0]) * 1e-9
+    if ns.size > 1:
+        rate = (ns.size - 1) / float(t[-1])
+        if not MIN_RATE_HZ <= rate <= MAX_RATE_HZ:
+            raise ImucalError(f"the stamps give {rate:.4g} Hz, not an IMU sample rate ({MIN_RATE_HZ:g} Hz to "
+                              f"{MAX_RATE_HZ:g} Hz)", file=str(path), field=f"{topic}.header.stamp",
+                              fix="check the driver's time stamps")
+    if temp is not None:
+        temp = np.interp(ns - ns[0], temp[0] - ns[0], temp[1])  # held at the ends beyond the temperature messages
+    return Recording(t=t, raw=raw, temp=temp, unit="m/s^2", source=str(path), sha256=sha, gyro=gyro,
+                     t_source=ns * 1e-9, time_unit="s", time_note=note, time_column="t")
+
+
+def _temperature(reader: object, path: Path, topic: str) -> tuple[np.ndarray, np.ndarray]:
+    """(stamps [ns], temperature [deg C]) of the Temperature messages on ``topic``."""
+    conns = [c for c in reader.connections if c.topic == topic]
+    found = ", ".join(sorted({c.topic for c in reader.connections if c.msgtype == TEMP_TYPE})) or "none"
+    if not conns:
+        raise ImucalError(f"topic {topic} is not in the bag", file=str(path), field="data.temp_topic",
+                          fix=f"temperature topics in the bag: {found}")
+    bad = sorted({c.msgtype for c in conns if c.msgtype != TEMP_TYPE})
+    if bad:
+        raise ImucalError(f"topic {topic} carries {bad[0]}, not {TEMP_TYPE}", file=str(path),
+                          field="data.temp_topic", fix=f"temperature topics in the bag: {found}")
+    st, val = [], []
+    for conn, t_recv, data in reader.messages(connections=conns):
+        m = reader.deserialize(data, conn.msgtype)
+        st.append(_stamp_ns(m) or int(t_recv))
+        val.append(float(m.temperature))
+    if not st:
+        raise ImucalError(f"topic {topic} holds no messages", file=str(path), field="data.temp_topic",
+                          fix="record temperature messages on it, or leave --temp-topic out")
+    order = np.argsort(st, kind="stable")
+    st_a, val_a = np.array(st, np.int64)[order], np.array(val, float)[order]
+    if not np.isfinite(val_a).all():
+        raise ImucalError("a temperature message holds NaN or Inf", file=str(path), field=f"{topic}.temperature",
+                          fix="drop the corrupt messages")
+    return st_a, val_a
