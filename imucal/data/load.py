@@ -16,6 +16,8 @@ from imucal.errors import ImucalError, short
 from imucal.files.inputs import max_data_bytes, open_regular
 
 FORMATS = ("auto", "csv", "whitespace")
+#: How a recording is read: in chunks (imucal.data.stream) above STREAM_BYTES ("auto"), always, never.
+STREAM_CHOICES = ("auto", "always", "never")
 #: Column roles: time, acceleration, angular rate, temperature.
 ROLES = ("t", "ax", "ay", "az", "gx", "gy", "gz", "temp")
 #: Plausible IMU sample rates [Hz]: anything outside is a wrong time unit or a wrong rate.
@@ -49,12 +51,14 @@ class DataSpec:
     saturation: dict | None = None
     #: a gyroscope recording on the same time base (imu_tk's second file), calibrated beside
     gyro_path: str | None = None
+    #: read in chunks with bounded memory: auto (files above imucal.data.stream.STREAM_BYTES), always, never
+    stream: str = "auto"
 
     def __post_init__(self) -> None:
         if not isinstance(self.path, (str, os.PathLike)) or not str(self.path):
             raise ImucalError(f"path {short(self.path)} must be a file name", field="data.path",
                               fix="give the recording's path as text")
-        for name in ("format", "time_unit", "unit"):
+        for name in ("format", "time_unit", "unit", "stream"):
             if not isinstance(getattr(self, name), str):
                 raise ImucalError(f"{name} {short(getattr(self, name))} must be text", field=f"data.{name}")
         if self.delimiter is not None and not (isinstance(self.delimiter, str) and len(self.delimiter) == 1
@@ -75,6 +79,9 @@ class DataSpec:
         if self.format not in FORMATS:
             raise ImucalError(f"unknown format {short(self.format)}", field="data.format",
                               fix=f"use one of {', '.join(FORMATS)}")
+        if self.stream not in STREAM_CHOICES:
+            raise ImucalError(f"unknown stream setting {short(self.stream)}", field="data.stream",
+                              fix=f"use one of {', '.join(STREAM_CHOICES)}")
         if self.time_unit not in TIME_UNIT_CHOICES:
             raise ImucalError(f"unknown time unit {short(self.time_unit)}", field="data.time_unit",
                               fix=f"use one of {', '.join(TIME_UNIT_CHOICES)}")
@@ -168,19 +175,31 @@ def _read_text(path: Path) -> tuple[str, str]:
                          fix="check the path (relative paths are relative to the YAML file)")
     try:
         with os.fdopen(fd, "rb") as f:
-            head = f.read(1 << 16)  # a sparse or binary file is refused before it is read whole
+            head = f.read(BINARY_PROBE)  # a sparse or binary file is refused before it is read whole
             if b"\x00" in head:
-                raise ImucalError("is a binary file (NUL bytes), not a text recording", file=str(path),
-                                  field="data.path", fix="export the recording as CSV or whitespace-separated text")
+                raise binary_file(path)
             blob = head + f.read()
     except OSError as exc:
         raise ImucalError(f"cannot read: {exc.strerror or exc}", file=str(path), field="data.path") from None
     try:
         text = blob.decode("utf-8-sig")
     except UnicodeDecodeError:
-        raise ImucalError("is not UTF-8 text", file=str(path), field="data.path",
-                          fix="export the recording as CSV or whitespace-separated text") from None
+        raise not_utf8(path) from None
     return text, hashlib.sha256(blob).hexdigest()
+
+
+#: Leading bytes searched for NUL (a binary file).
+BINARY_PROBE = 1 << 16
+
+
+def binary_file(path: Path) -> ImucalError:
+    return ImucalError("is a binary file (NUL bytes), not a text recording", file=str(path), field="data.path",
+                       fix="export the recording as CSV or whitespace-separated text")
+
+
+def not_utf8(path: Path) -> ImucalError:
+    return ImucalError("is not UTF-8 text", file=str(path), field="data.path",
+                       fix="export the recording as CSV or whitespace-separated text")
 
 
 def _is_number(tok: str) -> bool:
@@ -204,7 +223,7 @@ def _sniff_delimiter(line: str) -> str | None:
     return None
 
 
-def _parse_block(lines: list[str], first_lineno: int, delimiter: str | None, usecols: list[int],
+def parse_block(lines: list[str], first_lineno: int, delimiter: str | None, usecols: list[int],
                  path: Path) -> np.ndarray:
     """Parse numeric rows; on failure, find the offending line and name it."""
     if not any(ln.strip() and not ln.lstrip().startswith("#") for ln in lines):
@@ -218,7 +237,7 @@ def _parse_block(lines: list[str], first_lineno: int, delimiter: str | None, use
             bad = ~np.isfinite(arr).all(axis=1)
             if bad.any():
                 k = int(np.flatnonzero(bad)[0])
-                raise ImucalError(f"line {_lineno(lines, k, first_lineno)} holds NaN or Inf",
+                raise ImucalError(f"line {lineno(lines, k, first_lineno)} holds NaN or Inf",
                                   file=str(path), field="data",
                                   fix="remove or repair the non-finite rows before calibrating")
             return arr
@@ -250,7 +269,7 @@ def _parse_block(lines: list[str], first_lineno: int, delimiter: str | None, use
                       fix="use CSV with a header or whitespace-separated numbers")
 
 
-def _lineno(lines: list[str], k: int, first: int) -> int:
+def lineno(lines: list[str], k: int, first: int) -> int:
     seen = -1
     for i, ln in enumerate(lines):
         s = ln.strip()
@@ -499,17 +518,17 @@ def load_recording(spec: DataSpec | str | os.PathLike, base_dir: str | os.PathLi
     lines = text.splitlines()[spec.skip_rows:]
     lay = layout(lines, spec, path)
     body, body_first = lines[lay.body:], lay.body_first
-    arr = _parse_block(body, body_first, lay.delimiter, lay.usecols, path)
+    arr = parse_block(body, body_first, lay.delimiter, lay.usecols, path)
     big = np.abs(arr) > MAX_ABS_VALUE
     if big.any():
-        raise corrupt_value(_lineno(body, int(np.flatnonzero(big.any(axis=1))[0]), body_first), path)
+        raise corrupt_value(lineno(body, int(np.flatnonzero(big.any(axis=1))[0]), body_first), path)
     data = {r: arr[:, i] for i, r in enumerate(lay.roles)}
     n = arr.shape[0]
     stamps = data.get("t")
     if stamps is not None and n > 1:
         d = np.diff(stamps)
         if not (d > 0).all():
-            raise not_increasing(_lineno(body, int(np.flatnonzero(~(d > 0))[0]) + 1, body_first), path)
+            raise not_increasing(lineno(body, int(np.flatnonzero(~(d > 0))[0]) + 1, body_first), path)
     if stamps is None:
         unit, note = time_base_without_stamps(spec)
         t = np.arange(n) / float(spec.sample_rate)
