@@ -287,27 +287,44 @@ class Segment:
     hit_high: np.ndarray  #: (3,) bool: ... at or above the declared high rail
 
 
+def _std(x: np.ndarray, mean: np.ndarray) -> np.ndarray:
+    """Column standard deviation (ddof 1) about ``mean``."""
+    d = x - mean
+    return np.sqrt(np.einsum("ij,ij->j", d, d) / (x.shape[0] - 1))
+
+
 def segment(start: int, seg: np.ndarray, t: np.ndarray, temp: np.ndarray | None, lows: np.ndarray,
             highs: np.ndarray, declared: dict | None) -> Segment:
     """Statistics of the still samples ``seg`` (rows start..start+len) with their times and
-    temperatures; ``lows``/``highs``: the recording's extreme value of each axis."""
+    temperatures; ``lows``/``highs``: the recording's extreme value of each axis. Few numpy calls
+    per interval: a long log holds tens of thousands."""
+    n = seg.shape[0]
     mean = seg.mean(axis=0)
-    std = seg.std(axis=0, ddof=1)
+    std = _std(seg, mean)
     ratios: list = []
-    nb = seg.shape[0] // _BATCHES
+    nb = n // _BATCHES
     if nb >= 2:
         bm = seg[: nb * _BATCHES].reshape(_BATCHES, nb, 3).mean(axis=1)
         white = std ** 2 / nb
         ok = white > 0
-        ratios = (bm.var(axis=0, ddof=1)[ok] / white[ok]).tolist()
+        ratios = (_std(bm, bm.mean(axis=0))[ok] ** 2 / white[ok]).tolist()
+    srt = np.sort(seg, axis=0)
+    cut = int(np.floor(SATURATION_TRIM * n))
+    core = srt[cut:n - cut]
+    scatter = _std(core, core.mean(axis=0)) if core.shape[0] > 1 else np.zeros(3)
+    lo_, hi_ = srt[0], srt[-1]
+    at_low, at_high = np.zeros(3), np.zeros(3)
+    for j in range(3):  # only an interval that reaches an extreme counts its samples there
+        if lo_[j] == lows[j]:
+            at_low[j] = np.count_nonzero(srt[:, j] == lows[j]) / n
+        if hi_[j] == highs[j]:
+            at_high[j] = np.count_nonzero(srt[:, j] == highs[j]) / n
+    rl, rh = (declared or {}).get("low"), (declared or {}).get("high")
     no = np.zeros(3, bool)
-    lo, hi = (declared or {}).get("low"), (declared or {}).get("high")
-    return Segment(start=start, end=start + seg.shape[0], t_start=float(t[0]), t_end=float(t[-1]), mean=mean,
-                   std=std, ratios=ratios, t_mid=float(t.mean()), temp=None if temp is None else float(temp.mean()),
-                   scatter=central_scatter(seg), at_low=(seg == lows).mean(axis=0),
-                   at_high=(seg == highs).mean(axis=0),
-                   hit_low=no if lo is None else (seg <= lo).any(axis=0),
-                   hit_high=no if hi is None else (seg >= hi).any(axis=0))
+    return Segment(start=start, end=start + n, t_start=float(t[0]), t_end=float(t[-1]), mean=mean, std=std,
+                   ratios=ratios, t_mid=float(t.mean()), temp=None if temp is None else float(temp.mean()),
+                   scatter=scatter, at_low=at_low, at_high=at_high,
+                   hit_low=no if rl is None else lo_ <= rl, hit_high=no if rh is None else hi_ >= rh)
 
 
 def _on_rail(frac: np.ndarray, scatter: np.ndarray, j: int) -> np.ndarray:

@@ -107,7 +107,9 @@ class _File:
         self.stamp = (st.st_size, st.st_mtime_ns, st.st_ino)
         os.close(fd)
         self.sha = ""
+        self._counted = (0, 0)
         self.lay, self.offset = self._head()
+        self._counted = (self.offset, self.lay.body_first)
 
     def _open(self):
         fd, _ = open_regular(self.path, field="data.path", max_bytes=MAX_STREAM_BYTES)
@@ -149,11 +151,28 @@ class _File:
         offset = bom + sum(len(ln.encode("utf-8")) for ln in kept[:skip + lay.body])
         return lay, offset
 
+    def line_at(self, offset: int) -> int:
+        """Line number of the line starting at byte ``offset`` of the body (counted when a message
+        needs it, from the last one counted)."""
+        at, line = self._counted
+        if offset < at:
+            at, line = self.offset, self.lay.body_first
+        with self._open() as f:
+            f.seek(at)
+            while at < offset:
+                data = f.read(min(CHUNK_BYTES, offset - at))
+                if not data:
+                    break
+                line += data.count(b"\n")
+                at += len(data)
+        self._counted = (offset, line)
+        return line
+
     def blocks(self, hash_it: bool = False) -> Iterator[tuple[int, bytes]]:
-        """(first line number, bytes of whole lines) from the body on; the SHA-256 of the whole file
-        is left in ``self.sha`` when ``hash_it``."""
+        """(byte offset, bytes of whole lines) from the body on; the SHA-256 of the whole file is
+        left in ``self.sha`` when ``hash_it``."""
         h = hashlib.sha256() if hash_it else None
-        line = self.lay.body_first
+        at = self.offset
         with self._open() as f:
             if h is not None:
                 h.update(f.read(self.offset))
@@ -166,7 +185,7 @@ class _File:
                     h.update(data)
                 if not data:
                     if carry.strip():
-                        yield line, carry
+                        yield at, carry
                     break
                 buf = carry + data
                 cut = buf.rfind(b"\n") + 1
@@ -174,15 +193,15 @@ class _File:
                     carry = buf
                     continue
                 block, carry = buf[:cut], buf[cut:]
-                yield line, block
-                line += block.count(b"\n")
+                yield at, block
+                at += cut
             if f.tell() != self.stamp[0]:
                 raise ImucalError("changed while it was being read", file=str(self.path), field="data.path",
                                   fix="calibrate a copy that no program is writing to")
         if h is not None:
             self.sha = h.hexdigest()
 
-    def parse(self, block: bytes, first: int) -> np.ndarray:
+    def parse(self, block: bytes, offset: int) -> np.ndarray:
         """The used columns of a block's rows (roles order), or the loader's message for its first bad line."""
         lay = self.lay
         plain = block.isascii() and not any(c in block for c in _EXOTIC) and (
@@ -203,17 +222,16 @@ class _File:
             raise not_utf8(self.path) from None
         if not any(ln.strip() and not ln.lstrip().startswith("#") for ln in lines):
             return np.empty((0, len(lay.usecols)))
-        return parse_block(lines, first, lay.delimiter, lay.usecols, self.path)
+        return parse_block(lines, self.line_at(offset), lay.delimiter, lay.usecols, self.path)
 
     def rows(self, hash_it: bool = False) -> Iterator[tuple[int, bytes, np.ndarray]]:
-        """(first line number, block, its rows) of every block."""
-        for first, block in self.blocks(hash_it):
-            yield first, block, self.parse(block, first)
+        """(byte offset, block, its rows) of every block."""
+        for offset, block in self.blocks(hash_it):
+            yield offset, block, self.parse(block, offset)
 
-
-def _line_of(block: bytes, first: int, k: int) -> int:
-    """File line of the block's data row ``k``."""
-    return lineno(block.decode("utf-8").splitlines(), k, first)
+    def line_of(self, block: bytes, offset: int, k: int) -> int:
+        """File line of data row ``k`` of the block at ``offset``."""
+        return lineno(block.decode("utf-8").splitlines(), k, self.line_at(offset))
 
 
 class _Steps:
@@ -330,7 +348,7 @@ class StreamedRecording:
             if big is None:
                 bad = (np.abs(arr) > MAX_ABS_VALUE).any(axis=1)
                 if bad.any():
-                    big = corrupt_value(_line_of(block, first, int(np.flatnonzero(bad)[0])), path)
+                    big = corrupt_value(self.file.line_of(block, first, int(np.flatnonzero(bad)[0])), path)
             if has_t:
                 stamps = arr[:, it["t"]]
                 if n == 0:
@@ -340,7 +358,7 @@ class StreamedRecording:
                     bad = ~(d > 0)
                     if bad.any():
                         k = int(np.flatnonzero(bad)[0]) + (1 if last_stamp is None else 0)
-                        order = not_increasing(_line_of(block, first, k), path)
+                        order = not_increasing(self.file.line_of(block, first, k), path)
                 last_stamp = float(stamps[-1])
                 stamp_steps.add(stamps)
                 if sum(h.size for h in head_stamps) < TIME_HEAD_ROWS:
