@@ -245,8 +245,20 @@ def parse_block(lines: list[str], first_lineno: int, delimiter: str | None, usec
         raise
     except (ValueError, IndexError):
         pass
-    # Slow path: locate the first bad line for the message.
-    k = 0
+    check_lines(lines, first_lineno, delimiter, usecols, path)
+    raise unparsed(path)
+
+
+def unparsed(path: Path) -> ImucalError:
+    """Numbers that numpy cannot read although no line is found wrong."""
+    return ImucalError("could not be parsed as numeric columns", file=str(path), field="data",
+                       fix="use CSV with a header or whitespace-separated numbers")
+
+
+def check_lines(lines: list[str], first_lineno: int, delimiter: str | None, usecols: list[int], path: Path) -> None:
+    """The slow path: raise the message for the first line with too few columns, a non-number or
+    a non-finite value."""
+    ncol = max(usecols) + 1
     for i, ln in enumerate(lines):
         s = ln.strip()
         if not s or s.startswith("#"):
@@ -264,9 +276,6 @@ def parse_block(lines: list[str], first_lineno: int, delimiter: str | None, usec
             if not math.isfinite(float(toks[c])):
                 raise ImucalError(f"line {first_lineno + i} holds NaN or Inf", file=str(path),
                                   field="data", fix="remove or repair the non-finite rows before calibrating")
-        k += 1
-    raise ImucalError("could not be parsed as numeric columns", file=str(path), field="data",
-                      fix="use CSV with a header or whitespace-separated numbers")
 
 
 def lineno(lines: list[str], k: int, first: int) -> int:

@@ -28,8 +28,8 @@ import pandas as pd
 
 from imucal.constants import TIME_UNITS
 from imucal.data.load import (BINARY_PROBE, MAX_ABS_VALUE, TIME_HEAD_ROWS, DataSpec, Layout, as_spec,
-                              binary_file, check_rate, corrupt_value, layout, lineno, no_rows, not_increasing,
-                              not_utf8, parse_block, resolve_path, stamp_unit, time_base_without_stamps,
+                              binary_file, check_lines, check_rate, corrupt_value, layout, lineno, no_rows, not_increasing,
+                              not_utf8, parse_block, resolve_path, unparsed, stamp_unit, time_base_without_stamps,
                               time_unit_from_step, _MAX_SCAN_LINES)
 from imucal.data.static import (QUANTUM_ROWS, Intervals, MovingVariance, Segment, StaticSettings, auto_threshold,
                                 candidate_runs, intervals_from, quantum, segment, window_samples)
@@ -85,15 +85,23 @@ class RecordingSummary:
 
 def use_stream(spec: DataSpec, base_dir: str | os.PathLike | None = None) -> bool:
     """Whether ``spec`` is read in chunks: data.stream always, or auto and a file above STREAM_BYTES
-    without a second (gyroscope) file."""
+    without gyroscope data (columns or a second file)."""
     if spec.stream != "auto":
         return spec.stream == "always"
     if spec.gyro_path is not None:
         return False
     try:
-        return os.stat(resolve_path(spec, base_dir)).st_size > STREAM_BYTES
+        if os.stat(resolve_path(spec, base_dir)).st_size <= STREAM_BYTES:
+            return False
     except OSError:
         return False  # the loader names the problem
+    return not has_gyro(spec, base_dir)  # the gyroscope fit needs every sample
+
+
+def has_gyro(spec: DataSpec, base_dir: str | os.PathLike | None = None) -> bool:
+    """Whether a recording comes with gyroscope data: a second file, or gx gy gz columns (read from
+    its head)."""
+    return spec.gyro_path is not None or _File(spec, resolve_path(spec, base_dir)).lay.has_gyro
 
 
 class _File:
@@ -108,6 +116,9 @@ class _File:
         os.close(fd)
         self.sha = ""
         self._counted = (0, 0)
+        #: numbers numpy could not read in an earlier block, no line found wrong there: later
+        #: lines are checked one by one for a message naming one (as the loader does), else this
+        self.unparsed: ImucalError | None = None
         self.lay, self.offset = self._head()
         self._counted = (self.offset, self.lay.body_first)
 
@@ -204,6 +215,9 @@ class _File:
     def parse(self, block: bytes, offset: int) -> np.ndarray:
         """The used columns of a block's rows (roles order), or the loader's message for its first bad line."""
         lay = self.lay
+        if self.unparsed is not None:
+            check_lines(self._lines(block), self.line_at(offset), lay.delimiter, lay.usecols, self.path)
+            return np.empty((0, len(lay.usecols)))
         plain = block.isascii() and not any(c in block for c in _EXOTIC) and (
             b"\r" not in block or block.count(b"\r") == block.count(b"\r\n"))
         if plain:
@@ -216,13 +230,22 @@ class _File:
                     return arr
             except (ValueError, IndexError, pd.errors.ParserError, pd.errors.EmptyDataError):
                 pass
-        try:
-            lines = block.decode("utf-8").splitlines()
-        except UnicodeDecodeError:
-            raise not_utf8(self.path) from None
+        lines = self._lines(block)
         if not any(ln.strip() and not ln.lstrip().startswith("#") for ln in lines):
             return np.empty((0, len(lay.usecols)))
-        return parse_block(lines, self.line_at(offset), lay.delimiter, lay.usecols, self.path)
+        try:
+            return parse_block(lines, self.line_at(offset), lay.delimiter, lay.usecols, self.path)
+        except ImucalError as exc:
+            if exc.message != unparsed(self.path).message:
+                raise
+            self.unparsed = exc
+            return np.empty((0, len(lay.usecols)))
+
+    def _lines(self, block: bytes) -> list[str]:
+        try:
+            return block.decode("utf-8").splitlines()
+        except UnicodeDecodeError:
+            raise not_utf8(self.path) from None
 
     def rows(self, hash_it: bool = False) -> Iterator[tuple[int, bytes, np.ndarray]]:
         """(byte offset, block, its rows) of every block."""
@@ -295,6 +318,7 @@ class StreamedRecording:
     def __init__(self, spec: DataSpec | str | os.PathLike, settings: StaticSettings = StaticSettings(),
                  base_dir: str | os.PathLike | None = None, rails: dict | None = None,
                  keep_samples: bool = False) -> None:
+        """``keep_samples``: keep the static samples (samples mode). Gyroscope columns are not read."""
         self.spec = as_spec(spec)
         self.settings, self.rails = settings, rails
         self.file = _File(self.spec, resolve_path(self.spec, base_dir))
@@ -379,6 +403,8 @@ class StreamedRecording:
                     head_raw.append(raw[:QUANTUM_ROWS])
                 t_last = float(t[-1])
             n += m
+        if self.file.unparsed is not None:
+            raise self.file.unparsed
         if n == 0:
             raise no_rows(path)
         if big is not None:
@@ -393,6 +419,9 @@ class StreamedRecording:
             check_rate(n, last_stamp - t_first, unit_exact, path)
         else:
             unit_exact, note = time_base_without_stamps(spec)
+        if n < 3:  # as detect_static
+            raise ImucalError(f"only {n} samples", file=str(path), field="data",
+                              fix="record several seconds in each orientation")
         # the times of this pass are in the guessed unit; if it was wrong, the next pass's window
         # comes from the stamps' step in the right one
         dt = t_steps.median() if unit_exact == unit else stamp_steps.median() * TIME_UNITS[unit_exact]
@@ -403,9 +432,6 @@ class StreamedRecording:
     def _finish_scan(self, scan: _Scan) -> None:
         if not scan.consistent:  # pragma: no cover - the third pass uses the exact unit and window
             raise ImucalError("the time step changed between passes", file=str(self.path), field="data.path")
-        if scan.n < 3:
-            raise ImucalError(f"only {scan.n} samples", file=str(self.path), field="data",
-                              fix="record several seconds in each orientation")
         scan.var = scan.mv.finish()
         scan.mv = None
 

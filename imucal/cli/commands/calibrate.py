@@ -11,7 +11,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Fit shifts, scales and axis angles (Nakov & Ivanov) to a recording. "
                                    "Writes DIR/calibration.yaml, DIR/report.txt and figures.")
     p.add_argument("config", nargs="?", help="YAML run file (see configs/)")
-    options.add_data_options(p)
+    options.add_data_options(p, stream=True)
     options.add_gravity_options(p)
     options.add_model_options(p)
     p.add_argument("--gyro-data", metavar="FILE",
@@ -43,6 +43,8 @@ def run(args: argparse.Namespace) -> int:
     from imucal.pipeline import calibrate
     import yaml
 
+    from imucal.data.stream import has_gyro, use_stream
+    from imucal.errors import ImucalError
     from imucal.gyro.run import calibrate_gyro
     from imucal.report.text import fit_report, summary
 
@@ -61,6 +63,9 @@ def run(args: argparse.Namespace) -> int:
     outputs = [out / "calibration.yaml", out / "report.txt", out / "gyro.yaml", args.json,
                *([out / n for n in FIGURES] if figures else [])]
     check_outputs(inputs, outputs)  # fail before the work, not after it
+    if use_stream(cfg.data, cfg.base_dir) and has_gyro(cfg.data, cfg.base_dir):
+        raise ImucalError("has gyroscope data, which reading in chunks does not keep", file=str(options.data_path(cfg)),
+                          field="--stream", fix="give --stream never (data.stream: never) to read it whole")
     result = calibrate(cfg)
     text = fit_report(result)
     gyro = calibrate_gyro(result, None if gyro_file is None else str(gyro_file))  # None when the recording has no gyroscope

@@ -21,7 +21,8 @@ if TYPE_CHECKING:
     from imucal.config.run import GravitySpec, RunConfig
 
 
-def add_data_options(p: argparse.ArgumentParser, data_required: bool = False) -> None:
+def add_data_options(p: argparse.ArgumentParser, data_required: bool = False, stream: bool = False) -> None:
+    """--data and how to read it; ``stream``: the command can read the file in chunks (--stream)."""
     g = p.add_argument_group("data")
     g.add_argument("--data", required=data_required, metavar="FILE",
                    help="recording (CSV with header, or whitespace text: t x y z)")
@@ -32,6 +33,10 @@ def add_data_options(p: argparse.ArgumentParser, data_required: bool = False) ->
                    help="unit of the time column (default auto: inferred and reported)")
     g.add_argument("--sample-rate", type=float, help="sample rate [Hz] when the file has no time column")
     g.add_argument("--unit", help="unit of the raw readings (label only, e.g. raw or m/s^2)")
+    if stream:
+        g.add_argument("--stream", choices=("auto", "always", "never"),
+                       help="read the recording in chunks with bounded memory: auto (files above 64 MB, "
+                            "the default), always, never")
 
 
 def add_gravity_options(p: argparse.ArgumentParser) -> None:
@@ -82,7 +87,8 @@ def run_config(args: argparse.Namespace, config: str | None = None, data_overrid
     over = {}
     if getattr(args, "columns", None):
         over["columns"] = parse_columns(args.columns)
-    for opt, key in (("time_unit", "time_unit"), ("sample_rate", "sample_rate"), ("unit", "unit")):
+    for opt, key in (("time_unit", "time_unit"), ("sample_rate", "sample_rate"), ("unit", "unit"),
+                     ("stream", "stream")):
         if getattr(args, opt, None) is not None:
             over[key] = getattr(args, opt)
     data = dataclasses.replace(cfg.data, **over) if over else cfg.data
