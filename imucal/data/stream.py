@@ -24,7 +24,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from imucal.constants import TIME_UNITS
 from imucal.data.load import (BINARY_PROBE, MAX_ABS_VALUE, TIME_HEAD_ROWS, DataSpec, Layout, as_spec,
@@ -42,6 +41,9 @@ STREAM_BYTES = 64 * 1024**2
 MAX_STREAM_BYTES = 1024**4
 #: Bytes parsed at a time (whole lines).
 CHUNK_BYTES = 16 * 1024**2
+#: Parsed samples kept after the first pass, so that the next ones need not parse the file again,
+#: while they fit in this many bytes (raw, t and temperature as float64).
+CACHE_BYTES = 256 * 1024**2
 #: Largest head searched for the header and the first data line [bytes].
 MAX_HEAD_BYTES = 64 * 1024**2
 _EXOTIC = (b"\x0b", b"\x0c", b"\x1c", b"\x1d", b"\x1e")  # line breaks for str.splitlines, not for pandas
@@ -221,6 +223,10 @@ class _File:
         plain = block.isascii() and not any(c in block for c in _EXOTIC) and (
             b"\r" not in block or block.count(b"\r") == block.count(b"\r\n"))
         if plain:
+            # imported here: pandas adds about 0.3 s to start-up, which a short recording read whole
+            # never pays (the measured start-up of `imucal calibrate` in docs/benchmarks.md)
+            import pandas as pd
+
             try:
                 df = pd.read_csv(io.BytesIO(block), sep=lay.delimiter or r"\s+", header=None, usecols=lay.usecols,
                                  dtype=np.float64, comment="#", skip_blank_lines=True, quoting=csv.QUOTE_NONE,
@@ -344,6 +350,9 @@ class StreamedRecording:
             return (arr[:, self._it["t"]] - t_first) * TIME_UNITS[unit]
         return np.arange(row0, row0 + arr.shape[0]) / float(self.spec.sample_rate)
 
+    def _temp(self, arr: np.ndarray) -> np.ndarray | None:
+        return arr[:, self._it["temp"]].copy() if "temp" in self._it else None
+
     def _raw(self, arr: np.ndarray) -> np.ndarray:
         i = self._it
         return np.column_stack([arr[:, i["ax"]], arr[:, i["ay"]], arr[:, i["az"]]])
@@ -365,6 +374,8 @@ class StreamedRecording:
         mv = None
         lows = np.full(3, np.inf)
         highs = np.full(3, -np.inf)
+        self._cache: list[tuple] | None = []
+        cached = 0
         for first, block, arr in self.file.rows(hash_it=True):
             m = arr.shape[0]
             if m == 0:
@@ -402,6 +413,13 @@ class StreamedRecording:
                 if sum(h.shape[0] for h in head_raw) < QUANTUM_ROWS:
                     head_raw.append(raw[:QUANTUM_ROWS])
                 t_last = float(t[-1])
+                if self._cache is not None:  # the next passes read memory while the file fits in CACHE_BYTES
+                    temp = self._temp(arr)
+                    cached += raw.nbytes + t.nbytes + (0 if temp is None else temp.nbytes)
+                    if cached <= CACHE_BYTES:
+                        self._cache.append((n, raw, t, temp))
+                    else:
+                        self._cache = None
             n += m
         if self.file.unparsed is not None:
             raise self.file.unparsed
@@ -456,39 +474,54 @@ class StreamedRecording:
         parts = [kept[int(s)] for s in iv.start]
         return iv, _samples(parts, has_temp)
 
+    def _arrays(self, scan: _Scan) -> Iterator[tuple[int, np.ndarray, np.ndarray, np.ndarray | None]]:
+        """(first row, raw, t, temp) of every block: from pass 1's cache when the file fitted in it,
+        else parsed again."""
+        if self._cache is not None:
+            yield from self._cache
+            return
+        row0 = 0
+        for _, _, arr in self.file.rows():
+            yield row0, self._raw(arr), self._times(arr, row0, scan.unit, scan.t_first), self._temp(arr)
+            row0 += arr.shape[0]
+
     def _pieces(self, a: np.ndarray, b: np.ndarray, scan: _Scan
                 ) -> Iterator[tuple[int, np.ndarray, np.ndarray, np.ndarray | None]]:
         """(first row, raw, t, temp) of each row range [a_i, b_i), in order, from one pass."""
-        it = self._it
-        k, row0 = 0, 0
+        k = 0
         acc: list[tuple] = []
         if a.size == 0:
             return
-        for _, _, arr in self.file.rows():
-            row1 = row0 + arr.shape[0]
+        for row0, raw, t, temp in self._arrays(scan):
+            row1 = row0 + raw.shape[0]
             while k < a.size and a[k] < row1:
                 lo, hi = max(a[k], row0) - row0, min(b[k], row1) - row0
-                sub = arr[lo:hi]
-                acc.append((self._raw(sub), self._times(sub, row0 + lo, scan.unit, scan.t_first),
-                            sub[:, it["temp"]].copy() if "temp" in it else None))
+                acc.append((raw[lo:hi], t[lo:hi], None if temp is None else temp[lo:hi]))
                 if b[k] > row1:
                     break
                 yield int(a[k]), *_join(acc)
                 acc = []
                 k += 1
-            row0 = row1
             if k == a.size:
                 break
 
     # --- pass 3 ---------------------------------------------------------------------------------
     def static_blocks(self) -> Iterator[StaticSamples]:
-        """The static samples of ``self.intervals``, a block at a time (the kept ones, or re-read)."""
+        """The static samples of ``self.intervals`` (in order), a block of the file at a time."""
         if self.samples is not None:
             yield self.samples
             return
         iv = self.intervals
-        for _, raw, t, temp in self._pieces(iv.start, iv.end, self._scan_result):
-            yield StaticSamples(raw, t, temp)
+        if iv.n == 0:
+            return
+        for row0, raw, t, temp in self._arrays(self._scan_result):
+            row1 = row0 + raw.shape[0]
+            k0, k1 = np.searchsorted(iv.end, row0, "right"), np.searchsorted(iv.start, row1, "left")
+            if k1 <= k0:
+                continue
+            idx = np.concatenate([np.arange(max(a, row0), min(b, row1)) - row0
+                                  for a, b in zip(iv.start[k0:k1], iv.end[k0:k1])])
+            yield StaticSamples(raw[idx], t[idx], None if temp is None else temp[idx])
 
 
 def _infer(stamps: np.ndarray, head: np.ndarray) -> tuple[str, str]:
