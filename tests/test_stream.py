@@ -116,7 +116,7 @@ def test_slice_differences_equal_the_index_formula():
         mv = MovingVariance(w)  # fed in uneven chunks: the same numbers
         for part in np.array_split(x, [1, 7, 5000, 5001, 13_000]):
             mv.add(part)
-        np.testing.assert_array_equal(mv.finish(), new)
+        np.testing.assert_array_equal(mv.finish().array(), new)
 
 
 @pytest.mark.parametrize("name", ["xsens-mti-imutk", "ros-imu data2", "ros-imu data3", "ros-imu data4",

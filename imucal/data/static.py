@@ -8,6 +8,7 @@ lowest summed cost: that rule favours fewer intervals and generalises worse.
 """
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -141,6 +142,49 @@ def _window_variance(seg: np.ndarray, w: int) -> np.ndarray:
     return var.sum(axis=1)
 
 
+_F32_MAX = float(np.finfo(np.float32).max)
+
+
+def _f32(v: np.ndarray) -> np.ndarray:
+    return np.minimum(v, _F32_MAX).astype(np.float32)  # a variance beyond float32 saturates
+
+
+class VarianceSeries:
+    """A moving-variance series (float32) held as pieces: one a block, never joined, so a long log
+    needs no second copy. Order statistics by a radix select over the float32 bit patterns."""
+
+    def __init__(self, parts: list[np.ndarray]) -> None:
+        self.parts = [p for p in parts if p.size]
+        self.size = sum(p.size for p in self.parts)
+
+    def steps(self) -> Iterator[np.ndarray]:
+        for p in self.parts:
+            for i in range(0, p.size, _SWEEP):
+                yield p[i:i + _SWEEP]
+
+    def array(self) -> np.ndarray:
+        return np.concatenate(self.parts) if self.parts else np.empty(0, np.float32)
+
+    def _order_statistics(self, ks: list[int]) -> list[float]:
+        """The values at 0-based ranks ``ks`` (exact): a histogram of the top 16 bits of the
+        (non-negative, so monotonic) bit patterns, then a sort of the bins holding them."""
+        hist = np.zeros(1 << 16, np.int64)
+        for x in self.steps():
+            hist += np.bincount(x.view(np.uint32) >> 16, minlength=1 << 16)
+        cum = np.cumsum(hist)
+        bins = {k: int(np.searchsorted(cum, k, side="right")) for k in ks}
+        vals = {b: np.sort(np.concatenate([x[(x.view(np.uint32) >> 16) == b] for x in self.steps()]))
+                for b in set(bins.values())}
+        return [float(vals[bins[k]][k - (int(cum[bins[k] - 1]) if bins[k] else 0)]) for k in ks]
+
+    def percentile(self, q: float) -> float:
+        """The q-th percentile, linear between order statistics (numpy's default method)."""
+        h = (self.size - 1) * (q / 100.0)
+        lo = int(np.floor(h))
+        a, b = self._order_statistics([lo, min(lo + 1, self.size - 1)])
+        return a + (b - a) * (h - lo)
+
+
 class MovingVariance:
     """Centred moving variance of a recording fed in chunks of rows (float32, one value a sample).
 
@@ -160,38 +204,33 @@ class MovingVariance:
         span = VAR_BLOCK + self.w - 1
         k = 0
         while self._buf.shape[0] - k >= span:
-            self._blocks.append(_window_variance(self._buf[k:k + span], self.w).astype(np.float32))
+            self._blocks.append(_f32(_window_variance(self._buf[k:k + span], self.w)))
             k += VAR_BLOCK
         if k:
             self._buf = self._buf[k:].copy()
 
-    def finish(self) -> np.ndarray:
+    def finish(self) -> VarianceSeries:
         n, buf = self.n, self._buf
         if buf is None or n == 0:
-            return np.empty(0, np.float32)
+            return VarianceSeries([])
         w = max(2, min(self.w, n))
         if w != self.w:  # fewer samples than a window: nothing was computed yet
             self._blocks = []
         for j0 in range(0, buf.shape[0] - w + 1, VAR_BLOCK):
-            seg = buf[j0:j0 + VAR_BLOCK + w - 1]
-            self._blocks.append(_window_variance(seg, w).astype(np.float32))
+            self._blocks.append(_f32(_window_variance(buf[j0:j0 + VAR_BLOCK + w - 1], w)))
         self._buf = None
-        out = np.empty(n, np.float32)
-        half, k = w // 2, w // 2
-        for b in self._blocks:
-            out[k:k + b.size] = b
-            k += b.size
-        out[:half] = out[half]
-        out[k:] = out[k - 1]
-        self._blocks = []
-        return out
+        blocks, self._blocks = self._blocks, []
+        half = w // 2
+        tail = n - half - sum(b.size for b in blocks)
+        return VarianceSeries([np.full(half, blocks[0][0], np.float32), *blocks,
+                               np.full(tail, blocks[-1][-1], np.float32)])
 
 
 def moving_variance(x: np.ndarray, w: int) -> np.ndarray:
     """Centred moving variance of each column over ``w`` samples, summed over columns (float32)."""
     mv = MovingVariance(w)
     mv.add(np.asarray(x, float))
-    return mv.finish()
+    return mv.finish().array()
 
 
 def _otsu(hist: np.ndarray, edges: np.ndarray) -> float:
@@ -206,21 +245,21 @@ def _otsu(hist: np.ndarray, edges: np.ndarray) -> float:
     return float(centers[int(np.argmax(between))])
 
 
-def _log_histogram(var: np.ndarray, clip: float, bins: int = 256) -> tuple[np.ndarray, np.ndarray]:
+def _log_histogram(var: VarianceSeries, clip: float, bins: int = 256) -> tuple[np.ndarray, np.ndarray]:
     """Histogram of log10(max(var, clip)) over its own range, in steps (no float64 copy of var)."""
     lo, hi = np.inf, -np.inf
-    for i in range(0, var.size, _SWEEP):
-        lv = np.log10(np.maximum(var[i:i + _SWEEP].astype(np.float64), clip))
+    for x in var.steps():
+        lv = np.log10(np.maximum(x.astype(np.float64), clip))
         lo, hi = min(lo, float(lv.min())), max(hi, float(lv.max()))
     hist = np.zeros(bins, np.int64)
     edges = np.histogram_bin_edges(np.array([lo, hi]), bins=bins, range=(lo, hi))
-    for i in range(0, var.size, _SWEEP):
-        lv = np.log10(np.maximum(var[i:i + _SWEEP].astype(np.float64), clip))
+    for x in var.steps():
+        lv = np.log10(np.maximum(x.astype(np.float64), clip))
         hist += np.histogram(lv, bins=bins, range=(lo, hi))[0]
     return hist, edges
 
 
-def auto_threshold(var: np.ndarray, quantum: float) -> float:
+def auto_threshold(var: VarianceSeries, quantum: float) -> float:
     """Threshold on the moving variance, set from the data.
 
     Noise floor: the 5th percentile of the moving variance (any log that is still at least
@@ -228,7 +267,7 @@ def auto_threshold(var: np.ndarray, quantum: float) -> float:
     kept within [4, 100] times the floor so that a log that is mostly still, or mostly moving,
     still gets a sensible cut.
     """
-    floor = max(float(np.percentile(var, 5)), quantum**2 / 12 * 3, 1e-300)
+    floor = max(var.percentile(5), quantum**2 / 12 * 3, 1e-300)
     split = 10 ** _otsu(*_log_histogram(var, floor * 1e-3))
     return float(min(max(split, 4 * floor), 100 * floor))
 
@@ -238,10 +277,10 @@ def window_samples(settings: StaticSettings, dt: float) -> int:
     return max(3, int(round(settings.window / dt)))
 
 
-def candidate_runs(var: np.ndarray, threshold: float, trim: int) -> tuple[np.ndarray, np.ndarray]:
+def candidate_runs(var: VarianceSeries, threshold: float, trim: int) -> tuple[np.ndarray, np.ndarray]:
     """Runs of samples at or below the threshold, ``trim`` samples cut from each end, 3 or more
     left: (first, one past last). The minimum duration is checked on their time stamps."""
-    still = var <= np.float64(threshold)  # compared in double precision
+    still = np.concatenate([x <= np.float64(threshold) for x in var.parts])  # compared in double precision
     zero = np.zeros(1, np.int8)
     edges = np.diff(np.concatenate([zero, still.view(np.int8), zero]))
     del still
@@ -428,7 +467,9 @@ def detect_static(t: np.ndarray, raw: np.ndarray, settings: StaticSettings = Sta
         raise ImucalError(f"only {n} samples", file=source, field="data",
                           fix="record several seconds in each orientation")
     dt = float(np.median(np.diff(t)))
-    var = moving_variance(raw, window_samples(settings, dt))
+    mv = MovingVariance(window_samples(settings, dt))
+    mv.add(np.asarray(raw, float))
+    var = mv.finish()
     q = quantum(raw)
     thr = settings.threshold if settings.threshold is not None else auto_threshold(var, q)
     a, b = candidate_runs(var, thr, int(round(settings.trim / dt)))

@@ -30,8 +30,8 @@ from imucal.data.load import (BINARY_PROBE, MAX_ABS_VALUE, TIME_HEAD_ROWS, DataS
                               binary_file, check_lines, check_rate, corrupt_value, layout, lineno, no_rows, not_increasing,
                               not_utf8, parse_block, resolve_path, unparsed, stamp_unit, time_base_without_stamps,
                               time_unit_from_step, _MAX_SCAN_LINES)
-from imucal.data.static import (QUANTUM_ROWS, Intervals, MovingVariance, Segment, StaticSettings, auto_threshold,
-                                candidate_runs, intervals_from, quantum, segment, window_samples)
+from imucal.data.static import (QUANTUM_ROWS, Intervals, MovingVariance, Segment, StaticSettings, VarianceSeries,
+                                auto_threshold, candidate_runs, intervals_from, quantum, segment, window_samples)
 from imucal.errors import ImucalError
 from imucal.files.inputs import open_regular
 
@@ -311,7 +311,7 @@ class _Scan:
     unit_guess: str  #: the unit the times of this pass were computed in
     w_guess: int  #: the window the moving variance of this pass used
     mv: MovingVariance | None
-    var: np.ndarray | None = None
+    var: VarianceSeries | None = None
 
     @property
     def consistent(self) -> bool:
