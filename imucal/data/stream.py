@@ -107,7 +107,8 @@ def has_gyro(spec: DataSpec, base_dir: str | os.PathLike | None = None) -> bool:
 
 
 class _File:
-    """A recording's body in blocks of whole lines, each with its first line number and rows."""
+    """A recording's body in blocks of whole lines (with their byte offsets and parsed rows); the
+    file is refused if it changes between passes."""
 
     def __init__(self, spec: DataSpec, path: Path) -> None:
         self.spec, self.path = spec, path
@@ -117,14 +118,13 @@ class _File:
         self.stamp = (st.st_size, st.st_mtime_ns, st.st_ino)
         os.close(fd)
         self.sha = ""
-        self._counted = (0, 0)
         #: numbers numpy could not read in an earlier block, no line found wrong there: later
         #: lines are checked one by one for a message naming one (as the loader does), else this
         self.unparsed: ImucalError | None = None
         self.lay, self.offset = self._head()
         self._counted = (self.offset, self.lay.body_first)
 
-    def _open(self):
+    def _open(self) -> io.BufferedReader:
         fd, _ = open_regular(self.path, field="data.path", max_bytes=MAX_STREAM_BYTES)
         st = os.fstat(fd)
         if (st.st_size, st.st_mtime_ns, st.st_ino) != self.stamp:
