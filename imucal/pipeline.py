@@ -14,6 +14,7 @@ from imucal.calibration.gyro import GyroCalibration
 from imucal.config.run import RunConfig
 
 from imucal.data.load import Recording, load_recording, rails
+from imucal.data.stream import RecordingSummary, StaticSamples, StreamedRecording, use_stream
 from imucal.errors import ImucalError
 from imucal.solve.fit import FitData, FitResult, fit, jacobian_rows
 from imucal.solve.initial import InitialGuess, ellipsoid_guess
@@ -34,39 +35,46 @@ class CalibrationRun:
     """Everything a run produced: inputs, intervals, fit and the frozen calibration."""
 
     config: RunConfig
-    recording: Recording
+    recording: Recording | RecordingSummary  #: the summary alone when the file was read in chunks
     intervals: Intervals
     guess: InitialGuess
     observability: Observability
     result: FitResult
     calibration: Calibration
     directions: np.ndarray  #: unit gravity direction per interval, calibrated frame
-    sample_residuals: np.ndarray  #: |a| - g for every sample inside an interval [m/s^2]
+    #: |a| - g for every sample inside an interval [m/s^2]; None when the file was read in chunks
+    sample_residuals: np.ndarray | None
     gravity_source: str
     gyro: GyroResult | None = None  #: the gyroscope fit, when the recording has one
 
     @property
     def rms_residual_samples(self) -> float:
-        return float(np.sqrt(np.mean(self.sample_residuals**2)))
+        return float(self.calibration.fit["rms_residual_samples"])
 
 
-def covariates_for(model: SensorModel, intervals: Intervals | None = None, recording: Recording | None = None,
-                   rows: np.ndarray | None = None, source: str | None = None) -> np.ndarray:
-    """Covariate matrix (rows x k) for interval means, or for recording samples at ``rows``."""
+def static_samples(intervals: Intervals, recording: Recording) -> StaticSamples:
+    """The samples of a recording in memory that lie inside the static intervals, in order."""
+    rows = np.flatnonzero(intervals.sample_mask(recording.n))
+    return StaticSamples(recording.raw[rows], recording.t[rows], None if recording.temp is None else recording.temp[rows])
+
+
+def covariates_for(model: SensorModel, intervals: Intervals | None = None, samples: StaticSamples | None = None,
+                   source: str | None = None) -> np.ndarray:
+    """Covariate matrix (rows x k) for interval means, or for static samples."""
     cols = []
     for c in model.covariates:
         if c == "temp":
-            v = intervals.temp if intervals is not None else (None if recording.temp is None else recording.temp[rows])
+            v = intervals.temp if intervals is not None else samples.temp
             if v is None:
                 raise ImucalError("the model has a temperature effect but the data have no temp column",
                                   file=source, field="data.columns.temp",
                                   fix="add a temperature column (deg C) or drop the temperature effect")
         elif c == "time":
-            v = intervals.t_mid if intervals is not None else recording.t[rows]
+            v = intervals.t_mid if intervals is not None else samples.t
         else:  # pragma: no cover - effects declare only known covariates
             raise ImucalError(f"unknown covariate {c!r}", field="fit.effects")
         cols.append(np.asarray(v, float))
-    n = intervals.n if intervals is not None else len(rows)
+    n = intervals.n if intervals is not None else samples.t.size
     return np.column_stack(cols) if cols else np.zeros((n, 0))
 
 
@@ -132,15 +140,17 @@ def effect_initial(params: Parameters, config: RunConfig) -> Parameters:
     return params.with_values(init)
 
 
-def fit_data(model: SensorModel, intervals: Intervals, recording: Recording, mode: str, source: str | None
-             ) -> FitData:
+def fit_data(model: SensorModel, intervals: Intervals, samples: StaticSamples | Recording | None, mode: str,
+             source: str | None) -> FitData:
+    """The fit's rows: interval means, or (samples mode) the static samples (a Recording in memory
+    is cut to them)."""
     if mode == "means":
         return FitData(raw=intervals.mean, cov=covariates_for(model, intervals, source=source),
                        raw_var=intervals.mean_std**2, group=np.arange(intervals.n), mode="means")
-    mask = intervals.sample_mask(recording.n)
-    rows = np.flatnonzero(mask)
+    if isinstance(samples, Recording):
+        samples = static_samples(intervals, samples)
     group = intervals.sample_index()
-    return FitData(raw=recording.raw[rows], cov=covariates_for(model, recording=recording, rows=rows, source=source),
+    return FitData(raw=samples.raw, cov=covariates_for(model, samples=samples, source=source),
                    raw_var=intervals.std[group] ** 2, group=group, mode="samples")
 
 
@@ -197,13 +207,25 @@ def fit_warnings(res: FitResult, config: RunConfig, rec: Recording, dropped: lis
     return out
 
 
+def sample_residuals(cal: Calibration, model: SensorModel, samples: StaticSamples, gravity: float) -> np.ndarray:
+    """|a| - g of every static sample [m/s^2]."""
+    covs = {c: covariates_for(model, samples=samples)[:, i] for i, c in enumerate(model.covariates)}
+    return np.linalg.norm(cal.apply(samples.raw, covs), axis=1) - gravity
+
+
 def calibrate(config: RunConfig, recording: Recording | None = None) -> CalibrationRun:
     """Run the whole calibration described by ``config`` (on ``recording`` when given, else on
     the file ``config.data`` names)."""
     src = config.source
-    rec = recording if recording is not None else load_recording(config.data, config.base_dir)
     declared = rails(config.data.saturation) if config.data.saturation is not None else None
-    iv = detect_static(rec.t, rec.raw, config.static, rec.temp, source=rec.source, rails=declared)
+    streamed: StreamedRecording | None = None
+    if recording is None and use_stream(config.data, config.base_dir):  # bounded memory (imucal.data.stream)
+        streamed = StreamedRecording(config.data, config.static, config.base_dir, declared,
+                                     keep_samples=config.fit.mode == "samples")
+        rec, iv = streamed.recording, streamed.intervals
+    else:
+        rec = recording if recording is not None else load_recording(config.data, config.base_dir)
+        iv = detect_static(rec.t, rec.raw, config.static, rec.temp, source=rec.source, rails=declared)
     dropped = iv.meta.get("dropped", [])
     if dropped and iv.n < 2:
         raise ImucalError(f"{len(dropped)} static interval(s) dropped because an axis was clipped "
@@ -228,9 +250,12 @@ def calibrate(config: RunConfig, recording: Recording | None = None) -> Calibrat
             params = prepare_parameters(model.effects, params, {"temp": iv.temp, "time": iv.t_mid}, iv.n,
                                         rec.source)
             params = effect_initial(params, config)  # a given start wins over the data's
-        data = fit_data(model, iv, rec, config.fit.mode, rec.source)
+        samples = None
+        if config.fit.mode == "samples":
+            samples = streamed.samples if streamed is not None else static_samples(iv, rec)
+        data = fit_data(model, iv, samples, config.fit.mode, rec.source)
         # Observability on interval means (one row per interval), at the initial guess.
-        mdata = fit_data(model, iv, rec, "means", rec.source) if data.mode != "means" else data
+        mdata = fit_data(model, iv, None, "means", rec.source) if data.mode != "means" else data
         J, Jw = jacobian_rows(mdata, params, model, gravity, weighted=True)
         obs = analyse(dirs, J, params.free_names, Jw, thresholds(params.free_names, config.fit.angle_tolerance))
         require_observable(obs, params.free_names, rec.source)
@@ -261,11 +286,16 @@ def calibrate(config: RunConfig, recording: Recording | None = None) -> Calibrat
                             "time": rec.time_note,
                             "dropped_intervals": [dict(d) for d in dropped]},
                       created=now_utc())
-    mask_rows = np.flatnonzero(iv.sample_mask(rec.n))
-    covs = {c: covariates_for(model, recording=rec, rows=mask_rows)[:, i] for i, c in enumerate(model.covariates)}
-    a = cal.apply(rec.raw[mask_rows], covs)
-    samp_res = np.linalg.norm(a, axis=1) - gravity
-    cal = replace(cal, fit={**cal_fit, "rms_residual_samples": float(np.sqrt(np.mean(samp_res**2)))})
+    if streamed is None:
+        samp_res = sample_residuals(cal, model, samples if samples is not None else static_samples(iv, rec), gravity)
+        rms_samples = float(np.sqrt(np.mean(samp_res**2)))
+    else:  # a block at a time: the samples were not kept (or are, in samples mode)
+        samp_res, ss, m = None, 0.0, 0
+        for blk in streamed.static_blocks():
+            r = sample_residuals(cal, model, blk, gravity)
+            ss, m = ss + float(np.dot(r, r)), m + r.size
+        rms_samples = float(np.sqrt(ss / m))
+    cal = replace(cal, fit={**cal_fit, "rms_residual_samples": rms_samples})
     ai = cal.apply(iv.mean, {c: covariates_for(model, iv)[:, i] for i, c in enumerate(model.covariates)})
     directions = ai / np.linalg.norm(ai, axis=1, keepdims=True)
     return CalibrationRun(config=config, recording=rec, intervals=iv, guess=guess, observability=obs,

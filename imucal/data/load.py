@@ -17,6 +17,8 @@ from imucal.data.rosbag import is_bag, read_bag
 from imucal.files.inputs import max_data_bytes, open_regular
 
 FORMATS = ("auto", "csv", "whitespace")
+#: How a recording is read: in chunks (imucal.data.stream) above STREAM_BYTES ("auto"), always, never.
+STREAM_CHOICES = ("auto", "always", "never")
 #: Column roles: time, acceleration, angular rate, temperature.
 ROLES = ("t", "ax", "ay", "az", "gx", "gy", "gz", "temp")
 #: Plausible IMU sample rates [Hz]: anything outside is a wrong time unit or a wrong rate.
@@ -25,6 +27,8 @@ MIN_RATE_HZ, MAX_RATE_HZ = 1.0, 1.0e5
 #: (squares of it would overflow double precision in the fit).
 MAX_ABS_VALUE = 1.0e30
 _MAX_SCAN_LINES = 50
+#: Leading time stamps whose integer values mark a tick counter (infer_time_unit).
+TIME_HEAD_ROWS = 1000
 
 
 @dataclass(frozen=True)
@@ -51,12 +55,14 @@ class DataSpec:
     #: ROS bags: the sensor_msgs/msg/Imu topic, and optionally a sensor_msgs/msg/Temperature one
     topic: str | None = None
     temp_topic: str | None = None
+    #: read in chunks with bounded memory: auto (files above imucal.data.stream.STREAM_BYTES), always, never
+    stream: str = "auto"
 
     def __post_init__(self) -> None:
         if not isinstance(self.path, (str, os.PathLike)) or not str(self.path):
             raise ImucalError(f"path {short(self.path)} must be a file name", field="data.path",
                               fix="give the recording's path as text")
-        for name in ("format", "time_unit", "unit"):
+        for name in ("format", "time_unit", "unit", "stream"):
             if not isinstance(getattr(self, name), str):
                 raise ImucalError(f"{name} {short(getattr(self, name))} must be text", field=f"data.{name}")
         if self.delimiter is not None and not (isinstance(self.delimiter, str) and len(self.delimiter) == 1
@@ -77,6 +83,9 @@ class DataSpec:
         if self.format not in FORMATS:
             raise ImucalError(f"unknown format {short(self.format)}", field="data.format",
                               fix=f"use one of {', '.join(FORMATS)}")
+        if self.stream not in STREAM_CHOICES:
+            raise ImucalError(f"unknown stream setting {short(self.stream)}", field="data.stream",
+                              fix=f"use one of {', '.join(STREAM_CHOICES)}")
         if self.time_unit not in TIME_UNIT_CHOICES:
             raise ImucalError(f"unknown time unit {short(self.time_unit)}", field="data.time_unit",
                               fix=f"use one of {', '.join(TIME_UNIT_CHOICES)}")
@@ -175,19 +184,31 @@ def _read_text(path: Path) -> tuple[str, str]:
                          fix="check the path (relative paths are relative to the YAML file)")
     try:
         with os.fdopen(fd, "rb") as f:
-            head = f.read(1 << 16)  # a sparse or binary file is refused before it is read whole
+            head = f.read(BINARY_PROBE)  # a sparse or binary file is refused before it is read whole
             if b"\x00" in head:
-                raise ImucalError("is a binary file (NUL bytes), not a text recording", file=str(path),
-                                  field="data.path", fix="export the recording as CSV or whitespace-separated text")
+                raise binary_file(path)
             blob = head + f.read()
     except OSError as exc:
         raise ImucalError(f"cannot read: {exc.strerror or exc}", file=str(path), field="data.path") from None
     try:
         text = blob.decode("utf-8-sig")
     except UnicodeDecodeError:
-        raise ImucalError("is not UTF-8 text", file=str(path), field="data.path",
-                          fix="export the recording as CSV or whitespace-separated text") from None
+        raise not_utf8(path) from None
     return text, hashlib.sha256(blob).hexdigest()
+
+
+#: Leading bytes searched for NUL (a binary file).
+BINARY_PROBE = 1 << 16
+
+
+def binary_file(path: Path) -> ImucalError:
+    return ImucalError("is a binary file (NUL bytes), not a text recording", file=str(path), field="data.path",
+                       fix="export the recording as CSV or whitespace-separated text")
+
+
+def not_utf8(path: Path) -> ImucalError:
+    return ImucalError("is not UTF-8 text", file=str(path), field="data.path",
+                       fix="export the recording as CSV or whitespace-separated text")
 
 
 def _is_number(tok: str) -> bool:
@@ -211,7 +232,7 @@ def _sniff_delimiter(line: str) -> str | None:
     return None
 
 
-def _parse_block(lines: list[str], first_lineno: int, delimiter: str | None, usecols: list[int],
+def parse_block(lines: list[str], first_lineno: int, delimiter: str | None, usecols: list[int],
                  path: Path) -> np.ndarray:
     """Parse numeric rows; on failure, find the offending line and name it."""
     if not any(ln.strip() and not ln.lstrip().startswith("#") for ln in lines):
@@ -225,7 +246,7 @@ def _parse_block(lines: list[str], first_lineno: int, delimiter: str | None, use
             bad = ~np.isfinite(arr).all(axis=1)
             if bad.any():
                 k = int(np.flatnonzero(bad)[0])
-                raise ImucalError(f"line {_lineno(lines, k, first_lineno)} holds NaN or Inf",
+                raise ImucalError(f"line {lineno(lines, k, first_lineno)} holds NaN or Inf",
                                   file=str(path), field="data",
                                   fix="remove or repair the non-finite rows before calibrating")
             return arr
@@ -233,8 +254,20 @@ def _parse_block(lines: list[str], first_lineno: int, delimiter: str | None, use
         raise
     except (ValueError, IndexError):
         pass
-    # Slow path: locate the first bad line for the message.
-    k = 0
+    check_lines(lines, first_lineno, delimiter, usecols, path)
+    raise unparsed(path)
+
+
+def unparsed(path: Path) -> ImucalError:
+    """Numbers that numpy cannot read although no line is found wrong."""
+    return ImucalError("could not be parsed as numeric columns", file=str(path), field="data",
+                       fix="use CSV with a header or whitespace-separated numbers")
+
+
+def check_lines(lines: list[str], first_lineno: int, delimiter: str | None, usecols: list[int], path: Path) -> None:
+    """The slow path: raise the message for the first line with too few columns, a non-number or
+    a non-finite value."""
+    ncol = max(usecols) + 1
     for i, ln in enumerate(lines):
         s = ln.strip()
         if not s or s.startswith("#"):
@@ -252,12 +285,9 @@ def _parse_block(lines: list[str], first_lineno: int, delimiter: str | None, use
             if not math.isfinite(float(toks[c])):
                 raise ImucalError(f"line {first_lineno + i} holds NaN or Inf", file=str(path),
                                   field="data", fix="remove or repair the non-finite rows before calibrating")
-        k += 1
-    raise ImucalError("could not be parsed as numeric columns", file=str(path), field="data",
-                      fix="use CSV with a header or whitespace-separated numbers")
 
 
-def _lineno(lines: list[str], k: int, first: int) -> int:
+def lineno(lines: list[str], k: int, first: int) -> int:
     seen = -1
     for i, ln in enumerate(lines):
         s = ln.strip()
@@ -324,7 +354,16 @@ def _no_header_layout(ncol: int, path: Path) -> dict[str, int]:
 
 
 def infer_time_unit(stamps: np.ndarray) -> tuple[str, str]:
-    """The unit (s, ms, us, ns) of time stamps and a sentence saying why.
+    """The unit (s, ms, us, ns) of time stamps and a sentence saying why (see time_unit_from_step)."""
+    dt = float(np.median(np.diff(stamps))) if stamps.size > 1 else float("nan")
+    head = stamps[:TIME_HEAD_ROWS]
+    return time_unit_from_step(dt, float(stamps[0]) if stamps.size else float("nan"),
+                               bool(np.all(head == np.round(head))))
+
+
+def time_unit_from_step(dt: float, first: float, integer_head: bool) -> tuple[str, str]:
+    """The unit (s, ms, us, ns) of time stamps with median step ``dt``, first stamp ``first`` and
+    integer values in their first TIME_HEAD_ROWS (``integer_head``), and a sentence saying why.
 
     The sample rate must be an IMU's (1 Hz to 100 kHz). Among the units that give one, epoch
     time decides when the stamps look like it (1.7e9 s = 1.7e12 ms = ...). Fractional stamps are
@@ -332,19 +371,18 @@ def infer_time_unit(stamps: np.ndarray) -> tuple[str, str]:
     seconds unless that gives no IMU rate); integer stamps (tick counters) in the unit whose rate
     is closest to 200 Hz on a log scale. A second plausible unit is named in the note.
     """
-    dt = float(np.median(np.diff(stamps))) if stamps.size > 1 else float("nan")
     if not (math.isfinite(dt) and dt > 0):
         return "s", "time unit assumed: s (too few distinct time stamps to infer it)"
     plausible = [u for u, f in TIME_UNITS.items() if MIN_RATE_HZ <= 1.0 / (dt * f) <= MAX_RATE_HZ]
     if not plausible:
         return "s", ""  # refused by the caller with the rate in the message
-    t0 = abs(float(stamps[0]))
+    t0 = abs(first)
     epoch = [u for u in plausible if 9.0e8 <= t0 * TIME_UNITS[u] <= 4.2e9]  # 1998 .. 2103
     if epoch:
         unit = epoch[0]
         why = f"epoch time stamps; median step {dt:g} {unit} -> {1.0 / (dt * TIME_UNITS[unit]):.4g} Hz"
         return unit, f"time unit inferred: {unit} ({why})"
-    if np.all(stamps[:1000] == np.round(stamps[:1000])):
+    if integer_head:
         plausible.sort(key=lambda u: abs(math.log10(1.0 / (dt * TIME_UNITS[u]) / 200.0)))
     unit = plausible[0]
     note = f"time unit inferred: {unit} (median step {dt:g} -> {1.0 / (dt * TIME_UNITS[unit]):.4g} Hz"
@@ -367,23 +405,39 @@ def _check_bag_spec(spec: DataSpec, path: Path) -> None:
                           fix="drop it: the Imu messages give time [s], acceleration [m/s^2] and rate [rad/s]")
 
 
-def load_recording(spec: DataSpec | str | os.PathLike, base_dir: str | os.PathLike | None = None
-                   ) -> Recording:
-    """Read a recording described by ``spec`` (a DataSpec or just a path with defaults)."""
-    if not isinstance(spec, DataSpec):
-        spec = DataSpec(path=str(spec))
+@dataclass(frozen=True)
+class Layout:
+    """Where a recording's numbers are: delimiter, column of each role read, first data line."""
+
+    delimiter: str | None
+    columns: dict  #: role -> 0-based column index (every role found)
+    roles: list  #: the roles read, in ROLES order
+    body: int  #: index (in the lines after skip_rows) of the first line after the header
+    body_first: int  #: its 1-based line number in the file
+    time_column: str  #: the time column's name in the file ("t" without a header)
+
+    @property
+    def usecols(self) -> list[int]:
+        return [self.columns[r] for r in self.roles]
+
+    @property
+    def has_gyro(self) -> bool:
+        return "gx" in self.roles
+
+
+def resolve_path(spec: DataSpec, base_dir: str | os.PathLike | None) -> Path:
+    """The recording's path (relative paths are relative to ``base_dir``, the YAML file's folder)."""
     path = Path(spec.path)
-    if base_dir is not None and not path.is_absolute():
-        path = Path(base_dir) / path
-    if is_bag(path):
-        _check_bag_spec(spec, path)
-        return read_bag(path, spec.topic, spec.temp_topic)
-    for name in ("topic", "temp_topic"):
-        if getattr(spec, name) is not None:
-            raise ImucalError(f"{name} applies to ROS bags only", file=str(path), field=f"data.{name}",
-                              fix="give a .bag file or a ROS 2 bag folder, or drop the topic")
-    text, sha = _read_text(path)
-    lines = text.splitlines()[spec.skip_rows:]
+    return Path(base_dir) / path if base_dir is not None and not path.is_absolute() else path
+
+
+def as_spec(spec: DataSpec | str | os.PathLike) -> DataSpec:
+    return spec if isinstance(spec, DataSpec) else DataSpec(path=str(spec))
+
+
+def layout(lines: list[str], spec: DataSpec, path: Path) -> Layout:
+    """Header, delimiter and column roles from the lines after ``spec.skip_rows`` (the whole file,
+    or its head: the first data line and _MAX_SCAN_LINES after the first non-comment line)."""
     first_lineno = spec.skip_rows + 1
     # Find the first non-empty, non-comment line.
     k0 = next((i for i, ln in enumerate(lines) if ln.strip() and not ln.lstrip().startswith("#")), None)
@@ -414,6 +468,7 @@ def load_recording(spec: DataSpec | str | os.PathLike, base_dir: str | os.PathLi
             raise ImucalError("no header line with the mapped column names found", file=str(path),
                               field="data.columns",
                               fix="add a header row, or set data.format: whitespace with column indices")
+    names: list[str] = []
     if header_idx is not None:
         hdr_line = lines[header_idx]
         delim = spec.delimiter or _sniff_delimiter(hdr_line)
@@ -435,10 +490,9 @@ def load_recording(spec: DataSpec | str | os.PathLike, base_dir: str | os.PathLi
                 hit = next((lower.index(c) for c in _DEFAULT_NAMES[role] if c in lower), None)
                 if hit is not None:
                     cols[role] = hit
-        body = lines[header_idx + 1:]
-        body_first = first_lineno + header_idx + 1
+        body = header_idx + 1
     else:
-        if k0 is not None and not all(_is_number(t) for t in _split(lines[k0], spec.delimiter)):
+        if not all(_is_number(t) for t in _split(lines[k0], spec.delimiter)):
             raise ImucalError(f"line {first_lineno + k0} is neither a header with known column names nor numbers",
                               file=str(path), field="data.columns",
                               fix="name columns t, ax, ay, az (temp) or map them in data.columns")
@@ -450,8 +504,7 @@ def load_recording(spec: DataSpec | str | os.PathLike, base_dir: str | os.PathLi
                               field="data.columns", fix="map roles to 0-based column indices")
         if not cols:
             cols = _no_header_layout(ncol, path)
-        body = lines[k0:]
-        body_first = first_lineno + k0
+        body = k0
     for role in ("ax", "ay", "az"):
         if role not in cols:
             raise ImucalError(f"missing column for {role}", file=str(path), field=f"data.columns.{role}",
@@ -466,50 +519,90 @@ def load_recording(spec: DataSpec | str | os.PathLike, base_dir: str | os.PathLi
     roles = [r for r in ROLES if r in cols]
     if spec.sample_rate is not None and "t" in cols and "t" not in spec.columns:
         roles.remove("t")  # an explicit rate overrides a guessed time column
-    arr = _parse_block(body, body_first, delim, [cols[r] for r in roles], path)
+    tname = names[cols["t"]] if header_idx is not None and "t" in roles else "t"
+    return Layout(delimiter=delim, columns=cols, roles=roles, body=body, body_first=first_lineno + body,
+                  time_column=tname)
+
+
+def no_rows(path: Path) -> ImucalError:
+    return ImucalError("has no data rows", file=str(path), field="data", fix="record samples after the header")
+
+
+def corrupt_value(line: int, path: Path) -> ImucalError:
+    """A value beyond MAX_ABS_VALUE on ``line``."""
+    return ImucalError(f"line {line} holds a value beyond +-{MAX_ABS_VALUE:g} (corrupt)", file=str(path),
+                       field="data", fix="remove or repair the corrupt rows before calibrating")
+
+
+def not_increasing(line: int, path: Path) -> ImucalError:
+    """Time stamps that do not increase at ``line``."""
+    return ImucalError(f"time is not strictly increasing at line {line}", file=str(path), field="data.columns.t",
+                       fix="sort the rows by time and drop duplicates")
+
+
+def load_recording(spec: DataSpec | str | os.PathLike, base_dir: str | os.PathLike | None = None
+                   ) -> Recording:
+    """Read a recording described by ``spec`` (a DataSpec or just a path with defaults)."""
+    spec = as_spec(spec)
+    path = resolve_path(spec, base_dir)
+    if is_bag(path):
+        _check_bag_spec(spec, path)
+        return read_bag(path, spec.topic, spec.temp_topic)
+    for name in ("topic", "temp_topic"):
+        if getattr(spec, name) is not None:
+            raise ImucalError(f"{name} applies to ROS bags only", file=str(path), field=f"data.{name}",
+                              fix="give a .bag file or a ROS 2 bag folder, or drop the topic")
+    text, sha = _read_text(path)
+    lines = text.splitlines()[spec.skip_rows:]
+    lay = layout(lines, spec, path)
+    body, body_first = lines[lay.body:], lay.body_first
+    arr = parse_block(body, body_first, lay.delimiter, lay.usecols, path)
     big = np.abs(arr) > MAX_ABS_VALUE
     if big.any():
-        k = int(np.flatnonzero(big.any(axis=1))[0])
-        raise ImucalError(f"line {_lineno(body, k, body_first)} holds a value beyond +-{MAX_ABS_VALUE:g} "
-                          "(corrupt)", file=str(path), field="data",
-                          fix="remove or repair the corrupt rows before calibrating")
-    data = {r: arr[:, i] for i, r in enumerate(roles)}
+        raise corrupt_value(lineno(body, int(np.flatnonzero(big.any(axis=1))[0]), body_first), path)
+    data = {r: arr[:, i] for i, r in enumerate(lay.roles)}
     n = arr.shape[0]
-    t, t_source, unit, note = _time_base(data.get("t"), spec, n, path, body, body_first)
-    raw = np.column_stack([data["ax"], data["ay"], data["az"]])
-    gyro = np.column_stack([data["gx"], data["gy"], data["gz"]]) if gyro_roles else None
-    tname = names[cols["t"]] if header_idx is not None and "t" in roles else "t"
-    return Recording(t=t, raw=raw, temp=data.get("temp"), unit=spec.unit, source=str(path), sha256=sha,
-                     gyro=gyro, t_source=t_source, time_unit=unit, time_note=note, time_column=tname)
-
-
-def _time_base(stamps: np.ndarray | None, spec: DataSpec, n: int, path: Path, body: list[str],
-               body_first: int) -> tuple[np.ndarray, np.ndarray | None, str, str]:
-    """(t [s] from 0, the stamps as read, their unit, a note): unit given or inferred, rate checked."""
-    if stamps is None:
-        return (np.arange(n) / float(spec.sample_rate), None, "s",
-                f"no time column: {float(spec.sample_rate):g} Hz given")
-    if n > 1:
+    stamps = data.get("t")
+    if stamps is not None and n > 1:
         d = np.diff(stamps)
         if not (d > 0).all():
-            k = int(np.flatnonzero(~(d > 0))[0])
-            raise ImucalError(f"time is not strictly increasing at line {_lineno(body, k + 1, body_first)}",
-                              file=str(path), field="data.columns.t",
-                              fix="sort the rows by time and drop duplicates")
-    if spec.time_unit == "auto":
-        unit, note = infer_time_unit(stamps)
+            raise not_increasing(lineno(body, int(np.flatnonzero(~(d > 0))[0]) + 1, body_first), path)
+    if stamps is None:
+        unit, note = time_base_without_stamps(spec)
+        t = np.arange(n) / float(spec.sample_rate)
     else:
-        unit, note = spec.time_unit, f"time unit given: {spec.time_unit}"
-    t = (stamps - stamps[0]) * TIME_UNITS[unit]
-    if n > 1:
-        rate = (n - 1) / float(t[-1])
-        if not MIN_RATE_HZ <= rate <= MAX_RATE_HZ:
-            likely = [u for u, f in TIME_UNITS.items()
-                      if MIN_RATE_HZ <= (n - 1) / (float(stamps[-1] - stamps[0]) * f) <= MAX_RATE_HZ]
-            fix = (f"the time column looks like {likely[0]}: give --time-unit {likely[0]} "
-                   f"(data.time_unit: {likely[0]})" if likely else
-                   "check the time column (or drop it and give --sample-rate)")
-            raise ImucalError(f"time in {unit} gives {rate:.4g} Hz, not an IMU sample rate "
-                              f"({MIN_RATE_HZ:g} Hz to {MAX_RATE_HZ:g} Hz)", file=str(path),
-                              field="data.time_unit", fix=fix)
-    return t, stamps, unit, note
+        unit, note = stamp_unit(spec, infer_time_unit(stamps) if spec.time_unit == "auto" else None)
+        check_rate(n, float(stamps[-1] - stamps[0]) if n else 0.0, unit, path)
+        t = (stamps - stamps[0]) * TIME_UNITS[unit]
+    raw = np.column_stack([data["ax"], data["ay"], data["az"]])
+    gyro = np.column_stack([data["gx"], data["gy"], data["gz"]]) if lay.has_gyro else None
+    return Recording(t=t, raw=raw, temp=data.get("temp"), unit=spec.unit, source=str(path), sha256=sha,
+                     gyro=gyro, t_source=stamps, time_unit=unit, time_note=note, time_column=lay.time_column)
+
+
+def time_base_without_stamps(spec: DataSpec) -> tuple[str, str]:
+    """Unit and note of a time base made from the given sample rate."""
+    return "s", f"no time column: {float(spec.sample_rate):g} Hz given"
+
+
+def stamp_unit(spec: DataSpec, inferred: tuple[str, str] | None) -> tuple[str, str]:
+    """The time column's unit and note: given in the spec, else ``inferred`` (infer_time_unit)."""
+    if spec.time_unit == "auto":
+        return inferred
+    return spec.time_unit, f"time unit given: {spec.time_unit}"
+
+
+def check_rate(n: int, span: float, unit: str, path: Path) -> None:
+    """Refuse ``n`` stamps over ``span`` (in ``unit``) unless they give an IMU sample rate."""
+    if n < 2:
+        return
+    rate = (n - 1) / float(span * TIME_UNITS[unit])
+    if not MIN_RATE_HZ <= rate <= MAX_RATE_HZ:
+        likely = [u for u, f in TIME_UNITS.items()
+                  if MIN_RATE_HZ <= (n - 1) / (float(span) * f) <= MAX_RATE_HZ]
+        fix = (f"the time column looks like {likely[0]}: give --time-unit {likely[0]} "
+               f"(data.time_unit: {likely[0]})" if likely else
+               "check the time column (or drop it and give --sample-rate)")
+        raise ImucalError(f"time in {unit} gives {rate:.4g} Hz, not an IMU sample rate "
+                          f"({MIN_RATE_HZ:g} Hz to {MAX_RATE_HZ:g} Hz)", file=str(path),
+                          field="data.time_unit", fix=fix)

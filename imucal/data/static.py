@@ -8,6 +8,7 @@ lowest summed cost: that rule favours fewer intervals and generalises worse.
 """
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -25,6 +26,8 @@ SATURATION_STD_RATIO = 0.75
 #: Scatter for that test: the standard deviation of the central samples, without this fraction
 #: at each end, so that a few spikes in a pose that sits on its rail do not hide the rail.
 SATURATION_TRIM = 0.02
+#: Rows whose values decide whether the readings are integer counts (quantisation step 1).
+QUANTUM_ROWS = 20000
 
 
 @dataclass(frozen=True)
@@ -115,24 +118,122 @@ class Intervals:
         return "\n".join(rows)
 
 
-def moving_variance(x: np.ndarray, w: int) -> np.ndarray:
-    """Centred moving variance of each column over ``w`` samples, summed over columns."""
-    n = x.shape[0]
-    w = max(2, min(int(w), n))
-    xc = x - x.mean(axis=0)  # conditioning of the cumulative sums
-    c1 = np.vstack([np.zeros((1, x.shape[1])), np.cumsum(xc, axis=0)])
-    c2 = np.vstack([np.zeros((1, x.shape[1])), np.cumsum(xc * xc, axis=0)])
-    half = w // 2
-    lo = np.clip(np.arange(n) - half, 0, n - w)
-    hi = lo + w
-    s1 = c1[hi] - c1[lo]
-    s2 = c2[hi] - c2[lo]
+#: Window starts per block of the moving variance. Each block's cumulative sums restart (centred on
+#: the block's first sample), which bounds their round-off on long logs and gives the same numbers
+#: whether the samples arrive at once or in chunks (imucal.data.stream).
+VAR_BLOCK = 1 << 16
+#: Values per step when the threshold is computed over a long variance series.
+_SWEEP = 1 << 20
+
+
+def _window_variance(seg: np.ndarray, w: int) -> np.ndarray:
+    """Variance (ddof 1, summed over columns) of every window ``seg[j:j + w]``, by differences of
+    cumulative sums (slices, no index arrays)."""
+    m, k = seg.shape[0] - w + 1, seg.shape[1]
+    xc = seg - seg[0]
+    c1 = np.empty((m + w, k))
+    c2 = np.empty((m + w, k))
+    c1[0] = c2[0] = 0.0
+    np.cumsum(xc, axis=0, out=c1[1:])
+    np.cumsum(xc * xc, axis=0, out=c2[1:])
+    s1 = c1[w:] - c1[:m]
+    s2 = c2[w:] - c2[:m]
     var = np.maximum(s2 / w - (s1 / w) ** 2, 0.0) * w / (w - 1)
     return var.sum(axis=1)
 
 
-def _otsu(values: np.ndarray, bins: int = 256) -> float:
-    hist, edges = np.histogram(values, bins=bins)
+_F32_MAX = float(np.finfo(np.float32).max)
+
+
+def _f32(v: np.ndarray) -> np.ndarray:
+    return np.minimum(v, _F32_MAX).astype(np.float32)  # a variance beyond float32 saturates
+
+
+class VarianceSeries:
+    """A moving-variance series (float32) held as pieces: one a block, never joined, so a long log
+    needs no second copy. Order statistics by a radix select over the float32 bit patterns."""
+
+    def __init__(self, parts: list[np.ndarray]) -> None:
+        self.parts = [p for p in parts if p.size]
+        self.size = sum(p.size for p in self.parts)
+
+    def steps(self) -> Iterator[np.ndarray]:
+        for p in self.parts:
+            for i in range(0, p.size, _SWEEP):
+                yield p[i:i + _SWEEP]
+
+    def array(self) -> np.ndarray:
+        return np.concatenate(self.parts) if self.parts else np.empty(0, np.float32)
+
+    def _order_statistics(self, ks: list[int]) -> list[float]:
+        """The values at 0-based ranks ``ks`` (exact): a histogram of the top 16 bits of the
+        (non-negative, so monotonic) bit patterns, then a sort of the bins holding them."""
+        hist = np.zeros(1 << 16, np.int64)
+        for x in self.steps():
+            hist += np.bincount(x.view(np.uint32) >> 16, minlength=1 << 16)
+        cum = np.cumsum(hist)
+        bins = {k: int(np.searchsorted(cum, k, side="right")) for k in ks}
+        vals = {b: np.sort(np.concatenate([x[(x.view(np.uint32) >> 16) == b] for x in self.steps()]))
+                for b in set(bins.values())}
+        return [float(vals[bins[k]][k - (int(cum[bins[k] - 1]) if bins[k] else 0)]) for k in ks]
+
+    def percentile(self, q: float) -> float:
+        """The q-th percentile, linear between order statistics (numpy's default method)."""
+        h = (self.size - 1) * (q / 100.0)
+        lo = int(np.floor(h))
+        a, b = self._order_statistics([lo, min(lo + 1, self.size - 1)])
+        return a + (b - a) * (h - lo)
+
+
+class MovingVariance:
+    """Centred moving variance of a recording fed in chunks of rows (float32, one value a sample).
+
+    The window of sample i is ``x[lo:lo + w]`` with ``lo = clip(i - w // 2, 0, n - w)``: the
+    variance of the windows that fit, padded with the first and last at the ends.
+    """
+
+    def __init__(self, w: int) -> None:
+        self.w = int(w)
+        self.n = 0
+        self._buf: np.ndarray | None = None  # samples from the next window start on
+        self._blocks: list[np.ndarray] = []
+
+    def add(self, x: np.ndarray) -> None:
+        self.n += x.shape[0]
+        self._buf = x if self._buf is None else np.concatenate([self._buf, x])
+        span = VAR_BLOCK + self.w - 1
+        k = 0
+        while self._buf.shape[0] - k >= span:
+            self._blocks.append(_f32(_window_variance(self._buf[k:k + span], self.w)))
+            k += VAR_BLOCK
+        if k:
+            self._buf = self._buf[k:].copy()
+
+    def finish(self) -> VarianceSeries:
+        n, buf = self.n, self._buf
+        if buf is None or n == 0:
+            return VarianceSeries([])
+        w = max(2, min(self.w, n))
+        if w != self.w:  # fewer samples than a window: nothing was computed yet
+            self._blocks = []
+        for j0 in range(0, buf.shape[0] - w + 1, VAR_BLOCK):
+            self._blocks.append(_f32(_window_variance(buf[j0:j0 + VAR_BLOCK + w - 1], w)))
+        self._buf = None
+        blocks, self._blocks = self._blocks, []
+        half = w // 2
+        tail = n - half - sum(b.size for b in blocks)
+        return VarianceSeries([np.full(half, blocks[0][0], np.float32), *blocks,
+                               np.full(tail, blocks[-1][-1], np.float32)])
+
+
+def moving_variance(x: np.ndarray, w: int) -> np.ndarray:
+    """Centred moving variance of each column over ``w`` samples, summed over columns (float32)."""
+    mv = MovingVariance(w)
+    mv.add(np.asarray(x, float))
+    return mv.finish().array()
+
+
+def _otsu(hist: np.ndarray, edges: np.ndarray) -> float:
     centers = 0.5 * (edges[:-1] + edges[1:])
     w0 = np.cumsum(hist)
     w1 = w0[-1] - w0
@@ -144,7 +245,21 @@ def _otsu(values: np.ndarray, bins: int = 256) -> float:
     return float(centers[int(np.argmax(between))])
 
 
-def auto_threshold(var: np.ndarray, quantum: float) -> float:
+def _log_histogram(var: VarianceSeries, clip: float, bins: int = 256) -> tuple[np.ndarray, np.ndarray]:
+    """Histogram of log10(max(var, clip)) over its own range, in steps (no float64 copy of var)."""
+    lo, hi = np.inf, -np.inf
+    for x in var.steps():
+        lv = np.log10(np.maximum(x.astype(np.float64), clip))
+        lo, hi = min(lo, float(lv.min())), max(hi, float(lv.max()))
+    hist = np.zeros(bins, np.int64)
+    edges = np.histogram_bin_edges(np.array([lo, hi]), bins=bins, range=(lo, hi))
+    for x in var.steps():
+        lv = np.log10(np.maximum(x.astype(np.float64), clip))
+        hist += np.histogram(lv, bins=bins, range=(lo, hi))[0]
+    return hist, edges
+
+
+def auto_threshold(var: VarianceSeries, quantum: float) -> float:
     """Threshold on the moving variance, set from the data.
 
     Noise floor: the 5th percentile of the moving variance (any log that is still at least
@@ -152,15 +267,32 @@ def auto_threshold(var: np.ndarray, quantum: float) -> float:
     kept within [4, 100] times the floor so that a log that is mostly still, or mostly moving,
     still gets a sensible cut.
     """
-    floor = max(float(np.percentile(var, 5)), quantum**2 / 12 * 3, 1e-300)
-    lv = np.log10(np.maximum(var, floor * 1e-3))
-    split = 10 ** _otsu(lv)
+    floor = max(var.percentile(5), quantum**2 / 12 * 3, 1e-300)
+    split = 10 ** _otsu(*_log_histogram(var, floor * 1e-3))
     return float(min(max(split, 4 * floor), 100 * floor))
 
 
-def _quantum(x: np.ndarray) -> float:
-    """Quantisation step when the readings are integer counts, else 0."""
-    sample = x[: min(x.shape[0], 20000)]
+def window_samples(settings: StaticSettings, dt: float) -> int:
+    """Moving-variance window [samples] for a sample step ``dt`` [s]."""
+    return max(3, int(round(settings.window / dt)))
+
+
+def candidate_runs(var: VarianceSeries, threshold: float, trim: int) -> tuple[np.ndarray, np.ndarray]:
+    """Runs of samples at or below the threshold, ``trim`` samples cut from each end, 3 or more
+    left: (first, one past last). The minimum duration is checked on their time stamps."""
+    still = np.concatenate([x <= np.float64(threshold) for x in var.parts])  # compared in double precision
+    zero = np.zeros(1, np.int8)
+    edges = np.diff(np.concatenate([zero, still.view(np.int8), zero]))
+    del still
+    a = np.flatnonzero(edges == 1) + trim
+    b = np.flatnonzero(edges == -1) - trim
+    ok = b - a >= 3
+    return a[ok], b[ok]
+
+
+def quantum(x: np.ndarray) -> float:
+    """Quantisation step when the readings (their first 20000 rows) are integer counts, else 0."""
+    sample = x[: min(x.shape[0], QUANTUM_ROWS)]
     if np.all(sample == np.round(sample)):
         return 1.0
     return 0.0
@@ -174,24 +306,84 @@ def central_scatter(seg: np.ndarray, trim: float = SATURATION_TRIM) -> np.ndarra
     return core.std(axis=0, ddof=1) if core.shape[0] > 1 else np.zeros(seg.shape[1])
 
 
-def _on_rail(col: np.ndarray, rail: float, start: np.ndarray, end: np.ndarray, scatter: np.ndarray,
-             j: int) -> list[bool]:
+@dataclass(frozen=True)
+class Segment:
+    """What detection keeps of one still interval: its statistics and its rail evidence."""
+
+    start: int
+    end: int
+    t_start: float
+    t_end: float
+    mean: np.ndarray  #: (3,)
+    std: np.ndarray  #: (3,) ddof 1
+    ratios: list  #: batch-means / white-noise variance ratio per axis with enough samples
+    t_mid: float
+    temp: float | None
+    scatter: np.ndarray  #: (3,) central_scatter
+    at_low: np.ndarray  #: (3,) fraction of samples exactly at the recording's minimum, per axis
+    at_high: np.ndarray  #: (3,) ... at its maximum
+    hit_low: np.ndarray  #: (3,) bool: a sample at or below the declared low rail
+    hit_high: np.ndarray  #: (3,) bool: ... at or above the declared high rail
+
+
+def _std(x: np.ndarray, mean: np.ndarray) -> np.ndarray:
+    """Column standard deviation (ddof 1) about ``mean``."""
+    d = x - mean
+    return np.sqrt(np.einsum("ij,ij->j", d, d) / (x.shape[0] - 1))
+
+
+def segment(start: int, seg: np.ndarray, t: np.ndarray, temp: np.ndarray | None, lows: np.ndarray,
+            highs: np.ndarray, declared: dict | None) -> Segment:
+    """Statistics of the still samples ``seg`` (rows start..start+len) with their times and
+    temperatures; ``lows``/``highs``: the recording's extreme value of each axis. Few numpy calls
+    per interval: a long log holds tens of thousands."""
+    n = seg.shape[0]
+    mean = seg.mean(axis=0)
+    std = _std(seg, mean)
+    ratios: list = []
+    nb = n // _BATCHES
+    if nb >= 2:
+        bm = seg[: nb * _BATCHES].reshape(_BATCHES, nb, 3).mean(axis=1)
+        white = std ** 2 / nb
+        ok = white > 0
+        ratios = (_std(bm, bm.mean(axis=0))[ok] ** 2 / white[ok]).tolist()
+    srt = np.sort(seg, axis=0)
+    cut = int(np.floor(SATURATION_TRIM * n))
+    core = srt[cut:n - cut]
+    scatter = _std(core, core.mean(axis=0)) if core.shape[0] > 1 else np.zeros(3)
+    lo_, hi_ = srt[0], srt[-1]
+    at_low, at_high = np.zeros(3), np.zeros(3)
+    for j in range(3):  # only an interval that reaches an extreme counts its samples there
+        if lo_[j] == lows[j]:
+            at_low[j] = np.count_nonzero(srt[:, j] == lows[j]) / n
+        if hi_[j] == highs[j]:
+            at_high[j] = np.count_nonzero(srt[:, j] == highs[j]) / n
+    rl, rh = (declared or {}).get("low"), (declared or {}).get("high")
+    no = np.zeros(3, bool)
+    return Segment(start=start, end=start + n, t_start=float(t[0]), t_end=float(t[-1]), mean=mean, std=std,
+                   ratios=ratios, t_mid=float(t.mean()), temp=None if temp is None else float(temp.mean()),
+                   scatter=scatter, at_low=at_low, at_high=at_high,
+                   hit_low=no if rl is None else lo_ <= rl, hit_high=no if rh is None else hi_ >= rh)
+
+
+def _on_rail(frac: np.ndarray, scatter: np.ndarray, j: int) -> np.ndarray:
     """Intervals sitting on a suspect rail of axis ``j`` (the recording's extreme value).
 
-    Candidates hold SATURATION_FRACTION of their samples exactly on the rail; they are clipped
-    when their central scatter is flattened below SATURATION_STD_RATIO of the axis's scatter in
-    the other intervals (or, when every interval is a candidate, of the other axes' scatter). A
-    sensor that reads one constant value in every pose (scatter 0 everywhere) gives no verdict.
+    Candidates hold SATURATION_FRACTION of their samples exactly on the rail (``frac``); they are
+    clipped when their central scatter is flattened below SATURATION_STD_RATIO of the axis's
+    scatter in the other intervals (or, when every interval is a candidate, of the other axes'
+    scatter). A sensor that reads one constant value in every pose (scatter 0 everywhere) gives no
+    verdict.
     """
-    cand = np.array([np.mean(col[a:b] == rail) >= SATURATION_FRACTION for a, b in zip(start, end)])
+    cand = frac >= SATURATION_FRACTION
     if not cand.any():
-        return [False] * cand.size
+        return cand
     pool = scatter[~cand, j] if (~cand).any() else np.delete(scatter, j, axis=1).ravel()
     ref = float(np.median(pool))
-    return list(cand & (scatter[:, j] <= SATURATION_STD_RATIO * ref) & (ref > 0))
+    return cand & (scatter[:, j] <= SATURATION_STD_RATIO * ref) & (ref > 0)
 
 
-def saturation(raw: np.ndarray, start: np.ndarray, end: np.ndarray,
+def saturation(segs: list[Segment], lows: np.ndarray, highs: np.ndarray,
                declared: dict | None = None) -> tuple[np.ndarray, list[dict], dict]:
     """Intervals with a clipped axis: (keep mask, one record per drop, the rails per axis).
 
@@ -200,28 +392,26 @@ def saturation(raw: np.ndarray, start: np.ndarray, end: np.ndarray,
     clipped on that axis when a large share of its samples sit exactly on one while its scatter
     there is flattened (SATURATION_FRACTION, SATURATION_STD_RATIO).
     """
-    k = start.size
+    k = len(segs)
     keep = np.ones(k, bool)
     drops: list[dict] = []
     found: dict = {}
     if k == 0:
         return keep, drops, found
-    scatter = np.array([central_scatter(raw[a:b]) for a, b in zip(start, end)])
+    scatter = np.array([g.scatter for g in segs])
     for j, axis in enumerate("xyz"):
-        col = raw[:, j]
         rails_j = []
         if declared is not None:
             for side in ("low", "high"):
                 if declared.get(side) is not None:
                     rails_j.append((side, float(declared[side][j]), "declared"))
         else:
-            rails_j = [("low", float(col.min()), "detected"), ("high", float(col.max()), "detected")]
+            rails_j = [("low", float(lows[j]), "detected"), ("high", float(highs[j]), "detected")]
         for side, rail, how in rails_j:
             if how == "declared":
-                hits = [bool(np.any(col[a:b] <= rail if side == "low" else col[a:b] >= rail))
-                        for a, b in zip(start, end)]
+                hits = np.array([(g.hit_low if side == "low" else g.hit_high)[j] for g in segs])
             else:
-                hits = _on_rail(col, rail, start, end, scatter, j)
+                hits = _on_rail(np.array([(g.at_low if side == "low" else g.at_high)[j] for g in segs]), scatter, j)
             for i, clipped in enumerate(hits):
                 if clipped:
                     found.setdefault(axis, {"low": None, "high": None, "source": how})[side] = rail
@@ -232,63 +422,28 @@ def saturation(raw: np.ndarray, start: np.ndarray, end: np.ndarray,
     return keep, drops, found
 
 
-def detect_static(t: np.ndarray, raw: np.ndarray, settings: StaticSettings = StaticSettings(),
-                  temp: np.ndarray | None = None, source: str | None = None,
-                  rails: dict | None = None) -> Intervals:
-    """Find the intervals in which the sensor is still; drop those with a clipped axis.
-
-    ``rails``: declared rails (imucal.data.load.rails); None detects clipping from the data.
-    Dropped intervals are listed in ``meta["dropped"]`` (t_start, t_end, axis, rail, reason).
-    """
-    n = raw.shape[0]
-    if n < 3:
-        raise ImucalError(f"only {n} samples", file=source, field="data",
-                          fix="record several seconds in each orientation")
-    dt = float(np.median(np.diff(t)))
-    w = max(3, int(round(settings.window / dt)))
-    var = moving_variance(raw, w)
-    q = _quantum(raw)
-    thr = settings.threshold if settings.threshold is not None else auto_threshold(var, q)
-    still = var <= thr
-    edges = np.diff(np.concatenate([[0], still.view(np.int8), [0]]))
-    starts = np.flatnonzero(edges == 1)
-    ends = np.flatnonzero(edges == -1)
-    trim = int(round(settings.trim / dt))
-    keep_s, keep_e = [], []
-    for a, b in zip(starts, ends):
-        a2, b2 = a + trim, b - trim
-        if b2 - a2 >= 3 and t[b2 - 1] - t[a2] >= settings.min_duration:
-            keep_s.append(a2)
-            keep_e.append(b2)
-    start = np.array(keep_s, dtype=int)
-    end = np.array(keep_e, dtype=int)
-    k = start.size
-    mean = np.empty((k, 3))
-    std = np.empty((k, 3))
-    ratios = []
-    for i, (a, b) in enumerate(zip(start, end)):
-        seg = raw[a:b]
-        mean[i] = seg.mean(axis=0)
-        std[i] = seg.std(axis=0, ddof=1)
-        nb = (b - a) // _BATCHES
-        if nb >= 2:
-            bm = seg[: nb * _BATCHES].reshape(_BATCHES, nb, 3).mean(axis=1)
-            white = std[i] ** 2 / nb
-            ok = white > 0
-            ratios.extend((bm.var(axis=0, ddof=1)[ok] / white[ok]).tolist())
+def intervals_from(segs: list[Segment], threshold: float, q: float, settings: StaticSettings,
+                   lows: np.ndarray, highs: np.ndarray, rails: dict | None, has_temp: bool) -> Intervals:
+    """The Intervals of the kept segments: noise of the means, clipped ones dropped."""
+    k = len(segs)
+    start = np.array([g.start for g in segs], dtype=int)
+    end = np.array([g.end for g in segs], dtype=int)
+    mean = np.array([g.mean for g in segs]).reshape(k, 3)
+    std = np.array([g.std for g in segs]).reshape(k, 3)
+    ratios = [r for g in segs for r in g.ratios]
     # Pooled over all intervals and axes: robust to the few degrees of freedom per interval.
     inflation = float(max(1.0, np.median(ratios))) if ratios else 1.0
     nn = (end - start)[:, None].astype(float)
     var_mean = std**2 / nn * inflation
     if q > 0:
         var_mean = np.maximum(var_mean, q**2 / 12 / nn)
-    iv = Intervals(start=start, end=end, t_start=t[start] if k else np.empty(0),
-                   t_end=t[end - 1] if k else np.empty(0), mean=mean, std=std,
-                   mean_std=np.sqrt(var_mean),
-                   t_mid=np.array([t[a:b].mean() for a, b in zip(start, end)]),
-                   temp=None if temp is None else np.array([temp[a:b].mean() for a, b in zip(start, end)]),
-                   threshold=thr, noise_inflation=inflation, window=settings.window)
-    keep, drops, found = saturation(raw, start, end, rails)
+    temps = [g.temp for g in segs]
+    iv = Intervals(start=start, end=end, t_start=np.array([g.t_start for g in segs], float),
+                   t_end=np.array([g.t_end for g in segs], float), mean=mean, std=std,
+                   mean_std=np.sqrt(var_mean), t_mid=np.array([g.t_mid for g in segs], float),
+                   temp=np.array(temps, float) if has_temp else None,
+                   threshold=threshold, noise_inflation=inflation, window=settings.window)
+    keep, drops, found = saturation(segs, lows, highs, rails)
     for d in drops:
         i = d.pop("interval")
         d["t_start"], d["t_end"] = float(iv.t_start[i]), float(iv.t_end[i])
@@ -296,3 +451,30 @@ def detect_static(t: np.ndarray, raw: np.ndarray, settings: StaticSettings = Sta
         iv = iv.subset(np.flatnonzero(keep))
     iv.meta.update({"dropped": drops, "saturation": found})
     return iv
+
+
+def detect_static(t: np.ndarray, raw: np.ndarray, settings: StaticSettings = StaticSettings(),
+                  temp: np.ndarray | None = None, source: str | None = None,
+                  rails: dict | None = None) -> Intervals:
+    """Find the intervals in which the sensor is still; drop those with a clipped axis.
+
+    ``rails``: declared rails (imucal.data.load.rails); None detects clipping from the data.
+    Dropped intervals are listed in ``meta["dropped"]`` (t_start, t_end, axis, rail, reason).
+    imucal.data.stream does the same on a file read in chunks.
+    """
+    n = raw.shape[0]
+    if n < 3:
+        raise ImucalError(f"only {n} samples", file=source, field="data",
+                          fix="record several seconds in each orientation")
+    dt = float(np.median(np.diff(t)))
+    mv = MovingVariance(window_samples(settings, dt))
+    mv.add(np.asarray(raw, float))
+    var = mv.finish()
+    q = quantum(raw)
+    thr = settings.threshold if settings.threshold is not None else auto_threshold(var, q)
+    a, b = candidate_runs(var, thr, int(round(settings.trim / dt)))
+    del var
+    lows, highs = raw.min(axis=0), raw.max(axis=0)
+    segs = [segment(int(i), raw[i:j], t[i:j], None if temp is None else temp[i:j], lows, highs, rails)
+            for i, j in zip(a, b) if t[j - 1] - t[i] >= settings.min_duration]
+    return intervals_from(segs, thr, q, settings, lows, highs, rails, temp is not None)

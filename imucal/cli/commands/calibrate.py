@@ -12,7 +12,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Fit shifts, scales and axis angles (Nakov & Ivanov) to a recording. "
                                    "Writes DIR/calibration.yaml, DIR/report.txt, DIR/report.html and figures.")
     p.add_argument("config", nargs="?", help="YAML run file (see configs/)")
-    options.add_data_options(p, gyro=True)
+    options.add_data_options(p, gyro=True, stream=True)
     options.add_gravity_options(p)
     options.add_model_options(p)
     p.add_argument("--out", help="output directory (default: config output.dir, else ./out)")

@@ -21,7 +21,9 @@ if TYPE_CHECKING:
     from imucal.config.run import GravitySpec, RunConfig
 
 
-def add_data_options(p: argparse.ArgumentParser, data_required: bool = False, gyro: bool = False) -> None:
+def add_data_options(p: argparse.ArgumentParser, data_required: bool = False, gyro: bool = False,
+                     stream: bool = False) -> None:
+    """--data and how to read it; ``gyro``: --gyro-data; ``stream``: the command can read the file in chunks."""
     g = p.add_argument_group("data")
     g.add_argument("--data", required=data_required, metavar="FILE",
                    help="recording (CSV with header, or whitespace text: t x y z), or a ROS bag "
@@ -40,6 +42,10 @@ def add_data_options(p: argparse.ArgumentParser, data_required: bool = False, gy
         g.add_argument("--gyro-data", metavar="FILE",
                        help="gyroscope recording on the accelerometer's time base (imu_tk: t x y z); "
                             "gyro columns gx, gy, gz in --data are used without it")
+    if stream:
+        g.add_argument("--stream", choices=("auto", "always", "never"),
+                       help="read the recording in chunks with bounded memory: auto (files above 64 MB, "
+                            "the default), always, never")
 
 
 def add_gravity_options(p: argparse.ArgumentParser) -> None:
@@ -92,7 +98,7 @@ def run_config(args: argparse.Namespace, config: str | None = None, data_overrid
     if getattr(args, "columns", None):
         over["columns"] = parse_columns(args.columns)
     for opt, key in (("time_unit", "time_unit"), ("sample_rate", "sample_rate"), ("unit", "unit"),
-                     ("topic", "topic"), ("temp_topic", "temp_topic")):
+                     ("topic", "topic"), ("temp_topic", "temp_topic"), ("stream", "stream")):
         if getattr(args, opt, None) is not None:
             over[key] = getattr(args, opt)
     data = dataclasses.replace(cfg.data, **over) if over else cfg.data

@@ -1,0 +1,548 @@
+"""Long recordings in bounded memory: read in blocks of lines, detect static intervals on the way,
+keep only what the fit needs.
+
+The rules are imucal.data.load's (header, column roles, time unit, the same one-line errors for the
+same bad line) and imucal.data.static's (the same moving variance, threshold and per-interval
+statistics, computed by the same functions), so the intervals and the fit are those of the
+in-memory path. Numbers are parsed by pandas' C parser, a block of about CHUNK_BYTES at a time;
+a block it reads differently from numpy.loadtxt (anything unusual: quotes, NaN, too few columns,
+exotic line breaks) is parsed by the loader's own routine, which names the bad line.
+
+Passes over the file: 1. parse, SHA-256, time base, moving variance (float32, 4 bytes a sample)
+and its threshold; 2. the statistics of each still interval (and its samples in samples mode);
+3. (means mode, after the fit) the residual of every static sample. Memory: the variance series,
+one block, and a few numbers per interval.
+"""
+from __future__ import annotations
+
+import csv
+import hashlib
+import io
+import os
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from imucal.constants import TIME_UNITS
+from imucal.data.load import (BINARY_PROBE, MAX_ABS_VALUE, TIME_HEAD_ROWS, DataSpec, Layout, as_spec,
+                              binary_file, check_lines, check_rate, corrupt_value, layout, lineno, no_rows, not_increasing,
+                              not_utf8, parse_block, resolve_path, unparsed, stamp_unit, time_base_without_stamps,
+                              time_unit_from_step, _MAX_SCAN_LINES)
+from imucal.data.static import (QUANTUM_ROWS, Intervals, MovingVariance, Segment, StaticSettings, VarianceSeries,
+                                auto_threshold, candidate_runs, intervals_from, quantum, segment, window_samples)
+from imucal.data.rosbag import is_bag
+from imucal.errors import ImucalError
+from imucal.files.inputs import open_regular
+
+#: Recordings above this size are read in chunks when data.stream is "auto" [bytes].
+STREAM_BYTES = 64 * 1024**2
+#: Largest recording read in chunks [bytes].
+MAX_STREAM_BYTES = 1024**4
+#: Bytes parsed at a time (whole lines).
+CHUNK_BYTES = 16 * 1024**2
+#: Parsed samples kept after the first pass, so that the next ones need not parse the file again,
+#: while they fit in this many bytes (raw, t and temperature as float64).
+CACHE_BYTES = 256 * 1024**2
+#: Largest head searched for the header and the first data line [bytes].
+MAX_HEAD_BYTES = 64 * 1024**2
+_EXOTIC = (b"\x0b", b"\x0c", b"\x1c", b"\x1d", b"\x1e")  # line breaks for str.splitlines, not for pandas
+
+
+@dataclass(frozen=True)
+class StaticSamples:
+    """The samples inside static intervals, in order: what samples mode and the residuals read."""
+
+    raw: np.ndarray  #: (m, 3)
+    t: np.ndarray  #: (m,) [s]
+    temp: np.ndarray | None
+
+
+@dataclass(frozen=True)
+class RecordingSummary:
+    """What a run reports of a recording read in chunks (Recording's fields, without samples)."""
+
+    n: int
+    t_last: float  #: [s] from the first sample
+    unit: str
+    source: str
+    sha256: str
+    time_unit: str
+    time_note: str
+    time_column: str
+    raw: None = None
+    t: None = None
+    temp: None = None
+    gyro: None = None
+    t_source: None = None
+
+    @property
+    def sample_rate(self) -> float:
+        return float((self.n - 1) / self.t_last) if self.n > 1 else float("nan")
+
+    @property
+    def duration(self) -> float:
+        return float(self.t_last)
+
+
+def use_stream(spec: DataSpec, base_dir: str | os.PathLike | None = None) -> bool:
+    """Whether ``spec`` is read in chunks: data.stream always, or auto and a file above STREAM_BYTES
+    without gyroscope data (columns or a second file)."""
+    if is_bag(resolve_path(spec, base_dir)):
+        return False  # a ROS bag is read message by message (imucal.data.rosbag)
+    if spec.stream != "auto":
+        return spec.stream == "always"
+    if spec.gyro_path is not None:
+        return False
+    try:
+        if os.stat(resolve_path(spec, base_dir)).st_size <= STREAM_BYTES:
+            return False
+    except OSError:
+        return False  # the loader names the problem
+    return not has_gyro(spec, base_dir)  # the gyroscope fit needs every sample
+
+
+def has_gyro(spec: DataSpec, base_dir: str | os.PathLike | None = None) -> bool:
+    """Whether a recording comes with gyroscope data: a second file, or gx gy gz columns (read from
+    its head)."""
+    return spec.gyro_path is not None or _File(spec, resolve_path(spec, base_dir)).lay.has_gyro
+
+
+class _File:
+    """A recording's body in blocks of whole lines (with their byte offsets and parsed rows); the
+    file is refused if it changes between passes."""
+
+    def __init__(self, spec: DataSpec, path: Path) -> None:
+        self.spec, self.path = spec, path
+        fd, self.size = open_regular(path, field="data.path", max_bytes=MAX_STREAM_BYTES,
+                                     fix="check the path (relative paths are relative to the YAML file)")
+        st = os.fstat(fd)
+        self.stamp = (st.st_size, st.st_mtime_ns, st.st_ino)
+        os.close(fd)
+        self.sha = ""
+        #: numbers numpy could not read in an earlier block, no line found wrong there: later
+        #: lines are checked one by one for a message naming one (as the loader does), else this
+        self.unparsed: ImucalError | None = None
+        self.lay, self.offset = self._head()
+        self._counted = (self.offset, self.lay.body_first)
+
+    def _open(self) -> io.BufferedReader:
+        fd, _ = open_regular(self.path, field="data.path", max_bytes=MAX_STREAM_BYTES)
+        st = os.fstat(fd)
+        if (st.st_size, st.st_mtime_ns, st.st_ino) != self.stamp:
+            os.close(fd)
+            raise ImucalError("changed while it was being read", file=str(self.path), field="data.path",
+                              fix="calibrate a copy that no program is writing to")
+        return os.fdopen(fd, "rb")
+
+    def _head(self) -> tuple[Layout, int]:
+        """Header and layout from the head of the file; byte offset of the body."""
+        skip = self.spec.skip_rows
+        with self._open() as f:
+            head = f.read(BINARY_PROBE)
+            if b"\x00" in head:
+                raise binary_file(self.path)
+            size = 1 << 20
+            while True:
+                head += f.read(size - len(head))
+                eof = len(head) < size
+                cut = len(head) if eof else head.rfind(b"\n") + 1
+                try:
+                    text = head[:cut].decode("utf-8-sig")
+                except UnicodeDecodeError:
+                    raise not_utf8(self.path) from None
+                plain = text.splitlines()
+                rest = plain[skip:]
+                k0 = next((i for i, ln in enumerate(rest) if ln.strip() and not ln.lstrip().startswith("#")), None)
+                if eof or (k0 is not None and len(rest) > k0 + _MAX_SCAN_LINES + 1):
+                    break
+                if size >= MAX_HEAD_BYTES:
+                    raise ImucalError(f"no header or data line in the first {MAX_HEAD_BYTES} bytes", file=str(self.path),
+                                      field="data.path", fix="remove the leading text, or give data.stream: never")
+                size *= 4
+        lay = layout(rest, self.spec, self.path)
+        bom = 3 if head.startswith(b"\xef\xbb\xbf") else 0
+        kept = text.splitlines(keepends=True)  # the same lines with their line breaks
+        offset = bom + sum(len(ln.encode("utf-8")) for ln in kept[:skip + lay.body])
+        return lay, offset
+
+    def line_at(self, offset: int) -> int:
+        """Line number of the line starting at byte ``offset`` of the body (counted when a message
+        needs it, from the last one counted)."""
+        at, line = self._counted
+        if offset < at:
+            at, line = self.offset, self.lay.body_first
+        with self._open() as f:
+            f.seek(at)
+            while at < offset:
+                data = f.read(min(CHUNK_BYTES, offset - at))
+                if not data:
+                    break
+                line += data.count(b"\n")
+                at += len(data)
+        self._counted = (offset, line)
+        return line
+
+    def blocks(self, hash_it: bool = False) -> Iterator[tuple[int, bytes]]:
+        """(byte offset, bytes of whole lines) from the body on; the SHA-256 of the whole file is
+        left in ``self.sha`` when ``hash_it``."""
+        h = hashlib.sha256() if hash_it else None
+        at = self.offset
+        with self._open() as f:
+            if h is not None:
+                h.update(f.read(self.offset))
+            else:
+                f.seek(self.offset)
+            carry = b""
+            while True:
+                data = f.read(CHUNK_BYTES)
+                if h is not None:
+                    h.update(data)
+                if not data:
+                    if carry.strip():
+                        yield at, carry
+                    break
+                buf = carry + data
+                cut = buf.rfind(b"\n") + 1
+                if cut == 0:
+                    carry = buf
+                    continue
+                block, carry = buf[:cut], buf[cut:]
+                yield at, block
+                at += cut
+            if f.tell() != self.stamp[0]:
+                raise ImucalError("changed while it was being read", file=str(self.path), field="data.path",
+                                  fix="calibrate a copy that no program is writing to")
+        if h is not None:
+            self.sha = h.hexdigest()
+
+    def parse(self, block: bytes, offset: int) -> np.ndarray:
+        """The used columns of a block's rows (roles order), or the loader's message for its first bad line."""
+        lay = self.lay
+        if self.unparsed is not None:
+            check_lines(self._lines(block), self.line_at(offset), lay.delimiter, lay.usecols, self.path)
+            return np.empty((0, len(lay.usecols)))
+        plain = block.isascii() and not any(c in block for c in _EXOTIC) and (
+            b"\r" not in block or block.count(b"\r") == block.count(b"\r\n"))
+        if plain:
+            # imported here: pandas adds about 0.3 s to start-up, which a short recording read whole
+            # never pays (the measured start-up of `imucal calibrate` in docs/benchmarks.md)
+            import pandas as pd
+
+            try:
+                df = pd.read_csv(io.BytesIO(block), sep=lay.delimiter or r"\s+", header=None, usecols=lay.usecols,
+                                 dtype=np.float64, comment="#", skip_blank_lines=True, quoting=csv.QUOTE_NONE,
+                                 engine="c")
+                arr = df[lay.usecols].to_numpy(dtype=np.float64)
+                if np.isfinite(arr).all():
+                    return arr
+            except (ValueError, IndexError, pd.errors.ParserError, pd.errors.EmptyDataError):
+                pass
+        lines = self._lines(block)
+        if not any(ln.strip() and not ln.lstrip().startswith("#") for ln in lines):
+            return np.empty((0, len(lay.usecols)))
+        try:
+            return parse_block(lines, self.line_at(offset), lay.delimiter, lay.usecols, self.path)
+        except ImucalError as exc:
+            if exc.message != unparsed(self.path).message:
+                raise
+            self.unparsed = exc
+            return np.empty((0, len(lay.usecols)))
+
+    def _lines(self, block: bytes) -> list[str]:
+        try:
+            return block.decode("utf-8").splitlines()
+        except UnicodeDecodeError:
+            raise not_utf8(self.path) from None
+
+    def rows(self, hash_it: bool = False) -> Iterator[tuple[int, bytes, np.ndarray]]:
+        """(byte offset, block, its rows) of every block."""
+        for offset, block in self.blocks(hash_it):
+            yield offset, block, self.parse(block, offset)
+
+    def line_of(self, block: bytes, offset: int, k: int) -> int:
+        """File line of data row ``k`` of the block at ``offset``."""
+        return lineno(block.decode("utf-8").splitlines(), k, self.line_at(offset))
+
+
+class _Steps:
+    """Exact median of the differences of a series fed in chunks (distinct values with counts)."""
+
+    def __init__(self) -> None:
+        self.values = np.empty(0)
+        self.counts = np.empty(0, np.int64)
+        self.last: float | None = None
+
+    def add(self, x: np.ndarray) -> None:
+        if x.size == 0:
+            return
+        d = np.diff(x) if self.last is None else np.diff(np.concatenate([[self.last], x]))
+        self.last = float(x[-1])
+        if d.size:
+            v, c = np.unique(d, return_counts=True)
+            allv = np.concatenate([self.values, v])
+            u, inv = np.unique(allv, return_inverse=True)
+            cnt = np.zeros(u.size, np.int64)
+            np.add.at(cnt, inv, np.concatenate([self.counts, c]))
+            self.values, self.counts = u, cnt
+
+    def median(self) -> float:
+        m = int(self.counts.sum())
+        if m == 0:
+            return float("nan")
+        cum = np.cumsum(self.counts)
+        lo = self.values[np.searchsorted(cum, (m - 1) // 2, side="right")]
+        hi = self.values[np.searchsorted(cum, m // 2, side="right")]
+        return float(np.mean([lo, hi]))
+
+
+@dataclass
+class _Scan:
+    """What pass 1 learnt."""
+
+    n: int
+    unit: str
+    note: str
+    t_first: float  #: first stamp as read (0 without stamps)
+    t_last: float  #: last sample's time [s] from the first
+    dt: float  #: median step of t [s]
+    w: int
+    q: float
+    lows: np.ndarray
+    highs: np.ndarray
+    unit_guess: str  #: the unit the times of this pass were computed in
+    w_guess: int  #: the window the moving variance of this pass used
+    mv: MovingVariance | None
+    var: VarianceSeries | None = None
+
+    @property
+    def consistent(self) -> bool:
+        return (self.unit, self.w) == (self.unit_guess, self.w_guess)
+
+
+class StreamedRecording:
+    """A recording read in chunks: its summary, static intervals, and (samples mode) static samples."""
+
+    def __init__(self, spec: DataSpec | str | os.PathLike, settings: StaticSettings = StaticSettings(),
+                 base_dir: str | os.PathLike | None = None, rails: dict | None = None,
+                 keep_samples: bool = False) -> None:
+        """``keep_samples``: keep the static samples (samples mode). Gyroscope columns are not read."""
+        self.spec = as_spec(spec)
+        self.settings, self.rails = settings, rails
+        self.file = _File(self.spec, resolve_path(self.spec, base_dir))
+        self.path = self.file.path
+        roles = self.file.lay.roles
+        self._it = {r: i for i, r in enumerate(roles)}
+        # The window comes from the median step of the whole file: guessed from the first block, and
+        # the pass repeated in the rare case the guess (or the time unit) was wrong.
+        scan = self._scan(None, None)
+        for _ in range(2):
+            if scan.consistent:
+                break
+            scan = self._scan(scan.unit, scan.w)
+        self._finish_scan(scan)
+        self.recording = RecordingSummary(n=scan.n, t_last=scan.t_last, unit=self.spec.unit, source=str(self.path),
+                                          sha256=self.file.sha, time_unit=scan.unit, time_note=scan.note,
+                                          time_column=self.file.lay.time_column)
+        self.intervals, self.samples = self._intervals(scan, keep_samples)
+
+    # --- pass 1 ---------------------------------------------------------------------------------
+    def _times(self, arr: np.ndarray, row0: int, unit: str, t_first: float) -> np.ndarray:
+        if "t" in self._it:
+            return (arr[:, self._it["t"]] - t_first) * TIME_UNITS[unit]
+        return np.arange(row0, row0 + arr.shape[0]) / float(self.spec.sample_rate)
+
+    def _temp(self, arr: np.ndarray) -> np.ndarray | None:
+        return arr[:, self._it["temp"]].copy() if "temp" in self._it else None
+
+    def _raw(self, arr: np.ndarray) -> np.ndarray:
+        i = self._it
+        return np.column_stack([arr[:, i["ax"]], arr[:, i["ay"]], arr[:, i["az"]]])
+
+    def _scan(self, unit_given: str | None, w_given: int | None) -> _Scan:
+        """Pass 1: parse every block, hash, check values and time stamps, moving variance."""
+        spec, path, it = self.spec, self.path, self._it
+        has_t = "t" in it
+        n = 0
+        stamp_steps, t_steps = _Steps(), _Steps()
+        big: ImucalError | None = None
+        order: ImucalError | None = None
+        head_stamps: list[np.ndarray] = []
+        head_raw: list[np.ndarray] = []
+        unit = unit_given
+        w = w_given
+        t_first = 0.0
+        last_stamp = None
+        mv = None
+        lows = np.full(3, np.inf)
+        highs = np.full(3, -np.inf)
+        self._cache: list[tuple] | None = []
+        cached = 0
+        for first, block, arr in self.file.rows(hash_it=True):
+            m = arr.shape[0]
+            if m == 0:
+                continue
+            if big is None:
+                bad = (np.abs(arr) > MAX_ABS_VALUE).any(axis=1)
+                if bad.any():
+                    big = corrupt_value(self.file.line_of(block, first, int(np.flatnonzero(bad)[0])), path)
+            if has_t:
+                stamps = arr[:, it["t"]]
+                if n == 0:
+                    t_first = float(stamps[0])
+                if order is None:
+                    d = np.diff(stamps) if last_stamp is None else np.diff(np.concatenate([[last_stamp], stamps]))
+                    bad = ~(d > 0)
+                    if bad.any():
+                        k = int(np.flatnonzero(bad)[0]) + (1 if last_stamp is None else 0)
+                        order = not_increasing(self.file.line_of(block, first, k), path)
+                last_stamp = float(stamps[-1])
+                stamp_steps.add(stamps)
+                if sum(h.size for h in head_stamps) < TIME_HEAD_ROWS:
+                    head_stamps.append(stamps[:TIME_HEAD_ROWS].copy())
+            if big is None and order is None:
+                if unit is None:  # a guess from the first block, checked at the end
+                    unit = stamp_unit(spec, _infer(stamps, stamps[:TIME_HEAD_ROWS]))[0] if has_t else "s"
+                t = self._times(arr, n, unit, t_first)
+                t_steps.add(t)
+                if w is None:
+                    w = window_samples(self.settings, float(np.median(np.diff(t)))) if t.size > 1 else 3
+                if mv is None:
+                    mv = MovingVariance(w)
+                raw = self._raw(arr)
+                mv.add(raw)
+                lows, highs = np.minimum(lows, raw.min(axis=0)), np.maximum(highs, raw.max(axis=0))
+                if sum(h.shape[0] for h in head_raw) < QUANTUM_ROWS:
+                    head_raw.append(raw[:QUANTUM_ROWS])
+                t_last = float(t[-1])
+                if self._cache is not None:  # the next passes read memory while the file fits in CACHE_BYTES
+                    temp = self._temp(arr)
+                    cached += raw.nbytes + t.nbytes + (0 if temp is None else temp.nbytes)
+                    if cached <= CACHE_BYTES:
+                        self._cache.append((n, raw, t, temp))
+                    else:
+                        self._cache = None
+            n += m
+        if self.file.unparsed is not None:
+            raise self.file.unparsed
+        if n == 0:
+            raise no_rows(path)
+        if big is not None:
+            raise big
+        if order is not None:
+            raise order
+        if has_t:
+            hs = np.concatenate(head_stamps)[:TIME_HEAD_ROWS]
+            unit_exact, note = stamp_unit(spec, time_unit_from_step(stamp_steps.median(), t_first,
+                                                                    bool(np.all(hs == np.round(hs))))
+                                          if spec.time_unit == "auto" else None)
+            check_rate(n, last_stamp - t_first, unit_exact, path)
+        else:
+            unit_exact, note = time_base_without_stamps(spec)
+        if n < 3:  # as detect_static
+            raise ImucalError(f"only {n} samples", file=str(path), field="data",
+                              fix="record several seconds in each orientation")
+        # the times of this pass are in the guessed unit; if it was wrong, the next pass's window
+        # comes from the stamps' step in the right one
+        dt = t_steps.median() if unit_exact == unit else stamp_steps.median() * TIME_UNITS[unit_exact]
+        return _Scan(n=n, unit=unit_exact, note=note, t_first=t_first, t_last=t_last, dt=dt,
+                     w=window_samples(self.settings, dt), q=quantum(np.concatenate(head_raw)), lows=lows,
+                     highs=highs, unit_guess=unit, w_guess=w, mv=mv)
+
+    def _finish_scan(self, scan: _Scan) -> None:
+        if not scan.consistent:  # pragma: no cover - the third pass uses the exact unit and window
+            raise ImucalError("the time step changed between passes", file=str(self.path), field="data.path")
+        scan.var = scan.mv.finish()
+        scan.mv = None
+
+    # --- pass 2 ---------------------------------------------------------------------------------
+    def _intervals(self, scan: _Scan, keep_samples: bool) -> tuple[Intervals, StaticSamples | None]:
+        st = self.settings
+        thr = st.threshold if st.threshold is not None else auto_threshold(scan.var, scan.q)
+        a, b = candidate_runs(scan.var, thr, int(round(st.trim / scan.dt)))
+        scan.var = None
+        has_temp = "temp" in self._it
+        segs: list[Segment] = []
+        kept: dict[int, tuple] = {}
+        for start, raw, t, temp in self._pieces(a, b, scan):
+            if t[-1] - t[0] >= st.min_duration:
+                segs.append(segment(start, raw, t, temp, scan.lows, scan.highs, self.rails))
+                if keep_samples:
+                    kept[start] = (raw, t, temp)
+        iv = intervals_from(segs, thr, scan.q, st, scan.lows, scan.highs, self.rails, has_temp)
+        self._scan_result = scan
+        if not keep_samples:
+            return iv, None
+        parts = [kept[int(s)] for s in iv.start]
+        return iv, _samples(parts, has_temp)
+
+    def _arrays(self, scan: _Scan) -> Iterator[tuple[int, np.ndarray, np.ndarray, np.ndarray | None]]:
+        """(first row, raw, t, temp) of every block: from pass 1's cache when the file fitted in it,
+        else parsed again."""
+        if self._cache is not None:
+            yield from self._cache
+            return
+        row0 = 0
+        for _, _, arr in self.file.rows():
+            yield row0, self._raw(arr), self._times(arr, row0, scan.unit, scan.t_first), self._temp(arr)
+            row0 += arr.shape[0]
+
+    def _pieces(self, a: np.ndarray, b: np.ndarray, scan: _Scan
+                ) -> Iterator[tuple[int, np.ndarray, np.ndarray, np.ndarray | None]]:
+        """(first row, raw, t, temp) of each row range [a_i, b_i), in order, from one pass."""
+        k = 0
+        acc: list[tuple] = []
+        if a.size == 0:
+            return
+        for row0, raw, t, temp in self._arrays(scan):
+            row1 = row0 + raw.shape[0]
+            while k < a.size and a[k] < row1:
+                lo, hi = max(a[k], row0) - row0, min(b[k], row1) - row0
+                acc.append((raw[lo:hi], t[lo:hi], None if temp is None else temp[lo:hi]))
+                if b[k] > row1:
+                    break
+                yield int(a[k]), *_join(acc)
+                acc = []
+                k += 1
+            if k == a.size:
+                break
+
+    # --- pass 3 ---------------------------------------------------------------------------------
+    def static_blocks(self) -> Iterator[StaticSamples]:
+        """The static samples of ``self.intervals`` (in order), a block of the file at a time."""
+        if self.samples is not None:
+            yield self.samples
+            return
+        iv = self.intervals
+        if iv.n == 0:
+            return
+        for row0, raw, t, temp in self._arrays(self._scan_result):
+            row1 = row0 + raw.shape[0]
+            k0, k1 = np.searchsorted(iv.end, row0, "right"), np.searchsorted(iv.start, row1, "left")
+            if k1 <= k0:
+                continue
+            idx = np.concatenate([np.arange(max(a, row0), min(b, row1)) - row0
+                                  for a, b in zip(iv.start[k0:k1], iv.end[k0:k1])])
+            yield StaticSamples(raw[idx], t[idx], None if temp is None else temp[idx])
+
+
+def _infer(stamps: np.ndarray, head: np.ndarray) -> tuple[str, str]:
+    dt = float(np.median(np.diff(stamps))) if stamps.size > 1 else float("nan")
+    return time_unit_from_step(dt, float(stamps[0]), bool(np.all(head == np.round(head))))
+
+
+def _join(parts: list[tuple]) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    if len(parts) == 1:
+        return parts[0]
+    raw = np.concatenate([p[0] for p in parts])
+    t = np.concatenate([p[1] for p in parts])
+    temp = None if parts[0][2] is None else np.concatenate([p[2] for p in parts])
+    return raw, t, temp
+
+
+def _samples(parts: list[tuple], has_temp: bool) -> StaticSamples:
+    if not parts:
+        return StaticSamples(np.empty((0, 3)), np.empty(0), np.empty(0) if has_temp else None)
+    raw, t, temp = _join(parts)
+    return StaticSamples(raw, t, temp)
