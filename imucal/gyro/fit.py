@@ -96,9 +96,35 @@ def _search_scale(cost_fn: ca.Function, nx: int, pack) -> float:
     return float(fine[int(np.argmin([cost(k) for k in fine]))])
 
 
+def _refuse_scales(axes: list[int], eff: np.ndarray, min_deg: float, source: str | None) -> None:
+    """The refusal naming every gyro axis in ``axes`` and the rotations to add."""
+    ax = [AXES[k] for k in axes]
+    which = ax[0] if len(ax) == 1 else ", ".join(ax[:-1]) + " and " + ax[-1]
+    turned = "; ".join(f"about {AXES[k]} by an effective {eff[k]:.3g} deg" for k in axes)
+    if len(ax) == 1:
+        msg, fix = (f"the gyro {which} scale is not determined", f"add rotations about the {which} axis between "
+                    f"still poses, with the {which} axis horizontal (e.g. 90 deg turns about {which})")
+    else:
+        msg, fix = (f"the gyro scale is not determined for the {which} axes", f"add rotations about the {which} "
+                    f"axes between still poses, each with its axis horizontal (e.g. 90 deg turns about "
+                    f"{', then '.join(ax)})")
+    raise ImucalError(f"{msg}: the motions turn the gravity direction {turned} (need at least {min_deg:g} deg)",
+                      file=source, field="gyro.scale", fix=fix)
+
+
 def _require_observable(J: np.ndarray, names: tuple[str, ...], min_deg: float, source: str | None) -> None:
-    """Refuse, naming the axis, when the motions hardly move gravity about some gyro axis."""
+    """Refuse, naming the axes, when the motions hardly turn gravity about some gyro axis.
+
+    First every axis about which the motions turn gravity by less than ``min_deg`` in all (root
+    sum square over motions: sqrt of the information of its relative scale, in degrees); then,
+    with correlations, a null direction of J^T J or a scale whose standard error, as an angle,
+    is below ``min_deg``.
+    """
     info = J.T @ J
+    alone = np.degrees(np.sqrt(np.diag(info)[0:3]))
+    weak = [k for k in range(3) if not alone[k] >= min_deg]
+    if weak:
+        _refuse_scales(weak, alone, min_deg, source)
     lam, V = np.linalg.eigh(info)
     null = lam <= 1e-9 * max(lam[-1], 1e-300)
     weak = [int(np.argmax(np.abs(V[0:3, i]))) for i in np.flatnonzero(null) if np.abs(V[0:3, i]).max() > 0.1]
@@ -108,14 +134,9 @@ def _require_observable(J: np.ndarray, names: tuple[str, ...], min_deg: float, s
     eff = np.zeros(3)
     if not null.any():
         eff = np.degrees(1.0 / np.sqrt(np.diag(np.linalg.inv(info))[0:3]))
-    for k in (weak or [int(np.argmin(eff))]):
-        if weak or not eff[k] >= min_deg:
-            a = AXES[k]
-            raise ImucalError(
-                f"the gyro {a} scale is not determined: the motions turn the gravity direction about the "
-                f"{a} axis by an effective {eff[k]:.3g} deg (need at least {min_deg:g} deg)", file=source,
-                field="gyro.scale", fix=f"add rotations about the {a} axis between still poses, with the {a} axis "
-                                       f"horizontal (e.g. 90 deg turns about {a})")
+    k = weak[0] if weak else int(np.argmin(eff))
+    if weak or not eff[k] >= min_deg:
+        _refuse_scales([k], eff, min_deg, source)
 
 
 def fit_gyro(data: GyroData, options: GyroOptions = GyroOptions(), segments: np.ndarray | None = None) -> GyroResult:

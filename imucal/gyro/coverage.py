@@ -1,0 +1,85 @@
+"""Monte-Carlo check of the gyro fit's standard errors against known truth.
+
+Simulate hand-held sessions of one sensor (``simulate.hand_held``), fit each, and count how often
+the truth lies within 1.96 reported standard errors of the estimate. With honest standard errors
+that fraction is 95 %, within the binomial band of the number of estimates.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from imucal.gyro.fit import GyroOptions, fit_gyro
+from imucal.gyro.model import MIS_NAMES, misalignment_entries
+from imucal.gyro.result import GyroResult
+from imucal.gyro.simulate import GyroTruth, hand_held
+
+#: two-sided 95 % normal quantile
+Z95 = 1.959963984540054
+
+
+def scores(res: GyroResult, truth: GyroTruth) -> dict[str, np.ndarray]:
+    """(estimate - truth) / reported standard error, per parameter, grouped (G_s: selected rows only)."""
+    out = {"bias": (res.bias - truth.bias) / res.bias_std,
+           "scale": (res.scale - truth.scale) / res.scale_std,
+           "misalignment": (misalignment_entries(res.misalignment) - truth.mis)
+           / misalignment_entries(res.misalignment_std)}
+    rows = res.gsens_selected
+    out["gsens"] = ((res.gsens[rows] - truth.gsens[rows]) / res.gsens_std[rows]).ravel()
+    return out
+
+
+def names() -> dict[str, list[str]]:
+    """Parameter names of each group of ``scores`` (G_s: all nine, row-major)."""
+    return {"bias": [f"s_{a}" for a in "xyz"], "scale": [f"b_{a}" for a in "xyz"], "misalignment": list(MIS_NAMES),
+            "gsens": [f"G_{a}{b}" for a in "xyz" for b in "xyz"]}
+
+
+def binomial_band(n: int, p: float = 0.95, alpha: float = 0.05) -> tuple[float, float]:
+    """Fractions (lo, hi) of n trials that a two-sided binomial test at level ``alpha`` accepts for ``p``."""
+    pmf = [math.comb(n, k) * p**k * (1 - p) ** (n - k) for k in range(n + 1)]
+    lo, cum = 0, 0.0
+    while cum + pmf[lo] <= alpha / 2:
+        cum += pmf[lo]
+        lo += 1
+    hi, cum = n, 0.0
+    while cum + pmf[hi] <= alpha / 2:
+        cum += pmf[hi]
+        hi -= 1
+    return lo / n, hi / n
+
+
+@dataclass(frozen=True)
+class Coverage:
+    """Standard scores of every seed (rows) per group, and what the fits said."""
+
+    z: dict[str, np.ndarray]  #: group -> (seeds, parameters); G_s: NaN where a row was not selected
+    redchi: np.ndarray  #: (seeds,)
+    converged: int
+    gsens_rows_selected: np.ndarray  #: (3,) how many seeds kept each G_s row
+
+    def fraction(self, group: str) -> tuple[float, int]:
+        """Fraction of |z| < 1.96 over the group's estimates, and their number."""
+        z = self.z[group]
+        z = z[np.isfinite(z)]
+        return float(np.mean(np.abs(z) < Z95)) if z.size else float("nan"), int(z.size)
+
+
+def monte_carlo(truth: GyroTruth, seeds: range, options: GyroOptions = GyroOptions(), **session) -> Coverage:
+    """Fit ``hand_held(truth, seed=s, **session)`` for every seed and collect standard scores."""
+    z: dict[str, list[np.ndarray]] = {g: [] for g in names()}
+    red, conv, rows = [], 0, np.zeros(3, int)
+    for s in seeds:
+        res = fit_gyro(hand_held(truth, seed=s, **session), options)
+        sc = scores(res, truth)
+        for g in ("bias", "scale", "misalignment"):
+            z[g].append(sc[g])
+        G = np.full((3, 3), np.nan)
+        G[res.gsens_selected] = sc["gsens"].reshape(-1, 3)
+        z["gsens"].append(G.ravel())
+        red.append(res.redchi)
+        conv += res.success
+        rows += res.gsens_selected
+    return Coverage({g: np.array(v) for g, v in z.items()}, np.array(red), conv, rows)
