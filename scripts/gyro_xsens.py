@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Gyroscope calibration against imu_tk's published results (issue 11).
 
-On the Xsens MTi recording (raw counts) and the ROS recordings data2-4 (rad/s), on OUR static
+On the Xsens MTi recording (raw counts; the ROS recordings: scripts/gyro_ros.py), on OUR static
 intervals and motion segments, one evaluation formula (imucal.gyro.evaluate) scores every
 calibration: the angle between the start gravity direction carried through the integrated rate
 and the measured end direction. imu_tk's gyro is scored with imu_tk's own accelerometer
@@ -135,33 +135,12 @@ def section(s: dict) -> list[str]:
     return L
 
 
-def repeatability(studies: list[dict]) -> list[str]:
-    """Out of sample across recordings: each ROS recording's gyro fit applied to the others."""
-    L = ["## ROS repeatability (fit on one recording, evaluate on another)", "",
-         "| fitted on \\ evaluated on | " + " | ".join(s["name"] for s in studies) + " |",
-         "|---|" + "---|" * len(studies)]
-    for a in studies:
-        fa = a["fits"]["auto"][0]
-        row = []
-        for b in studies:
-            d = b["data"]
-            rate = fa.apply(d.gyro, d.acc)
-            row.append(f"{rms(direction_errors_deg(d.t, rate, motion_segments(d))):.3f}")
-        L.append(f"| {a['name']} | " + " | ".join(row) + " |")
-    return L + [""]
-
-
 def main() -> None:
     real = _real()
-    xs, ros = real / "xsens-mti-imutk", real / "ros-imu-getovermassif"
+    xs = real / "xsens-mti-imutk"
     ref = xs / "reference_imutk_output"
     studies = [study("Xsens MTi (imu_tk test data, raw counts)", "xsens-mti-imutk.yaml", xs / "xsens_gyro.mat",
                      "raw", ref / "test_imu_acc.calib", ref / "test_imu_gyro.calib")]
-    rs = []
-    for k in (2, 3, 4):
-        d = ros / f"data{k}"
-        rs.append(study(f"ROS data{k} (rad/s)", f"ros-imu-data{k}.yaml", d / "gyro_data.txt", "rad/s",
-                        d / "test_imu_acc.calib", d / "test_imu_gyro.calib"))
     x = studies[0]
     tk = rms(x["tk"])
     L = ["# Gyroscope calibration against imu_tk", "",
@@ -175,9 +154,10 @@ def main() -> None:
          f"{rms(x['cv']['off']):.3f}, {'met' if rms(x['cv']['off']) <= tk else 'MISSED'}); with g-sensitivity "
          f"<= {0.4 * tk:.3f} deg (cross-validated: {rms(x['cv']['auto']):.3f}, "
          f"{'met' if rms(x['cv']['auto']) <= 0.4 * tk else 'MISSED'}).", ""]
-    for s in studies + rs:
+    for s in studies:
         L += section(s)
-    L += repeatability(rs)
+    L += ["The ROS recordings data2-4 (one IMU, three recordings, with repeatability across them): "
+          "[gyro_ros.md](gyro_ros.md), `python scripts/gyro_ros.py`.", ""]
     text = "\n".join(L)
     write_text_atomic(OUT, text + "\n")
     print(text)

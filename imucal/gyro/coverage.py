@@ -39,7 +39,8 @@ def names() -> dict[str, list[str]]:
 
 def binomial_band(n: int, p: float = 0.95, alpha: float = 0.05) -> tuple[float, float]:
     """Fractions (lo, hi) of n trials that a two-sided binomial test at level ``alpha`` accepts for ``p``."""
-    pmf = [math.comb(n, k) * p**k * (1 - p) ** (n - k) for k in range(n + 1)]
+    pmf = [math.exp(math.lgamma(n + 1) - math.lgamma(k + 1) - math.lgamma(n - k + 1) + k * math.log(p)
+                    + (n - k) * math.log1p(-p)) for k in range(n + 1)]
     lo, cum = 0, 0.0
     while cum + pmf[lo] <= alpha / 2:
         cum += pmf[lo]
@@ -59,6 +60,13 @@ class Coverage:
     redchi: np.ndarray  #: (seeds,)
     converged: int
     gsens_rows_selected: np.ndarray  #: (3,) how many seeds kept each G_s row
+
+    @staticmethod
+    def merge(parts: list["Coverage"]) -> "Coverage":
+        """One Coverage of several runs (seeds split over processes)."""
+        return Coverage({g: np.concatenate([p.z[g] for p in parts]) for g in parts[0].z},
+                        np.concatenate([p.redchi for p in parts]), sum(p.converged for p in parts),
+                        np.sum([p.gsens_rows_selected for p in parts], axis=0))
 
     def fraction(self, group: str) -> tuple[float, int]:
         """Fraction of |z| < 1.96 over the group's estimates, and their number."""
