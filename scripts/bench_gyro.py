@@ -110,12 +110,13 @@ def main() -> None:
          f"{os.cpu_count()} cores, Python {platform.python_version()}, casadi {casadi.__version__}, numpy {np.__version__}; "
          f"load average {load:.2f} at the start (a shared machine: wall times carry other jobs' noise). Do not edit by hand.",
          "", "Recording: 51,175 samples at 100 Hz, 38 static intervals, 37 motion segments (our detection).", "",
-         "## Whole processes", "", "| what | runs | median wall [s] | min wall [s] | CPU (user + system) [s] |",
-         "|---|---|---|---|---|"]
+         "## Whole processes", "", "<!-- begin:summary -->",
+         "| what | runs | median wall [s] | min wall [s] | CPU (user + system) [s] |", "|---|---|---|---|---|"]
     for name, r in rows:
         L.append(f"| {name} | {r['runs']} | {r['median']:.3f} | {r['min']:.3f} | {r['cpu']:.3f} |")
     if not a.imutk:
         L += ["", "imu_tk not timed: give its test program with --imutk (scripts/build_imutk.sh builds it)."]
+    L += ["<!-- end:summary -->"]
     L += ["", "## Parts of imucal's gyro fit (one process, median wall time)", "", "| what | [s] |", "|---|---|"]
     L += [f"| {name} | {t:.3f} |" for name, t in inproc]
     text = "\n".join(L)
