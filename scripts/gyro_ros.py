@@ -47,6 +47,8 @@ from imucal.solve.stats import chi2_sf  # noqa: E402
 from imucal.pipeline import calibrate  # noqa: E402
 
 OUT = ROOT / "docs" / "gyro_ros.md"
+#: [s] integration from inside the still poses (GyroOptions.lead_in_s), table 1b
+LEAD_IN = 0.5
 RECORDINGS = (2, 3, 4)
 FOLDS = 5
 GSENS = {"off": "no g-sensitivity", "auto": "g-sensitivity by test"}
@@ -89,7 +91,8 @@ def load(k: int, real: Path) -> Rec:
                read_imutk_calib(folder / "test_imu_gyro.calib"))
 
 
-def score(target: Rec, acc_map: AccMap, gyro_map: GyroMap, refresh_bias: bool = False) -> np.ndarray:
+def score(target: Rec, acc_map: AccMap, gyro_map: GyroMap, refresh_bias: bool = False,
+          lead_in: float = 0.0) -> np.ndarray:
     """Per-segment direction errors [deg] of a calibration (acc_map, gyro_map) on ``target``'s raw data.
 
     ``refresh_bias``: subtract the calibrated rate's mean over the target's static samples (a
@@ -101,7 +104,7 @@ def score(target: Rec, acc_map: AccMap, gyro_map: GyroMap, refresh_bias: bool = 
     if refresh_bias:
         rate = rate - rate[target.static_samples()].mean(0)
     g = GyroData(d.t, d.gyro, acc, d.start, d.end, d.unit, d.source)
-    return direction_errors_deg(d.t, rate, motion_segments(g))
+    return direction_errors_deg(d.t, rate, motion_segments(g, lead_in))
 
 
 def ours(rec: Rec, res: GyroResult) -> tuple[AccMap, GyroMap]:
@@ -144,6 +147,25 @@ def per_recording(recs: list[Rec], fits: dict, cvs: dict, pooled: dict[str, floa
         kept = ", ".join("xyz"[i] for i in range(3) if f.gsens_selected[i]) or "none"
         L.append(f"- {r.name}: p = {', '.join(f'{v:.2g}' for v in f.gsens_p_value)} (x, y, z); kept: {kept}; "
                  f"IPOPT {f.status}, {f.iterations} iterations, reduced chi-square {f.redchi:.3g}.")
+    return L + [""]
+
+
+def lead_in(recs: list[Rec]) -> list[str]:
+    """Table 1b: every segment integrated from LEAD_IN s inside its poses, imu_tk on the same segments."""
+    L = [f"### 1b. Segments integrated from {LEAD_IN} s inside the still poses", "",
+         f"As in the Xsens study (docs/gyro_xsens.md): each segment starts {LEAD_IN} s before the end of its start pose "
+         "and ends as far into its end pose (`GyroOptions(lead_in_s=...)`), for every row.", "",
+         "| calibration | " + " | ".join(r.name for r in recs) + " | all three (pooled) |", "|---|" + "---|" * (len(recs) + 1)]
+    rows: dict[str, list[np.ndarray]] = {"imu_tk published": [score(r, *imutk(r), lead_in=LEAD_IN) for r in recs]}
+    for gs, label in GSENS.items():
+        opt = GyroOptions(gsens=gs, lead_in_s=LEAD_IN)
+        rows[f"ours, {label}, in sample"] = [score(r, *ours(r, fit_gyro(r.data, opt)), lead_in=LEAD_IN) for r in recs]
+        rows[f"ours, {label}, cross-validated"] = [cross_validate(r.data, opt, FOLDS) for r in recs]
+    tk = rows["imu_tk published"]
+    for label, errs in rows.items():
+        cells = [f"{rms(e):.3f} ({rms(e) / rms(t):.2f})" for e, t in zip(errs, tk)]
+        cells.append(f"{rms(np.concatenate(errs)):.3f} ({rms(np.concatenate(errs)) / rms(np.concatenate(tk)):.2f})")
+        L.append(f"| {label} | " + " | ".join(cells) + " |")
     return L + [""]
 
 
@@ -277,7 +299,7 @@ def main() -> None:
          "segments' motions are not in the rotation fit (the static intervals still give bias and g-sensitivity).",
          ""]
     pooled: dict = {}
-    body = per_recording(recs, fits, cvs, pooled) + across(recs, fits, pooled)
+    body = per_recording(recs, fits, cvs, pooled) + lead_in(recs) + across(recs, fits, pooled)
     body += ["## 3. Parameter repeatability (one IMU, three recordings)", "",
              "Each parameter's value ± standard error on each recording; the chi-square of the three about their",
              "inverse-variance weighted mean (2 dof) tests whether the spread is within the standard errors.",

@@ -37,11 +37,15 @@ class GyroOptions:
     free_bias: bool = False  #: also fit a bias correction in the rotation fit
     nominal_scale: float | None = None  #: [unit per rad/s]; None: from the unit, else a 1-D search
     min_angle_deg: float = MIN_ANGLE_DEG
+    lead_in_s: float = 0.0  #: integrate from this far inside the still poses [s] (segments.motion_segments)
 
     def __post_init__(self) -> None:
         if self.gsens not in ("auto", "on", "off"):
             raise ImucalError(f"gsens {self.gsens!r} is not one of auto, on, off", field="gyro.gsens",
                               fix="use auto (test the data), on or off")
+        if not 0 <= self.lead_in_s <= 10:
+            raise ImucalError(f"lead_in_s {self.lead_in_s!r} is not between 0 and 10 s", field="gyro.lead_in_s",
+                              fix="give the seconds to integrate from inside each still pose, e.g. 0.5")
 
 
 @functools.lru_cache(maxsize=16)
@@ -144,7 +148,7 @@ def fit_gyro(data: GyroData, options: GyroOptions = GyroOptions(), segments: np.
     tic = time.perf_counter()
     gm, _, am, _ = data.static_means()
     st = fit_static(gm, am, options.gsens)
-    seg = motion_segments(data)
+    seg = motion_segments(data, options.lead_in_s)
     if segments is not None:
         seg = seg.subset(np.asarray(segments, int))
     corrected = data.gyro - st.bias - data.acc @ st.H.T  # raw - s_g - B_g G_s a
@@ -208,7 +212,7 @@ def _result(data, options, st: StaticFit, seg, x, sd, cov, scale0, corrected, st
 
 def cross_validate(data: GyroData, options: GyroOptions = GyroOptions(), folds: int = 5) -> np.ndarray:
     """Held-out direction error [deg] of every motion segment: fit on the other folds (segment k in fold k % folds)."""
-    seg = motion_segments(data)
+    seg = motion_segments(data, options.lead_in_s)
     out = np.full(seg.n, np.nan)
     for f in range(folds):
         test = np.flatnonzero(seg.index % folds == f)
