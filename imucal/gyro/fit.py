@@ -37,11 +37,15 @@ class GyroOptions:
     free_bias: bool = False  #: also fit a bias correction in the rotation fit
     nominal_scale: float | None = None  #: [unit per rad/s]; None: from the unit, else a 1-D search
     min_angle_deg: float = MIN_ANGLE_DEG
+    lead_in_s: float = 0.0  #: integrate from this far inside the still poses [s] (segments.motion_segments)
 
     def __post_init__(self) -> None:
         if self.gsens not in ("auto", "on", "off"):
             raise ImucalError(f"gsens {self.gsens!r} is not one of auto, on, off", field="gyro.gsens",
                               fix="use auto (test the data), on or off")
+        if not 0 <= self.lead_in_s <= 10:
+            raise ImucalError(f"lead_in_s {self.lead_in_s!r} is not between 0 and 10 s", field="gyro.lead_in_s",
+                              fix="give the seconds to integrate from inside each still pose, e.g. 0.5")
 
 
 @functools.lru_cache(maxsize=16)
@@ -96,9 +100,35 @@ def _search_scale(cost_fn: ca.Function, nx: int, pack) -> float:
     return float(fine[int(np.argmin([cost(k) for k in fine]))])
 
 
+def _refuse_scales(axes: list[int], eff: np.ndarray, min_deg: float, source: str | None) -> None:
+    """The refusal naming every gyro axis in ``axes`` and the rotations to add."""
+    ax = [AXES[k] for k in axes]
+    which = ax[0] if len(ax) == 1 else ", ".join(ax[:-1]) + " and " + ax[-1]
+    turned = "; ".join(f"about {AXES[k]} by an effective {eff[k]:.3g} deg" for k in axes)
+    if len(ax) == 1:
+        msg, fix = (f"the gyro {which} scale is not determined", f"add rotations about the {which} axis between "
+                    f"still poses, with the {which} axis horizontal (e.g. 90 deg turns about {which})")
+    else:
+        msg, fix = (f"the gyro scale is not determined for the {which} axes", f"add rotations about the {which} "
+                    f"axes between still poses, each with its axis horizontal (e.g. 90 deg turns about "
+                    f"{', then '.join(ax)})")
+    raise ImucalError(f"{msg}: the motions turn the gravity direction {turned} (need at least {min_deg:g} deg)",
+                      file=source, field="gyro.scale", fix=fix)
+
+
 def _require_observable(J: np.ndarray, names: tuple[str, ...], min_deg: float, source: str | None) -> None:
-    """Refuse, naming the axis, when the motions hardly move gravity about some gyro axis."""
+    """Refuse, naming the axes, when the motions hardly turn gravity about some gyro axis.
+
+    First every axis about which the motions turn gravity by less than ``min_deg`` in all (root
+    sum square over motions: sqrt of the information of its relative scale, in degrees); then,
+    with correlations, a null direction of J^T J or a scale whose standard error, as an angle,
+    is below ``min_deg``.
+    """
     info = J.T @ J
+    alone = np.degrees(np.sqrt(np.diag(info)[0:3]))
+    weak = [k for k in range(3) if not alone[k] >= min_deg]
+    if weak:
+        _refuse_scales(weak, alone, min_deg, source)
     lam, V = np.linalg.eigh(info)
     null = lam <= 1e-9 * max(lam[-1], 1e-300)
     weak = [int(np.argmax(np.abs(V[0:3, i]))) for i in np.flatnonzero(null) if np.abs(V[0:3, i]).max() > 0.1]
@@ -108,14 +138,9 @@ def _require_observable(J: np.ndarray, names: tuple[str, ...], min_deg: float, s
     eff = np.zeros(3)
     if not null.any():
         eff = np.degrees(1.0 / np.sqrt(np.diag(np.linalg.inv(info))[0:3]))
-    for k in (weak or [int(np.argmin(eff))]):
-        if weak or not eff[k] >= min_deg:
-            a = AXES[k]
-            raise ImucalError(
-                f"the gyro {a} scale is not determined: the motions turn the gravity direction about the "
-                f"{a} axis by an effective {eff[k]:.3g} deg (need at least {min_deg:g} deg)", file=source,
-                field="gyro.scale", fix=f"add rotations about the {a} axis between still poses, with the {a} axis "
-                                       f"horizontal (e.g. 90 deg turns about {a})")
+    k = weak[0] if weak else int(np.argmin(eff))
+    if weak or not eff[k] >= min_deg:
+        _refuse_scales([k], eff, min_deg, source)
 
 
 def fit_gyro(data: GyroData, options: GyroOptions = GyroOptions(), segments: np.ndarray | None = None) -> GyroResult:
@@ -123,7 +148,7 @@ def fit_gyro(data: GyroData, options: GyroOptions = GyroOptions(), segments: np.
     tic = time.perf_counter()
     gm, _, am, _ = data.static_means()
     st = fit_static(gm, am, options.gsens)
-    seg = motion_segments(data)
+    seg = motion_segments(data, options.lead_in_s)
     if segments is not None:
         seg = seg.subset(np.asarray(segments, int))
     corrected = data.gyro - st.bias - data.acc @ st.H.T  # raw - s_g - B_g G_s a
@@ -186,7 +211,7 @@ def _result(data, options, st: StaticFit, seg, x, sd, cov, scale0, corrected, st
 
 def cross_validate(data: GyroData, options: GyroOptions = GyroOptions(), folds: int = 5) -> np.ndarray:
     """Held-out direction error [deg] of every motion segment: fit on the other folds (segment k in fold k % folds)."""
-    seg = motion_segments(data)
+    seg = motion_segments(data, options.lead_in_s)
     out = np.full(seg.n, np.nan)
     for f in range(folds):
         test = np.flatnonzero(seg.index % folds == f)

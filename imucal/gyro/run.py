@@ -9,7 +9,7 @@ from imucal.data.load import Recording, load_recording
 from imucal.errors import ImucalError
 from imucal.gyro.fit import GyroOptions, fit_gyro
 from imucal.gyro.result import GyroResult
-from imucal.gyro.segments import gyro_data_from_run
+from imucal.gyro.segments import GyroData, gyro_data_from_run
 
 
 def gyro_channel(rec: Recording, gyro_file: str | None = None
@@ -37,8 +37,10 @@ def gyro_channel(rec: Recording, gyro_file: str | None = None
 MAX_DIRECTION_ERROR_DEG = 10.0
 
 
-def calibrate_gyro(run, gyro_file: str | None = None, options: GyroOptions = GyroOptions()) -> GyroResult | None:
-    """Fit the gyroscope of ``run`` (imucal.pipeline.CalibrationRun); None when it has none."""
+def gyro_data(run, gyro_file: str | None = None, unit: str | None = None) -> tuple[GyroData, str] | None:
+    """The gyro fit's data of ``run`` (imucal.pipeline.CalibrationRun) and the gyro's source; None without a gyro.
+
+    ``unit``: the gyro's raw unit (rad/s, deg/s or raw); default the recording's unit."""
     ch = gyro_channel(run.recording, gyro_file)
     if ch is None:
         return None
@@ -46,9 +48,17 @@ def calibrate_gyro(run, gyro_file: str | None = None, options: GyroOptions = Gyr
     if gyro_file is not None and raw.shape[0] == run.recording.n:
         acc_t0 = None  # same samples: taken one by one
     try:
-        data = gyro_data_from_run(run, t, raw, unit=run.recording.unit, acc_t0=acc_t0)
+        return gyro_data_from_run(run, t, raw, unit=unit or run.recording.unit, acc_t0=acc_t0), source
     except ImucalError as exc:
         raise ImucalError(exc.message, file=exc.file or source, field=exc.field, fix=exc.fix) from None
+
+
+def calibrate_gyro(run, gyro_file: str | None = None, options: GyroOptions = GyroOptions()) -> GyroResult | None:
+    """Fit the gyroscope of ``run`` (imucal.pipeline.CalibrationRun); None when it has none."""
+    got = gyro_data(run, gyro_file)
+    if got is None:
+        return None
+    data, source = got
     res = fit_gyro(data, options)
     after = res.rms_direction_error_deg["after"]
     if not after <= MAX_DIRECTION_ERROR_DEG:

@@ -80,14 +80,22 @@ class Segments:
                         self.index[keep])
 
 
-def motion_segments(data: GyroData) -> Segments:
-    """All motion segments between consecutive static intervals, with the measured gravity directions."""
+def motion_segments(data: GyroData, lead_in: float = 0.0) -> Segments:
+    """All motion segments between consecutive static intervals, with the measured gravity directions.
+
+    ``lead_in`` [s]: integrate from this far before the end of a still pose to this far after the
+    start of the next (at most a quarter of each pose), since a static detector's window can hold
+    a motion's first or last moments; the directions stay the whole poses' means.
+    """
     _, _, a, a_se = data.static_means()
     norm = np.linalg.norm(a, axis=1)
     u = a / norm[:, None]
     sig = np.sqrt(np.mean(a_se**2, axis=1)) / norm  # one component of a direction's error [rad]
-    first = data.end[:-1] - 1
-    last = data.start[1:]
+    k = np.zeros(data.start.size, int)
+    if lead_in > 0:
+        k = np.minimum(int(round(lead_in / float(np.median(np.diff(data.t))))), (data.end - data.start) // 4)
+    first = data.end[:-1] - 1 - k[:-1]
+    last = data.start[1:] + k[1:]
     if np.any(last <= first):
         raise ImucalError("static intervals overlap or are out of order", file=data.source, field="intervals",
                           fix="give intervals sorted by time and disjoint")
