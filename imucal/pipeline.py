@@ -288,7 +288,7 @@ def calibrate(config: RunConfig, recording: Recording | None = None) -> Calibrat
                       created=now_utc())
     if streamed is None:
         samp_res = sample_residuals(cal, model, samples if samples is not None else static_samples(iv, rec), gravity)
-        rms_samples = float(np.sqrt(np.mean(samp_res**2)))
+        rms_samples = float(np.sqrt(float(np.dot(samp_res, samp_res)) / samp_res.size))  # as the streamed sum
     else:  # a block at a time: the samples were not kept (or are, in samples mode)
         samp_res, ss, m = None, 0.0, 0
         for blk in streamed.static_blocks():
