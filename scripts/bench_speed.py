@@ -173,6 +173,9 @@ def calibrate_cmd(out: str) -> list[str]:
 
 
 def bench_calibrate(runs: int) -> dict:
+    # Byte-compiled modules, as `pip install` leaves them: where PYTHONDONTWRITEBYTECODE is set (this
+    # machine), an editable install would otherwise recompile every module at every run.
+    subprocess.run([sys.executable, "-m", "compileall", "-q", str(ROOT / "imucal")], capture_output=True, check=True)
     tmp = tempfile.mkdtemp(prefix="imucal-bench-")
     cmd = calibrate_cmd(tmp)
     shown = ["imucal", *cmd[cmd.index("calibrate"):]]
@@ -271,6 +274,8 @@ def markdown(r: dict, args) -> str:
     if c:
         L += ["## End-to-end calibrate (Xsens MTi, 51,175 samples, 38 intervals)", "",
               f"    {c['command']}", "",
+              "With the package byte-compiled first, as `pip install` leaves it (this machine sets "
+              "PYTHONDONTWRITEBYTECODE, under which an editable install recompiles every module at every run).", "",
               "| tool | runs | median [s] | min [s] | user CPU [s] | system CPU [s] | peak RSS [MB] | "
               "floor: `python -c 'import numpy, casadi'` [s] |",
               "|---|---|---|---|---|---|---|---|",

@@ -36,8 +36,18 @@ class RowFunctions:
 
     value: Vectorized  #: (raw, cov, pfree, pfix, g) -> r
     derivatives: Vectorized  #: ... -> r, dr/dpfree, dr/draw
-    curvature: Vectorized  #: ... -> d2r/dpfree2 (the exact Hessian's extra term)
+    curvature_function: ca.Function  #: ... -> d2r/dpfree2 (the exact Hessian's extra term)
     n_free: int
+
+    @property
+    def curvature(self) -> Vectorized:
+        """The curvature's numpy evaluator, generated on first use (only hessian="exact" needs it)."""
+        return _vectorized(self.curvature_function)
+
+
+@lru_cache(maxsize=64)
+def _vectorized(fn: ca.Function) -> Vectorized:
+    return Vectorized(fn)
 
 
 @lru_cache(maxsize=64)
@@ -53,7 +63,7 @@ def row_functions(model: SensorModel, free: tuple[str, ...]) -> RowFunctions:
     return RowFunctions(
         value=Vectorized(ca.Function("row_r", args, [r])),
         derivatives=Vectorized(ca.Function("row_rj", args, [r, J, ca.jacobian(r, raw)])),
-        curvature=Vectorized(ca.Function("row_h", args, [ca.hessian(r, pf)[0]])),
+        curvature_function=ca.Function("row_h", args, [ca.hessian(r, pf)[0]]),
         n_free=len(free))
 
 
