@@ -210,8 +210,8 @@ def compare_files(whole: str, chunks: str) -> str:
             return x.keys() == y.keys() and all(close(x[k], y[k]) for k in x)
         if isinstance(x, list) and isinstance(y, list):
             return len(x) == len(y) and all(close(u, v) for u, v in zip(x, y))
-        if isinstance(x, float) and isinstance(y, float):
-            return abs(x - y) <= 1e-12 * max(abs(x), abs(y))
+        if isinstance(x, float) and isinstance(y, float):  # equal infinities and NaNs count as equal
+            return x == y or (x != x and y != y) or abs(x - y) <= 1e-12 * max(abs(x), abs(y))
         return x == y
     return "rounding" if close(a, b) else "differs"
 
