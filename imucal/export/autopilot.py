@@ -198,14 +198,19 @@ def _params(pairs: list[tuple[int, str, str]], path: str, offsets: tuple[str, ..
                                           path, gyro[0]))
 
 
+def _parameter_lines(path: str):
+    """(line number, text) of every non-empty line of a parameter file, # comments removed."""
+    for i, ln in enumerate(read_input_text(path, field="parameters").splitlines(), 1):
+        ln = ln.split("#", 1)[0].strip()
+        if ln:
+            yield i, ln
+
+
 def read_ardupilot_params(path: str | Path) -> AffineCalibration:
     """NAME,VALUE (or NAME VALUE) lines, # comments; other parameters of a full dump are ignored."""
     p = str(path)
     pairs = []
-    for i, ln in enumerate(read_input_text(p, field="parameters").splitlines(), 1):
-        ln = ln.split("#", 1)[0].strip()
-        if not ln:
-            continue
+    for i, ln in _parameter_lines(p):
         parts = re.split(r"[,\s]+", ln)
         if len(parts) != 2:
             raise ImucalError(f"{short(ln)} is not NAME,VALUE", file=p, field=f"line {i}",
@@ -218,10 +223,7 @@ def read_px4_params(path: str | Path) -> AffineCalibration:
     """QGroundControl's lines: vehicle, component, name, value, type; # comments."""
     p = str(path)
     pairs = []
-    for i, ln in enumerate(read_input_text(p, field="parameters").splitlines(), 1):
-        ln = ln.split("#", 1)[0].strip()
-        if not ln:
-            continue
+    for i, ln in _parameter_lines(p):
         parts = ln.split()
         if len(parts) != 5:
             raise ImucalError(f"{short(ln)} is not vehicle, component, name, value, type", file=p,
