@@ -19,6 +19,7 @@ from imucal.errors import ImucalError
 from imucal.solve.fit import FitData, FitResult, fit, jacobian_rows
 from imucal.solve.initial import InitialGuess, ellipsoid_guess
 from imucal.model.sensor import SensorModel, build_model
+from imucal.model.channels import covariate_matrix, covariate_values
 from imucal.solve.observability import Observability, analyse, distinct_directions, require_observable, thresholds
 from imucal.constants import RIGHT_ANGLE
 from imucal.model.parameters import ANGLE_NAMES, BASE_NAMES, Parameters, base_parameters
@@ -61,21 +62,10 @@ def static_samples(intervals: Intervals, recording: Recording) -> StaticSamples:
 def covariates_for(model: SensorModel, intervals: Intervals | None = None, samples: StaticSamples | None = None,
                    source: str | None = None) -> np.ndarray:
     """Covariate matrix (rows x k) for interval means, or for static samples."""
-    cols = []
-    for c in model.covariates:
-        if c == "temp":
-            v = intervals.temp if intervals is not None else samples.temp
-            if v is None:
-                raise ImucalError("the model has a temperature effect but the data have no temp column",
-                                  file=source, field="data.columns.temp",
-                                  fix="add a temperature column (deg C) or drop the temperature effect")
-        elif c == "time":
-            v = intervals.t_mid if intervals is not None else samples.t
-        else:  # pragma: no cover - effects declare only known covariates
-            raise ImucalError(f"unknown covariate {c!r}", field="fit.effects")
-        cols.append(np.asarray(v, float))
-    n = intervals.n if intervals is not None else samples.t.size
-    return np.column_stack(cols) if cols else np.zeros((n, 0))
+    rows = intervals if intervals is not None else samples
+    time = intervals.t_mid if intervals is not None else samples.t
+    values = covariate_values(model.covariates, temp=rows.temp, time=time, source=source)
+    return covariate_matrix(model.covariates, values, np.asarray(time).size)
 
 
 def _rough_guess(means: np.ndarray, gravity: float) -> InitialGuess:
@@ -209,7 +199,7 @@ def fit_warnings(res: FitResult, config: RunConfig, rec: Recording, dropped: lis
 
 def sample_residuals(cal: Calibration, model: SensorModel, samples: StaticSamples, gravity: float) -> np.ndarray:
     """|a| - g of every static sample [m/s^2]."""
-    covs = {c: covariates_for(model, samples=samples)[:, i] for i, c in enumerate(model.covariates)}
+    covs = covariate_values(model.covariates, temp=samples.temp, time=samples.t)
     return np.linalg.norm(cal.apply(samples.raw, covs), axis=1) - gravity
 
 
@@ -296,7 +286,7 @@ def calibrate(config: RunConfig, recording: Recording | None = None) -> Calibrat
             ss, m = ss + float(np.dot(r, r)), m + r.size
         rms_samples = float(np.sqrt(ss / m))
     cal = replace(cal, fit={**cal_fit, "rms_residual_samples": rms_samples})
-    ai = cal.apply(iv.mean, {c: covariates_for(model, iv)[:, i] for i, c in enumerate(model.covariates)})
+    ai = cal.apply(iv.mean, covariate_values(model.covariates, temp=iv.temp, time=iv.t_mid, source=rec.source))
     directions = ai / np.linalg.norm(ai, axis=1, keepdims=True)
     return CalibrationRun(config=config, recording=rec, intervals=iv, guess=guess, observability=obs,
                           result=res, calibration=cal, directions=directions, sample_residuals=samp_res,

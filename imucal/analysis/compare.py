@@ -14,6 +14,7 @@ import numpy as np
 from imucal.data.load import Recording
 from imucal.data.static import Intervals
 from imucal.errors import ImucalError
+from imucal.model.channels import covariate_values
 
 
 @dataclass(frozen=True)
@@ -56,14 +57,8 @@ def calibrated(cal: Any, rec: Recording, idx: np.ndarray) -> np.ndarray:
     covs = getattr(cal, "covariates", ())
     if not covs:
         return cal.apply(rec.raw[idx])
-    given = {}
-    if "temp" in covs:
-        if rec.temp is None:
-            raise ImucalError("the calibration has a temperature effect but the data have no temp column",
-                              file=rec.source, field="temp", fix="add a temp column in deg C")
-        given["temp"] = rec.temp[idx]
-    if "time" in covs:
-        given["time"] = rec.t[idx]
+    given = covariate_values(covs, temp=None if rec.temp is None else rec.temp[idx], time=rec.t[idx],
+                             source=rec.source, what="the calibration")
     return cal.apply(rec.raw[idx], given)
 
 

@@ -26,6 +26,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from imucal.errors import ImucalError
+from imucal.model.channels import covariate_values
 import casadi as ca
 from imucal.model.sensor import frame
 from imucal.data.static import detect_static
@@ -122,9 +123,8 @@ def calibration_cases(cal: Any, gravity: float, recording: Any = None) -> list[D
                               fix="record the sensor still in several orientations")
         raw = iv.mean
         where = f"over {iv.n} static intervals of {recording.source}"
-        cov = {} if iv.temp is None else {"temp": iv.temp}
-        a = cal.apply(raw, covariates={**cov, "t": iv.t_mid, "time": iv.t_mid}) if cal.effects \
-            else cal.apply(raw)
+        a = cal.apply(raw, covariate_values(cal.covariates, temp=iv.temp, time=iv.t_mid, source=recording.source,
+                                            what="the calibration"))
         rms, mx = _stats(np.abs(np.linalg.norm(a, axis=1) - gravity))
         calibrated = DriftCase("calibrated", rms, f"RMS of | |a| - g | {where}", mx)
     rms_r, max_r = _stats(np.abs(np.linalg.norm((raw - s_bar) / b_bar, axis=1) - gravity))

@@ -24,6 +24,7 @@ from imucal.errors import ImucalError, short
 from imucal.files.output import write_text_atomic
 from imucal.files.yamlio import read_yaml
 from imucal.model.geometry import gram_det_np
+from imucal.model.channels import TEMPERATURE, TIME
 from imucal.model.parameters import ANGLE_NAMES, BASE_NAMES, Parameter, Parameters, model_label
 
 
@@ -49,7 +50,7 @@ def to_dict(cal: "frozen.Calibration") -> dict[str, Any]:
         "model": model_label(cal.model_name, cal.params),
         "effects": [{"name": n, "axes": ["xyz"[a] for a in ax]} for n, ax in cal.effects],
         "units": {"input": cal.raw_unit, "output": SI_ACCEL_UNIT, "angles": "rad",
-                  "time": "s", "temperature": "degC", "gravity": SI_ACCEL_UNIT},
+                  "time": TIME.unit, "temperature": TEMPERATURE.unit, "gravity": SI_ACCEL_UNIT},
         "output_frame": OUTPUT_FRAME,
         "gravity": float(cal.gravity),
         "parameters": {

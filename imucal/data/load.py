@@ -15,6 +15,7 @@ from imucal.constants import TIME_UNIT_CHOICES, TIME_UNITS
 from imucal.errors import ImucalError, short
 from imucal.data.rosbag import is_bag, read_bag
 from imucal.files.inputs import max_data_bytes, open_regular
+from imucal.model.channels import ACCELERATION, ANGULAR_RATE, TEMPERATURE, TIME, Channel
 
 FORMATS = ("auto", "csv", "whitespace")
 #: How a recording is read: in chunks (imucal.data.stream) above STREAM_BYTES ("auto"), always, never.
@@ -136,6 +137,16 @@ class Recording:
     @property
     def n(self) -> int:
         return self.raw.shape[0]
+
+    @property
+    def channels(self) -> tuple[Channel, ...]:
+        """The channels this recording carries, with their units (a sensor is data)."""
+        out = [TIME, ACCELERATION.with_unit(self.unit)]
+        if self.gyro is not None:
+            out.append(ANGULAR_RATE)
+        if self.temp is not None:
+            out.append(TEMPERATURE)
+        return tuple(out)
 
     @property
     def sample_rate(self) -> float:

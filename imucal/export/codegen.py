@@ -45,6 +45,7 @@ from imucal.calibration.gyro import OUTPUT_UNIT as GYRO_UNIT, GyroCalibration
 from imucal.constants import SI_ACCEL_UNIT
 from imucal.errors import ImucalError, short
 from imucal.files.inputs import read_input_bytes
+from imucal.model.channels import COVARIATES
 from imucal.model.parameters import BASE_NAMES, model_label
 from imucal.model.sensor import build_model, gram_det
 from imucal.files.output import OutputSet
@@ -53,8 +54,8 @@ PRECISIONS = ("float", "double")
 DEFAULT_PREFIX = "imucal"
 #: Smallest accepted Gram determinant; the same threshold as calibration.validate_parameters.
 MIN_GRAM_DET = 1e-12
-#: Unit of each covariate an effect may use (calibration file "units" section).
-COVARIATE_UNITS = {"temp": "degC", "time": "s"}
+#: Unit of each covariate an effect may use (its channel's unit).
+COVARIATE_UNITS = {key: ch.unit for key, ch in COVARIATES.items()}
 #: Unit roundoff of each precision (2^-24, 2^-53).
 UNIT_ROUNDOFF = {"float": 2.0**-24, "double": 2.0**-53}
 

@@ -17,6 +17,12 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from imucal.model.channels import ACCELERATION, ANGULAR_RATE, TIME, Channel
+
+#: the channels the gyroscope model reads: its rate, the calibrated specific force (gravity
+#: directions, g-sensitivity) and the time base it integrates over
+READS: tuple[Channel, ...] = (ANGULAR_RATE, ACCELERATION, TIME)
+
 #: names of M_g's free entries: m_ij is row i (gyro axis), column j (frame axis)
 MIS_NAMES = ("m_xy", "m_xz", "m_yx", "m_yz", "m_zx", "m_zy")
 _MIS_INDEX = ((0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1))

@@ -24,6 +24,7 @@ import casadi as ca
 
 from imucal.model.geometry import (frame, frame_inverse_transpose, frame_np, geometry_function,  # noqa: F401
                                    gram, gram_det, gram_det_np, gram_np, tbar)
+from imucal.model.channels import ACCELERATION, Channel, covariate_channels
 from imucal.model.parameters import BASE_NAMES, Parameter, Parameters
 from imucal.model.parameters import base_parameters
 
@@ -69,6 +70,9 @@ class Effect:
 class SensorModel:
     """The symbolic model with a fixed set of effects; CasADi functions are built once.
 
+    It declares what it reads (``reads``: channels), its parameters (``parameters``: named, with
+    units and bounds) and its residual (``residual``).
+
     Functions (all per sample; ``cov`` holds the covariates named in ``covariates``):
       measured(raw[3], cov[k], p[np]) -> m[3]          Eq. (theModel) plus effects
       accel(raw, cov, p)              -> a_orth[3]     Theorem
@@ -88,6 +92,11 @@ class SensorModel:
             return "nakov-ivanov-9"
         return "nakov-ivanov-9+" + "+".join(f"{e.name}[{''.join('xyz'[a] for a in e.axes)}]"
                                             for e in self.effects)
+
+    @property
+    def reads(self) -> tuple[Channel, ...]:
+        """The channels the model reads: the acceleration, and the covariates of its effects."""
+        return (ACCELERATION, *covariate_channels(self.covariates))
 
     @property
     def is_affine(self) -> bool:

@@ -38,9 +38,9 @@ def run(args: argparse.Namespace) -> int:
 
     from imucal.calibration.fileformat import load_calibration
     from imucal.data.load import load_recording
-    from imucal.errors import ImucalError
     from imucal.files.output import check_outputs, write_text_atomic
     from imucal.gyro.run import gyro_on_accel_samples
+    from imucal.model.channels import covariate_values
 
     cfg = options.run_config(args, args.config)
     gyro_file = args.gyro_data or options.data_path(cfg, gyro=True)
@@ -48,14 +48,7 @@ def run(args: argparse.Namespace) -> int:
     check_outputs(inputs, [args.out])
     cal = load_calibration(args.calibration)
     rec = load_recording(cfg.data, cfg.base_dir)
-    covs = {}
-    if "temp" in cal.covariates:
-        if rec.temp is None:
-            raise ImucalError("the calibration has a temperature effect but the data have no temp column",
-                              file=rec.source, field="temp", fix="add a temp column in deg C")
-        covs["temp"] = rec.temp
-    if "time" in cal.covariates:
-        covs["time"] = rec.t
+    covs = covariate_values(cal.covariates, temp=rec.temp, time=rec.t, source=rec.source, what="the calibration")
     a = cal.apply(rec.raw, covs)
     cols, body = ["ax", "ay", "az"], [a]
     raw_g = None if cal.gyro is None else gyro_on_accel_samples(rec, None if gyro_file is None else str(gyro_file))
