@@ -203,10 +203,9 @@ def sample_residuals(cal: Calibration, model: SensorModel, samples: StaticSample
     return np.linalg.norm(cal.apply(samples.raw, covs), axis=1) - gravity
 
 
-def calibrate(config: RunConfig, recording: Recording | None = None) -> CalibrationRun:
-    """Run the whole calibration described by ``config`` (on ``recording`` when given, else on
-    the file ``config.data`` names)."""
-    src = config.source
+def read_intervals(config: RunConfig, recording: Recording | None = None
+                   ) -> tuple[Recording | RecordingSummary, Intervals, StreamedRecording | None]:
+    """The recording (or its streamed summary) and its static intervals; refuses too few of them."""
     declared = rails(config.data.saturation) if config.data.saturation is not None else None
     streamed: StreamedRecording | None = None
     if recording is None and use_stream(config.data, config.base_dir):  # bounded memory (imucal.data.stream)
@@ -228,15 +227,30 @@ def calibrate(config: RunConfig, recording: Recording | None = None) -> Calibrat
     if iv.n == 1:
         raise ImucalError("only one static interval found: the log holds a single still pose", file=rec.source,
                           field="intervals", fix="record 12 to 50 orientations with movement between them")
-    gravity, gsource = config.gravity.resolve()
+    return rec, iv, streamed
 
-    model = build_model(effects_from_specs(config.fit.effects, src))
+
+@dataclass(frozen=True)
+class _Problem:
+    """What the fit needs, prepared from the intervals: model, start, data and observability."""
+
+    model: SensorModel
+    guess: InitialGuess
+    params: Parameters
+    data: FitData
+    means: FitData  #: the interval means (observability and the means residuals of a samples fit)
+    samples: StaticSamples | None
+    obs: Observability
+
+
+def _problem(config: RunConfig, rec: Recording | RecordingSummary, iv: Intervals,
+             streamed: StreamedRecording | None, gravity: float) -> _Problem:
+    model = build_model(effects_from_specs(config.fit.effects, config.source))
     angles_free = not set(ANGLE_NAMES) <= set(config.fit.fix)
-    with _noting_drops(dropped):  # too few poses left: the refusal says that clipping took some
+    with _noting_drops(iv.meta.get("dropped", [])):  # too few poses left: the refusal says clipping took some
         guess, dirs, n_distinct = initial_guess(iv, gravity, angles_free, rec.source)
         params = make_parameters(guess, config, gravity, model, config.data.unit)
         if model.effects:  # covariate spread, enough intervals, reference temperature (imucal.model.effects)
-
             params = prepare_parameters(model.effects, params, {"temp": iv.temp, "time": iv.t_mid}, iv.n,
                                         rec.source)
             params = effect_initial(params, config)  # a given start wins over the data's
@@ -249,46 +263,63 @@ def calibrate(config: RunConfig, recording: Recording | None = None) -> Calibrat
         J, Jw = jacobian_rows(mdata, params, model, gravity, weighted=True)
         obs = analyse(dirs, J, params.free_names, Jw, thresholds(params.free_names, config.fit.angle_tolerance))
         require_observable(obs, params.free_names, rec.source)
-    res = fit(data, params, model, gravity, source=rec.source, weights=config.fit.weights)
+    return _Problem(model, guess, params, data, mdata, samples, obs)
+
+
+def _refuse_absurd(res: FitResult, params: Parameters, source: str) -> None:
     if res.dof > 0 and res.redchi_noise > ABSURD_REDCHI:
         held = [n for n in params.names if params[n].fixed]
         rms = float(np.sqrt(np.mean(res.residuals**2)))
         raise ImucalError(f"reduced chi-square {res.redchi_noise:.3g} (RMS |a|-g {rms:.3g} m/s^2): the model cannot "
-                          "describe these data, refused", file=rec.source, field="fit",
+                          "describe these data, refused", file=source, field="fit",
                           fix=(f"free the held parameters ({', '.join(held)}); " if held else "")
                           + "check that the log holds still poses of one sensor and the data columns")
-    if res.mode != "means":  # report residuals on interval means too
-        rm = jacobian_rows(mdata, res.params, model, gravity, residuals=True)
-    else:
-        rm = res.residuals
+
+
+def _samples_rms(cal: Calibration, pb: _Problem, rec: Recording | RecordingSummary, iv: Intervals,
+                 streamed: StreamedRecording | None, gravity: float) -> tuple[np.ndarray | None, float]:
+    """|a| - g of every static sample (None when streamed) and their RMS."""
+    if streamed is None:
+        r = sample_residuals(cal, pb.model, pb.samples if pb.samples is not None else static_samples(iv, rec), gravity)
+        return r, float(np.sqrt(float(np.dot(r, r)) / r.size))  # as the streamed sum
+    ss, m = 0.0, 0  # a block at a time: the samples were not kept (or are, in samples mode)
+    for blk in streamed.static_blocks():
+        r = sample_residuals(cal, pb.model, blk, gravity)
+        ss, m = ss + float(np.dot(r, r)), m + r.size
+    return None, float(np.sqrt(ss / m))
+
+
+def calibrate(config: RunConfig, recording: Recording | None = None) -> CalibrationRun:
+    """Run the whole calibration described by ``config`` (on ``recording`` when given, else on
+    the file ``config.data`` names): read -> detect -> guess -> fit -> result -> calibration."""
+    rec, iv, streamed = read_intervals(config, recording)
+    dropped = iv.meta.get("dropped", [])
+    gravity, gsource = config.gravity.resolve()
+    pb = _problem(config, rec, iv, streamed, gravity)
+    res = fit(pb.data, pb.params, pb.model, gravity, source=rec.source, weights=config.fit.weights)
+    _refuse_absurd(res, pb.params, rec.source)
+    rm = res.residuals if res.mode == "means" else jacobian_rows(pb.means, res.params, pb.model, gravity,
+                                                                 residuals=True)  # residuals on means too
     cal_fit = {
         "mode": res.mode, "weights": config.fit.weights, "status": res.status, "iterations": res.iterations,
         "rms_residual": float(np.sqrt(np.mean(rm**2))), "chi2": res.chi2, "dof": res.dof,
         "redchi": res.redchi, "redchi_noise": res.redchi_noise,
         "bias_instability": math.sqrt(res.excess),  # between-interval excess in the weights [m/s^2]
-        "n_intervals": iv.n, "n_distinct_orientations": obs.n_distinct,
+        "n_intervals": iv.n, "n_distinct_orientations": pb.obs.n_distinct,
         "gravity_source": gsource,
         "warnings": fit_warnings(res, config, rec, dropped),
     }
     cal = Calibration(params=res.params, std=res.std, gravity=gravity, raw_unit=config.data.unit,
-                      effects=tuple((e.name, e.axes) for e in model.effects), fit=cal_fit,
+                      effects=tuple((e.name, e.axes) for e in pb.model.effects), fit=cal_fit,
                       data={"file": Path(rec.source).name, "sha256": rec.sha256, "samples": rec.n,
                             "time": rec.time_note,
                             "dropped_intervals": [dict(d) for d in dropped]},
                       created=now_utc())
-    if streamed is None:
-        samp_res = sample_residuals(cal, model, samples if samples is not None else static_samples(iv, rec), gravity)
-        rms_samples = float(np.sqrt(float(np.dot(samp_res, samp_res)) / samp_res.size))  # as the streamed sum
-    else:  # a block at a time: the samples were not kept (or are, in samples mode)
-        samp_res, ss, m = None, 0.0, 0
-        for blk in streamed.static_blocks():
-            r = sample_residuals(cal, model, blk, gravity)
-            ss, m = ss + float(np.dot(r, r)), m + r.size
-        rms_samples = float(np.sqrt(ss / m))
+    samp_res, rms_samples = _samples_rms(cal, pb, rec, iv, streamed, gravity)
     cal = replace(cal, fit={**cal_fit, "rms_residual_samples": rms_samples})
-    ai = cal.apply(iv.mean, covariate_values(model.covariates, temp=iv.temp, time=iv.t_mid, source=rec.source))
+    ai = cal.apply(iv.mean, covariate_values(pb.model.covariates, temp=iv.temp, time=iv.t_mid, source=rec.source))
     directions = ai / np.linalg.norm(ai, axis=1, keepdims=True)
-    return CalibrationRun(config=config, recording=rec, intervals=iv, guess=guess, observability=obs,
+    return CalibrationRun(config=config, recording=rec, intervals=iv, guess=pb.guess, observability=pb.obs,
                           result=res, calibration=cal, directions=directions, sample_residuals=samp_res,
                           gravity_source=gsource)
 
