@@ -249,7 +249,6 @@ def parse_block(lines: list[str], first_lineno: int, delimiter: str | None, usec
     if not any(ln.strip() and not ln.lstrip().startswith("#") for ln in lines):
         raise ImucalError("has no data rows", file=str(path), field="data",
                           fix="record samples after the header")
-    ncol = max(usecols) + 1
     try:
         arr = np.loadtxt(io.StringIO("\n".join(lines)), delimiter=delimiter, usecols=usecols,
                          ndmin=2, dtype=float, comments="#")
@@ -446,76 +445,56 @@ def as_spec(spec: DataSpec | str | os.PathLike) -> DataSpec:
     return spec if isinstance(spec, DataSpec) else DataSpec(path=str(spec))
 
 
-def layout(lines: list[str], spec: DataSpec, path: Path) -> Layout:
-    """Header, delimiter and column roles from the lines after ``spec.skip_rows`` (the whole file,
-    or its head: the first data line and _MAX_SCAN_LINES after the first non-comment line)."""
-    first_lineno = spec.skip_rows + 1
-    # Find the first non-empty, non-comment line.
-    k0 = next((i for i, ln in enumerate(lines) if ln.strip() and not ln.lstrip().startswith("#")), None)
-    if k0 is None:
-        raise ImucalError("is empty", file=str(path), field="data.path",
-                          fix="record samples into the file")
-    fmt = spec.format
-    header_idx = None
-    if fmt in ("auto", "csv"):
-        wanted = [str(v) for r, v in spec.columns.items() if isinstance(v, str)]
-        first_text: list[str] | None = None  # the first non-numeric line, for the message
-        for i in range(k0, min(len(lines), k0 + _MAX_SCAN_LINES)):
-            toks = _split(lines[i], spec.delimiter or _sniff_delimiter(lines[i]))
-            if toks and not all(_is_number(t) for t in toks):
-                names = [t.strip().strip('"').strip("'") for t in toks]
-                first_text = names if first_text is None else first_text
-                if wanted and not all(w in names for w in wanted):
-                    continue
-                if not wanted and not any(n.lower() in sum(_DEFAULT_NAMES.values(), ()) for n in names):
-                    continue
-                header_idx = i
-                break
-        if wanted and header_idx is None and first_text is not None:
-            missing = [w for w in wanted if w not in first_text]
-            raise ImucalError(f"mapped column(s) {missing} not in header {first_text[:12]}", file=str(path),
-                              field="data.columns", fix="map the roles to the header's names")
-        if fmt == "csv" and header_idx is None:
-            raise ImucalError("no header line with the mapped column names found", file=str(path),
-                              field="data.columns",
-                              fix="add a header row, or set data.format: whitespace with column indices")
-    names: list[str] = []
-    if header_idx is not None:
-        hdr_line = lines[header_idx]
-        delim = spec.delimiter or _sniff_delimiter(hdr_line)
-        names = [t.strip().strip('"').strip("'") for t in _split(hdr_line, delim)]
-        lower = [n.lower() for n in names]
-        cols: dict[str, int] = {}
-        for role in ROLES:
-            if role in spec.columns:
-                want = spec.columns[role]
-                if isinstance(want, int):
-                    cols[role] = want
-                elif want in names:
-                    cols[role] = names.index(want)
-                else:
-                    raise ImucalError(f"column {short(want)} (for {role}) not in header {short(names, 200)}",
-                                      file=str(path), field=f"data.columns.{role}",
-                                      fix="map the role to one of the header's names")
+def _find_header(lines: list[str], k0: int, spec: DataSpec, path: Path) -> int | None:
+    """Index of the header line: the first text line with the mapped (or known default) names."""
+    if spec.format not in ("auto", "csv"):
+        return None
+    wanted = [str(v) for r, v in spec.columns.items() if isinstance(v, str)]
+    first_text: list[str] | None = None  # the first non-numeric line, for the message
+    for i in range(k0, min(len(lines), k0 + _MAX_SCAN_LINES)):
+        toks = _split(lines[i], spec.delimiter or _sniff_delimiter(lines[i]))
+        if toks and not all(_is_number(t) for t in toks):
+            names = [t.strip().strip('"').strip("'") for t in toks]
+            first_text = names if first_text is None else first_text
+            if wanted and not all(w in names for w in wanted):
+                continue
+            if not wanted and not any(n.lower() in sum(_DEFAULT_NAMES.values(), ()) for n in names):
+                continue
+            return i
+    if wanted and first_text is not None:
+        missing = [w for w in wanted if w not in first_text]
+        raise ImucalError(f"mapped column(s) {missing} not in header {first_text[:12]}", file=str(path),
+                          field="data.columns", fix="map the roles to the header's names")
+    if spec.format == "csv":
+        raise ImucalError("no header line with the mapped column names found", file=str(path),
+                          field="data.columns",
+                          fix="add a header row, or set data.format: whitespace with column indices")
+    return None
+
+
+def _header_columns(names: list[str], spec: DataSpec, path: Path) -> dict[str, int]:
+    """Role -> column index from a header: the mapped names (or indices), else the default names."""
+    lower = [n.lower() for n in names]
+    cols: dict[str, int] = {}
+    for role in ROLES:
+        if role in spec.columns:
+            want = spec.columns[role]
+            if isinstance(want, int):
+                cols[role] = want
+            elif want in names:
+                cols[role] = names.index(want)
             else:
-                hit = next((lower.index(c) for c in _DEFAULT_NAMES[role] if c in lower), None)
-                if hit is not None:
-                    cols[role] = hit
-        body = header_idx + 1
-    else:
-        if not all(_is_number(t) for t in _split(lines[k0], spec.delimiter)):
-            raise ImucalError(f"line {first_lineno + k0} is neither a header with known column names nor numbers",
-                              file=str(path), field="data.columns",
-                              fix="name columns t, ax, ay, az (temp) or map them in data.columns")
-        delim = spec.delimiter or _sniff_delimiter(lines[k0])
-        ncol = len(_split(lines[k0], delim))
-        cols = {r: int(v) for r, v in spec.columns.items() if isinstance(v, int)}
-        if any(isinstance(v, str) for v in spec.columns.values()):
-            raise ImucalError("column names given but the file has no header", file=str(path),
-                              field="data.columns", fix="map roles to 0-based column indices")
-        if not cols:
-            cols = _no_header_layout(ncol, path)
-        body = k0
+                raise ImucalError(f"column {short(want)} (for {role}) not in header {short(names, 200)}",
+                                  file=str(path), field=f"data.columns.{role}",
+                                  fix="map the role to one of the header's names")
+        else:
+            hit = next((lower.index(c) for c in _DEFAULT_NAMES[role] if c in lower), None)
+            if hit is not None:
+                cols[role] = hit
+    return cols
+
+
+def _check_roles(cols: dict[str, int], spec: DataSpec, path: Path) -> None:
     for role in ("ax", "ay", "az"):
         if role not in cols:
             raise ImucalError(f"missing column for {role}", file=str(path), field=f"data.columns.{role}",
@@ -527,6 +506,38 @@ def layout(lines: list[str], spec: DataSpec, path: Path) -> Layout:
     if gyro_roles and len(gyro_roles) != 3:
         raise ImucalError(f"only {', '.join(gyro_roles)} of gx, gy, gz mapped", file=str(path),
                           field="data.columns", fix="map all three gyroscope columns or none")
+
+
+def layout(lines: list[str], spec: DataSpec, path: Path) -> Layout:
+    """Header, delimiter and column roles from the lines after ``spec.skip_rows`` (the whole file,
+    or its head: the first data line and _MAX_SCAN_LINES after the first non-comment line)."""
+    first_lineno = spec.skip_rows + 1
+    # Find the first non-empty, non-comment line.
+    k0 = next((i for i, ln in enumerate(lines) if ln.strip() and not ln.lstrip().startswith("#")), None)
+    if k0 is None:
+        raise ImucalError("is empty", file=str(path), field="data.path",
+                          fix="record samples into the file")
+    header_idx = _find_header(lines, k0, spec, path)
+    names: list[str] = []
+    if header_idx is not None:
+        delim = spec.delimiter or _sniff_delimiter(lines[header_idx])
+        names = [t.strip().strip('"').strip("'") for t in _split(lines[header_idx], delim)]
+        cols = _header_columns(names, spec, path)
+        body = header_idx + 1
+    else:
+        if not all(_is_number(t) for t in _split(lines[k0], spec.delimiter)):
+            raise ImucalError(f"line {first_lineno + k0} is neither a header with known column names nor numbers",
+                              file=str(path), field="data.columns",
+                              fix="name columns t, ax, ay, az (temp) or map them in data.columns")
+        delim = spec.delimiter or _sniff_delimiter(lines[k0])
+        cols = {r: int(v) for r, v in spec.columns.items() if isinstance(v, int)}
+        if any(isinstance(v, str) for v in spec.columns.values()):
+            raise ImucalError("column names given but the file has no header", file=str(path),
+                              field="data.columns", fix="map roles to 0-based column indices")
+        if not cols:
+            cols = _no_header_layout(len(_split(lines[k0], delim)), path)
+        body = k0
+    _check_roles(cols, spec, path)
     roles = [r for r in ROLES if r in cols]
     if spec.sample_rate is not None and "t" in cols and "t" not in spec.columns:
         roles.remove("t")  # an explicit rate overrides a guessed time column
