@@ -4,16 +4,13 @@ from __future__ import annotations
 from typing import Sequence
 
 from imucal.errors import ImucalError, short
+from imucal.model.effects import EFFECTS, make_effect
 
 
 def effects_from_specs(specs: Sequence, source: str | None = None) -> list:
     """Build effect objects from config EffectSpecs (name, axes as 'x'/'y'/'z')."""
     if not specs:
         return []
-    try:
-        from imucal.model.effects import EFFECTS, make_effect
-    except ModuleNotFoundError:  # pragma: no cover - effects module ships with imucal
-        raise ImucalError("effects are not available in this build", file=source, field="fit.effects")
     out = []
     for i, s in enumerate(specs):
         if s.name not in EFFECTS:
