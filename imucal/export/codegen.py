@@ -531,8 +531,9 @@ class _Context:
         return c_literal(x, self.real)
 
 
-def _header(c: _Context, k_apply: Kernel | None, k_cov: Kernel | None, k_gyro: Kernel | None) -> str:
-    cal, p, P, real = c.cal, c.prefix, c.P, c.real
+def _header_doc(c: _Context, k_apply: Kernel | None, k_cov: Kernel | None, k_gyro: Kernel | None) -> list[str]:
+    """The header's opening comment: provenance, model, units, expected error, cost."""
+    cal, p, real = c.cal, c.prefix, c.real
     v = cal.params.value_dict()
     std = cal.std
     A, _ = cal.linear_map()
@@ -604,9 +605,14 @@ def _header(c: _Context, k_apply: Kernel | None, k_cov: Kernel | None, k_gyro: K
                   f" * no mutable static state. {p}_apply_coeffs (base model): 6 multiplies, 6 adds."]
     if k_gyro is not None:
         lines += _gyro_doc(c, k_gyro)
-    lines += [" */"]
+    return lines + [" */"]
+
+
+def _header_types(c: _Context) -> list[str]:
+    """Include guard, status codes and the coefficients struct."""
+    cal, p, P, real = c.cal, c.prefix, c.P, c.real
     guard = f"{P}_H"
-    out = ["\n".join(lines), f"#ifndef {guard}", f"#define {guard}", "", "#include <stddef.h>", "#include <stdint.h>", "",
+    out = [f"#ifndef {guard}", f"#define {guard}", "", "#include <stddef.h>", "#include <stdint.h>", "",
            "#ifdef __cplusplus", 'extern "C" {', "#endif", "",
            f"typedef {real} {p}_real;", "",
            f"/* Return values of {p}_prepare. */",
@@ -624,6 +630,13 @@ def _header(c: _Context, k_apply: Kernel | None, k_cov: Kernel | None, k_gyro: K
            f"[{SI_ACCEL_UNIT} per {comment_text(cal.raw_unit)}] */",
            f"  {real} s[3]; /* shifts s1 s2 s3 [{comment_text(cal.raw_unit)}] */",
            f"}} {p}_coeffs;", ""]
+    return out
+
+
+def _header_apply_decls(c: _Context, k_gyro: Kernel | None) -> list[str]:
+    """This calibration's apply entry points (raw only, or raw and covariates)."""
+    cal, p, P, real = c.cal, c.prefix, c.P, c.real
+    out: list[str] = []
     if not c.effects:
         vals = ", ".join(c.lit(x) for x in cal.values[0:9])
         out += [
@@ -658,9 +671,16 @@ def _header(c: _Context, k_apply: Kernel | None, k_cov: Kernel | None, k_gyro: K
     out += [f"#define {P}_HAS_GYRO 1 /* a gyroscope part: {p}_apply_gyro, {p}_apply_imu"
             f"{'_cov' if c.covariates else ''} below */" if k_gyro is not None else
             f"#define {P}_HAS_GYRO 0 /* accelerometer only: no gyroscope functions */", ""]
-    out += [f"/* Index of each known covariate in cov, or -1 when this calibration does not use it. */",
+    out += ["/* Index of each known covariate in cov, or -1 when this calibration does not use it. */",
             *(f"#define {P}_COV_{n.upper()} {c.covariates.index(n) if n in c.covariates else -1}"
               f" /* {n} [{u}] */" for n, u in COVARIATE_UNITS.items()), ""]
+    return out
+
+
+def _header(c: _Context, k_apply: Kernel | None, k_cov: Kernel | None, k_gyro: Kernel | None) -> str:
+    p, P, real = c.prefix, c.P, c.real
+    guard = f"{P}_H"
+    out = ["\n".join(_header_doc(c, k_apply, k_cov, k_gyro)), *_header_types(c), *_header_apply_decls(c, k_gyro)]
     out += [
         f"/* Coefficients from the nine base-model parameters s1 s2 s3 [raw] b1 b2 b3 [raw per {SI_ACCEL_UNIT}]",
         " * phi psi theta [rad] (the calibration file's order), e.g. read from flash at start-up.",
