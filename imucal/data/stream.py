@@ -20,7 +20,7 @@ import hashlib
 import io
 import os
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -321,6 +321,28 @@ class _Scan:
         return (self.unit, self.w) == (self.unit_guess, self.w_guess)
 
 
+@dataclass
+class _ScanState:
+    """Pass 1's running state, block to block."""
+
+    unit: str | None
+    w: int | None
+    n: int = 0
+    t_first: float = 0.0
+    t_last: float = 0.0
+    last_stamp: float | None = None
+    big: ImucalError | None = None  #: the first value beyond MAX_ABS_VALUE
+    order: ImucalError | None = None  #: the first stamp that does not increase
+    mv: MovingVariance | None = None
+    lows: np.ndarray = field(default_factory=lambda: np.full(3, np.inf))
+    highs: np.ndarray = field(default_factory=lambda: np.full(3, -np.inf))
+    stamp_steps: "_Steps" = field(default_factory=lambda: _Steps())
+    t_steps: "_Steps" = field(default_factory=lambda: _Steps())
+    head_stamps: list = field(default_factory=list)
+    head_raw: list = field(default_factory=list)
+    cached: int = 0
+
+
 class StreamedRecording:
     """A recording read in chunks: its summary, static intervals, and (samples mode) static samples."""
 
@@ -362,82 +384,84 @@ class StreamedRecording:
 
     def _scan(self, unit_given: str | None, w_given: int | None) -> _Scan:
         """Pass 1: parse every block, hash, check values and time stamps, moving variance."""
-        spec, path, it = self.spec, self.path, self._it
-        has_t = "t" in it
-        n = 0
-        stamp_steps, t_steps = _Steps(), _Steps()
-        big: ImucalError | None = None
-        order: ImucalError | None = None
-        head_stamps: list[np.ndarray] = []
-        head_raw: list[np.ndarray] = []
-        unit = unit_given
-        w = w_given
-        t_first = 0.0
-        last_stamp = None
-        mv = None
-        lows = np.full(3, np.inf)
-        highs = np.full(3, -np.inf)
+        st = _ScanState(unit=unit_given, w=w_given)
         self._cache: list[tuple] | None = []
-        cached = 0
         for first, block, arr in self.file.rows(hash_it=True):
-            m = arr.shape[0]
-            if m == 0:
+            if arr.shape[0] == 0:
                 continue
-            if big is None:
-                bad = (np.abs(arr) > MAX_ABS_VALUE).any(axis=1)
-                if bad.any():
-                    big = corrupt_value(self.file.line_of(block, first, int(np.flatnonzero(bad)[0])), path)
-            if has_t:
-                stamps = arr[:, it["t"]]
-                if n == 0:
-                    t_first = float(stamps[0])
-                if order is None:
-                    d = np.diff(stamps) if last_stamp is None else np.diff(np.concatenate([[last_stamp], stamps]))
-                    bad = ~(d > 0)
-                    if bad.any():
-                        k = int(np.flatnonzero(bad)[0]) + (1 if last_stamp is None else 0)
-                        order = not_increasing(self.file.line_of(block, first, k), path)
-                last_stamp = float(stamps[-1])
-                stamp_steps.add(stamps)
-                if sum(h.size for h in head_stamps) < TIME_HEAD_ROWS:
-                    head_stamps.append(stamps[:TIME_HEAD_ROWS].copy())
-            if big is None and order is None:
-                if unit is None:  # a guess from the first block, checked at the end
-                    unit = stamp_unit(spec, _infer(stamps, stamps[:TIME_HEAD_ROWS]))[0] if has_t else "s"
-                t = self._times(arr, n, unit, t_first)
-                t_steps.add(t)
-                if w is None:
-                    w = window_samples(self.settings, float(np.median(np.diff(t)))) if t.size > 1 else 3
-                if mv is None:
-                    mv = MovingVariance(w)
-                raw = self._raw(arr)
-                mv.add(raw)
-                lows, highs = np.minimum(lows, raw.min(axis=0)), np.maximum(highs, raw.max(axis=0))
-                if sum(h.shape[0] for h in head_raw) < QUANTUM_ROWS:
-                    head_raw.append(raw[:QUANTUM_ROWS])
-                t_last = float(t[-1])
-                if self._cache is not None:  # the next passes read memory while the file fits in CACHE_BYTES
-                    temp = self._temp(arr)
-                    cached += raw.nbytes + t.nbytes + (0 if temp is None else temp.nbytes)
-                    if cached <= CACHE_BYTES:
-                        self._cache.append((n, raw, t, temp))
-                    else:
-                        self._cache = None
-            n += m
+            self._check_block(st, first, block, arr)
+            if st.big is None and st.order is None:
+                self._accumulate(st, arr)
+            st.n += arr.shape[0]
+        return self._scan_result(st)
+
+    def _check_block(self, st: "_ScanState", first: int, block: object, arr: np.ndarray) -> None:
+        """Values beyond MAX_ABS_VALUE and time stamps that do not increase (the first of each is kept)."""
+        if st.big is None:
+            bad = (np.abs(arr) > MAX_ABS_VALUE).any(axis=1)
+            if bad.any():
+                st.big = corrupt_value(self.file.line_of(block, first, int(np.flatnonzero(bad)[0])), self.path)
+        if "t" not in self._it:
+            return
+        stamps = arr[:, self._it["t"]]
+        if st.n == 0:
+            st.t_first = float(stamps[0])
+        if st.order is None:
+            prev = st.last_stamp
+            d = np.diff(stamps) if prev is None else np.diff(np.concatenate([[prev], stamps]))
+            bad = ~(d > 0)
+            if bad.any():
+                k = int(np.flatnonzero(bad)[0]) + (1 if prev is None else 0)
+                st.order = not_increasing(self.file.line_of(block, first, k), self.path)
+        st.last_stamp = float(stamps[-1])
+        st.stamp_steps.add(stamps)
+        if sum(h.size for h in st.head_stamps) < TIME_HEAD_ROWS:
+            st.head_stamps.append(stamps[:TIME_HEAD_ROWS].copy())
+
+    def _accumulate(self, st: "_ScanState", arr: np.ndarray) -> None:
+        """Times in the (guessed) unit, moving variance, ranges, the quantum's head, the memory cache."""
+        if st.unit is None:  # a guess from the first block, checked at the end
+            if "t" in self._it:
+                stamps = arr[:, self._it["t"]]
+                st.unit = stamp_unit(self.spec, _infer(stamps, stamps[:TIME_HEAD_ROWS]))[0]
+            else:
+                st.unit = "s"
+        t = self._times(arr, st.n, st.unit, st.t_first)
+        st.t_steps.add(t)
+        if st.w is None:
+            st.w = window_samples(self.settings, float(np.median(np.diff(t)))) if t.size > 1 else 3
+        if st.mv is None:
+            st.mv = MovingVariance(st.w)
+        raw = self._raw(arr)
+        st.mv.add(raw)
+        st.lows, st.highs = np.minimum(st.lows, raw.min(axis=0)), np.maximum(st.highs, raw.max(axis=0))
+        if sum(h.shape[0] for h in st.head_raw) < QUANTUM_ROWS:
+            st.head_raw.append(raw[:QUANTUM_ROWS])
+        st.t_last = float(t[-1])
+        if self._cache is not None:  # the next passes read memory while the file fits in CACHE_BYTES
+            temp = self._temp(arr)
+            st.cached += raw.nbytes + t.nbytes + (0 if temp is None else temp.nbytes)
+            if st.cached <= CACHE_BYTES:
+                self._cache.append((st.n, raw, t, temp))
+            else:
+                self._cache = None
+
+    def _scan_result(self, st: "_ScanState") -> _Scan:
+        """The first error met, or what pass 1 learnt with the time unit decided on every stamp."""
+        path, spec, n = self.path, self.spec, st.n
         if self.file.unparsed is not None:
             raise self.file.unparsed
         if n == 0:
             raise no_rows(path)
-        if big is not None:
-            raise big
-        if order is not None:
-            raise order
-        if has_t:
-            hs = np.concatenate(head_stamps)[:TIME_HEAD_ROWS]
-            unit_exact, note = stamp_unit(spec, time_unit_from_step(stamp_steps.median(), t_first,
+        for err in (st.big, st.order):
+            if err is not None:
+                raise err
+        if "t" in self._it:
+            hs = np.concatenate(st.head_stamps)[:TIME_HEAD_ROWS]
+            unit_exact, note = stamp_unit(spec, time_unit_from_step(st.stamp_steps.median(), st.t_first,
                                                                     bool(np.all(hs == np.round(hs))))
                                           if spec.time_unit == "auto" else None)
-            check_rate(n, last_stamp - t_first, unit_exact, path)
+            check_rate(n, st.last_stamp - st.t_first, unit_exact, path)
         else:
             unit_exact, note = time_base_without_stamps(spec)
         if n < 3:  # as detect_static
@@ -445,10 +469,10 @@ class StreamedRecording:
                               fix="record several seconds in each orientation")
         # the times of this pass are in the guessed unit; if it was wrong, the next pass's window
         # comes from the stamps' step in the right one
-        dt = t_steps.median() if unit_exact == unit else stamp_steps.median() * TIME_UNITS[unit_exact]
-        return _Scan(n=n, unit=unit_exact, note=note, t_first=t_first, t_last=t_last, dt=dt,
-                     w=window_samples(self.settings, dt), q=quantum(np.concatenate(head_raw)), lows=lows,
-                     highs=highs, unit_guess=unit, w_guess=w, mv=mv)
+        dt = st.t_steps.median() if unit_exact == st.unit else st.stamp_steps.median() * TIME_UNITS[unit_exact]
+        return _Scan(n=n, unit=unit_exact, note=note, t_first=st.t_first, t_last=st.t_last, dt=dt,
+                     w=window_samples(self.settings, dt), q=quantum(np.concatenate(st.head_raw)), lows=st.lows,
+                     highs=st.highs, unit_guess=st.unit, w_guess=st.w, mv=st.mv)
 
     def _finish_scan(self, scan: _Scan) -> None:
         if not scan.consistent:  # pragma: no cover - the third pass uses the exact unit and window
