@@ -7,10 +7,9 @@ import numpy as np
 import pytest
 
 from imucal.gyro import GyroOptions, fit_gyro
-from imucal.gyro.attitude import fit_rates
+from imucal.gyro.attitude import chained_graph
 from imucal.gyro.fit import _grid_argmin, _segment_sigma, _steps
 from imucal.gyro.gsens import fit_static
-from imucal.gyro.model import direction_residual, rk4_step
 from imucal.gyro.segments import motion_segments
 from imucal.gyro.simulate import GyroTruth, simulate
 
@@ -28,26 +27,11 @@ def case():
     return data, seg, data.gyro - st.bias - data.acc @ st.H.T
 
 
-def reference_graph(data, seg, corrected, nx: int, scale0: np.ndarray) -> tuple[ca.MX, ca.MX]:
-    """x and the residuals (3 n) of the chained RK4 graph: every step normalised, restarted per segment."""
-    x = ca.MX.sym("x", nx)
-    i0 = np.concatenate([np.arange(f, l) for f, l in zip(seg.first, seg.last)])
-    W0 = fit_rates(x, ca.DM(scale0), ca.DM(corrected[i0].T))
-    W1 = fit_rates(x, ca.DM(scale0), ca.DM(corrected[i0 + 1].T))
-    ends = np.cumsum(seg.lengths) - 1
-    reset = np.zeros((1, i0.size))
-    reset[0, np.r_[0, ends[:-1] + 1]] = 1.0
-    U = ca.vertcat(W0, W1, ca.DM((data.t[i0 + 1] - data.t[i0])[None, :]), ca.DM(reset))
-    Q = rk4_step().mapaccum("path", i0.size)(ca.DM([1, 0, 0, 0]), U)
-    r = direction_residual().map(seg.n)(Q[:, ends.tolist()], ca.DM(seg.u0.T), ca.DM(seg.u1.T))
-    return x, ca.vec(r)
-
-
 @pytest.mark.parametrize("nx", [9, 12])
 def test_residuals_and_jacobian_equal_the_chained_graph(case, nx: int) -> None:
     data, seg, corrected = case
     scale0 = TRUTH.scale * 1.01
-    xs, rv = reference_graph(data, seg, corrected, nx, scale0)
+    xs, rv = chained_graph(data.t, seg, corrected, nx, scale0)
     f = ca.Function("ref", [xs], [rv, ca.jacobian(rv, xs)])
     x = np.random.default_rng(1).normal(size=nx) * 0.02
     r_ref, J_ref = (np.asarray(v) for v in f(x))
@@ -61,7 +45,7 @@ def test_optimum_equals_the_exact_hessian_nlp(case) -> None:
     r = fit_gyro(data, GyroOptions(gsens="off", nominal_scale=4700.0))
     scale0 = np.full(3, 4700.0)
     w = 1.0 / _segment_sigma(data, seg, scale0)
-    xs, rv = reference_graph(data, seg, corrected, 9, scale0)
+    xs, rv = chained_graph(data.t, seg, corrected, 9, scale0)
     obj = 0.5 * ca.sumsqr(rv * ca.DM(np.repeat(w, 3)))
     solver = ca.nlpsol("ref", "ipopt", {"x": xs, "f": obj},
                        {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "ipopt.tol": 1e-12})

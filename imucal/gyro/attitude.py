@@ -20,7 +20,7 @@ from functools import cached_property, lru_cache
 import casadi as ca
 import numpy as np
 
-from imucal.gyro.model import direction_residual, quat_mul, quat_to_rot, rate_map, rk4_increment
+from imucal.gyro.model import direction_residual, quat_mul, quat_to_rot, rate_map, rk4_increment, rk4_step
 from imucal.solve.vectorize import Vectorized
 
 #: steps per block: about the square root of a long segment's steps (hundreds)
@@ -167,3 +167,20 @@ class SegmentSteps:
         rows = np.concatenate([np.arange(starts[s], starts[s] + L[s]) for s in keep])
         return SegmentSteps(self.y0[:, rows], self.y1[:, rows], self.dt[:, rows], self.u0[:, keep],
                             self.u1[:, keep], Layout(L[keep]))
+
+
+def chained_graph(t: np.ndarray, seg, corrected: np.ndarray, nx: int, scale0: np.ndarray) -> tuple[ca.MX, ca.MX]:
+    """The check's reference: unknowns x and residuals (3 n) of imu_tk's normalised RK4 steps chained in one
+    CasADi graph (restarted at each segment), exact derivatives by CasADi. Slow to build; for tests and
+    scripts/bench_gyro.py, which compare the fast path (and its optimum) with it."""
+    x = ca.MX.sym("x", nx)
+    i0 = np.concatenate([np.arange(f, l) for f, l in zip(seg.first, seg.last)])
+    W0 = fit_rates(x, ca.DM(scale0), ca.DM(corrected[i0].T))
+    W1 = fit_rates(x, ca.DM(scale0), ca.DM(corrected[i0 + 1].T))
+    ends = np.cumsum(seg.lengths) - 1
+    reset = np.zeros((1, i0.size))
+    reset[0, np.r_[0, ends[:-1] + 1]] = 1.0
+    U = ca.vertcat(W0, W1, ca.DM((t[i0 + 1] - t[i0])[None, :]), ca.DM(reset))
+    Q = rk4_step().mapaccum("gyro_path", i0.size)(ca.DM([1, 0, 0, 0]), U)
+    r = direction_residual().map(seg.n)(Q[:, ends.tolist()], ca.DM(seg.u0.T), ca.DM(seg.u1.T))
+    return x, ca.vec(r)
