@@ -14,10 +14,11 @@ from imucal.gyro.segments import Segments
 
 def _omega(w: np.ndarray) -> np.ndarray:
     """(n, 4, 4) matrices of q' = 0.5 Omega(w) q, q = (w, x, y, z)."""
-    z = np.zeros(w.shape[0])
     x, y, c = w[:, 0], w[:, 1], w[:, 2]
-    return np.stack([np.stack([z, -x, -y, -c], 1), np.stack([x, z, c, -y], 1),
-                     np.stack([y, -c, z, x], 1), np.stack([c, y, -x, z], 1)], 1)
+    O = np.zeros((w.shape[0], 4, 4))
+    O[:, 0, 1:], O[:, 1:, 0] = -w, w
+    O[:, 1, 2], O[:, 1, 3], O[:, 2, 1], O[:, 2, 3], O[:, 3, 1], O[:, 3, 2] = c, -y, -c, x, y, -x
+    return O
 
 
 def integrate(t: np.ndarray, rate: np.ndarray, segments: Segments) -> np.ndarray:

@@ -8,18 +8,17 @@ standard error and the angle random walk of the gyro noise over the segment's du
 """
 from __future__ import annotations
 
-import functools
 import time
 from dataclasses import dataclass
 
-import casadi as ca
 import numpy as np
 
-from imucal.solve import ipopt
+from imucal.solve import least_squares
 from imucal.errors import ImucalError
 from imucal.gyro.evaluate import direction_errors_deg
 from imucal.gyro.gsens import StaticFit, fit_static
-from imucal.gyro.model import AXES, MIS_NAMES, apply_rate, direction_residual, misalignment_matrix, rk4_step
+from imucal.gyro.attitude import Layout, SegmentSteps
+from imucal.gyro.model import AXES, MIS_NAMES, apply_rate, misalignment_matrix
 from imucal.gyro.result import GyroResult
 from imucal.gyro.segments import GyroData, Segments, motion_segments
 
@@ -48,56 +47,72 @@ class GyroOptions:
                               fix="give the seconds to integrate from inside each still pose, e.g. 0.5")
 
 
-@functools.lru_cache(maxsize=16)
-def _problem(lengths: tuple[int, ...], free_bias: bool) -> tuple[ca.Function, ca.Function, ca.Function, int]:
-    """IPOPT solver and residual/Jacobian function for segments of these step counts (built once)."""
-    n, S = len(lengths), int(sum(lengths))
-    nx = 12 if free_bias else 9
-    x = ca.MX.sym("x", nx)
-    P = {"raw0": (3, S), "raw1": (3, S), "dt": (1, S), "u0": (3, n), "u1": (3, n), "w": (1, n), "scale0": (3, 1)}
-    syms = {k: ca.MX.sym(k, *s) for k, s in P.items()}
-    p = ca.vertcat(*[ca.vec(v) for v in syms.values()])
-    scale = syms["scale0"] * (1 + x[0:3])
-    db = syms["scale0"] * 1e-3 * x[9:12] if free_bias else ca.DM.zeros(3, 1)
-    C = ca.mtimes(ca.inv(misalignment_matrix(x[3:9])), ca.diag(1.0 / scale))
-    W0 = ca.mtimes(C, syms["raw0"] - ca.repmat(db, 1, S))
-    W1 = ca.mtimes(C, syms["raw1"] - ca.repmat(db, 1, S))
-    reset = np.zeros((1, S))
-    ends = np.cumsum(lengths) - 1
-    reset[0, np.r_[0, ends[:-1] + 1]] = 1.0
-    U = ca.vertcat(W0, W1, syms["dt"], ca.DM(reset))
-    Q = rk4_step().mapaccum("gyro_path", S)(ca.DM([1, 0, 0, 0]), U)
-    r = direction_residual().map(n)(Q[:, ends.tolist()], syms["u0"], syms["u1"])  # 3 x n, imu_tk's residual
-    rw = ca.vec(r * ca.repmat(syms["w"], 3, 1))
-    rv = ca.vec(r)
-    J = ca.jacobian(rv, x)
-    res = ca.Function("gyro_res", [x, p], [rv, J])
-    cost = ca.Function("gyro_cost", [x, p], [ca.sumsqr(rv)])
-    lam = ca.MX.sym("lam")
-    Jw = ca.jacobian(rw, x)
-    hess = ca.Function("nlp_hess_l", [x, p, lam, ca.MX.sym("lam_g", 0)], [lam * ca.triu(ca.mtimes(Jw.T, Jw))],
-                       ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
-    opts = {**ipopt.OPTIONS, "hess_lag": hess}  # the one option set of every calibration NLP
-    solver = ca.nlpsol("gyro_fit", "ipopt", {"x": x, "p": p, "f": 0.5 * ca.sumsqr(rw)}, opts)
-    return solver, res, cost, nx
-
-
-def _pack(data: GyroData, seg: Segments, corrected: np.ndarray, w: np.ndarray, scale0: np.ndarray) -> np.ndarray:
-    """The NLP's parameter vector (data of this fit), in the order of ``_problem``."""
+def _steps(data: GyroData, seg: Segments, corrected: np.ndarray) -> SegmentSteps:
+    """The RK4 steps of the motion segments: corrected raw rates at both ends of each step, dt, directions."""
     i0 = np.concatenate([np.arange(f, l) for f, l in zip(seg.first, seg.last)])
-    parts = [corrected[i0].T, corrected[i0 + 1].T, (data.t[i0 + 1] - data.t[i0])[None, :],
-             seg.u0.T, seg.u1.T, w[None, :], scale0[:, None]]
-    return np.concatenate([np.asarray(v, float).ravel(order="F") for v in parts])
+    return SegmentSteps(np.ascontiguousarray(corrected[i0].T), np.ascontiguousarray(corrected[i0 + 1].T),
+                        (data.t[i0 + 1] - data.t[i0])[None, :], np.ascontiguousarray(seg.u0.T),
+                        np.ascontiguousarray(seg.u1.T), Layout(np.asarray(seg.lengths, int)))
 
 
-def _search_scale(cost_fn: ca.Function, nx: int, pack) -> float:
+def _grid_argmin(steps: SegmentSteps, grid: np.ndarray, nx: int) -> float:
+    """The grid value of least cost sum_k |r_k|^2 (x = 0), the first of equal ones.
+
+    Exact pruning: the cost is a sum of squares over segments, so a scale whose sum over some
+    segments already exceeds a complete cost cannot be the least. The segments are taken in groups
+    of growing size; after the first group the most promising scale is completed to give that bound.
+    """
+    cuts = [c for c in (2, 6, 14) if c < steps.n]
+    groups = [steps.subset(g) for g in np.split(np.arange(steps.n), cuts)]
+    partial = groups[0].costs(grid, nx)
+    best = int(np.argmin(partial))
+    bound = partial[best] + sum(float(g.costs(grid[[best]], nx)[0]) for g in groups[1:])
+    alive = np.ones(grid.size, bool)
+    alive[best] = False
+    for g in groups[1:]:
+        alive &= partial <= bound
+        if alive.any():
+            partial[alive] += g.costs(grid[alive], nx)
+    alive &= partial <= bound
+    partial[best] = bound
+    cand = np.flatnonzero(alive | (np.arange(grid.size) == best))
+    return float(grid[cand[int(np.argmin(partial[cand]))]])
+
+
+def _search_scale(steps: SegmentSteps, nx: int) -> float:
     """Scalar nominal scale [unit per rad/s] minimising the direction mismatch (log grid, then refine)."""
-    def cost(k: float) -> float:
-        return float(cost_fn(np.zeros(nx), pack(np.full(3, k))))
-    grid = 10.0 ** np.arange(-2, 6.01, 0.1)
-    best = grid[int(np.argmin([cost(k) for k in grid]))]
-    fine = best * np.linspace(0.88, 1.12, 25)
-    return float(fine[int(np.argmin([cost(k) for k in fine]))])
+    best = _grid_argmin(steps, 10.0 ** np.arange(-2, 6.01, 0.1), nx)
+    return _grid_argmin(steps, best * np.linspace(0.88, 1.12, 25), nx)
+
+
+class _Problem:
+    """1/2 sum_k w_k^2 |r_k|^2 over the segments, for IPOPT through imucal.solve.least_squares.
+
+    Gradient J^T W r and Gauss-Newton Hessian J^T W J from one Jacobian per point (cached).
+    """
+
+    def __init__(self, steps: SegmentSteps, scale0: np.ndarray, w: np.ndarray, nx: int) -> None:
+        self.steps, self.scale0, self.wr, self.n_free = steps, scale0, np.repeat(w, 3), nx
+        self._key: bytes | None = None
+        self._rj: tuple[np.ndarray, np.ndarray] = (np.zeros(0), np.zeros(0))
+
+    def jacobian(self, x) -> tuple[np.ndarray, np.ndarray]:
+        """Residuals (3 n,) and Jacobian (3 n, nx), unweighted."""
+        x = np.asarray(x, float).ravel()
+        if self._key != x.tobytes():
+            r, J = self.steps.jacobian(x, self.scale0)
+            self._key, self._rj = x.tobytes(), (r.ravel(), J)
+        return self._rj
+
+    def value(self, x) -> float:
+        x = np.asarray(x, float).ravel()
+        r = self._rj[0] if self._key == x.tobytes() else self.steps.residuals(x, self.scale0).ravel()
+        return 0.5 * float(np.sum((self.wr * r) ** 2))
+
+    def derivatives(self, x) -> tuple[float, np.ndarray, np.ndarray]:
+        r, J = self.jacobian(x)
+        Jw = J * self.wr[:, None]
+        return 0.5 * float(np.sum((self.wr * r) ** 2)), Jw.T @ (self.wr * r), Jw.T @ Jw
 
 
 def _refuse_scales(axes: list[int], eff: np.ndarray, min_deg: float, source: str | None) -> None:
@@ -152,20 +167,18 @@ def fit_gyro(data: GyroData, options: GyroOptions = GyroOptions(), segments: np.
     if segments is not None:
         seg = seg.subset(np.asarray(segments, int))
     corrected = data.gyro - st.bias - data.acc @ st.H.T  # raw - s_g - B_g G_s a
-    solver, res, cost, nx = _problem(seg.lengths, options.free_bias)
-    ones = np.ones(seg.n)
+    nx = 12 if options.free_bias else 9
+    steps = _steps(data, seg, corrected)
     scale0 = options.nominal_scale or NOMINAL_SCALE.get(data.unit)
     if scale0 is None:
-        scale0 = _search_scale(cost, nx, lambda s: _pack(data, seg, corrected, ones, s))
+        scale0 = _search_scale(steps, nx)
     scale0 = np.full(3, float(scale0))
     w = 1.0 / _segment_sigma(data, seg, scale0)
-    p = _pack(data, seg, corrected, w, scale0)
+    problem = _Problem(steps, scale0, w, nx)
     names = ("x_scale_x", "x_scale_y", "x_scale_z") + MIS_NAMES + (("db_x", "db_y", "db_z") if options.free_bias else ())
-    r0, J0 = (np.asarray(v) for v in res(np.zeros(nx), p))
-    _require_observable(J0, names, options.min_angle_deg, data.source)
-    sol, stats = ipopt.run(solver, x0=np.zeros(nx), p=p)
-    x = np.asarray(sol["x"]).ravel()
-    r, J = (np.asarray(v) for v in res(x, p))
+    _require_observable(problem.jacobian(np.zeros(nx))[1], names, options.min_angle_deg, data.source)
+    x, stats = least_squares.solve(problem, np.full(nx, -np.inf), np.full(nx, np.inf))
+    r, J = problem.jacobian(x)
     wr = np.repeat(w, 3)
     Jw = J * wr[:, None]
     chi2 = float(np.sum((r.ravel() * wr) ** 2))

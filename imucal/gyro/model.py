@@ -79,19 +79,50 @@ def _omega_matrix(w):
                       ca.horzcat(w[2], w[1], -w[0], 0))
 
 
+def rk4_matrix() -> ca.Function:
+    """imu_tk's quaternion RK4 step as a linear map: (w0, w1, dt) -> A with q_next = A q before normalising.
+
+    q' = 0.5 Omega(w) q is linear in q, so each RK4 stage is a matrix times q (Tedaldi 2014, Eq. 9;
+    rate at both ends, linear interpolation at the midpoint): k_i = K_i q.
+    """
+    w0, w1, dt = ca.SX.sym("w0", 3), ca.SX.sym("w1", 3), ca.SX.sym("dt")
+    eye = ca.SX.eye(4)
+    wm = 0.5 * (w0 + w1)
+    K1 = 0.5 * _omega_matrix(w0)
+    K2 = 0.5 * ca.mtimes(_omega_matrix(wm), eye + 0.5 * dt * K1)
+    K3 = 0.5 * ca.mtimes(_omega_matrix(wm), eye + 0.5 * dt * K2)
+    K4 = 0.5 * ca.mtimes(_omega_matrix(w1), eye + dt * K3)
+    return ca.Function("gyro_rk4_matrix", [w0, w1, dt], [eye + dt * (K1 + 2 * K2 + 2 * K3 + K4) / 6])
+
+
 def rk4_step() -> ca.Function:
     """One quaternion RK4 step (q, [w0; w1; dt; reset]) -> q; reset = 1 restarts from identity."""
     q0 = ca.SX.sym("q0", 4)
     u = ca.SX.sym("u", 8)
     w0, w1, dt, reset = u[0:3], u[3:6], u[6], u[7]
     q = reset * ca.DM([1, 0, 0, 0]) + (1 - reset) * q0  # branch-free restart at a segment's first step
-    wm = 0.5 * (w0 + w1)
-    k1 = 0.5 * ca.mtimes(_omega_matrix(w0), q)
-    k2 = 0.5 * ca.mtimes(_omega_matrix(wm), q + 0.5 * dt * k1)
-    k3 = 0.5 * ca.mtimes(_omega_matrix(wm), q + 0.5 * dt * k2)
-    k4 = 0.5 * ca.mtimes(_omega_matrix(w1), q + dt * k3)
-    qn = q + dt * (k1 + 2 * k2 + 2 * k3 + k4) / 6
+    qn = ca.mtimes(rk4_matrix()(w0, w1, dt), q)
     return ca.Function("gyro_rk4", [q0, u], [qn / ca.norm_2(qn)])
+
+
+def rk4_increment() -> ca.Function:
+    """The unit quaternion a of one RK4 step, (w0, w1, dt) -> a with normalise(A q) = q (x) a.
+
+    Omega(w) q = q (x) (0, w) (a body rate right-multiplies), so every RK4 stage, and A itself,
+    right-multiplies q by a fixed quaternion: A q = q (x) (A e), e = (1, 0, 0, 0). For a unit q,
+    |q (x) a| = |a|, so imu_tk's normalised step is q (x) a / |a| exactly.
+    """
+    w0, w1, dt = ca.SX.sym("w0", 3), ca.SX.sym("w1", 3), ca.SX.sym("dt")
+    a = ca.mtimes(rk4_matrix()(w0, w1, dt), ca.DM([1, 0, 0, 0]))
+    return ca.Function("gyro_rk4_increment", [w0, w1, dt], [a / ca.norm_2(a)])
+
+
+def quat_mul(p, q):
+    """Hamilton product p (x) q of quaternions (w, x, y, z)."""
+    return ca.vertcat(p[0] * q[0] - p[1] * q[1] - p[2] * q[2] - p[3] * q[3],
+                      p[0] * q[1] + p[1] * q[0] + p[2] * q[3] - p[3] * q[2],
+                      p[0] * q[2] - p[1] * q[3] + p[2] * q[0] + p[3] * q[1],
+                      p[0] * q[3] + p[1] * q[2] - p[2] * q[1] + p[3] * q[0])
 
 
 def quat_to_rot(q):

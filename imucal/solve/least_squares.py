@@ -157,6 +157,10 @@ class Problem:
         self._key: bytes | None = None
         self._val: tuple = ()
 
+    @property
+    def n_free(self) -> int:
+        return self.fns.n_free
+
     def p_of(self, x) -> np.ndarray:
         return self.off + self.scale * np.asarray(x, float).ravel()
 
@@ -267,8 +271,12 @@ def _solver(nf: int) -> tuple[ca.Function, _Slot, _Objective]:
 
 
 def solve(problem: Problem, lb: np.ndarray, ub: np.ndarray) -> tuple[np.ndarray, dict]:
-    """Minimise the problem from x = 0 within [lb, ub]; returns (x, IPOPT's stats)."""
-    nf = problem.fns.n_free
+    """Minimise the problem from x = 0 within [lb, ub]; returns (x, IPOPT's stats).
+
+    ``problem`` has ``n_free``, ``value(x)`` and ``derivatives(x)`` -> (f, gradient, Hessian), as
+    ``Problem`` (the gyroscope's segment fit, imucal.gyro.fit, is another).
+    """
+    nf = problem.n_free
     solver, slot, _ = _solver(nf)
     slot.problem, slot.interrupt = problem, None
     try:
