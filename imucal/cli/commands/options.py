@@ -14,7 +14,7 @@ import dataclasses
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from imucal.constants import TIME_UNIT_CHOICES
+from imucal.constants import GYRO_UNIT_CHOICES, TIME_UNIT_CHOICES
 from imucal.errors import ImucalError
 
 if TYPE_CHECKING:
@@ -42,6 +42,9 @@ def add_data_options(p: argparse.ArgumentParser, data_required: bool = False, gy
         g.add_argument("--gyro-data", metavar="FILE",
                        help="gyroscope recording on the accelerometer's time base (imu_tk: t x y z); "
                             "gyro columns gx, gy, gz in --data are used without it")
+        g.add_argument("--gyro-unit", choices=GYRO_UNIT_CHOICES,
+                       help="the gyroscope's raw unit: raw or counts (the scale is searched), deg/s or rad/s "
+                            "(nominal scale); default auto: rad/s for a ROS bag, else counts")
     if stream:
         g.add_argument("--stream", choices=("auto", "always", "never"),
                        help="read the recording in chunks with bounded memory: auto (files above 64 MB, "
@@ -98,7 +101,7 @@ def run_config(args: argparse.Namespace, config: str | None = None, data_overrid
     if getattr(args, "columns", None):
         over["columns"] = parse_columns(args.columns)
     for opt, key in (("time_unit", "time_unit"), ("sample_rate", "sample_rate"), ("unit", "unit"),
-                     ("topic", "topic"), ("temp_topic", "temp_topic"), ("stream", "stream")):
+                     ("gyro_unit", "gyro_unit"), ("topic", "topic"), ("temp_topic", "temp_topic"), ("stream", "stream")):
         if getattr(args, opt, None) is not None:
             over[key] = getattr(args, opt)
     data = dataclasses.replace(cfg.data, **over) if over else cfg.data
