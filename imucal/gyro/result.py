@@ -35,6 +35,7 @@ class GyroResult:
     dof: int
     redchi: float
     seconds: float  #: wall time of the fit
+    lead_in_s: float = 0.0  #: [s] the segments started and ended this far inside the still poses
 
     @property
     def success(self) -> bool:
