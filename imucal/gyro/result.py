@@ -101,7 +101,8 @@ class GyroResult:
                 L.append(f"  G_s row {ax[i]}: not selected (p = {self.gsens_p_value[i]:.2g})")
         r = self.rms_direction_error_deg
         inside = f" (each from {self.lead_in_s:g} s inside its still poses)" if self.lead_in_s > 0 else ""
-        L.append(f"  gravity-direction error over {self.segments.size} motions{inside}: rms {r['before']:.3f} deg before, "
+        L.append(f"  gravity-direction error over {self.segments.size} motions{inside}: "
+                 f"rms {r['before']:.3f} deg before, "
                  f"{r['after']:.3f} deg after;  IPOPT {self.status}, {self.iterations} iterations, "
                  f"redchi {self.redchi:.3g}")
         for a, b, c in self.correlations():

@@ -136,7 +136,8 @@ def run_config(args: argparse.Namespace, config: str | None = None, data_overrid
     if getattr(args, "columns", None):
         over["columns"] = parse_columns(args.columns)
     for opt, key in (("time_unit", "time_unit"), ("sample_rate", "sample_rate"), ("unit", "unit"),
-                     ("gyro_unit", "gyro_unit"), ("topic", "topic"), ("temp_topic", "temp_topic"), ("stream", "stream")):
+                     ("gyro_unit", "gyro_unit"), ("topic", "topic"), ("temp_topic", "temp_topic"),
+                     ("stream", "stream")):
         if getattr(args, opt, None) is not None:
             over[key] = getattr(args, opt)
     data = dataclasses.replace(cfg.data, **over) if over else cfg.data
