@@ -26,6 +26,8 @@ DEFAULT_ANGLE_TOL = 0.02
 #: Time units of a time column, with their factor to seconds ("auto": inferred from the stamps).
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 TIME_UNIT_CHOICES = ("auto", *TIME_UNITS)
+#: A gyroscope's raw units (data.gyro_unit): auto, counts (= raw: the scale is searched), deg/s, rad/s.
+GYRO_UNIT_CHOICES = ("auto", "raw", "counts", "deg/s", "rad/s")
 
 #: SI unit of the calibrated output.
 SI_ACCEL_UNIT = "m/s^2"

@@ -4,7 +4,7 @@ from __future__ import annotations
 from collections.abc import Iterator
 from contextlib import contextmanager
 import math
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +25,7 @@ from imucal.constants import RIGHT_ANGLE
 from imucal.model.parameters import ANGLE_NAMES, BASE_NAMES, Parameters, base_parameters
 from imucal.data.static import Intervals, detect_static
 from imucal.solve.stats import chi2_sf
+from imucal.gyro.fit import GyroOptions
 from imucal.gyro.result import GyroResult
 from imucal.gyro.run import calibrate_gyro
 from imucal.model.effects_registry import effects_from_specs
@@ -329,7 +330,7 @@ def calibrate_imu(config: RunConfig, recording: Recording | None = None,
     """The accelerometer (``calibrate``), then the gyroscope when the recording has gx, gy, gz
     or ``gyro_file`` (imu_tk's second file) is given: one calibration holding both sensors."""
     run = calibrate(config, recording)
-    res = calibrate_gyro(run, gyro_file)
+    res = calibrate_gyro(run, gyro_file, GyroOptions(**asdict(config.gyro)))
     if res is None:
         return run
     return replace(run, gyro=res, calibration=replace(run.calibration, gyro=GyroCalibration.from_result(res)))

@@ -98,20 +98,22 @@ def test_all_axes_turned_is_accepted() -> None:
 def test_lead_in_integrates_motions_a_detector_counted_as_still() -> None:
     """Still poses detected 0.1 s too long at both ends (a detector's window holding the start and end of
     each turn): the default segments miss part of every turn and the scales come out several standard
-    errors off; integrating from 0.5 s inside the poses (GyroOptions.lead_in_s) recovers them."""
+    errors off; integrating from 0.5 s inside the poses (GyroOptions.lead_in_s) recovers them, and the
+    default (lead_in_s="auto", imucal.gyro.lead_in) sees the turning edges and does so."""
     d = hand_held(TRUTH, seed=5, unit="rad/s", n_poses=16, durations=None)
     k = 10
     late = type(d)(d.t, d.gyro, d.acc, np.r_[d.start[0], d.start[1:] - k], np.r_[d.end[:-1] + k, d.end[-1]], d.unit,
                    d.source)
     seg, seg_in = motion_segments(late), motion_segments(late, 0.5)
     assert np.all(seg.first - seg_in.first == 50) and np.all(seg_in.last - seg.last == 50)
-    plain = fit_gyro(late, GyroOptions(gsens="auto"))
-    inside = fit_gyro(late, GyroOptions(gsens="auto", lead_in_s=0.5))
+    plain = fit_gyro(late, GyroOptions(gsens="auto", lead_in_s=0.0))
+    inside = fit_gyro(late, GyroOptions(gsens="auto"))
+    assert inside.lead_in_s == 0.5
     assert np.max(np.abs(plain.scale - TRUTH.scale) / plain.scale_std) > 4
     assert np.all(np.abs(inside.scale - TRUTH.scale) < 3 * inside.scale_std)
 
 
 @pytest.mark.parametrize("bad", [-0.1, float("nan"), 11.0])
 def test_bad_lead_in_is_refused(bad) -> None:
-    with pytest.raises(ImucalError, match=r"gyro.lead_in_s: lead_in_s .* is not between 0 and 10 s \(fix: give"):
+    with pytest.raises(ImucalError, match=r"gyro.lead_in_s: lead_in_s .* is not auto or between 0 and 10 s \(fix: give"):
         GyroOptions(lead_in_s=bad)

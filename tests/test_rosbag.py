@@ -292,7 +292,8 @@ def test_topic_is_refused_for_a_text_recording(si_recording, run_cli):
 @pytest.mark.slow
 def test_a_real_ros_recording_with_its_gyro_calibrates_as_from_text(run_cli, tmp_path):
     """GetOverMassif's data2 (exported from a ROS 2 bag, m/s^2 and rad/s) back into a bag: the
-    accelerometer and the gyroscope come out as from the same samples in a CSV."""
+    accelerometer and the gyroscope come out as from the same samples in a CSV (gyro in rad/s, as a
+    bag's gyro_unit defaults to)."""
     from conftest import real_file
 
     acc = np.loadtxt(real_file("ros-imu-getovermassif", "data2", "acc_data.txt"))
@@ -306,7 +307,7 @@ def test_a_real_ros_recording_with_its_gyro_calibrates_as_from_text(run_cli, tmp
                header="t,ax,ay,az,gx,gy,gz", comments="")
     keys = ("params", "std", "matrix", "offset", "rms_residual", "n_intervals", "gyro")
     js = [_calibrate(run_cli, d, tmp_path / n, "--gravity", "9.81744", *x)
-          for d, n, x in ((csv, "c", ()), (bag, "b", ("--topic", "/imu")))]
+          for d, n, x in ((csv, "c", ("--gyro-unit", "rad/s")), (bag, "b", ("--topic", "/imu")))]
     want, got = (_numbers({k: j[k] for k in keys}) for j in js)
     assert any(k.startswith(".gyro") for k in want) and set(got) == set(want)
     for k in want:

@@ -118,6 +118,28 @@ class FitSettings:
                 raise ImucalError(f"initial value {short(v)} is not a finite number", field=f"fit.initial.{n}")
 
 
+GYRO_GSENS = ("auto", "on", "off")
+
+
+@dataclass(frozen=True)
+class GyroSettings:
+    """The gyroscope fit's choices (the YAML ``gyro:`` section; imucal.gyro.fit.GyroOptions)."""
+
+    gsens: str = "auto"  #: g-sensitivity: auto (a likelihood-ratio test per axis), on or off
+    lead_in_s: float | str = "auto"  #: [s] integrate from inside the still poses; auto: imucal.gyro.lead_in
+    free_bias: bool = False  #: also fit a bias correction in the rotation fit (imu_tk's option)
+
+    def __post_init__(self) -> None:
+        if self.gsens not in GYRO_GSENS:
+            raise ImucalError(f"unknown g-sensitivity choice {short(self.gsens)}", field="gyro.gsens",
+                              fix=f"use one of {', '.join(GYRO_GSENS)}")
+        if self.lead_in_s != "auto" and not (_is_real(self.lead_in_s) and 0 <= self.lead_in_s <= 10):
+            raise ImucalError(f"lead_in_s {short(self.lead_in_s)} is not auto or between 0 and 10 s",
+                              field="gyro.lead_in_s", fix="give auto, or seconds such as 0.5")
+        if not isinstance(self.free_bias, bool):
+            raise ImucalError(f"free_bias {short(self.free_bias)} must be true or false", field="gyro.free_bias")
+
+
 @dataclass(frozen=True)
 class OutputSettings:
     dir: str = "out"
@@ -137,6 +159,7 @@ class RunConfig:
     gravity: GravitySpec = GravitySpec()
     fit: FitSettings = FitSettings()
     output: OutputSettings = OutputSettings()
+    gyro: GyroSettings = GyroSettings()
     source: str | None = None  #: the YAML file, for messages and relative paths
 
     @property
@@ -188,7 +211,7 @@ def config_from_dict(d: Any, path: str | None = None) -> RunConfig:
     if not isinstance(d, Mapping):
         raise ImucalError("top level must be a mapping with a data: section", file=path, field="top level",
                           fix="see the YAML schema in the README")
-    allowed = ("data", "static", "gravity", "fit", "output")
+    allowed = ("data", "static", "gravity", "fit", "output", "gyro")
     unknown = [k for k in d if k not in allowed]
     if unknown:
         raise ImucalError(f"unknown key {short(unknown[0])}", file=path, field=key_text(unknown[0]),
@@ -231,6 +254,7 @@ def config_from_dict(d: Any, path: str | None = None) -> RunConfig:
         gravity=_fill(GravitySpec, d.get("gravity"), "gravity.", path),
         fit=_fill(FitSettings, fitraw, "fit.", path),
         output=_fill(OutputSettings, d.get("output"), "output.", path),
+        gyro=_fill(GyroSettings, d.get("gyro"), "gyro.", path),
         source=path,
     )
 

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from imucal.constants import TIME_UNIT_CHOICES, TIME_UNITS
+from imucal.constants import GYRO_UNIT_CHOICES, TIME_UNIT_CHOICES, TIME_UNITS
 from imucal.errors import ImucalError, short
 from imucal.data.rosbag import is_bag, read_bag
 from imucal.files.inputs import max_data_bytes, open_regular
@@ -28,6 +28,13 @@ MIN_RATE_HZ, MAX_RATE_HZ = 1.0, 1.0e5
 #: (squares of it would overflow double precision in the fit).
 MAX_ABS_VALUE = 1.0e30
 _MAX_SCAN_LINES = 50
+def gyro_unit(spec: DataSpec, bag: bool = False) -> str:
+    """The gyro unit a fit uses: raw (counts, scale searched), deg/s or rad/s; ``bag``: a ROS bag's default."""
+    if spec.gyro_unit == "auto":
+        return "rad/s" if bag else "raw"
+    return "raw" if spec.gyro_unit == "counts" else spec.gyro_unit
+
+
 #: Leading time stamps whose integer values mark a tick counter (infer_time_unit).
 TIME_HEAD_ROWS = 1000
 
@@ -39,6 +46,9 @@ class DataSpec:
     ``columns`` maps the roles t, ax, ay, az, temp to column names (CSV with header) or to
     0-based column indices (files without header). Without a time column, give
     ``sample_rate`` [Hz]. ``unit`` labels the raw values ("raw" counts, or "m/s^2").
+    ``gyro_unit`` is the gyroscope's raw unit (GYRO_UNIT_CHOICES): counts start the gyro fit with a
+    search for the scale, deg/s and rad/s with the nominal scale; "auto" is rad/s for a ROS bag
+    (REP 103) and counts otherwise.
     """
 
     path: str
@@ -49,6 +59,7 @@ class DataSpec:
     sample_rate: float | None = None
     time_unit: str = "auto"
     unit: str = "raw"
+    gyro_unit: str = "auto"  #: the gyroscope's raw unit, one of GYRO_UNIT_CHOICES
     #: rails of the raw readings: {"low": v, "high": v}, each a number or [x, y, z]
     saturation: dict | None = None
     #: a gyroscope recording on the same time base (imu_tk's second file), calibrated beside
@@ -63,7 +74,7 @@ class DataSpec:
         if not isinstance(self.path, (str, os.PathLike)) or not str(self.path):
             raise ImucalError(f"path {short(self.path)} must be a file name", field="data.path",
                               fix="give the recording's path as text")
-        for name in ("format", "time_unit", "unit", "stream"):
+        for name in ("format", "time_unit", "unit", "gyro_unit", "stream"):
             if not isinstance(getattr(self, name), str):
                 raise ImucalError(f"{name} {short(getattr(self, name))} must be text", field=f"data.{name}")
         if self.delimiter is not None and not (isinstance(self.delimiter, str) and len(self.delimiter) == 1
@@ -87,6 +98,9 @@ class DataSpec:
         if self.stream not in STREAM_CHOICES:
             raise ImucalError(f"unknown stream setting {short(self.stream)}", field="data.stream",
                               fix=f"use one of {', '.join(STREAM_CHOICES)}")
+        if self.gyro_unit not in GYRO_UNIT_CHOICES:
+            raise ImucalError(f"unknown gyro unit {short(self.gyro_unit)}", field="data.gyro_unit",
+                              fix=f"use one of {', '.join(GYRO_UNIT_CHOICES)} (raw and counts: the scale is searched)")
         if self.time_unit not in TIME_UNIT_CHOICES:
             raise ImucalError(f"unknown time unit {short(self.time_unit)}", field="data.time_unit",
                               fix=f"use one of {', '.join(TIME_UNIT_CHOICES)}")
@@ -133,6 +147,7 @@ class Recording:
     time_unit: str = "s"  #: unit of t_source
     time_note: str = ""  #: how the time base was obtained (given, inferred, or from the rate)
     time_column: str = "t"  #: the time column's name in the file
+    gyro_unit: str = "raw"  #: unit of ``gyro`` (and of a second gyro file): raw (counts), deg/s or rad/s
 
     @property
     def n(self) -> int:
@@ -410,6 +425,8 @@ def _check_bag_spec(spec: DataSpec, path: Path) -> None:
     given += [n for n, v, d in (("format", spec.format, "auto"), ("time_unit", spec.time_unit, "auto")) if v != d]
     if spec.unit not in ("raw", "m/s^2"):
         given.append("unit")
+    if spec.gyro_unit not in ("auto", "rad/s"):
+        given.append("gyro_unit")
     if given:
         raise ImucalError(f"{given[0]} does not apply to a ROS bag", file=str(path), field=f"data.{given[0]}",
                           fix="drop it: the Imu messages give time [s], acceleration [m/s^2] and rate [rad/s]")
@@ -599,7 +616,8 @@ def load_recording(spec: DataSpec | str | os.PathLike, base_dir: str | os.PathLi
     raw = np.column_stack([data["ax"], data["ay"], data["az"]])
     gyro = np.column_stack([data["gx"], data["gy"], data["gz"]]) if lay.has_gyro else None
     return Recording(t=t, raw=raw, temp=data.get("temp"), unit=spec.unit, source=str(path), sha256=sha,
-                     gyro=gyro, t_source=stamps, time_unit=unit, time_note=note, time_column=lay.time_column)
+                     gyro=gyro, t_source=stamps, time_unit=unit, time_note=note, time_column=lay.time_column,
+                     gyro_unit=gyro_unit(spec))
 
 
 def time_base_without_stamps(spec: DataSpec) -> tuple[str, str]:

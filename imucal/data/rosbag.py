@@ -150,7 +150,7 @@ def read_bag(path: str | os.PathLike, topic: str | None, temp_topic: str | None 
     if temp is not None:
         temp = np.interp(ns - ns[0], temp[0] - ns[0], temp[1])  # held at the ends beyond the temperature messages
     return Recording(t=t, raw=raw, temp=temp, unit="m/s^2", source=str(path), sha256=sha, gyro=gyro,
-                     t_source=ns * 1e-9, time_unit="s", time_note=note, time_column="t")
+                     t_source=ns * 1e-9, time_unit="s", time_note=note, time_column="t", gyro_unit="rad/s")
 
 
 def _temperature(reader: object, path: Path, topic: str) -> tuple[np.ndarray, np.ndarray]:

@@ -9,7 +9,7 @@ standard error and the angle random walk of the gyro noise over the segment's du
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -18,6 +18,7 @@ from imucal.errors import ImucalError
 from imucal.gyro.evaluate import direction_errors_deg
 from imucal.gyro.gsens import StaticFit, fit_static
 from imucal.gyro.attitude import Layout, SegmentSteps
+from imucal.gyro.lead_in import lead_in_for
 from imucal.gyro.model import AXES, MIS_NAMES, apply_rate, misalignment_matrix
 from imucal.gyro.result import GyroResult
 from imucal.gyro.segments import GyroData, Segments, motion_segments
@@ -36,15 +37,18 @@ class GyroOptions:
     free_bias: bool = False  #: also fit a bias correction in the rotation fit
     nominal_scale: float | None = None  #: [unit per rad/s]; None: from the unit, else a 1-D search
     min_angle_deg: float = MIN_ANGLE_DEG
-    lead_in_s: float = 0.0  #: integrate from this far inside the still poses [s] (segments.motion_segments)
+    #: integrate from this far inside the still poses [s] (segments.motion_segments); "auto": by the
+    #: data (imucal.gyro.lead_in: when the poses' edges turn and the g-sensitivity found is modelled)
+    lead_in_s: float | str = "auto"
 
     def __post_init__(self) -> None:
         if self.gsens not in ("auto", "on", "off"):
             raise ImucalError(f"gsens {self.gsens!r} is not one of auto, on, off", field="gyro.gsens",
                               fix="use auto (test the data), on or off")
-        if not 0 <= self.lead_in_s <= 10:
-            raise ImucalError(f"lead_in_s {self.lead_in_s!r} is not between 0 and 10 s", field="gyro.lead_in_s",
-                              fix="give the seconds to integrate from inside each still pose, e.g. 0.5")
+        if self.lead_in_s != "auto" and not (isinstance(self.lead_in_s, (int, float))
+                                             and not isinstance(self.lead_in_s, bool) and 0 <= self.lead_in_s <= 10):
+            raise ImucalError(f"lead_in_s {self.lead_in_s!r} is not auto or between 0 and 10 s", field="gyro.lead_in_s",
+                              fix="give auto, or the seconds to integrate from inside each still pose, e.g. 0.5")
 
 
 def _steps(data: GyroData, seg: Segments, corrected: np.ndarray) -> SegmentSteps:
@@ -163,7 +167,8 @@ def fit_gyro(data: GyroData, options: GyroOptions = GyroOptions(), segments: np.
     tic = time.perf_counter()
     gm, _, am, _ = data.static_means()
     st = fit_static(gm, am, options.gsens)
-    seg = motion_segments(data, options.lead_in_s)
+    lead_in = lead_in_for(data, options.gsens, options.lead_in_s, st)
+    seg = motion_segments(data, lead_in)
     if segments is not None:
         seg = seg.subset(np.asarray(segments, int))
     corrected = data.gyro - st.bias - data.acc @ st.H.T  # raw - s_g - B_g G_s a
@@ -186,8 +191,9 @@ def fit_gyro(data: GyroData, options: GyroOptions = GyroOptions(), segments: np.
     redchi = chi2 / dof if dof > 0 else float("nan")
     cov = np.linalg.inv(Jw.T @ Jw) * (redchi if dof > 0 else 1.0)
     sd = np.sqrt(np.diag(cov))
-    return _result(data, options, st, seg, x, sd, cov, scale0, corrected, stats, chi2, dof, redchi, names,
-                   time.perf_counter() - tic)
+    res = _result(data, options, st, seg, x, sd, cov, scale0, corrected, stats, chi2, dof, redchi, names,
+                  time.perf_counter() - tic)
+    return replace(res, lead_in_s=lead_in)
 
 
 def _segment_sigma(data: GyroData, seg: Segments, scale0: np.ndarray) -> np.ndarray:
@@ -224,6 +230,7 @@ def _result(data, options, st: StaticFit, seg, x, sd, cov, scale0, corrected, st
 
 def cross_validate(data: GyroData, options: GyroOptions = GyroOptions(), folds: int = 5) -> np.ndarray:
     """Held-out direction error [deg] of every motion segment: fit on the other folds (segment k in fold k % folds)."""
+    options = replace(options, lead_in_s=lead_in_for(data, options.gsens, options.lead_in_s))  # one for all folds
     seg = motion_segments(data, options.lead_in_s)
     out = np.full(seg.n, np.nan)
     for f in range(folds):

@@ -35,6 +35,7 @@ class GyroResult:
     dof: int
     redchi: float
     seconds: float  #: wall time of the fit
+    lead_in_s: float = 0.0  #: [s] the segments started and ended this far inside the still poses
 
     @property
     def success(self) -> bool:
@@ -99,7 +100,9 @@ class GyroResult:
             else:
                 L.append(f"  G_s row {ax[i]}: not selected (p = {self.gsens_p_value[i]:.2g})")
         r = self.rms_direction_error_deg
-        L.append(f"  gravity-direction error over {self.segments.size} motions: rms {r['before']:.3f} deg before, "
+        inside = f" (each from {self.lead_in_s:g} s inside its still poses)" if self.lead_in_s > 0 else ""
+        L.append(f"  gravity-direction error over {self.segments.size} motions{inside}: "
+                 f"rms {r['before']:.3f} deg before, "
                  f"{r['after']:.3f} deg after;  IPOPT {self.status}, {self.iterations} iterations, "
                  f"redchi {self.redchi:.3g}")
         for a, b, c in self.correlations():

@@ -40,7 +40,8 @@ MAX_DIRECTION_ERROR_DEG = 10.0
 def gyro_data(run, gyro_file: str | None = None, unit: str | None = None) -> tuple[GyroData, str] | None:
     """The gyro fit's data of ``run`` (imucal.pipeline.CalibrationRun) and the gyro's source; None without a gyro.
 
-    ``unit``: the gyro's raw unit (rad/s, deg/s or raw); default the recording's unit."""
+    ``unit``: the gyro's raw unit (rad/s, deg/s or raw); default the recording's ``gyro_unit``
+    (data.gyro_unit), never the accelerometer's unit."""
     ch = gyro_channel(run.recording, gyro_file)
     if ch is None:
         return None
@@ -48,7 +49,7 @@ def gyro_data(run, gyro_file: str | None = None, unit: str | None = None) -> tup
     if gyro_file is not None and raw.shape[0] == run.recording.n:
         acc_t0 = None  # same samples: taken one by one
     try:
-        return gyro_data_from_run(run, t, raw, unit=unit or run.recording.unit, acc_t0=acc_t0), source
+        return gyro_data_from_run(run, t, raw, unit=unit or run.recording.gyro_unit, acc_t0=acc_t0), source
     except ImucalError as exc:
         raise ImucalError(exc.message, file=exc.file or source, field=exc.field, fix=exc.fix) from None
 

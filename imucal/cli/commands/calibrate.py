@@ -15,6 +15,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     options.add_data_options(p, gyro=True, stream=True)
     options.add_gravity_options(p)
     options.add_model_options(p)
+    options.add_gyro_options(p)
     p.add_argument("--out", help="output directory (default: config output.dir, else ./out)")
     p.add_argument("--json", help="also write a machine-readable summary to this file")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures (report.html then has none)")

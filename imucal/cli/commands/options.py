@@ -14,11 +14,11 @@ import dataclasses
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from imucal.constants import TIME_UNIT_CHOICES
+from imucal.constants import GYRO_UNIT_CHOICES, TIME_UNIT_CHOICES
 from imucal.errors import ImucalError
 
 if TYPE_CHECKING:
-    from imucal.config.run import GravitySpec, RunConfig
+    from imucal.config.run import GravitySpec, GyroSettings, RunConfig
 
 
 def add_data_options(p: argparse.ArgumentParser, data_required: bool = False, gyro: bool = False,
@@ -42,6 +42,9 @@ def add_data_options(p: argparse.ArgumentParser, data_required: bool = False, gy
         g.add_argument("--gyro-data", metavar="FILE",
                        help="gyroscope recording on the accelerometer's time base (imu_tk: t x y z); "
                             "gyro columns gx, gy, gz in --data are used without it")
+        g.add_argument("--gyro-unit", choices=GYRO_UNIT_CHOICES,
+                       help="the gyroscope's raw unit: raw or counts (the scale is searched), deg/s or rad/s "
+                            "(nominal scale); default auto: rad/s for a ROS bag, else counts")
     if stream:
         g.add_argument("--stream", choices=("auto", "always", "never"),
                        help="read the recording in chunks with bounded memory: auto (files above 64 MB, "
@@ -64,6 +67,41 @@ def add_model_options(p: argparse.ArgumentParser, mode: bool = True) -> None:
     g.add_argument("--weights", choices=("auto", "noise", "uniform"),
                    help="row weights: auto (default: 1/(sigma^2 + excess), the between-interval excess "
                         "added when the residuals exceed the noise), noise (1/sigma^2) or uniform (as imu_tk)")
+
+
+def add_gyro_options(p: argparse.ArgumentParser) -> None:
+    """The gyroscope fit's choices (the YAML gyro: section)."""
+    g = p.add_argument_group("gyroscope")
+    g.add_argument("--gyro-gsens", choices=("auto", "on", "off"),
+                   help="g-sensitivity: auto (default: kept per axis by a test on the static means), on or off")
+    g.add_argument("--gyro-lead-in", type=_lead_in, metavar="auto|SECONDS",
+                   help="integrate the motions from this far inside the still poses; auto (default): 0.5 s "
+                        "when the poses' edges turn and the g-sensitivity found is modelled, else 0")
+    g.add_argument("--gyro-free-bias", action="store_true",
+                   help="also fit a gyro bias correction in the rotation fit (imu_tk's option)")
+
+
+def _lead_in(text: str) -> float | str:
+    if text == "auto":
+        return text
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not auto or a number of seconds") from None
+
+
+def _gyro(args: argparse.Namespace, cfg: RunConfig) -> GyroSettings:
+    """cfg.gyro with the --gyro-* options given."""
+    over = {k: v for k, v in (("gsens", getattr(args, "gyro_gsens", None)),
+                              ("lead_in_s", getattr(args, "gyro_lead_in", None)),
+                              ("free_bias", getattr(args, "gyro_free_bias", False) or None)) if v is not None}
+    if not over:
+        return cfg.gyro
+    try:
+        return dataclasses.replace(cfg.gyro, **over)
+    except ImucalError as exc:
+        flag = "--gyro-" + {"gyro.gsens": "gsens", "gyro.lead_in_s": "lead-in"}.get(exc.field, "free-bias")
+        raise ImucalError(exc.message, field=flag, fix=exc.fix) from None
 
 
 def _gravity(args: argparse.Namespace, cfg: RunConfig) -> GravitySpec:
@@ -98,7 +136,8 @@ def run_config(args: argparse.Namespace, config: str | None = None, data_overrid
     if getattr(args, "columns", None):
         over["columns"] = parse_columns(args.columns)
     for opt, key in (("time_unit", "time_unit"), ("sample_rate", "sample_rate"), ("unit", "unit"),
-                     ("topic", "topic"), ("temp_topic", "temp_topic"), ("stream", "stream")):
+                     ("gyro_unit", "gyro_unit"), ("topic", "topic"), ("temp_topic", "temp_topic"),
+                     ("stream", "stream")):
         if getattr(args, opt, None) is not None:
             over[key] = getattr(args, opt)
     data = dataclasses.replace(cfg.data, **over) if over else cfg.data
@@ -109,7 +148,7 @@ def run_config(args: argparse.Namespace, config: str | None = None, data_overrid
         fit = dataclasses.replace(fit, fix=tuple(sorted(fix)), mode=mode or fit.mode,
                                   weights=weights or fit.weights)
     grav = _gravity(args, cfg) if hasattr(args, "gravity") else cfg.gravity
-    return dataclasses.replace(cfg, data=data, gravity=grav, fit=fit)
+    return dataclasses.replace(cfg, data=data, gravity=grav, fit=fit, gyro=_gyro(args, cfg))
 
 
 def data_path(cfg: RunConfig, gyro: bool = False) -> Path | None:
