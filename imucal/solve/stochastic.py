@@ -44,7 +44,7 @@ MODELS = ("none", INSTABILITY, RANDOM_WALK, "both")
 #: variance components of each model: (instability, random walk) free?
 _FREE = {"none": (False, False), INSTABILITY: (True, False), RANDOM_WALK: (False, True), "both": (True, True)}
 #: log10 grid of each component relative to its natural scale (median sigma^2, and that per second)
-_GRID = np.linspace(-3.0, 3.0, 25)
+_GRID = np.linspace(-3.0, 3.0, 13)
 UNITS = {INSTABILITY: "m/s^2", RANDOM_WALK: "m/s^2/sqrt(s)"}
 
 
@@ -78,14 +78,16 @@ def components_at(fns: lsq.RowFunctions, rows: lsq.Rows, pfree: np.ndarray, pfix
     return components(r, sigma, J, Jraw * np.asarray(b, float), t)
 
 
-def reml(c: Components, tau2: float, q2: float) -> tuple[float, np.ndarray]:
-    """REML log-likelihood (up to a constant) and the projector P at (tau^2, q^2)."""
+def reml(c: Components, tau2: float, q2: float, projector: bool = False) -> tuple[float, np.ndarray | None]:
+    """REML log-likelihood (up to a constant) and, by option, the projector P at (tau^2, q^2)."""
     V = c.covariance(tau2, q2)
     L = np.linalg.cholesky(V)
     Xw, rw = np.linalg.solve(L, c.X), np.linalg.solve(L, c.r)
     Q, R = np.linalg.qr(Xw)
     e = rw - Q @ (Q.T @ rw)
     ll = -0.5 * (2 * np.sum(np.log(np.diag(L))) + 2 * np.sum(np.log(np.abs(np.diag(R)))) + float(e @ e))
+    if not projector:
+        return float(ll), None
     Li = np.linalg.solve(L, np.eye(len(c.r)))
     M = Li - Q @ (Q.T @ Li)
     return float(ll), M.T @ M
@@ -113,7 +115,7 @@ def fit_model(c: Components, name: str) -> ModelFit:
     best = max(((reml(c, a, b)[0], a, b) for a in axes[0] for b in axes[1]), key=lambda x: x[0])
     theta, ll = np.array(best[1:]), best[0]
     for _ in range(50):  # Fisher scoring with step halving, projected on theta >= 0
-        _, P = reml(c, *theta)
+        _, P = reml(c, *theta, projector=True)
         PK = [P @ K for K in c.K]
         Pr = P @ c.r
         score = np.array([-0.5 * np.trace(A) + 0.5 * float(Pr @ K @ Pr) for A, K in zip(PK, c.K)])
@@ -131,7 +133,7 @@ def fit_model(c: Components, name: str) -> ModelFit:
         theta, ll = new, max(ll, ll_new)
         if done:
             break
-    _, P = reml(c, *theta)
+    _, P = reml(c, *theta, projector=True)
     PK = [P @ K for K in c.K]
     F = np.array([[0.5 * np.sum(A * B.T) for B in PK] for A in PK])
     idx = np.flatnonzero(free)
