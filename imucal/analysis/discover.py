@@ -780,7 +780,9 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings())
 def _beaten(config: RunConfig, base: CalibrationRun, final: CalibrationRun, found: list, cur_effects: dict,
             current: FitResult, verdict: str, settings: DiscoverSettings, notes: list[str]):
     """Drop the terms in time that a bias random walk explains as well (imucal.analysis.stochastic)."""
-    beaten = stoch.beaten_terms(final, {f[0] for f in found}, settings.alpha_effect) if found else {}
+    if not found or _p_noise(final.result) >= settings.alpha_noise:  # no excess left: nothing to beat
+        return final, found, cur_effects, verdict
+    beaten = stoch.beaten_terms(final, {f[0] for f in found}, settings.alpha_effect)
     if not beaten:
         return final, found, cur_effects, verdict
     notes.extend(beaten.values())

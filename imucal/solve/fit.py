@@ -25,6 +25,9 @@ from imucal.model.parameters import Parameters, model_label
 _STATUS_WORDS, _CONVERGED = ipopt.STATUS_WORDS, ipopt.CONVERGED
 #: weights="auto": the noise-only chi-square test at which a between-interval excess is used.
 EXCESS_P = 1e-3
+#: weights="auto": no stochastic-bias test above this reduced chi-square against the noise: that is a
+#: model error (the pipeline refuses such a fit), which a random walk would otherwise absorb.
+STOCHASTIC_MAX_REDCHI = 1.0e4
 #: weights="auto": at most this many solves while the excess settles.
 MAX_PASSES = 8
 
@@ -234,7 +237,8 @@ def _excess(fns, rows, data: FitData, params: Parameters, p_now, pfix, gravity: 
     """
     if chi2_sf(float(np.sum((r0 / s0) ** 2)), dof) >= EXCESS_P:
         return 0.0, 0.0, None
-    if data.t is not None and len(r0) > len(params.free_names) + 3:
+    if data.t is not None and len(r0) > len(params.free_names) + 3 and float(np.sum((r0 / s0) ** 2)) / dof < (
+            STOCHASTIC_MAX_REDCHI):
         sto = stochastic.select(_components(fns, rows, data, params, p_now, pfix, gravity, s0))
         if stochastic.RANDOM_WALK in sto.named and not sto.ambiguous:  # undecided: the per-visit excess
             return sto.chosen.tau2, sto.chosen.q2, sto

@@ -78,19 +78,24 @@ def components_at(fns: lsq.RowFunctions, rows: lsq.Rows, pfree: np.ndarray, pfix
     return components(r, sigma, J, Jraw * np.asarray(b, float), t)
 
 
-def reml(c: Components, tau2: float, q2: float, projector: bool = False) -> tuple[float, np.ndarray | None]:
-    """REML log-likelihood (up to a constant) and, by option, the projector P at (tau^2, q^2)."""
+def reml(c: Components, tau2: float, q2: float, projector: bool = False, ml: bool = False
+         ) -> tuple[float, np.ndarray | None]:
+    """REML log-likelihood (up to a constant) and, by option, the projector P at (tau^2, q^2).
+
+    ``ml=True``: the profile (full) likelihood instead, without log det(X^T V^-1 X): comparable
+    between different X (nested fixed effects); its scoring uses V^-1 for P in the traces."""
     V = c.covariance(tau2, q2)
     L = np.linalg.cholesky(V)
     Xw, rw = np.linalg.solve(L, c.X), np.linalg.solve(L, c.r)
     Q, R = np.linalg.qr(Xw)
     e = rw - Q @ (Q.T @ rw)
-    ll = -0.5 * (2 * np.sum(np.log(np.diag(L))) + 2 * np.sum(np.log(np.abs(np.diag(R)))) + float(e @ e))
+    ll = -0.5 * (2 * np.sum(np.log(np.diag(L))) + (0.0 if ml else 2 * np.sum(np.log(np.abs(np.diag(R)))))
+                 + float(e @ e))
     if not projector:
         return float(ll), None
     Li = np.linalg.solve(L, np.eye(len(c.r)))
     M = Li - Q @ (Q.T @ Li)
-    return float(ll), M.T @ M
+    return float(ll), M.T @ M if not ml else (M.T @ M, Li.T @ Li)
 
 
 @dataclass(frozen=True)
@@ -104,19 +109,20 @@ class ModelFit:
     cov: np.ndarray  #: 2 x 2 covariance of (tau^2, q^2) from the expected information (0 where fixed)
 
 
-def fit_model(c: Components, name: str) -> ModelFit:
-    """Maximise the REML likelihood over the model's free components (>= 0): log grid, then Fisher scoring."""
+def fit_model(c: Components, name: str, ml: bool = False) -> ModelFit:
+    """Maximise the REML (or, ``ml``, the full) likelihood over the model's free components (>= 0):
+    log grid, then Fisher scoring."""
     free = np.array(_FREE[name])
     s2 = float(np.median(c.sigma**2))
     scale = np.array([s2, s2 / max(float(np.max(c.t)), 1e-9)])
     if not free.any():
-        return ModelFit(name, 0.0, 0.0, reml(c, 0.0, 0.0)[0], np.zeros((2, 2)))
+        return ModelFit(name, 0.0, 0.0, reml(c, 0.0, 0.0, ml=ml)[0], np.zeros((2, 2)))
     axes = [scale[j] * 10.0**_GRID if free[j] else np.zeros(1) for j in range(2)]
-    best = max(((reml(c, a, b)[0], a, b) for a in axes[0] for b in axes[1]), key=lambda x: x[0])
+    best = max(((reml(c, a, b, ml=ml)[0], a, b) for a in axes[0] for b in axes[1]), key=lambda x: x[0])
     theta, ll = np.array(best[1:]), best[0]
     for _ in range(50):  # Fisher scoring with step halving, projected on theta >= 0
-        _, P = reml(c, *theta, projector=True)
-        PK = [P @ K for K in c.K]
+        P, T = _projectors(c, theta, ml)
+        PK = [T @ K for K in c.K]
         Pr = P @ c.r
         score = np.array([-0.5 * np.trace(A) + 0.5 * float(Pr @ K @ Pr) for A, K in zip(PK, c.K)])
         F = np.array([[0.5 * np.sum(A * B.T) for B in PK] for A in PK])
@@ -125,21 +131,28 @@ def fit_model(c: Components, name: str) -> ModelFit:
         step[idx] = np.linalg.lstsq(F[np.ix_(idx, idx)], score[idx], rcond=None)[0]
         for _ in range(30):
             new = np.maximum(theta + step, 0.0)
-            ll_new = reml(c, *new)[0]
+            ll_new = reml(c, *new, ml=ml)[0]
             if ll_new >= ll - 1e-12:
                 break
             step *= 0.5
+        if ll_new < ll - 1e-12:  # no ascent along the scoring direction: at the maximum
+            break
         done = np.all(np.abs(new - theta) <= 1e-6 * np.maximum(theta, 1e-3 * scale))
         theta, ll = new, max(ll, ll_new)
         if done:
             break
-    _, P = reml(c, *theta, projector=True)
-    PK = [P @ K for K in c.K]
+    PK = [_projectors(c, theta, ml)[1] @ K for K in c.K]
     F = np.array([[0.5 * np.sum(A * B.T) for B in PK] for A in PK])
     idx = np.flatnonzero(free)
     cov = np.zeros((2, 2))
     cov[np.ix_(idx, idx)] = np.linalg.pinv(F[np.ix_(idx, idx)])
     return ModelFit(name, float(theta[0]), float(theta[1]), float(ll), cov)
+
+
+def _projectors(c: Components, theta: np.ndarray, ml: bool) -> tuple[np.ndarray, np.ndarray]:
+    """(P for the quadratic term, the matrix in the traces): P twice for REML, V^-1 in the traces for ML."""
+    P = reml(c, *theta, projector=True, ml=ml)[1]
+    return P if ml else (P, P)
 
 
 def innovations(c: Components, tau2: float, q2: float) -> np.ndarray:
