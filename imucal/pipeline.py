@@ -137,7 +137,8 @@ def fit_data(model: SensorModel, intervals: Intervals, samples: StaticSamples | 
     is cut to them)."""
     if mode == "means":
         return FitData(raw=intervals.mean, cov=covariates_for(model, intervals, source=source),
-                       raw_var=intervals.mean_std**2, group=np.arange(intervals.n), mode="means")
+                       raw_var=intervals.mean_std**2, group=np.arange(intervals.n), mode="means",
+                       t=intervals.t_mid)
     if isinstance(samples, Recording):
         samples = static_samples(intervals, samples)
     group = intervals.sample_index()
@@ -192,6 +193,9 @@ def fit_warnings(res: FitResult, config: RunConfig, rec: Recording, dropped: lis
     elif res.dof > 0 and res.redchi_noise > POOR_FIT_REDCHI and chi2_sf(res.chi2_noise, res.dof) < POOR_FIT_P:
         held = (f"; the weights and standard errors include it as a random bias per visit of a pose "
                 f"(bias_instability, {math.sqrt(res.excess):.3g} m/s^2 rms)" if res.excess > 0 else "")
+        if res.random_walk > 0:
+            held = (f"; the weights (full covariance) and standard errors include it as a bias random walk "
+                    f"(bias_random_walk, {math.sqrt(res.random_walk):.3g} m/s^2/sqrt(s))")
         out.append(f"reduced chi-square {res.redchi_noise:.3g} against the noise ({res.dof} dof, p < {POOR_FIT_P:g}): "
                    "the residuals exceed the noise, so the model misses an effect or the noise is underestimated"
                    f"{held}; investigate with: {discover_command(config, rec)}")
@@ -306,6 +310,7 @@ def calibrate(config: RunConfig, recording: Recording | None = None) -> Calibrat
         "rms_residual": float(np.sqrt(np.mean(rm**2))), "chi2": res.chi2, "dof": res.dof,
         "redchi": res.redchi, "redchi_noise": res.redchi_noise,
         "bias_instability": math.sqrt(res.excess),  # between-interval excess in the weights [m/s^2]
+        "bias_random_walk": math.sqrt(res.random_walk),  # its density in the GLS weights [m/s^2/sqrt(s)]
         "n_intervals": iv.n, "n_distinct_orientations": pb.obs.n_distinct,
         "gravity_source": gsource,
         "warnings": fit_warnings(res, config, rec, dropped),

@@ -44,6 +44,7 @@ from imucal.config.run import EffectSpec, RunConfig
 from imucal.model.effects import (AXIS_NAMES, EFFECTS, MIN_DOF, MIN_TEMPERATURE_SPREAD, AxisEffect, Term, make_effect,
                                   fit_to_data, prepare_parameters, temperature_spread)
 from imucal.analysis.f_test import f_sf
+from imucal.analysis import stochastic as stoch
 from imucal.solve.stats import between_excess, chi2_sf
 from imucal.errors import ImucalError
 from imucal.solve.fit import FitData, FitResult, fit, jacobian_rows
@@ -170,6 +171,8 @@ class Discovery:
     disagreement: tuple[tuple[str, float], ...]  #: (pattern, chi-square it would remove), base fit
     notes: tuple[str, ...] = ()
     settings: DiscoverSettings = field(default_factory=DiscoverSettings)
+    stochastic: "stoch.StochasticFit | None" = None  #: the REML test of the stochastic biases (final fit)
+    allan: "stoch.AllanView | None" = None  #: Allan view of the longest still interval, when long enough
 
     # the gap, on interval means
     @property
@@ -231,6 +234,8 @@ class Discovery:
                       for s in self.steps],
             "notes": list(self.notes),
             "settings": dataclasses.asdict(self.settings),
+            "stochastic": self.stochastic.to_json() if self.stochastic is not None else None,
+            "allan": self.allan.to_json() if self.allan is not None else None,
         }
 
     def report(self) -> str:
@@ -278,6 +283,7 @@ class Discovery:
                             if s.ambiguous_with else ""))
             else:
                 L.append("    -> no candidate is significant")
+        L.extend(_stochastic_lines(self))
         if self.notes:
             L.append("[[Notes]]")
             L.extend(f"    - {n}" for n in self.notes)
@@ -744,6 +750,8 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings())
         final, found, cur_effects = base, [], {}
         verdict = (f"disagreement not explained by any candidate: chi2/dof = {base.result.redchi:.3g} "
                    f"(p = {p_before:.3g}); the model found cannot be calibrated from these poses")
+    final, found, cur_effects, verdict = _beaten(config, base, final, found, cur_effects, current, verdict,
+                                                 settings, notes)
     if found and verdict.startswith("explained"):  # name the effects as kept after the backward step
         verdict = (f"explained: after adding {_added(found, cur_effects)} chi2/dof = {final.result.redchi:.3g} "
                    f"(p = {_p_noise(final.result):.3g}), at noise level")
@@ -760,10 +768,64 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings())
     effects = tuple(_found(n, ax, final.result, *last[n]) for n, ax in
                     sorted(cur_effects.items(), key=lambda kv: _EFFECT_ORDER[kv[0]]) if n in last)
     p_after = _p_noise(final.result)
+    sto = stoch.assess(final, settings.alpha_noise) if p_after < settings.alpha_noise else None
+    verdict = _stochastic_verdict(verdict, sto)
     return Discovery(base=base, final=final, steps=tuple(steps), effects=effects, verdict=verdict,
                      consistent_before=p_before >= settings.alpha_noise,
                      consistent_after=p_after >= settings.alpha_noise, p_before=p_before, p_after=p_after,
-                     disagreement=tuple(disagreement), notes=tuple(notes), settings=settings)
+                     disagreement=tuple(disagreement), notes=tuple(notes) + (sto.notes if sto else ()),
+                     settings=settings, stochastic=sto, allan=stoch.allan_view(final, sto))
+
+
+def _beaten(config: RunConfig, base: CalibrationRun, final: CalibrationRun, found: list, cur_effects: dict,
+            current: FitResult, verdict: str, settings: DiscoverSettings, notes: list[str]):
+    """Drop the terms in time that a bias random walk explains as well (imucal.analysis.stochastic)."""
+    if not found or _p_noise(final.result) >= settings.alpha_noise:  # no excess left: nothing to beat
+        return final, found, cur_effects, verdict
+    beaten = stoch.beaten_terms(final, {f[0] for f in found}, settings.alpha_effect)
+    if not beaten:
+        return final, found, cur_effects, verdict
+    notes.extend(beaten.values())
+    found = [f for f in found if f[0] not in beaten]
+    cur_effects = {n: ax for n, ax in cur_effects.items() if n not in beaten}
+    final = _final_run(config, base, found, cur_effects, current, notes)
+    verdict = (f"disagreement not explained by any candidate: chi2/dof = {final.result.redchi:.3g} "
+               f"(p = {_p_noise(final.result):.3g}); no deterministic term beats a bias random walk")
+    if found:
+        verdict = f"partly explained by {_added(found, cur_effects)}; the remaining {verdict}"
+    return final, found, cur_effects, verdict
+
+
+def _stochastic_verdict(verdict: str, sto: "stoch.StochasticFit | None") -> str:
+    """The verdict with the stochastic biases the REML test named (the per-visit sentence replaced)."""
+    if sto is None:
+        return verdict
+    verdict = verdict.split("; the scatter between intervals fits", 1)[0]
+    if not sto.named:
+        return verdict
+    vals = ", ".join(f"{n} {v:.3g} +/- {s:.2g} {u}" for n, (v, s, u) in sto.values().items())
+    amb = (" (the data cannot tell bias_instability from bias_random_walk)" if sto.ambiguous else "")
+    return (f"{verdict}; the scatter between intervals is a stochastic bias: {vals}{amb}, which the default fit "
+            "(weights: auto) includes in its weights and standard errors")
+
+
+def _stochastic_lines(d: Discovery) -> list[str]:
+    """The report's stochastic section: the REML estimates and tests, and the Allan view."""
+    s = d.stochastic
+    if s is None:
+        return []
+    L = ["[[Stochastic biases]]  REML on interval means, LR tests at level "
+         f"{s.alpha:g} (boundary-corrected, Bonferroni over the two)"]
+    for n, (v, sd, u) in s.values().items():
+        L.append(f"    {n} = {v:.4g} +/- {sd:.2g} {u}")
+    L.append(f"    named: {', '.join(s.named) or 'none'}" + ("  (ambiguous)" if s.ambiguous else ""))
+    for n in s.p:
+        L.append(f"    {n:<18s} p given the other {s.p[n]:9.3g}   p alone {s.p_alone[n]:9.3g}")
+    if d.allan is not None:
+        a = d.allan
+        L.append(f"    Allan view: interval {a.interval} ({a.duration:.4g} s still); the curve's own +1/2 slope: "
+                 + ", ".join(f"{x} {v:.3g}" for x, v in zip("xyz", a.q_allan)) + " m/s^2/sqrt(s)")
+    return L
 
 
 def _testable(names: list[str], iv, source: str, notes: list[str]) -> list[str]:

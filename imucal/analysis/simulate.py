@@ -38,6 +38,10 @@ class SensorSpec:
     unit: str = "m/s^2"
     #: extra model terms: effect name -> {parameter name: value}; see imucal.model.effects
     effects: dict = field(default_factory=dict)
+    #: bias random walk density per axis [raw / sqrt(s)]: b_i(t) = q_i W_i(t), W a Wiener process
+    random_walk: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    #: std of a random bias offset drawn per hold, per axis [raw] (bias_instability: one draw per visit)
+    visit_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def values(self) -> dict[str, float]:
         v = {f"s{i+1}": float(self.s[i]) for i in range(3)}
@@ -191,10 +195,26 @@ def simulate(sensor: SensorSpec, plan: PosePlan, gravity: float = STANDARD_GRAVI
     E = frame_matrix(np.asarray(sensor.angles))
     m = a @ E  # m_i = e_i . a (Lemma 1), E's columns are e_i
     raw = sensor.forward(m, t, temp) + rng.normal(0, 1, (n, 3)) * np.asarray(sensor.noise)
+    raw = raw + _stochastic_bias(sensor, t, np.array(bounds), rng)
     if sensor.quantum > 0:
         raw = np.round(raw / sensor.quantum) * sensor.quantum
     return Simulation(t=t, raw=raw, temp=temp, accel=a, still=np.concatenate(still), sensor=sensor,
                       gravity=gravity, hold_bounds=np.array(bounds))
+
+
+def _stochastic_bias(sensor: SensorSpec, t: np.ndarray, bounds: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """The stochastic bias [raw], (N, 3): a random walk q_i W_i(t) (increments N(0, q_i^2 dt), W(0) = 0)
+    plus one offset per hold, held from the hold's start to the next hold's. Draws nothing when both
+    are zero, so recordings without them are unchanged (byte-identical CSV)."""
+    out = np.zeros((t.size, 3))
+    q, v = np.asarray(sensor.random_walk, float), np.asarray(sensor.visit_offset, float)
+    if np.any(q > 0):
+        dt = np.diff(t, prepend=t[0])
+        out += np.cumsum(rng.normal(0, 1, (t.size, 3)) * np.sqrt(dt)[:, None], axis=0) * q
+    if np.any(v > 0):
+        hold = np.searchsorted(bounds[:, 0], np.arange(t.size), side="right") - 1
+        out += (rng.normal(0, 1, (len(bounds), 3)) * v)[np.maximum(hold, 0)]
+    return out
 
 
 @dataclass(frozen=True)
@@ -284,7 +304,7 @@ def simulation_from_dict(d: object, path: str | None = None) -> SimulationConfig
     rng = np.random.default_rng(seed)
     # sensor: a random preset drawn from the seed, explicit values override it
     sd = _section(top.get("sensor"), "sensor", ("preset", "s", "b", "angles_deg", "noise", "quantum", "unit",
-                                                 "effects"), path)
+                                                 "effects", "random_walk", "visit_offset"), path)
     preset = sd.get("preset", "mems_counts")
     if preset not in SENSOR_PRESETS:
         raise ImucalError(f"unknown preset {short(preset)}", file=path, field="sensor.preset",
@@ -292,9 +312,13 @@ def simulation_from_dict(d: object, path: str | None = None) -> SimulationConfig
     base = {"mems_counts": lambda: mems_counts_sensor(rng), "si": lambda: si_sensor(rng),
             "none": SensorSpec}[preset]()
     kw: dict = {}
-    for key in ("s", "b", "noise"):
+    for key in ("s", "b", "noise", "random_walk", "visit_offset"):
         if key in sd:
             kw[key] = _vec3(sd[key], path, f"sensor.{key}")
+    for key in ("random_walk", "visit_offset"):
+        if key in kw and not all(x >= 0 for x in kw[key]):
+            raise ImucalError(f"{key} must be non-negative [raw{' / sqrt(s)' if key == 'random_walk' else ''}]",
+                              file=path, field=f"sensor.{key}")
     if "b" in kw and not all(x > 0 for x in kw["b"]):
         raise ImucalError("scales must be positive", file=path, field="sensor.b")
     if "noise" in kw and not all(x >= 0 for x in kw["noise"]):

@@ -5,7 +5,9 @@
   gravity component along each sensor axis (orientation and axis);
 - candidates: the likelihood-ratio statistic of every candidate of each round against the
   significance threshold;
-- gap: RMS and chi-square per degree of freedom before and after, against the noise level.
+- gap: RMS and chi-square per degree of freedom before and after, against the noise level;
+- allan: the overlapping Allan deviation of the longest still interval (when it is long enough) with
+  the +1/2 slope line q sqrt(tau / 3) of the bias random walk discovery found.
 """
 from __future__ import annotations
 
@@ -215,6 +217,36 @@ def gap_figure(d: Discovery, path: str | Path) -> None:
     plt.close(fig)
 
 
+def allan_figure(d: Discovery, path: str | Path) -> None:
+    """Allan deviation per axis of the longest still interval, with the discovered random walk's line."""
+    plt = _plt()
+    a = d.allan
+    if a is None:
+        fig, ax = plt.subplots(figsize=(8, 2.2), dpi=100)
+        ax.axis("off")
+        ax.text(0.5, 0.5, _wrap("No Allan view: the recording has no still interval of at least "
+                                "10000 samples (100 x 100 sample periods).", 80), ha="center", va="center", fontsize=10)
+        fig.savefig(path, format="png")
+        plt.close(fig)
+        return
+    fig, ax = plt.subplots(figsize=(7, 4.6), dpi=100)
+    for i, c in enumerate(("tab:red", "tab:green", "tab:blue")):
+        ax.loglog(a.tau, a.adev[:, i], color=c, lw=1.4, label=f"measured, axis {AXIS_NAMES[i]}")
+    if a.q > 0:
+        ax.loglog(a.tau, a.line(), "k--", lw=1.2, label=f"bias_random_walk found: q sqrt(tau/3), q = {a.q:.3g} m/s^2/sqrt(s)")
+        lo, hi = max(a.q - a.q_std, 0.0), a.q + a.q_std
+        ax.fill_between(a.tau, lo * np.sqrt(a.tau / 3), hi * np.sqrt(a.tau / 3), color="k", alpha=0.12,
+                        label="+/- 1 std of q")
+    ax.set_xlabel("averaging time tau [s]")
+    ax.set_ylabel("Allan deviation [m/s^2]")
+    ax.legend(fontsize=8, loc="best")
+    ax.grid(True, which="both", alpha=0.3)
+    fig.suptitle(f"Allan view: interval {a.interval}, {a.duration:.0f} s still at {a.rate:.0f} Hz", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, format="png")
+    plt.close(fig)
+
+
 #: File name -> figure function, for `imucal discover --plot DIR`.
 FIGURES = {"discover_residuals.png": residuals_figure, "discover_candidates.png": candidates_figure,
-           "discover_gap.png": gap_figure}
+           "discover_gap.png": gap_figure, "discover_allan.png": allan_figure}

@@ -59,13 +59,17 @@ def fit_report(run: CalibrationRun, correl_min: float = CORREL_MIN) -> str:
     L.append(f"    # free parameters  = {len(res.free_names)}")
     L.append(f"    chi-square         = {res.chi2:.6g}")
     L.append(f"    reduced chi-square = {res.redchi:.6g}  (1 = residuals match the noise of the means"
-             + (", with the excess below)" if res.excess > 0 else ")"))
-    if res.excess > 0:
+             + (", with the excess below)" if res.excess > 0 or res.random_walk > 0 else ")"))
+    if res.excess > 0 or res.random_walk > 0:
         L.append(f"    noise alone        = reduced chi-square {res.redchi_noise:.6g}: the intervals scatter more "
                  "than their own noise")
         L.append(f"    bias_instability   = {math.sqrt(res.excess):.4g} m/s^2 rms per visit of a pose (random "
                  "offset between intervals, Paule-Mandel), added to every interval's sigma: weights and "
                  "standard errors include it")
+    if res.random_walk > 0:
+        L.append(f"    bias_random_walk   = {math.sqrt(res.random_walk):.4g} +/- {res.stochastic.q_std:.2g} m/s^2/sqrt(s) "
+                 "(REML): the intervals are correlated in time; the fit is generalised least squares with "
+                 "their full covariance, and the standard errors include it")
     L.append(f"    degrees of freedom = {res.dof}  (95 % intervals: value +/- {t_quantile_975(res.dof):.3g} x std, "
              "Student-t, since std is scaled by the reduced chi-square)")
     L.append(f"    RMS |a|-g, means   = {cal.fit['rms_residual']:.6g} m/s^2")
@@ -151,6 +155,7 @@ def summary(run: CalibrationRun) -> dict:
         "rms_residual_samples": cal.fit["rms_residual_samples"],
         "chi2": res.chi2, "dof": res.dof, "redchi": nz(res.redchi), "redchi_noise": nz(res.redchi_noise),
         "bias_instability": math.sqrt(res.excess),
+        "bias_random_walk": math.sqrt(res.random_walk),
         "n_intervals": run.intervals.n,
         "n_distinct_orientations": run.observability.n_distinct,
         "gravity": cal.gravity,

@@ -16,6 +16,7 @@ import numpy as np
 
 from imucal.solve import ipopt
 from imucal.solve import least_squares as lsq
+from imucal.solve import stochastic
 from imucal.solve.stats import between_excess, chi2_sf
 from imucal.errors import ImucalError
 from imucal.model.sensor import SensorModel
@@ -24,6 +25,9 @@ from imucal.model.parameters import Parameters, model_label
 _STATUS_WORDS, _CONVERGED = ipopt.STATUS_WORDS, ipopt.CONVERGED
 #: weights="auto": the noise-only chi-square test at which a between-interval excess is used.
 EXCESS_P = 1e-3
+#: weights="auto": no stochastic-bias test above this reduced chi-square against the noise: that is a
+#: model error (the pipeline refuses such a fit), which a random walk would otherwise absorb.
+STOCHASTIC_MAX_REDCHI = 1.0e4
 #: weights="auto": at most this many solves while the excess settles.
 MAX_PASSES = 8
 
@@ -37,6 +41,7 @@ class FitData:
     raw_var: np.ndarray  #: (N, 3) variance of each raw reading [raw^2]
     group: np.ndarray  #: (N,) interval index of each row
     mode: str  #: "means" or "samples"
+    t: np.ndarray | None = None  #: (N,) time of each interval mean [s] (the random-walk test needs it)
 
 
 @dataclass(frozen=True)
@@ -63,6 +68,8 @@ class FitResult:
     at_bound: dict[str, str] = field(default_factory=dict)
     excess: float = 0.0  #: between-interval excess variance in the weights [(m/s^2)^2] (weights="auto")
     chi2_noise: float = float("nan")  #: chi-square against the noise of each row alone
+    random_walk: float = 0.0  #: bias random-walk q^2 in the weights [(m/s^2)^2 / s] (weights="auto")
+    stochastic: "stochastic.StochasticFit | None" = None  #: the REML test that named it
 
     @property
     def redchi(self) -> float:
@@ -124,7 +131,9 @@ def fit(data: FitData, params: Parameters, model: SensorModel, gravity: float,
     scatter); ``"uniform"`` gives every row the median sigma (imu_tk's unweighted cost);
     ``"auto"`` (interval means) adds to every sigma^2 the between-interval excess (a random bias
     offset per visit of a pose) when the residuals exceed the noise at p < EXCESS_P, estimated by
-    Paule-Mandel and iterated with the fit: with no excess it is the noise-weighted fit.
+    Paule-Mandel and iterated with the fit: with no excess it is the noise-weighted fit. When the
+    REML test of imucal.solve.stochastic names a bias random walk (rows with times ``data.t``), the
+    weights are its full covariance (generalised least squares) and the standard errors follow.
     ``hessian="exact"`` gives IPOPT the exact Hessian instead of Gauss-Newton's J^T W J.
     """
     names = model.names
@@ -145,15 +154,17 @@ def fit(data: FitData, params: Parameters, model: SensorModel, gravity: float,
     fns, rows = lsq.row_functions(model, free), lsq.Rows(data.raw, data.cov)
     dof = n - len(free)
     t0 = time.perf_counter()
-    iters, excess, passes = 0, 0.0, 0
+    iters, excess, q2, sto, passes = 0, 0.0, 0.0, None, 0
     # Weights from the noise propagated at the current estimate; refreshed once at the solution
-    # (and, with weights="auto", until the between-interval excess settles).
+    # (and, with weights="auto", until the between-interval excess settles). With a bias random
+    # walk the rows are correlated: V = diag(sigma0^2 + excess) + q^2 K_W, and the fit is generalised
+    # least squares (rows whitened by L^-1, V = L L^T).
     while True:
         sigma0 = lsq.noise_sigma(fns, rows, data.raw_var, p_now, pfix, gravity, weights)
-        sigma = np.sqrt(sigma0**2 + excess)
-        R = lsq.weighted_r_factor(fns, rows, sigma, p_now, pfix, gravity)
+        sigma, W, white = _weights(fns, rows, data, params, p_now, pfix, gravity, sigma0, excess, q2)
+        R = lsq.weighted_r_factor(fns, rows, sigma if white is None else white, p_now, pfix, gravity)
         d = _step_scale(R, scale)  # p = p0 + d * x
-        problem = lsq.Problem(fns, rows, 1.0 / sigma**2, pfix, gravity, p_now, d, exact=hessian == "exact")
+        problem = lsq.Problem(fns, rows, W, pfix, gravity, p_now, d, exact=hessian == "exact")
         x, stats = lsq.solve(problem, (lo - p_now) / d, (hi - p_now) / d)
         iters += int(stats.get("iter_count", 0))
         p_now = np.clip(p_now + d * x, lo, hi)
@@ -164,17 +175,18 @@ def fit(data: FitData, params: Parameters, model: SensorModel, gravity: float,
             break
         r0 = lsq.residuals(fns, rows, p_now, pfix, gravity)
         s0 = lsq.noise_sigma(fns, rows, data.raw_var, p_now, pfix, gravity, weights)
-        new = between_excess(r0, s0, dof) if chi2_sf(float(np.sum((r0 / s0) ** 2)), dof) < EXCESS_P else 0.0
-        if abs(new - excess) <= 1e-4 * max(new, excess) or (new == 0.0 and excess == 0.0):
+        new, new_q2, sto = _excess(fns, rows, data, params, p_now, pfix, gravity, r0, s0, dof)
+        if (abs(new - excess) <= 1e-4 * max(new, excess) and abs(new_q2 - q2) <= 1e-4 * max(new_q2, q2)) or (
+                new == 0.0 and excess == 0.0 and new_q2 == 0.0 and q2 == 0.0):
             break
-        excess = new
+        excess, q2 = new, new_q2
     solve_time = time.perf_counter() - t0
     status = str(stats.get("return_status", "unknown"))
     pfree = p_now
     r = lsq.residuals(fns, rows, pfree, pfix, gravity)
-    R = lsq.weighted_r_factor(fns, rows, sigma, pfree, pfix, gravity)
+    R = lsq.weighted_r_factor(fns, rows, sigma if white is None else white, pfree, pfix, gravity)
     fitted = params.with_values(dict(zip(free, pfree)))
-    chi2 = float(np.sum((r / sigma) ** 2))
+    chi2 = float(np.sum((r / sigma) ** 2)) if white is None else float(np.sum((white @ r) ** 2))
     chi2_noise = float(np.sum((r / sigma0) ** 2))
     redchi = chi2 / dof if dof > 0 else float("nan")
     # Covariance from the Jacobian at the solution (via its SVD, symmetric by construction),
@@ -193,7 +205,44 @@ def fit(data: FitData, params: Parameters, model: SensorModel, gravity: float,
                      free_names=free, gravity=gravity, mode=data.mode, residuals=r, sigma=sigma,
                      chi2=chi2, dof=dof, status=status, success=success, iterations=iters,
                      solve_time=solve_time, model_name=model_label(model.name, params), at_bound=at_bound,
-                     excess=excess, chi2_noise=chi2_noise)
+                     excess=excess, chi2_noise=chi2_noise, random_walk=q2,
+                     stochastic=sto if q2 > 0 else None)
+
+
+def _components(fns, rows, data: FitData, params: Parameters, p_now, pfix, gravity: float,
+                sigma0: np.ndarray) -> stochastic.Components:
+    """The stochastic-bias components at p_now (G uses the current scales b_i)."""
+    values = dict(zip(params.names, pfix)) | dict(zip(params.free_names, p_now))
+    b = np.array([values[f"b{i}"] for i in (1, 2, 3)])
+    return stochastic.components_at(fns, rows, p_now, pfix, gravity, sigma0, b, data.t)
+
+
+def _weights(fns, rows, data: FitData, params: Parameters, p_now, pfix, gravity: float, sigma0: np.ndarray,
+             excess: float, q2: float) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """(sigma of each row, weights for the NLP, whitening L^-1 or None): diagonal unless q2 > 0."""
+    if q2 <= 0:
+        sigma = np.sqrt(sigma0**2 + excess)
+        return sigma, 1.0 / sigma**2, None
+    V = _components(fns, rows, data, params, p_now, pfix, gravity, sigma0).covariance(excess, q2)
+    white = np.linalg.inv(np.linalg.cholesky(V))
+    return np.sqrt(np.diag(V)), white.T @ white, white
+
+
+def _excess(fns, rows, data: FitData, params: Parameters, p_now, pfix, gravity: float, r0: np.ndarray,
+            s0: np.ndarray, dof: int) -> tuple[float, float, "stochastic.StochasticFit | None"]:
+    """weights="auto": (tau^2, q^2, the test) when the residuals exceed the noise at p < EXCESS_P.
+
+    A bias random walk named by the REML test (imucal.solve.stochastic), and told apart from
+    per-visit offsets, gives its (tau^2, q^2); otherwise the excess is Paule-Mandel's common between-interval variance, as before the test.
+    """
+    if chi2_sf(float(np.sum((r0 / s0) ** 2)), dof) >= EXCESS_P:
+        return 0.0, 0.0, None
+    if data.t is not None and len(r0) > len(params.free_names) + 3 and float(np.sum((r0 / s0) ** 2)) / dof < (
+            STOCHASTIC_MAX_REDCHI):
+        sto = stochastic.select(_components(fns, rows, data, params, p_now, pfix, gravity, s0))
+        if stochastic.RANDOM_WALK in sto.named and not sto.ambiguous:  # undecided: the per-visit excess
+            return sto.chosen.tau2, sto.chosen.q2, sto
+    return between_excess(r0, s0, dof), 0.0, None
 
 
 def jacobian_rows(data: FitData, params: Parameters, model: SensorModel, gravity: float,

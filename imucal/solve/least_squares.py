@@ -8,7 +8,8 @@ blocks of rows). The normal equations are accumulated block by block,
 
     f = 1/2 sum w r^2,   grad = sum w r J,   H = sum w J^T J   (+ sum w r d2r, "exact"),
 
-so memory grows with the block, not with the number of rows. IPOPT sees f, grad and H through
+(or, with a full weight matrix W = V^-1 on interval means, f = 1/2 r^T W r: generalised least
+squares for correlated rows, imucal.solve.stochastic), so memory grows with the block, not with the number of rows. IPOPT sees f, grad and H through
 CasADi callbacks of an NLP built once per number of free parameters and reused: the data are
 swapped in, the solver is not rebuilt. Every fit (base model, effects, means and samples mode)
 takes this path with the one option set of imucal.solve.ipopt.
@@ -122,8 +123,11 @@ def weighted_r_factor(fns: RowFunctions, rows: Rows, sigma: np.ndarray, pfree, p
     """R (nf x nf) with R^T R = J^T W J, by a QR of the weighted Jacobian taken block by block.
 
     R has the singular values and right singular vectors of J / sigma, so the covariance from
-    it equals the one from the whole Jacobian, without holding an N x nf array.
+    it equals the one from the whole Jacobian, without holding an N x nf array. ``sigma`` (N, N)
+    is a whitening matrix L^-1 (V = L L^T, generalised least squares): R from L^-1 J.
     """
+    if sigma.ndim == 2:
+        return np.linalg.qr(sigma @ jacobians(fns, rows, pfree, pfix, g)[1], mode="r")
     R = np.zeros((0, fns.n_free))
     for sl, raw, cov in rows.blocks():
         Jb = fns.derivatives(raw, cov, pfree, pfix, [g])[1].T / sigma[sl, None]
@@ -133,8 +137,20 @@ def weighted_r_factor(fns: RowFunctions, rows: Rows, sigma: np.ndarray, pfree, p
 
 def normal_equations(fns: RowFunctions, rows: Rows, w: np.ndarray, pfree, pfix, g: float,
                      exact: bool = False) -> tuple[float, np.ndarray, np.ndarray]:
-    """f, grad and Hessian (Gauss-Newton, or exact) of 1/2 sum w r^2, accumulated by blocks."""
+    """f, grad and Hessian (Gauss-Newton, or exact) of 1/2 sum w r^2, accumulated by blocks.
+
+    ``w`` (N, N) is a full weight matrix V^-1 (generalised least squares, interval means only):
+    f = 1/2 r^T W r, grad = J^T W r, H = J^T W J, on whole arrays.
+    """
     nf = fns.n_free
+    if w.ndim == 2:
+        r, J, _ = jacobians(fns, rows, pfree, pfix, g)
+        wr_all = w @ r
+        H = J.T @ w @ J
+        if exact:
+            for sl, raw, cov in rows.blocks():
+                H += (fns.curvature(raw, cov, pfree, pfix, [g])[0] @ wr_all[sl]).reshape(nf, nf)
+        return 0.5 * float(r @ wr_all), J.T @ wr_all, H
     f, grad, H = 0.0, np.zeros(nf), np.zeros((nf, nf))
     for sl, raw, cov in rows.blocks():
         rb, Jb, _ = fns.derivatives(raw, cov, pfree, pfix, [g])
@@ -168,7 +184,7 @@ class Problem:
         if self._key == np.asarray(x, float).tobytes():
             return self._val[0]
         r = residuals(self.fns, self.rows, self.p_of(x), self.pfix, self.g)
-        return 0.5 * float(np.dot(self.w * r, r))
+        return 0.5 * float(r @ (self.w @ r if self.w.ndim == 2 else self.w * r))
 
     def derivatives(self, x) -> tuple[float, np.ndarray, np.ndarray]:
         """f, grad and Hessian in x; IPOPT asks them at the same point: computed once."""

@@ -72,6 +72,7 @@ def run(args: argparse.Namespace) -> int:
                 "gravity": cfg.gravity, "unit": cfg.sensor.unit, "parameters": cfg.sensor.values(),
                 "effects": {n: dict(c) for n, c in cfg.sensor.effects.items()},
                 "noise": list(cfg.sensor.noise), "quantum": cfg.sensor.quantum,
+                "random_walk": list(cfg.sensor.random_walk), "visit_offset": list(cfg.sensor.visit_offset),
                 "poses": len(cfg.plan.directions), "hold_bounds": sim.hold_bounds.tolist()})
     temp = f", temp {sim.temp.min():.1f}..{sim.temp.max():.1f} degC" if sim.temp is not None else ", no temp column"
     print(f"wrote {sim.t.size} samples ({sim.t[-1]:.1f} s, {len(cfg.plan.directions)} poses, unit {cfg.sensor.unit}"

@@ -1,0 +1,139 @@
+"""Stochastic biases of a calibration run, for discovery: the REML test and the Allan view.
+
+``assess`` runs imucal.solve.stochastic's test (bias_instability, bias_random_walk, both or none) on
+the interval means of a fitted run. ``allan_view`` puts the random walk found there beside the
+overlapping Allan deviation (imucal.analysis.noise) of the recording's longest still interval,
+when that interval is long enough: a random walk of density q has Allan variance q^2 tau / 3
+(IEEE Std 952, Annex C), the +1/2 slope line sigma(tau) = q sqrt(tau / 3).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from imucal.analysis.noise import allan_deviation, estimate
+from imucal.model.effects import EFFECTS, make_effect
+from imucal.pipeline import CalibrationRun, fit_data
+from imucal.model.sensor import build_model
+from imucal.solve import least_squares as lsq
+from imucal.solve import stochastic
+from imucal.solve.stats import chi2_sf
+from imucal.solve.stochastic import RANDOM_WALK, StochasticFit
+
+#: The Allan view needs one still interval of at least this many samples (100 x 100 sample
+#: periods: the curve then spans taus up to ~33 s at 100 Hz, 3.5 decades).
+MIN_ALLAN_SAMPLES = 10_000
+
+
+def assess(run: CalibrationRun, alpha: float = 1e-3) -> StochasticFit:
+    """The REML test of the stochastic biases on ``run``'s interval means, at its fitted values."""
+    res, cal = run.result, run.calibration
+    model = build_model(cal.effect_objects())
+    data = fit_data(model, run.intervals, run.recording, "means", run.recording.source)
+    free = res.free_names
+    fns, rows = lsq.row_functions(model, free), lsq.Rows(data.raw, data.cov)
+    pfix = np.array(res.params.values(), float)
+    pfree = np.array([res.params[n].value for n in free])
+    sigma0 = lsq.noise_sigma(fns, rows, data.raw_var, pfree, pfix, res.gravity)
+    b = np.array([res.params[f"b{i}"].value for i in (1, 2, 3)])
+    return stochastic.select(stochastic.components_at(fns, rows, pfree, pfix, res.gravity, sigma0, b, data.t),
+                             alpha)
+
+
+def beaten_terms(run: CalibrationRun, names: set[str], alpha: float = 1e-3) -> dict[str, str]:
+    """Terms in time that a bias random walk explains as well: {name: note}.
+
+    A random walk has trends of its own, so a drift found by the search (which weighs the means as
+    independent) must beat the walk. Under the null (the time terms removed, linearised: r0 = r -
+    J_term beta_term, exact for amplitudes) the REML test runs; if it names the random walk, each term
+    is tested by the full-likelihood ratio of the nested models with and without it, both with
+    per-visit offsets and the walk re-estimated (ML), LR ~ chi-square(k), Bonferroni over the terms.
+    Those not significant are returned.
+    """
+    terms = [n for n in names if "time" in EFFECTS[n].covariates]
+    if not terms:
+        return {}
+    res = run.result
+    ax = dict(run.calibration.effects)
+    model = build_model(run.calibration.effect_objects())
+    data = fit_data(model, run.intervals, run.recording, "means", run.recording.source)
+    free = list(res.free_names)
+    fns, rows = lsq.row_functions(model, tuple(free)), lsq.Rows(data.raw, data.cov)
+    pfix, pfree = np.array(res.params.values(), float), np.array([res.params[n].value for n in free])
+    r, J, Jraw = lsq.jacobians(fns, rows, pfree, pfix, res.gravity)
+    cols = {n: [free.index(c) for c in (*make_effect(n, ax[n]).coefficient_names, *make_effect(n, ax[n]).shape_names)
+                if c in free] for n in terms}
+    amp = {n: [free.index(c) for c in make_effect(n, ax[n]).coefficient_names if c in free] for n in terms}
+    drop = sorted({i for n in terms for i in cols[n]})
+    r0 = r - J[:, sorted({i for n in terms for i in amp[n]})] @ pfree[sorted({i for n in terms for i in amp[n]})]
+    keep = [i for i in range(len(free)) if i not in drop]
+    sigma0 = lsq.noise_sigma(fns, rows, data.raw_var, pfree, pfix, res.gravity)
+    b = np.array([res.params[f"b{i}"].value for i in (1, 2, 3)])
+    c = stochastic.components(r0, sigma0, J[:, keep], Jraw * b, data.t)
+    sto = stochastic.select(c, alpha)
+    if RANDOM_WALK not in sto.named:
+        return {}
+    ll0 = stochastic.fit_model(c, "both", ml=True).loglik
+    out = {}
+    for n in terms:
+        c1 = stochastic.components(r0, sigma0, J[:, keep + cols[n]], Jraw * b, data.t)
+        lr = 2.0 * (stochastic.fit_model(c1, "both", ml=True).loglik - ll0)
+        p = chi2_sf(max(lr, 0.0), len(cols[n])) * len(terms)
+        if p >= alpha:
+            out[n] = (f"{n} dropped: with a bias random walk (q = {sto.q:.3g} m/s^2/sqrt(s)) and per-visit offsets "
+                      f"re-estimated, it raises the likelihood by LR {lr:.3g} on {len(cols[n])} parameter(s) "
+                      f"(p adjusted {min(p, 1.0):.2g}): the walk explains the trend")
+    return out
+
+
+@dataclass(frozen=True)
+class AllanView:
+    """The Allan deviation of the longest still interval, beside the random walk discovery found."""
+
+    interval: int  #: index of the interval
+    duration: float  #: [s]
+    rate: float  #: [Hz]
+    tau: np.ndarray  #: [s]
+    adev: np.ndarray  #: (k, 3) [m/s^2]
+    q: float  #: discovered density [m/s^2/sqrt(s)] (0: none named)
+    q_std: float
+    q_allan: tuple[float, float, float]  #: the curve's own +1/2-slope fit per axis [m/s^2/sqrt(s)] (nan: not seen)
+    q_allan_rel_err: tuple[float, float, float]
+
+    def line(self) -> np.ndarray:
+        """sigma(tau) = q sqrt(tau / 3) of the discovered random walk [m/s^2]."""
+        return self.q * np.sqrt(self.tau / 3.0)
+
+    def to_json(self) -> dict:
+        def num(x: float):
+            return float(x) if math.isfinite(x) else None
+
+        return {"interval": self.interval, "duration_s": self.duration, "rate_hz": self.rate,
+                "tau_s": self.tau.tolist(), "adev": {a: self.adev[:, i].tolist() for i, a in enumerate("xyz")},
+                "adev_unit": "m/s^2", "q_discovered": self.q, "q_discovered_std": num(self.q_std),
+                "line_adev": self.line().tolist(), "q_allan": {a: num(v) for a, v in zip("xyz", self.q_allan)},
+                "q_allan_rel_err": {a: num(v) for a, v in zip("xyz", self.q_allan_rel_err)},
+                "q_unit": "m/s^2/sqrt(s)"}
+
+
+def allan_view(run: CalibrationRun, found: StochasticFit | None,
+               min_samples: int = MIN_ALLAN_SAMPLES) -> AllanView | None:
+    """The Allan view of ``run``'s longest still interval, or None when it has < ``min_samples`` samples."""
+    iv, rec = run.intervals, run.recording
+    if iv.n == 0:
+        return None
+    k = int(np.argmax(iv.n_samples))
+    if int(iv.n_samples[k]) < min_samples:
+        return None
+    t = rec.t[iv.start[k]:iv.end[k]]
+    rate = (t.size - 1) / float(t[-1] - t[0])
+    b = np.array([run.result.params[f"b{i}"].value for i in (1, 2, 3)])
+    y = rec.raw[iv.start[k]:iv.end[k]] / b  # [m/s^2] per axis (scale only: the Allan curve ignores offsets)
+    curve = allan_deviation(y, rate)
+    est = [estimate(curve, a) for a in range(3)]
+    named = found is not None and RANDOM_WALK in found.named
+    return AllanView(interval=k, duration=float(t[-1] - t[0]), rate=float(rate), tau=curve.tau, adev=curve.adev,
+                     q=found.q if named else 0.0, q_std=found.q_std if named else float("nan"),
+                     q_allan=tuple(e.random_walk for e in est), q_allan_rel_err=tuple(e.random_walk_rel_err for e in est))

@@ -1,0 +1,262 @@
+"""Stochastic biases between interval means: variance components estimated by REML.
+
+The residual of interval mean k, r_k = |a_k| - g at the fit, picks up a bias vector beta_k
+(sensor frame, m/s^2) through the model's own derivative: r_k += G_k . beta_k with
+G_k,i = (dr_k / draw_i) b_i (~ the direction u_k of gravity in the sensor frame). Two kinds of
+beta, each common to the three axes:
+
+* ``bias_instability``: an independent offset per visit of a pose, std tau per axis:
+  Cov(r_j, r_k) = tau^2 (G_j . G_k) delta_jk ~ tau^2 delta_jk;
+* ``bias_random_walk``: beta(t) = q W(t), W a Wiener process per axis, density q [m/s^2/sqrt(s)]:
+  Cov(r_j, r_k) = q^2 (G_j . G_k) min(t_j, t_k), t from the first interval. The origin does not
+  matter: a constant bias is a fitted parameter (s_i), so a change of origin adds
+  c (G_j . G_k), which lies in the span of the fit's Jacobian and drops out of the REML likelihood.
+  Revisits of a pose close in time agree better than revisits far apart: that is what tells the
+  walk from per-visit offsets.
+
+V(theta) = diag(sigma_k^2) + tau^2 K_I + q^2 K_W, with sigma_k the noise of each mean. theta is
+estimated by restricted (residual) maximum likelihood (Patterson & Thompson 1971; Harville 1977):
+
+    l(theta) = -1/2 [log det V + log det(X^T V^-1 X) + r^T P r],  P = V^-1 - V^-1 X (X^T V^-1 X)^-1 X^T V^-1,
+
+X the Jacobian of the residuals w.r.t. the free parameters (the fit absorbs that much of any
+covariance). l is maximised on a log grid and refined by Fisher scoring; standard errors come
+from the inverse expected information, F_ij = 1/2 tr(P K_i P K_j).
+
+Which components are present is decided by likelihood ratios against the nested models, each
+variance at its boundary 0 (p = 1/2 P(chi2(1) > LR), Self & Liang 1987), each at level alpha / 2
+(Bonferroni over the two components). A component is then named only if the whitened residuals
+have no single outlier (a step in the bias would otherwise pass for a random walk): the largest
+standardized one-step innovation must be consistent with N(0, 1) at level alpha (Sidak over rows).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from imucal.solve import least_squares as lsq
+from imucal.solve.stats import chi2_sf
+
+INSTABILITY, RANDOM_WALK = "bias_instability", "bias_random_walk"
+MODELS = ("none", INSTABILITY, RANDOM_WALK, "both")
+#: variance components of each model: (instability, random walk) free?
+_FREE = {"none": (False, False), INSTABILITY: (True, False), RANDOM_WALK: (False, True), "both": (True, True)}
+#: log10 grid of each component relative to its natural scale (median sigma^2, and that per second)
+_GRID = np.linspace(-3.0, 3.0, 13)
+UNITS = {INSTABILITY: "m/s^2", RANDOM_WALK: "m/s^2/sqrt(s)"}
+
+
+@dataclass(frozen=True)
+class Components:
+    """The fixed inputs of the variance-component model of one fit."""
+
+    r: np.ndarray  #: residuals |a| - g of the interval means [m/s^2]
+    sigma: np.ndarray  #: noise of each mean [m/s^2]
+    X: np.ndarray  #: (n, p) Jacobian of r w.r.t. the free parameters (any column scaling)
+    K: tuple[np.ndarray, np.ndarray]  #: (K_I, K_W): covariance per unit tau^2 and per unit q^2
+    t: np.ndarray  #: interval times from the first [s]
+
+    def covariance(self, tau2: float, q2: float) -> np.ndarray:
+        return np.diag(self.sigma**2) + tau2 * self.K[0] + q2 * self.K[1]
+
+
+def components(r: np.ndarray, sigma: np.ndarray, X: np.ndarray, G: np.ndarray, t: np.ndarray) -> Components:
+    """The kernels of both stochastic biases for residuals ``r`` with directions ``G`` (n, 3) at times ``t``."""
+    t = np.asarray(t, float) - float(np.min(t))
+    GG = G @ G.T
+    c = np.linalg.norm(X, axis=0)
+    return Components(r=np.asarray(r, float), sigma=np.asarray(sigma, float), X=X / np.where(c > 0, c, 1.0),
+                      K=(np.diag(np.diag(GG)), GG * np.minimum.outer(t, t)), t=t)
+
+
+def components_at(fns: lsq.RowFunctions, rows: lsq.Rows, pfree: np.ndarray, pfix: np.ndarray, gravity: float,
+                  sigma: np.ndarray, b: np.ndarray, t: np.ndarray) -> Components:
+    """Components at a fit: residuals, Jacobian and G = dr/draw * b from the model's generated row functions."""
+    r, J, Jraw = lsq.jacobians(fns, rows, pfree, pfix, gravity)
+    return components(r, sigma, J, Jraw * np.asarray(b, float), t)
+
+
+def reml(c: Components, tau2: float, q2: float, projector: bool = False, ml: bool = False
+         ) -> tuple[float, np.ndarray | None]:
+    """REML log-likelihood (up to a constant) and, by option, the projector P at (tau^2, q^2).
+
+    ``ml=True``: the profile (full) likelihood instead, without log det(X^T V^-1 X): comparable
+    between different X (nested fixed effects); its scoring uses V^-1 for P in the traces."""
+    V = c.covariance(tau2, q2)
+    L = np.linalg.cholesky(V)
+    Xw, rw = np.linalg.solve(L, c.X), np.linalg.solve(L, c.r)
+    Q, R = np.linalg.qr(Xw)
+    e = rw - Q @ (Q.T @ rw)
+    ll = -0.5 * (2 * np.sum(np.log(np.diag(L))) + (0.0 if ml else 2 * np.sum(np.log(np.abs(np.diag(R)))))
+                 + float(e @ e))
+    if not projector:
+        return float(ll), None
+    Li = np.linalg.solve(L, np.eye(len(c.r)))
+    M = Li - Q @ (Q.T @ Li)
+    return float(ll), M.T @ M if not ml else (M.T @ M, Li.T @ Li)
+
+
+@dataclass(frozen=True)
+class ModelFit:
+    """One model's REML estimate."""
+
+    name: str
+    tau2: float  #: [(m/s^2)^2]
+    q2: float  #: [(m/s^2)^2 / s]
+    loglik: float
+    cov: np.ndarray  #: 2 x 2 covariance of (tau^2, q^2) from the expected information (0 where fixed)
+
+
+def fit_model(c: Components, name: str, ml: bool = False) -> ModelFit:
+    """Maximise the REML (or, ``ml``, the full) likelihood over the model's free components (>= 0):
+    log grid, then Fisher scoring."""
+    free = np.array(_FREE[name])
+    s2 = float(np.median(c.sigma**2))
+    scale = np.array([s2, s2 / max(float(np.max(c.t)), 1e-9)])
+    if not free.any():
+        return ModelFit(name, 0.0, 0.0, reml(c, 0.0, 0.0, ml=ml)[0], np.zeros((2, 2)))
+    axes = [scale[j] * 10.0**_GRID if free[j] else np.zeros(1) for j in range(2)]
+    best = max(((reml(c, a, b, ml=ml)[0], a, b) for a in axes[0] for b in axes[1]), key=lambda x: x[0])
+    theta, ll = np.array(best[1:]), best[0]
+    for _ in range(50):  # Fisher scoring with step halving, projected on theta >= 0
+        P, T = _projectors(c, theta, ml)
+        PK = [T @ K for K in c.K]
+        Pr = P @ c.r
+        score = np.array([-0.5 * np.trace(A) + 0.5 * float(Pr @ K @ Pr) for A, K in zip(PK, c.K)])
+        F = np.array([[0.5 * np.sum(A * B.T) for B in PK] for A in PK])
+        idx = np.flatnonzero(free)
+        step = np.zeros(2)
+        step[idx] = np.linalg.lstsq(F[np.ix_(idx, idx)], score[idx], rcond=None)[0]
+        for _ in range(30):
+            new = np.maximum(theta + step, 0.0)
+            ll_new = reml(c, *new, ml=ml)[0]
+            if ll_new >= ll - 1e-12:
+                break
+            step *= 0.5
+        if ll_new < ll - 1e-12:  # no ascent along the scoring direction: at the maximum
+            break
+        done = np.all(np.abs(new - theta) <= 1e-6 * np.maximum(theta, 1e-3 * scale))
+        theta, ll = new, max(ll, ll_new)
+        if done:
+            break
+    PK = [_projectors(c, theta, ml)[1] @ K for K in c.K]
+    F = np.array([[0.5 * np.sum(A * B.T) for B in PK] for A in PK])
+    idx = np.flatnonzero(free)
+    cov = np.zeros((2, 2))
+    cov[np.ix_(idx, idx)] = np.linalg.pinv(F[np.ix_(idx, idx)])
+    return ModelFit(name, float(theta[0]), float(theta[1]), float(ll), cov)
+
+
+def _projectors(c: Components, theta: np.ndarray, ml: bool) -> tuple[np.ndarray, np.ndarray]:
+    """(P for the quadratic term, the matrix in the traces): P twice for REML, V^-1 in the traces for ML."""
+    P = reml(c, *theta, projector=True, ml=ml)[1]
+    return P if ml else (P, P)
+
+
+def innovations(c: Components, tau2: float, q2: float) -> np.ndarray:
+    """Standardised one-step innovations in time order: L^-1 (r - X beta_GLS), L the Cholesky factor
+    of V in time order. N(0, 1) and independent when V is right (to first order in p / n)."""
+    order = np.argsort(c.t, kind="stable")
+    V = c.covariance(tau2, q2)[np.ix_(order, order)]
+    L = np.linalg.cholesky(V)
+    Xw, rw = np.linalg.solve(L, c.X[order]), np.linalg.solve(L, c.r[order])
+    Q, _ = np.linalg.qr(Xw)
+    e = rw - Q @ (Q.T @ rw)
+    return e / math.sqrt(max(1.0 - c.X.shape[1] / len(c.r), 1e-3))
+
+
+def _p_outlier(e: np.ndarray) -> float:
+    """Sidak-adjusted p of the largest |e| among n N(0, 1) values."""
+    p1 = math.erfc(float(np.max(np.abs(e))) / math.sqrt(2.0))
+    return 1.0 - (1.0 - p1) ** len(e) if p1 > 1e-12 else p1 * len(e)
+
+
+def _p_boundary(lr: float) -> float:
+    """p of an LR test of one variance at its boundary 0: 1/2 chi2(0) + 1/2 chi2(1) (Self & Liang 1987)."""
+    return 0.5 * chi2_sf(max(lr, 0.0), 1) if lr > 0 else 1.0
+
+
+@dataclass(frozen=True)
+class StochasticFit:
+    """Which stochastic biases the residuals show, with their REML estimates and the tests."""
+
+    named: tuple[str, ...]  #: subset of (bias_instability, bias_random_walk), in that order
+    chosen: ModelFit  #: the model of the named components ("none" when nothing is named)
+    fits: dict[str, ModelFit]  #: every model's REML fit
+    p: dict[str, float]  #: each component's LR p against the model without it (given the other)
+    p_alone: dict[str, float]  #: each component's LR p against no stochastic bias
+    p_outlier: float  #: Sidak p of the largest whitened innovation under the best model
+    alpha: float
+    ambiguous: bool = False  #: each alone fits, neither adds to the other: the data cannot tell them apart
+    notes: tuple[str, ...] = field(default_factory=tuple)
+
+    @property
+    def tau(self) -> float:
+        """Per-visit bias std [m/s^2] (0 unless named)."""
+        return math.sqrt(self.chosen.tau2)
+
+    @property
+    def tau_std(self) -> float:
+        return _sqrt_std(self.chosen.tau2, self.chosen.cov[0, 0])
+
+    @property
+    def q(self) -> float:
+        """Random-walk density [m/s^2/sqrt(s)] (0 unless named)."""
+        return math.sqrt(self.chosen.q2)
+
+    @property
+    def q_std(self) -> float:
+        return _sqrt_std(self.chosen.q2, self.chosen.cov[1, 1])
+
+    def values(self) -> dict[str, tuple[float, float, str]]:
+        """{name: (value, std, unit)} of the named components."""
+        v = {INSTABILITY: (self.tau, self.tau_std), RANDOM_WALK: (self.q, self.q_std)}
+        return {n: (*v[n], UNITS[n]) for n in self.named}
+
+    def to_json(self) -> dict:
+        def num(x: float):
+            return float(x) if math.isfinite(x) else None
+
+        return {"named": list(self.named), "ambiguous": self.ambiguous, "alpha": self.alpha,
+                "values": {n: {"value": v, "std": num(s), "unit": u} for n, (v, s, u) in self.values().items()},
+                "p_given_other": {k: num(v) for k, v in self.p.items()},
+                "p_alone": {k: num(v) for k, v in self.p_alone.items()}, "p_outlier": num(self.p_outlier),
+                "models": {m: {"tau": math.sqrt(f.tau2), "q": math.sqrt(f.q2), "reml_loglik": f.loglik}
+                           for m, f in self.fits.items()},
+                "notes": list(self.notes)}
+
+
+def _sqrt_std(v2: float, var: float) -> float:
+    """std of sqrt(v2) by the delta method, from the variance of v2."""
+    return math.sqrt(max(var, 0.0)) / (2.0 * math.sqrt(v2)) if v2 > 0 else float("nan")
+
+
+def select(c: Components, alpha: float = 1e-3) -> StochasticFit:
+    """Fit the four models and name the components the data ask for (module docstring)."""
+    fits = {m: fit_model(c, m) for m in MODELS}
+    lr = lambda a, b: 2.0 * (fits[a].loglik - fits[b].loglik)  # noqa: E731
+    p = {INSTABILITY: _p_boundary(lr("both", RANDOM_WALK)), RANDOM_WALK: _p_boundary(lr("both", INSTABILITY))}
+    alone = {n: _p_boundary(lr(n, "none")) for n in (INSTABILITY, RANDOM_WALK)}
+    level = alpha / 2.0
+    named = tuple(n for n in (INSTABILITY, RANDOM_WALK) if p[n] < level and alone[n] < level)
+    ambiguous = False
+    if len(named) == 2:
+        model = "both"
+    elif named:
+        model = named[0]
+    elif min(alone.values()) < level:  # each explains the excess alone, neither adds to the other
+        model = max((INSTABILITY, RANDOM_WALK), key=lambda n: fits[n].loglik)
+        named, ambiguous = (model,), alone[INSTABILITY] < level and alone[RANDOM_WALK] < level
+    else:
+        model = "none"
+    notes = []
+    e = innovations(c, fits[model].tau2, fits[model].q2)
+    p_out = _p_outlier(e)
+    if named and p_out < alpha:
+        notes.append(f"{' and '.join(named)} not named: one whitened innovation is {np.max(np.abs(e)):.3g} sigma "
+                     f"(p adjusted {p_out:.2g} < {alpha:g}), a jump no Gaussian stochastic bias explains")
+        named, model, ambiguous = (), "none", False
+    return StochasticFit(named=named, chosen=fits[model], fits=fits, p=p, p_alone=alone, p_outlier=p_out,
+                         alpha=alpha, ambiguous=ambiguous, notes=tuple(notes))

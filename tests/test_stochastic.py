@@ -1,0 +1,162 @@
+"""Stochastic biases (issue 12): bias_random_walk vs bias_instability by REML, GLS weights, the Allan view.
+
+Interval means are made here with a known truth (a bias random walk of density q, or one offset per
+visit, per axis, in counts), so the tests are fast; one discovery runs on a simulated recording."""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from imucal.analysis.simulate import PosePlan, cube_directions, si_sensor, simulate, simulation_from_dict
+from imucal.errors import ImucalError
+from imucal.model.geometry import frame_np
+from imucal.model.parameters import base_parameters
+from imucal.model.sensor import build_model
+from imucal.solve import least_squares as lsq
+from imucal.solve import stochastic
+from imucal.solve.fit import FitData, fit
+
+G = 9.80665
+ANGLES = np.array([1.5608, 1.5808, 1.5758])
+S, B = np.array([30.0, -12.0, 8.0]), np.array([1670.0, 1660.0, 1675.0])  # counts, counts per m/s^2
+SIG = 0.3  # noise of one mean [counts]
+
+
+def _means(seed: int, q: float = 0.0, tau: float = 0.0, visits: int = 2):
+    """Means of the 18 faces and edges visited ``visits`` times in shuffled order, one every 5 s:
+    noise SIG per mean, a random walk of q [m/s^2/sqrt(s)] and an offset of tau [m/s^2] per visit."""
+    rng = np.random.default_rng(seed)
+    d = cube_directions("faces+edges")
+    u = np.vstack([d[rng.permutation(len(d))] for _ in range(visits)])
+    t = 2.5 + 5.0 * np.arange(len(u))
+    walk = np.cumsum(rng.normal(0, 1, u.shape) * np.sqrt(np.diff(t, prepend=0.0))[:, None], axis=0) * q
+    bias = (walk + rng.normal(0, 1, u.shape) * tau) * B  # [counts]
+    raw = S + B * (G * u @ frame_np(ANGLES)) + bias + rng.normal(0, SIG, u.shape)  # Eq. theModel
+    return FitData(raw, np.zeros((len(u), 0)), np.full(u.shape, SIG**2), np.arange(len(u)), "means", t=t)
+
+
+def _fit(data: FitData, weights: str):
+    p = base_parameters(S * 1.01, B * 0.99, np.full(3, np.pi / 2), gravity=G)
+    return fit(data, p, build_model(), G, weights=weights)
+
+
+def _test(data: FitData) -> stochastic.StochasticFit:
+    """The REML test at the noise-weighted fit of ``data``."""
+    res = _fit(data, "noise")
+    fns, rows = lsq.row_functions(build_model(), res.free_names), lsq.Rows(data.raw, data.cov)
+    pv = np.array(res.params.values(), float)
+    b = np.array([res.params[f"b{i}"].value for i in (1, 2, 3)])
+    return stochastic.select(stochastic.components_at(fns, rows, pv, pv, G, res.sigma, b, data.t))
+
+
+Q = 1.5e-4  # m/s^2/sqrt(s): the walk moves ~10 noise sigmas of a mean over the 180 s
+TAU = 8e-4  # m/s^2 per visit: ~4.5 noise sigmas
+
+
+def test_a_random_walk_is_named_with_its_density():
+    named, z = [], []
+    for seed in range(8):
+        s = _test(_means(seed, q=Q))
+        named.append(s.named)
+        if s.named == (stochastic.RANDOM_WALK,):
+            z.append((s.q - Q) / s.q_std)
+    assert named.count((stochastic.RANDOM_WALK,)) >= 7, named
+    assert np.all(np.abs(z) < 3), z  # q within 3 standard errors of the truth
+    assert s.values()[stochastic.RANDOM_WALK][2] == "m/s^2/sqrt(s)"
+
+
+def test_per_visit_offsets_are_bias_instability_not_a_random_walk():
+    named = [_test(_means(seed, tau=TAU)).named for seed in range(8)]
+    assert named.count((stochastic.INSTABILITY,)) >= 7, named
+    assert not any(stochastic.RANDOM_WALK in n for n in named), named
+
+
+def test_no_false_alarm_on_50_clean_sets():
+    """The test at level 1e-3 run unconditionally (the fit and discovery run it only when the
+    chi-square test fails): nothing named on 50 clean sets."""
+    named = [_test(_means(seed)).named for seed in range(100, 150)]
+    assert all(n == () for n in named), [n for n in named if n]
+
+
+def test_a_jump_is_not_passed_off_as_a_random_walk():
+    data = _means(7)
+    raw = data.raw.copy()
+    raw[len(raw) // 2:, 1] += 40 * SIG  # a step in the bias of y halfway
+    s = _test(dataclasses.replace(data, raw=raw))
+    assert s.named == () and "jump" in s.notes[0]
+
+
+def test_auto_weights_use_the_random_walk_covariance_and_honest_errors():
+    truth = {"s1": S[0], "s2": S[1], "s3": S[2], "b1": B[0], "b2": B[1], "b3": B[2],
+             "phi": ANGLES[0], "psi": ANGLES[1], "theta": ANGLES[2]}
+    z_auto, z_noise = [], []
+    for seed in range(10):
+        data = _means(seed, q=Q)
+        a, n = _fit(data, "auto"), _fit(data, "noise")
+        assert a.success and a.random_walk > 0 and a.stochastic is not None
+        assert a.redchi == pytest.approx(1.0, abs=0.5)  # GLS chi-square: about its dof
+        z_auto += [(a.params[k].value - v) / a.std[k] for k, v in truth.items()]
+        z_noise += [(n.params[k].value - v) / n.std[k] for k, v in truth.items()]
+    assert 0.6 < np.std(z_auto) < 1.5, np.std(z_auto)  # errors that cover the truth
+    assert np.std(z_noise) > np.std(z_auto)
+
+
+def test_without_excess_auto_is_still_the_noise_weighted_fit():
+    data = _means(3)
+    a, n = _fit(data, "auto"), _fit(data, "noise")
+    assert a.random_walk == 0.0 and a.excess == 0.0 and a.values() == n.values()
+
+
+def test_simulator_random_walk_and_visit_offsets(tmp_path):
+    rng = np.random.default_rng(0)
+    sens = si_sensor(rng, noise=0.0)
+    plan = PosePlan(cube_directions("faces"), hold=3.0, transition=1.0)
+    base = simulate(sens, plan, seed=1)
+    rw = simulate(dataclasses.replace(sens, random_walk=(1e-3, 0.0, 0.0)), plan, seed=1)
+    vo = simulate(dataclasses.replace(sens, visit_offset=(0.0, 0.0, 1e-2)), plan, seed=1)
+    d_rw, d_vo = rw.raw - base.raw, vo.raw - base.raw
+    assert np.all(d_rw[:, 1:] == 0) and np.std(np.diff(d_rw[:, 0])) == pytest.approx(1e-3 * 0.1, rel=0.1)
+    a, b = vo.hold_bounds[2]
+    assert np.ptp(d_vo[a:b, 2]) == 0 and np.all(d_vo[:, :2] == 0)  # one offset per hold, on z only
+    with pytest.raises(ImucalError, match="sensor.random_walk"):
+        simulation_from_dict({"sensor": {"random_walk": [-1, 0, 0]}})
+
+
+def test_discover_names_the_random_walk_with_the_allan_view(tmp_path):
+    from imucal.analysis.discover import discover
+    from imucal.config.run import config_from_dict
+    from imucal.report.discover_figures import allan_figure
+    from test_figure_units import axis_problems
+    from matplotlib.figure import Figure
+
+    # 36 holds (faces and edges twice) after 110 s still, q = 2e-4 m/s^2/sqrt(s). Measured on seeds 0-6:
+    # 6 of 7 name only the walk; on seed 0 a drift on z beats the walk's likelihood and is kept.
+    rng = np.random.default_rng(1)
+    q = 2e-4
+    sens = dataclasses.replace(si_sensor(rng, noise=0.003), random_walk=(q,) * 3)
+    d = cube_directions("faces+edges")
+    dirs = np.vstack([d[rng.permutation(18)], d[rng.permutation(18)]])
+    sim = simulate(sens, PosePlan(dirs, hold=3.0, transition=2.0, initial_hold=110.0), seed=1)
+    (tmp_path / "rw.csv").write_text(sim.to_csv_text())
+    disc = discover(config_from_dict({"data": {"path": str(tmp_path / "rw.csv"), "unit": "m/s^2"}}, None))
+    assert disc.effects == ()  # the trends the walk makes are not named as drifts
+    assert disc.stochastic.named == (stochastic.RANDOM_WALK,)
+    assert abs(disc.stochastic.q - q) < 3 * disc.stochastic.q_std
+    assert "bias_random_walk" in disc.verdict and "m/s^2/sqrt(s)" in disc.verdict
+    js = disc.to_json()
+    assert js["stochastic"]["values"]["bias_random_walk"]["unit"] == "m/s^2/sqrt(s)"
+    assert js["allan"]["duration_s"] > 100 and len(js["allan"]["line_adev"]) == len(js["allan"]["tau_s"])
+    # the curve's own +1/2 slope (one 110 s segment: 14-47 % errors here) agrees with the REML density
+    # within 3 combined standard errors on every axis
+    s = disc.stochastic
+    assert all(abs(v - s.q) < 3 * np.hypot(v * e, s.q_std) for v, e in zip(disc.allan.q_allan, disc.allan.q_allan_rel_err))
+    saved = []
+    orig = Figure.savefig
+    Figure.savefig = lambda self, *a, **k: (saved.append(self), orig(self, *a, **k))[1]
+    try:
+        allan_figure(disc, tmp_path / "allan.png")
+    finally:
+        Figure.savefig = orig
+    assert saved and axis_problems(saved[0]) == []
