@@ -37,6 +37,9 @@ class FitData:
     raw_var: np.ndarray  #: (N, 3) variance of each raw reading [raw^2]
     group: np.ndarray  #: (N,) interval index of each row
     mode: str  #: "means" or "samples"
+    #: where raw_var comes from: "scatter" (each interval's own) or a noise model's file
+    #: (imucal.analysis.noise_model: white-noise density and bias-instability floor)
+    noise_source: str = "scatter"
 
 
 @dataclass(frozen=True)
