@@ -87,7 +87,7 @@ def one(args: tuple) -> dict:
     raw = sim.raw + noise(kind, sim.raw.shape[0], np.random.default_rng(seed + 10**6))
     truth = dict(zip(BASE_NAMES, [*s.s, *s.b, *s.angles]))
     base = config_from_dict({"data": {"path": "<sim>", "unit": "raw"},
-                             "static": {"window": 0.2, "min_duration": 0.4, "trim": 0.1}})
+                             "static": {"window": 0.2, "min_duration": 0.3, "trim": 0.05}})
     out = {}
     for how, nf in (("scatter", None), ("model", nfile)):
         run = calibrate(raw, t=sim.t, weights="noise", noise=nf, config=base)
@@ -121,7 +121,7 @@ def page(results: list[tuple], cmd: str, wall: float, cpu: float, noise_json: di
          "(`imucal/analysis/noise_model.py`), instead of the interval's own scatter over sqrt(n) times the "
          "pooled batch-means factor (`imucal/data/static.py`).", "",
          f"Simulated: 18 poses (cube faces and edges), {RATE:g} Hz, per-sample noise std {SIGMA:g} raw, white or "
-         f"AR(1) low-pass (coefficient {AR:g}); static detection with window 0.2 s, min_duration 0.4 s, trim 0.1 s; "
+         f"AR(1) low-pass (coefficient {AR:g}); static detection with window 0.2 s, min_duration 0.3 s, trim 0.05 s; "
          "weights \"noise\" for both fits. The noise file comes from `imucal noise` on a simulated "
          f"{STILL_S:g} s still log of the same noise:", ""]
     for kind, d in noise_json.items():
