@@ -295,6 +295,8 @@ def calibrate(config: RunConfig, recording: Recording | None = None) -> Calibrat
         "gravity_source": gsource,
         "warnings": fit_warnings(res, config, rec, dropped),
     }
+    if iv.temp is not None:  # the range a temperature effect holds over (exports write it: INS_TCAL1_TMIN ...)
+        cal_fit["temperature_range"] = [float(np.min(iv.temp)), float(np.max(iv.temp))]
     cal = Calibration(params=res.params, std=res.std, gravity=gravity, raw_unit=config.data.unit,
                       effects=tuple((e.name, e.axes) for e in model.effects), fit=cal_fit,
                       data={"file": Path(rec.source).name, "sha256": rec.sha256, "samples": rec.n,
