@@ -27,7 +27,7 @@ def add_data_options(p: argparse.ArgumentParser, data_required: bool = False, gy
     g = p.add_argument_group("data")
     g.add_argument("--data", required=data_required, metavar="FILE",
                    help="recording (CSV with header, or whitespace text: t x y z), or a ROS bag "
-                        "(.bag file or ROS 2 bag folder) with --topic")
+                        "(.bag file, ROS 2 bag folder or .mcap file) with --topic")
     g.add_argument("--topic", metavar="TOPIC", help="ROS bags: the sensor_msgs/Imu topic (e.g. /imu)")
     g.add_argument("--temp-topic", metavar="TOPIC",
                    help="ROS bags: a sensor_msgs/Temperature topic, interpolated onto the IMU stamps")
