@@ -287,7 +287,8 @@ def calibrate(config: RunConfig, recording: Recording | None = None) -> Calibrat
     else:
         rm = res.residuals
     cal_fit = {
-        "mode": res.mode, "weights": config.fit.weights, "noise": Path(data.noise_source).name, "status": res.status, "iterations": res.iterations,
+        "mode": res.mode, "weights": config.fit.weights, "noise": Path(data.noise_source).name,
+        "status": res.status, "iterations": res.iterations,
         "rms_residual": float(np.sqrt(np.mean(rm**2))), "chi2": res.chi2, "dof": res.dof,
         "redchi": res.redchi, "redchi_noise": res.redchi_noise,
         "bias_instability": math.sqrt(res.excess),  # between-interval excess in the weights [m/s^2]

@@ -128,17 +128,20 @@ def page(results: list[tuple], cmd: str, wall: float, cpu: float, noise_json: di
         dens = ", ".join(f"{d['axes'][a]['white_density']:.4g}" for a in "xyz")
         true = SIGMA / np.sqrt(RATE) * (1.0 if kind == "white" else np.sqrt((1 + AR) / (1 - AR)))
         L.append(f"* {kind}: white density x, y, z = {dens} raw/sqrt(Hz) (true {true:.4g})")
-    L += ["", "| hold [s] | noise | samples per interval | weights from | 95 % coverage, pooled [%] | worst parameter [%] "
-          "| mean reduced chi-square | RMS z | RMS error / scatter's |", "|---|---|---|---|---|---|---|---|---|"]
+    L += ["", "| hold [s] | noise | samples per interval | weights from | 95 % coverage, pooled [%] "
+          "| worst parameter [%] | mean reduced chi-square | RMS z | RMS error / scatter's |",
+          "|---|---|---|---|---|---|---|---|---|"]
     for hold, kind, n, summ in results:
         for how in ("scatter", "model"):
             s = summ[how]
-            L.append(f"| {hold:g} | {kind} | {s['n_samples']:.0f} | {'own scatter' if how == 'scatter' else 'noise file'} "
+            src = "own scatter" if how == "scatter" else "noise file"
+            L.append(f"| {hold:g} | {kind} | {s['n_samples']:.0f} | {src} "
                      f"| {s['coverage']:.1f} | {s['worst']:.1f} | {s['redchi']:.3f} | {s['rms_z']:.3f} | "
                      f"{s['rms_err_ratio']:.3f} |")
-    L += ["", f"{results[0][2]} recordings per row; a pooled coverage is known to about "
-          f"+-{100 * 1.96 * np.sqrt(0.05 * 0.95 / (9 * results[0][2])):.1f} points (95 %, if the nine were independent), "
-          f"one parameter's to +-{100 * 1.96 * np.sqrt(0.05 * 0.95 / results[0][2]):.1f}."]
+    n = results[0][2]
+    L += ["", f"{n} recordings per row; a pooled coverage is known to about "
+          f"+-{100 * 1.96 * np.sqrt(0.05 * 0.95 / (9 * n)):.1f} points (95 %, if the nine were independent), "
+          f"one parameter's to +-{100 * 1.96 * np.sqrt(0.05 * 0.95 / n):.1f}."]
     return "\n".join(L) + "\n"
 
 

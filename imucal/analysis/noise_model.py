@@ -10,10 +10,10 @@ N the white-noise density [unit/sqrt(Hz)] (N sqrt(fs) is the per-sample white no
 sqrt(n) for a mean of n samples), B the bias instability: the Allan deviation's flat floor
 sigma_min = FLICKER_FACTOR B, added only when the curve shows one (its minimum lies at half its
 longest tau or earlier, so it turns up over an octave; a curve falling to its end has none).
-A rows-of-samples fit uses the per-sample white noise N sqrt(fs). Densities in m/s^2 are converted to the raw unit by the scale
-b_i [raw per m/s^2] of each axis (the ellipsoid guess; the angles are near 90 deg, so raw axis i
-sees a_i b_i). The random walk is drift over the whole log, not noise of one mean: not used here
-(fit a drift effect for it).
+A rows-of-samples fit uses the per-sample white noise N sqrt(fs). Densities in m/s^2 are
+converted to the raw unit by the scale b_i [raw per m/s^2] of each axis (the ellipsoid guess;
+the angles are near 90 deg, so raw axis i sees a_i b_i). The random walk is drift over the
+whole log, not noise of one mean: not used here (fit a drift effect for it).
 """
 from __future__ import annotations
 

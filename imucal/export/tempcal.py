@@ -18,7 +18,8 @@ X0 = 0 and Xk the coefficients in powers of (T - T_ref). s(T) is read from the c
 apply map (the CasADi model), never re-derived: at each temperature the map is affine in raw,
 a = A(T) (raw - s(T)), so s(T) = -A(T)^-1 a(0). Scale terms (scale_temperature...) change A(T):
 the peer's a_peer = A(T_ref) A(T)^-1 a, so their loss is g ||I - A(T_ref) A(T)^-1|| over T in
-[TMIN, TMAX] (max: 2-norm; RMS: Frobenius / sqrt 3, averaged over LOSS_POINTS temperatures), stated in the file and the command's output.
+[TMIN, TMAX] (max: 2-norm; RMS: Frobenius / sqrt 3, averaged over LOSS_POINTS temperatures),
+stated in the file and the command's output.
 """
 from __future__ import annotations
 
