@@ -14,7 +14,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from imucal.config.run import FitSettings, GravitySpec, RunConfig, config_from_dict
+from imucal.config.run import GravitySpec, RunConfig, config_from_dict
 from imucal.data.load import DataSpec, Recording, infer_time_unit, TIME_UNITS, MIN_RATE_HZ, MAX_RATE_HZ
 from imucal.errors import ImucalError
 from imucal.pipeline import CalibrationRun, calibrate as _calibrate_config
@@ -73,9 +73,12 @@ def recording_from_arrays(acc: Any, t: Sequence[float] | None = None, temp: Sequ
 def calibrate(acc: Any, t: Sequence[float] | None = None, temp: Sequence[float] | None = None, *,
               fs: float | None = None, gravity: float | None = None, latitude: float | None = None,
               height: float = 0.0, unit: str = "raw", time_unit: str = "auto", fix_angles: bool = False,
-              mode: str = "means", weights: str = "auto", config: RunConfig | None = None
-              ) -> CalibrationRun:
+              mode: str = "means", weights: str = "auto", noise: str | None = None,
+              config: RunConfig | None = None) -> CalibrationRun:
     """Calibrate from arrays: ``acc`` (N, 3) raw readings (or a DataFrame with ax, ay, az[, t, temp]).
+
+    ``noise``: a noise file (`imucal noise --json` output or a Kalibr imu.yaml) for the interval
+    means' noise (imucal.analysis.noise_model), as ``--noise`` and ``fit.noise``.
 
     Also takes a RunConfig as the only argument (the YAML's typed form), as the CLI does.
     """
@@ -86,10 +89,9 @@ def calibrate(acc: Any, t: Sequence[float] | None = None, temp: Sequence[float] 
     grav = base.gravity if gravity is None and latitude is None else GravitySpec(
         value=gravity, latitude=latitude, height=height)
     fit = base.fit
-    if fix_angles or mode != "means" or weights != "auto":
-        fit = FitSettings(mode=mode, weights=weights, angle_tolerance=fit.angle_tolerance,
-                          fix=tuple(sorted(set(fit.fix) | ({"phi", "psi", "theta"} if fix_angles else set()))),
-                          initial=fit.initial, effects=fit.effects)
+    if fix_angles or mode != "means" or weights != "auto" or noise is not None:
+        fit = dataclasses.replace(fit, mode=mode, weights=weights, noise=noise if noise is not None else fit.noise,
+                                  fix=tuple(sorted(set(fit.fix) | ({"phi", "psi", "theta"} if fix_angles else set()))))
 
     cfg = dataclasses.replace(base, data=DataSpec(path=rec.source, unit=unit), gravity=grav, fit=fit)
     return _calibrate_config(cfg, recording=rec)

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from imucal.analysis.noise_model import NoiseModel, load_noise_model
 from imucal.calibration.frozen import Calibration, now_utc
 from imucal.calibration.gyro import GyroCalibration
 from imucal.config.run import RunConfig
@@ -132,18 +133,31 @@ def effect_initial(params: Parameters, config: RunConfig) -> Parameters:
 
 
 def fit_data(model: SensorModel, intervals: Intervals, samples: StaticSamples | Recording | None, mode: str,
-             source: str | None) -> FitData:
+             source: str | None, noise: tuple[NoiseModel, float] | None = None) -> FitData:
     """The fit's rows: interval means, or (samples mode) the static samples (a Recording in memory
-    is cut to them)."""
+    is cut to them). Their noise is each interval's scatter, or with ``noise`` (a model in the raw
+    unit and the sample rate [Hz]) the measured white noise and floor (imucal.analysis.noise_model)."""
+    src = "scatter" if noise is None else noise[0].source
     if mode == "means":
+        var = intervals.mean_std**2 if noise is None else noise[0].mean_variance(intervals.n_samples, noise[1])
         return FitData(raw=intervals.mean, cov=covariates_for(model, intervals, source=source),
-                       raw_var=intervals.mean_std**2, group=np.arange(intervals.n), mode="means",
-                       t=intervals.t_mid)
+                       raw_var=var, group=np.arange(intervals.n), mode="means", t=intervals.t_mid,
+                       noise_source=src)
     if isinstance(samples, Recording):
         samples = static_samples(intervals, samples)
     group = intervals.sample_index()
+    var = intervals.std[group] ** 2 if noise is None else noise[0].sample_variance(group.size, noise[1])
     return FitData(raw=samples.raw, cov=covariates_for(model, samples=samples, source=source),
-                   raw_var=intervals.std[group] ** 2, group=group, mode="samples")
+                   raw_var=var, group=group, mode="samples", noise_source=src)
+
+
+def measured_noise(config: RunConfig, guess: InitialGuess, rate: float) -> tuple[NoiseModel, float] | None:
+    """``fit.noise`` (a noise file, relative to the YAML file) in the raw unit, with the rate [Hz]."""
+    if config.fit.noise is None:
+        return None
+    p = Path(config.fit.noise)
+    p = p if p.is_absolute() or config.base_dir is None else config.base_dir / p
+    return load_noise_model(p).in_raw(config.data.unit, guess.b), float(rate)
 
 
 #: Reduced chi-square above which a fit is refused, not reported: no sensor model is that wrong.
@@ -262,9 +276,10 @@ def _problem(config: RunConfig, rec: Recording | RecordingSummary, iv: Intervals
         samples = None
         if config.fit.mode == "samples":
             samples = streamed.samples if streamed is not None else static_samples(iv, rec)
-        data = fit_data(model, iv, samples, config.fit.mode, rec.source)
+        noise = measured_noise(config, guess, rec.sample_rate)
+        data = fit_data(model, iv, samples, config.fit.mode, rec.source, noise)
         # Observability on interval means (one row per interval), at the initial guess.
-        mdata = fit_data(model, iv, None, "means", rec.source) if data.mode != "means" else data
+        mdata = fit_data(model, iv, None, "means", rec.source, noise) if data.mode != "means" else data
         J, Jw = jacobian_rows(mdata, params, model, gravity, weighted=True)
         obs = analyse(dirs, J, params.free_names, Jw, thresholds(params.free_names, config.fit.angle_tolerance))
         require_observable(obs, params.free_names, rec.source)
@@ -306,7 +321,8 @@ def calibrate(config: RunConfig, recording: Recording | None = None) -> Calibrat
     rm = res.residuals if res.mode == "means" else jacobian_rows(pb.means, res.params, pb.model, gravity,
                                                                  residuals=True)  # residuals on means too
     cal_fit = {
-        "mode": res.mode, "weights": config.fit.weights, "status": res.status, "iterations": res.iterations,
+        "mode": res.mode, "weights": config.fit.weights, "noise": Path(pb.data.noise_source).name,
+        "status": res.status, "iterations": res.iterations,
         "rms_residual": float(np.sqrt(np.mean(rm**2))), "chi2": res.chi2, "dof": res.dof,
         "redchi": res.redchi, "redchi_noise": res.redchi_noise,
         "bias_instability": math.sqrt(res.excess),  # between-interval excess in the weights [m/s^2]
@@ -315,6 +331,8 @@ def calibrate(config: RunConfig, recording: Recording | None = None) -> Calibrat
         "gravity_source": gsource,
         "warnings": fit_warnings(res, config, rec, dropped),
     }
+    if iv.temp is not None:  # the range a temperature effect holds over (exports write it: INS_TCAL1_TMIN ...)
+        cal_fit["temperature_range"] = [float(np.min(iv.temp)), float(np.max(iv.temp))]
     cal = Calibration(params=res.params, std=res.std, gravity=gravity, raw_unit=config.data.unit,
                       effects=tuple((e.name, e.axes) for e in pb.model.effects), fit=cal_fit,
                       data={"file": Path(rec.source).name, "sha256": rec.sha256, "samples": rec.n,

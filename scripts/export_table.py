@@ -53,9 +53,9 @@ HOLDS = {
     "kalibr": ("lower-triangular M (= ours, exactly); bias only as imucal's extra key (Kalibr estimates it "
                "online)", "no", "M, C_gyro_i, A (= G_s), exactly; bias as imucal's extra key",
                "yes (`--data`: Allan deviation, both sensors)"),
-    "ardupilot": ("offset + diagonal scale (no misalignment)", "INS_TCAL1_* exist; not exported",
+    "ardupilot": ("offset + diagonal scale (no misalignment)", "INS_TCAL1_*: the bias terms (cubic in T) exactly over TMIN..TMAX; no scale term",
                   "INS_GYROFFS only (rad/s)", "no"),
-    "px4": ("offset + diagonal scale (no misalignment)", "TC_A0_* exist; not exported",
+    "px4": ("offset + diagonal scale (no misalignment)", "TC_A0_*: the bias terms (cubic in T) exactly over TMIN..TMAX; no scale term",
             "CAL_GYRO0_*OFF only (rad/s)", "no"),
 }
 
@@ -151,7 +151,8 @@ def main() -> int:
     for r in rows:
         g = r[9]
         lines.append(f"| `{r[0]}` | {g[0]:.2g} / {g[1]:.2g} | {g[2]:.2g} / {g[3]:.2g} | {g[4]:.2g} |")
-    lines += ["", "Every format drops effects (temperature, drift, nonlinearity): the file holds the map at the "
+    lines += ["", "Every format drops effects (drift, nonlinearity; temperature except the bias terms ArduPilot's "
+              "INS_TCAL1_* and PX4's TC_A0_* hold, `tests/test_export_tempcal.py`): the file holds the map at the "
               "effects' reference point and `imucal export` prints what was dropped (checked with the Xsens "
               f"calibration given bias_temperature and scale_drift terms: {sum(r[-1] for r in rows)} of {len(rows)} "
               "formats say so). `imucal codegen` keeps every effect.",

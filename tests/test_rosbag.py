@@ -12,7 +12,7 @@ import pytest
 pytest.importorskip("rosbags", reason="the ROS extra is not installed (pip install imucal-nlp[ros])")
 
 from rosbags.rosbag1 import Writer as Writer1  # noqa: E402
-from rosbags.rosbag2 import Writer as Writer2  # noqa: E402
+from rosbags.rosbag2 import StoragePlugin, Writer as Writer2  # noqa: E402
 from rosbags.typesys import Stores, get_typestore  # noqa: E402
 
 #: Bag stamps start here [s since epoch] so that the stamps look like a real driver's.
@@ -49,10 +49,12 @@ def _seq(header_type, k: int) -> dict:
     return {"seq": k} if "seq" in header_type.__dataclass_fields__ else {}
 
 
-def write_bag(path: Path, ros: int, topics: dict[str, tuple[str, list, list]]) -> Path:
-    """Write ``{topic: (msgtype, receive times [ns], messages)}`` as a ROS 1 .bag or a ROS 2 folder."""
+def write_bag(path: Path, ros: int, topics: dict[str, tuple[str, list, list]], storage: str = "sqlite3") -> Path:
+    """Write ``{topic: (msgtype, receive times [ns], messages)}`` as a ROS 1 .bag or a ROS 2 folder
+    (``storage`` "sqlite3": a .db3 inside, or "mcap": a .mcap inside, rosbags' two ROS 2 storages)."""
     ts = get_typestore(Stores.ROS1_NOETIC if ros == 1 else Stores.ROS2_HUMBLE)
-    writer = Writer1(path) if ros == 1 else Writer2(path, version=9)
+    plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+    writer = Writer1(path) if ros == 1 else Writer2(path, version=9, storage_plugin=plugin)
     with writer:
         for topic, (msgtype, recv, msgs) in topics.items():
             conn = writer.add_connection(topic, msgtype, typestore=ts)
@@ -84,7 +86,14 @@ def si_bags(si_recording, tmp_path_factory):
     csv = d / "same.csv"
     np.savetxt(csv, np.column_stack([t, sim.raw]), delimiter=",", fmt="%.17g", header="t,ax,ay,az", comments="")
     bags = {ros: write_bag(_bag_name(d, ros), ros, {"/imu": imu_topic(ros, t, sim.raw)}) for ros in (1, 2)}
+    bags["mcap"] = write_bag(d / "run_mcap", 2, {"/imu": imu_topic(2, t, sim.raw)}, storage="mcap")
+    (mcap,) = bags["mcap"].glob("*.mcap")
+    bags["mcap file"] = d / "alone.mcap"  # the .mcap without its folder's metadata.yaml
+    bags["mcap file"].write_bytes(mcap.read_bytes())
     return bags, csv, t, sim
+
+
+BAG_KINDS = [1, 2, "mcap", "mcap file"]
 
 
 def _calibrate(run_cli, data, out: Path, *extra) -> dict:
@@ -108,7 +117,7 @@ def _numbers(d, prefix: str = "") -> dict[str, float]:
     return out
 
 
-@pytest.mark.parametrize("ros", [1, 2])
+@pytest.mark.parametrize("ros", BAG_KINDS)
 def test_a_bag_calibrates_as_the_same_samples_in_a_csv(si_bags, run_cli, tmp_path, ros):
     bags, csv, _, _ = si_bags
     keys = ("params", "std", "matrix", "offset", "rms_residual", "chi2", "n_intervals")
@@ -124,7 +133,7 @@ def test_the_recording_from_a_bag_holds_the_messages(si_bags):
     from imucal.data.load import DataSpec, load_recording
 
     bags, _, t, sim = si_bags
-    for ros in (1, 2):
+    for ros in BAG_KINDS:
         rec = load_recording(DataSpec(path=str(bags[ros]), topic="/imu"))
         np.testing.assert_array_equal(rec.raw, sim.raw)
         np.testing.assert_allclose(rec.t, t, rtol=0, atol=1e-12)
@@ -209,6 +218,12 @@ def _bad(tmp_path: Path, case: str) -> tuple[Path, list[str]]:
         for f in good.glob("*.db3"):
             f.write_bytes(b"not a database" * 20)
         return good, ["--topic", "/imu"]
+    if case == "corrupt mcap":
+        good = write_bag(tmp_path / "g", 2, {"/imu": imu_topic(2, t, acc)}, storage="mcap")
+        (f,) = good.glob("*.mcap")
+        p = tmp_path / "c.mcap"
+        p.write_bytes(f.read_bytes()[:200])
+        return p, ["--topic", "/imu"]
     if case == "csv option":
         return write_bag(tmp_path / "a.bag", 1, {"/imu": imu_topic(1, t, acc)}), ["--topic", "/imu",
                                                                                    "--sample-rate", "100"]
@@ -222,6 +237,7 @@ BAD = {"topic absent": ("topic /imu is not in the bag", "/imu/data"),
        "not monotonic": ("not strictly increasing at message 20", "header.stamp"),
        "corrupt ros1": ("cannot read the bag", "c.bag"),
        "corrupt ros2": ("cannot read the bag", "data.path"),
+       "corrupt mcap": ("cannot read the bag", "c.mcap"),
        "csv option": ("sample_rate does not apply to a ROS bag", "data.sample_rate")}
 
 

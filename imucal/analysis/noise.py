@@ -23,6 +23,8 @@ from imucal.errors import ImucalError
 
 #: sqrt(2 ln 2 / pi): sigma_min of a flicker floor over the bias instability B.
 FLICKER_FACTOR = math.sqrt(2 * math.log(2) / math.pi)
+#: A curve peaking after its first tau is fitted from this many times the peak's tau on.
+LOWPASS_MARGIN = 10.0
 
 
 @dataclass(frozen=True)
@@ -98,6 +100,13 @@ def _fit_terms(t: np.ndarray, s: np.ndarray, c: np.ndarray) -> tuple[np.ndarray,
 def estimate(curve: AllanCurve, axis: int = 0) -> NoiseEstimate:
     """White-noise density, random walk and bias instability of one axis of ``curve``."""
     t, s, c = curve.tau, curve.adev[:, axis], curve.clusters
+    # A curve that rises first is low-pass filtered noise, correlated over about its peak's tau: the
+    # -1/2 slope of white noise holds from well beyond it (LOWPASS_MARGIN x the peak's tau) on.
+    k0 = int(np.argmax(s))
+    if k0 > 0:
+        keep = t >= LOWPASS_MARGIN * t[k0]
+        if np.count_nonzero(keep) >= 4:
+            t, s, c = t[keep], s[keep], c[keep]
     q, sd = _fit_terms(t, s, c)
 
     def term(j: int) -> tuple[float, float]:  # value = sqrt(q_j); relative error = sd / (2 q)

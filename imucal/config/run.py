@@ -96,8 +96,14 @@ class FitSettings:
     fix: tuple[str, ...] = ()  #: parameters held at their initial value
     initial: Mapping[str, float] = field(default_factory=dict)  #: overrides of the initial guess
     effects: tuple[EffectSpec, ...] = ()
+    #: `imucal noise --json` output or a Kalibr imu.yaml: the interval means' noise from its
+    #: white-noise density (imucal.analysis.noise_model) instead of their own scatter
+    noise: str | None = None
 
     def __post_init__(self) -> None:
+        if self.noise is not None and (not isinstance(self.noise, str) or not self.noise):
+            raise ImucalError(f"noise {short(self.noise)} must be a file name", field="fit.noise",
+                              fix="give the JSON of `imucal noise --json` or a Kalibr imu.yaml")
         if self.mode not in FIT_MODES:
             raise ImucalError(f"unknown fit mode {short(self.mode)}", field="fit.mode",
                               fix=f"use one of {', '.join(FIT_MODES)}")

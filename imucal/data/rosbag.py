@@ -1,5 +1,6 @@
 """ROS bags in: ``sensor_msgs/msg/Imu`` (and ``sensor_msgs/msg/Temperature``) from ROS 1 ``.bag``
-files and ROS 2 bag folders (metadata.yaml + .db3/.mcap), read with the optional ``rosbags``
+files, ROS 2 bag folders (metadata.yaml + .db3/.mcap) and bare ROS 2 ``.mcap`` files (the one file of a
+folder recorded with ``ros2 bag record -s mcap``, as users share it), read with the optional ``rosbags``
 library (``pip install imucal-nlp[ros]``) into the same Recording the text loader builds.
 
 Units are ROS's (REP 103): linear_acceleration [m/s^2], angular_velocity [rad/s]. A driver that
@@ -27,9 +28,10 @@ _INSTALL = "install the ROS extra: pip install imucal-nlp[ros]"
 
 
 def is_bag(path: str | os.PathLike) -> bool:
-    """A ROS 1 bag (``.bag`` file) or a ROS 2 bag folder (holding metadata.yaml)."""
+    """A ROS 1 bag (``.bag`` file), a ROS 2 MCAP file (``.mcap``) or a ROS 2 bag folder (holding
+    metadata.yaml)."""
     p = Path(path)
-    return p.suffix == ".bag" or (p.is_dir() and (p / "metadata.yaml").is_file())
+    return p.suffix in (".bag", ".mcap") or (p.is_dir() and (p / "metadata.yaml").is_file())
 
 
 def _bag_files(path: Path) -> list[Path]:
@@ -45,7 +47,7 @@ def _sha256(files: list[Path]) -> str:
     limit, total = max_data_bytes(), 0
     for q in files:
         fd, size = open_regular(q, field="data.path", max_bytes=limit - total,
-                                fix="check the path of the bag (a .bag file or a ROS 2 bag folder)")
+                                fix="check the path of the bag (a .bag or .mcap file, or a ROS 2 bag folder)")
         total += size
         if len(files) > 1:
             h.update(q.name.encode() + b"\0")
@@ -70,7 +72,7 @@ def read_bag(path: str | os.PathLike, topic: str | None, temp_topic: str | None 
     path = Path(path)
     if not path.exists():
         raise ImucalError("file not found", file=str(path), field="data.path",
-                          fix="check the path of the bag (a .bag file or a ROS 2 bag folder)")
+                          fix="check the path of the bag (a .bag or .mcap file, or a ROS 2 bag folder)")
     try:  # the optional extra: imported only when a bag is read
         from rosbags.highlevel import AnyReader
         from rosbags.typesys import Stores, get_typestore

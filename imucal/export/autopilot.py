@@ -14,7 +14,8 @@ B = diag(1/b) A^-1. A rotation between the frames is the board's orientation (AH
 CAL_ACC0_ROT), not calibration, so the error is taken in the rotation R that best aligns them
 (orthogonal Procrustes: the polar factor of B): d(u) = (R^T B - I) g u over unit directions u,
   max |d| = g ||R^T B - I||_2,   RMS |d| = g ||R^T B - I||_F / sqrt(3)  (uniform directions).
-Temperature terms (INS_TCAL1_*, TC_A0_*) are not exported: the file and the command say so.
+Temperature terms: the bias polynomial goes to INS_TCAL1_* and TC_A0_* exactly (imucal.export.tempcal);
+the scale terms, which neither holds, are dropped with their error stated.
 
 The gyroscope: both subtract an offset from the driver's reading [rad/s] in the sensor frame and
 hold nothing else:
@@ -41,7 +42,8 @@ from imucal.constants import SI_ACCEL_UNIT
 from imucal.errors import ImucalError, short
 from imucal.export.formats import ExportOptions, Exported, affine, dropped_effects
 from imucal.export.gyro import OffsetFit, offset_fit
-from imucal.export.peers import AffineCalibration, _text_number, checked, checked_gyro
+from imucal.export import tempcal
+from imucal.export.peers import AffineCalibration, ThermalOffset, _text_number, checked, checked_gyro
 from imucal.files.inputs import read_input_text
 
 AXES = ("X", "Y", "Z")
@@ -51,8 +53,8 @@ PX4_OFFSETS = tuple(f"CAL_ACC0_{a}OFF" for a in AXES)
 PX4_SCALES = tuple(f"CAL_ACC0_{a}SCALE" for a in AXES)
 ARDUPILOT_GYRO = tuple(f"INS_GYROFFS_{a}" for a in AXES)
 PX4_GYRO = tuple(f"CAL_GYRO0_{a}OFF" for a in AXES)
-#: QGroundControl's parameter file: MAV_PARAM_TYPE_REAL32 for a float parameter.
-MAV_PARAM_TYPE_REAL32 = 9
+#: QGroundControl's parameter file: MAV_PARAM_TYPE_REAL32 for a float parameter, _INT32 for an integer.
+MAV_PARAM_TYPE_REAL32, MAV_PARAM_TYPE_INT32 = 9, 6
 
 
 @dataclass(frozen=True)
@@ -92,14 +94,34 @@ def gyro_fit(cal: Calibration) -> OffsetFit | None:
     return None if cal.gyro is None else offset_fit(cal.gyro, diagonal_fit(cal).rotation, cal.gravity)
 
 
+def thermal(cal: Calibration) -> tempcal.TempPolynomial | None:
+    """The bias polynomial in temperature to export, when the calibration has a bias term."""
+    if not any(n in tempcal.BIAS_TERMS for n, _ in cal.effects):
+        return None
+    return tempcal.polynomial(cal)
+
+
+def _thermal_notes(cal: Calibration, what: str) -> list[str]:
+    """What happens to the temperature terms, and what else is dropped."""
+    names = "INS_TCAL1_* and INS_ACC1_CALTEMP" if what == "ArduPilot" else "TC_A_ENABLE and TC_A0_*"
+    p, notes = thermal(cal), []
+    if p is not None:
+        notes.append(f"temperature: the bias terms are written exactly as {names} over {p.tmin:.4g}..{p.tmax:.4g} "
+                     f"degC ({p.range_note}; {what} holds the offset at the range's ends outside it); the offsets "
+                     f"are s(T_ref = {p.tref:g} degC)")
+    part = tempcal.polynomial(cal) if p is None else p
+    if part is not None and (loss := tempcal.loss_sentence(part, what)):
+        notes.append(loss)
+    rest = tuple(e for e in cal.effects if e[0] not in (tempcal.BIAS_TERMS if p is not None else ()))
+    return notes + list(dropped_effects(replace(cal, effects=rest)) if rest else ())
+
+
 def _notes(cal: Calibration, fit: DiagonalFit, what: str, units: str) -> tuple[str, ...]:
     notes = [fit.sentence(what)]
     gfit = gyro_fit(cal)
     if gfit is not None:
         notes.append(gfit.sentence(what, cal.gyro.unit))
-    if any(n in ("bias_temperature", "scale_temperature") for n, _ in cal.effects):
-        notes.append(f"temperature terms ({'INS_TCAL1_*' if what == 'ArduPilot' else 'TC_A0_*'}) are not exported")
-    notes += dropped_effects(cal)
+    notes += _thermal_notes(cal, what)
     if cal.raw_unit != SI_ACCEL_UNIT:
         notes.append(f"{what} applies {units} to its driver's readings in m/s^2 (offsets in m/s^2, scales "
                      f"near 1); this calibration's input unit is {cal.raw_unit!r}, so these numbers reproduce it "
@@ -125,7 +147,11 @@ def _gyro_header(cal: Calibration, fit: OffsetFit | None, label: str, formula: s
 
 def _values(cal: Calibration, fit: DiagonalFit, acc_names: tuple[str, ...], gyro_names: tuple[str, ...]
             ) -> list[tuple[str, float]]:
-    out = list(zip(acc_names, [*map(float, fit.offset), *map(float, fit.scale)]))
+    p = thermal(cal)
+    offset = fit.offset if p is None else p.s_ref  # with temperature terms: s at the reference temperature
+    out = list(zip(acc_names, [*map(float, offset), *map(float, fit.scale)]))
+    if p is not None:
+        out += tempcal.ardupilot_lines(p) if acc_names[0].startswith("INS_") else tempcal.px4_lines(p)
     gfit = gyro_fit(cal)
     if gfit is not None:
         out += list(zip(gyro_names, map(float, gfit.offset)))
@@ -160,8 +186,8 @@ def to_px4(cal: Calibration, opts: ExportOptions) -> Exported:
         *_gyro_header(cal, gyro_fit(cal), "CAL_GYRO0_*OFF", "Gyroscope.hpp Correct(): omega = rotation * (reading - "
                       "thermal_offset - CAL_GYRO0_*OFF), reading = raw / k")], notes)
     lines.append("# Vehicle-Id\tComponent-Id\tName\tValue\tType")
-    lines += [f"1\t1\t{n}\t{v!r}\t{MAV_PARAM_TYPE_REAL32}" for n, v in _values(cal, fit, PX4_OFFSETS + PX4_SCALES,
-                                                                                 PX4_GYRO)]
+    lines += [f"1\t1\t{n}\t{v!r}\t{MAV_PARAM_TYPE_INT32 if isinstance(v, int) else MAV_PARAM_TYPE_REAL32}"
+              for n, v in _values(cal, fit, PX4_OFFSETS + PX4_SCALES, PX4_GYRO)]
     return Exported("\n".join(lines) + "\n", notes)
 
 
@@ -186,7 +212,7 @@ def _params(pairs: list[tuple[int, str, str]], path: str, offsets: tuple[str, ..
                           fix=f"the file needs {', '.join(offsets + scales)}")
     o = np.array([values[n] for n in offsets])
     k = np.array([values[n] for n in scales])
-    out = checked(np.diag(k), o, path, "/".join(scales), fmt)
+    out = replace(checked(np.diag(k), o, path, "/".join(scales), fmt), thermal=_thermal_in(values, path, fmt))
     held = [n for n in gyro if n in values]
     if not held:
         return out
@@ -196,6 +222,36 @@ def _params(pairs: list[tuple[int, str, str]], path: str, offsets: tuple[str, ..
     # omega = reading - offset, the reading in rad/s: what the file holds of a gyroscope
     return replace(out, gyro=checked_gyro(np.eye(3), np.array([values[n] for n in gyro]), np.zeros((3, 3)),
                                           path, gyro[0]))
+
+
+#: ArduPilot's and PX4's defaults for a temperature parameter a file leaves out (their param tables).
+_AP_DEFAULTS = {"INS_TCAL1_TMIN": 0.0, "INS_TCAL1_TMAX": 70.0, "INS_ACC1_CALTEMP": -300.0}
+_PX4_DEFAULTS = {"TC_A0_TREF": 25.0, "TC_A0_TMIN": 0.0, "TC_A0_TMAX": 100.0}
+
+
+def _thermal_in(values: dict[str, float], path: str, fmt: str) -> ThermalOffset | None:
+    """The temperature offset the file enables (INS_TCAL1_ENABLE = 1, TC_A_ENABLE = 1), else None;
+    parameters left out take the autopilot's defaults (coefficients 0)."""
+    if fmt == "ardupilot":
+        if values.get("INS_TCAL1_ENABLE", 0.0) != 1.0:
+            return None
+        v = {**_AP_DEFAULTS, **values}
+        c = np.zeros((4, 3))
+        for k in (1, 2, 3):
+            c[k] = [v.get(f"INS_TCAL1_ACC{k}_{a}", 0.0) / tempcal.ARDUPILOT_SCALE for a in AXES]
+        lo, hi, tc = v["INS_TCAL1_TMIN"], v["INS_TCAL1_TMAX"], v["INS_ACC1_CALTEMP"]
+        origin, names = tempcal.ARDUPILOT_TREF, ("INS_TCAL1_TMIN", "INS_TCAL1_TMAX")
+    else:
+        if values.get("TC_A_ENABLE", 0.0) != 1.0:
+            return None
+        v = {**_PX4_DEFAULTS, **values}
+        c = np.array([[v.get(f"TC_A0_X{k}_{i}", 0.0) for i in range(3)] for k in range(4)])
+        lo, hi, tc, origin = v["TC_A0_TMIN"], v["TC_A0_TMAX"], None, v["TC_A0_TREF"]
+        names = ("TC_A0_TMIN", "TC_A0_TMAX")
+    if not lo <= hi:
+        raise ImucalError(f"{lo:g} is above {names[1]} = {hi:g}", file=path, field=names[0],
+                          fix="the temperature range's minimum must not exceed its maximum")
+    return ThermalOffset(coeffs=c, origin=float(origin), tmin=float(lo), tmax=float(hi), t_cal=tc)
 
 
 def _parameter_lines(path: str):

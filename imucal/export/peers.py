@@ -52,8 +52,30 @@ class GyroMap:
 
 
 @dataclass(frozen=True)
+class ThermalOffset:
+    """An autopilot's temperature offset, subtracted from the reading before its map [raw]:
+    q(clamp(T, tmin, tmax) - origin) - q(clamp(t_cal, tmin, tmax) - origin), q(x) = sum_k c_k x^k
+    (ArduPilot: origin 35 degC, t_cal INS_ACC1_CALTEMP; PX4: origin TC_A0_TREF, no t_cal term)."""
+
+    coeffs: np.ndarray  #: (4, 3), c_0..c_3 per axis [raw / degC^k]
+    origin: float  #: [degC]
+    tmin: float  #: [degC]
+    tmax: float  #: [degC]
+    t_cal: float | None = None  #: [degC]; None: no second term
+
+    def _q(self, temp: np.ndarray) -> np.ndarray:
+        x = np.clip(np.asarray(temp, float), self.tmin, self.tmax) - self.origin
+        return np.vander(np.atleast_1d(x), 4, increasing=True) @ self.coeffs
+
+    def offset(self, temp: np.ndarray) -> np.ndarray:
+        """(n, 3) offset at each temperature [raw]."""
+        out = self._q(temp)
+        return out if self.t_cal is None else out - self._q(np.array([self.t_cal]))
+
+
+@dataclass(frozen=True)
 class AffineCalibration:
-    """a = M (raw - o): a peer's calibration, with the nine parameters it implies."""
+    """a = M (raw - o - thermal(T)): a peer's calibration, with the nine parameters it implies."""
 
     M: np.ndarray
     o: np.ndarray
@@ -62,9 +84,20 @@ class AffineCalibration:
     #: what the file holds beside the map (noise densities, rate, topic, temperature terms)
     extra: Mapping[str, Any] = field(default_factory=dict)
     gyro: GyroMap | None = None  #: the gyroscope part, when the file holds one
+    thermal: ThermalOffset | None = None  #: ArduPilot's INS_TCAL1_*, PX4's TC_A0_*, when enabled
 
-    def apply(self, raw: np.ndarray) -> np.ndarray:
-        return (np.asarray(raw, float) - self.o) @ self.M.T
+    @property
+    def covariates(self) -> tuple[str, ...]:
+        return ("temp",) if self.thermal is not None else ()
+
+    def apply(self, raw: np.ndarray, covariates: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
+        raw = np.asarray(raw, float)
+        if self.thermal is not None:
+            if not covariates or "temp" not in covariates:
+                raise ImucalError("this calibration has temperature terms", field="covariates",
+                                  fix="pass the temperature of the samples (temp in deg C)")
+            raw = raw - self.thermal.offset(np.broadcast_to(covariates["temp"], raw.shape[:1]))
+        return (raw - self.o) @ self.M.T
 
     def nine_parameters(self) -> dict[str, float]:
         Minv = np.linalg.inv(self.M)

@@ -74,7 +74,11 @@ def fit_report(run: CalibrationRun, correl_min: float = CORREL_MIN) -> str:
              "Student-t, since std is scaled by the reduced chi-square)")
     L.append(f"    RMS |a|-g, means   = {cal.fit['rms_residual']:.6g} m/s^2")
     L.append(f"    RMS |a|-g, samples = {cal.fit['rms_residual_samples']:.6g} m/s^2")
-    L.append(f"    noise inflation    = {iv.noise_inflation:.3g}  (batch-means / white-noise variance)")
+    if cal.fit.get("noise", "scatter") == "scatter":
+        L.append(f"    noise inflation    = {iv.noise_inflation:.3g}  (batch-means / white-noise variance)")
+    else:
+        L.append(f"    noise of the means = from {cal.fit['noise']} (white-noise density x sqrt(fs/n), "
+                 "bias-instability floor), not each interval's scatter")
     L.append(f"    Jacobian condition = {run.observability.condition:.4g}")
     if run.observability.poorly_determined:
         L.append("    WARNING            = poorly determined by these poses: "

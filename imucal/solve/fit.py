@@ -42,6 +42,9 @@ class FitData:
     group: np.ndarray  #: (N,) interval index of each row
     mode: str  #: "means" or "samples"
     t: np.ndarray | None = None  #: (N,) time of each interval mean [s] (the random-walk test needs it)
+    #: where raw_var comes from: "scatter" (each interval's own) or a noise model's file
+    #: (imucal.analysis.noise_model: white-noise density and bias-instability floor)
+    noise_source: str = "scatter"
 
 
 @dataclass(frozen=True)

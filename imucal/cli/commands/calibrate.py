@@ -14,7 +14,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("config", nargs="?", help="YAML run file (see configs/)")
     options.add_data_options(p, gyro=True, stream=True)
     options.add_gravity_options(p)
-    options.add_model_options(p)
+    options.add_model_options(p, noise=True)
     options.add_gyro_options(p)
     p.add_argument("--out", help="output directory (default: config output.dir, else ./out)")
     p.add_argument("--json", help="also write a machine-readable summary to this file")
@@ -50,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
     out = Path(os.path.normpath(out))
     figures = cfg.output.figures and not args.no_figures
     gyro_file = args.gyro_data or options.data_path(cfg, gyro=True)
-    inputs = [args.config, options.data_path(cfg), gyro_file]
+    inputs = [args.config, options.data_path(cfg), gyro_file, options.noise_path(cfg)]
     check_outputs(inputs, [*output_paths(out, figures), args.json])  # fail before the work, not after it
     files = calibrate_files(cfg, gyro_file)
     with OutputSet(inputs) as o:

@@ -27,7 +27,7 @@ def add_data_options(p: argparse.ArgumentParser, data_required: bool = False, gy
     g = p.add_argument_group("data")
     g.add_argument("--data", required=data_required, metavar="FILE",
                    help="recording (CSV with header, or whitespace text: t x y z), or a ROS bag "
-                        "(.bag file or ROS 2 bag folder) with --topic")
+                        "(.bag file, ROS 2 bag folder or .mcap file) with --topic")
     g.add_argument("--topic", metavar="TOPIC", help="ROS bags: the sensor_msgs/Imu topic (e.g. /imu)")
     g.add_argument("--temp-topic", metavar="TOPIC",
                    help="ROS bags: a sensor_msgs/Temperature topic, interpolated onto the IMU stamps")
@@ -58,8 +58,8 @@ def add_gravity_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--height", type=float, help="height above the ellipsoid [m] (with --latitude)")
 
 
-def add_model_options(p: argparse.ArgumentParser, mode: bool = True) -> None:
-    """--fix-angles, --weights and (where the command can fit samples) --mode."""
+def add_model_options(p: argparse.ArgumentParser, mode: bool = True, noise: bool = False) -> None:
+    """--fix-angles, --weights, (where the command can fit samples) --mode and (``noise``) --noise."""
     g = p.add_argument_group("model")
     g.add_argument("--fix-angles", action="store_true", help="hold the angles at 90 deg (6-parameter model)")
     if mode:
@@ -67,6 +67,11 @@ def add_model_options(p: argparse.ArgumentParser, mode: bool = True) -> None:
     g.add_argument("--weights", choices=("auto", "noise", "uniform"),
                    help="row weights: auto (default: 1/(sigma^2 + excess), the between-interval excess "
                         "added when the residuals exceed the noise), noise (1/sigma^2) or uniform (as imu_tk)")
+    if noise:
+        g.add_argument("--noise", metavar="FILE",
+                       help="noise of the interval means from a still log's white-noise density (and bias-"
+                            "instability floor): `imucal noise --json` output or a Kalibr imu.yaml "
+                            "(default: each interval's own scatter)")
 
 
 def add_gyro_options(p: argparse.ArgumentParser) -> None:
@@ -147,8 +152,18 @@ def run_config(args: argparse.Namespace, config: str | None = None, data_overrid
         fix = set(fit.fix) | ({"phi", "psi", "theta"} if getattr(args, "fix_angles", False) else set())
         fit = dataclasses.replace(fit, fix=tuple(sorted(fix)), mode=mode or fit.mode,
                                   weights=weights or fit.weights)
+    if getattr(args, "noise", None):
+        fit = dataclasses.replace(fit, noise=str(Path(args.noise).resolve()))
     grav = _gravity(args, cfg) if hasattr(args, "gravity") else cfg.gravity
     return dataclasses.replace(cfg, data=data, gravity=grav, fit=fit, gyro=_gyro(args, cfg))
+
+
+def noise_path(cfg: RunConfig) -> Path | None:
+    """The noise file (fit.noise) as the pipeline resolves it (relative to the YAML file)."""
+    if cfg.fit.noise is None:
+        return None
+    p = Path(cfg.fit.noise)
+    return p if p.is_absolute() or cfg.base_dir is None else cfg.base_dir / p
 
 
 def data_path(cfg: RunConfig, gyro: bool = False) -> Path | None:
