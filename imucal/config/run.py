@@ -106,7 +106,8 @@ class FitSettings:
     weights: str = "auto"
     angle_tolerance: float = DEFAULT_ANGLE_TOL  #: angles in pi/2 (1 +- tol)
     fix: tuple[str, ...] = ()  #: parameters held at their initial value
-    initial: Mapping[str, float] = field(default_factory=dict)  #: overrides of the initial guess
+    initial: Mapping[str, float] = field(default_factory=dict, metadata=rule(  #: overrides of the initial guess
+        msg="initial value {value} is not a finite number", fix="e.g. initial: {s1: 0.0}"))
     effects: tuple[EffectSpec, ...] = field(default=(), metadata=rule(fix="e.g. effects: [bias_temperature]"))
 
     @classmethod

@@ -16,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+import collections.abc
 import types
 import typing
 from dataclasses import dataclass
@@ -138,7 +139,7 @@ def _value(tp: Any, raw: Any, ctx: _Ctx, where: str, r: Rule) -> Any:
         return _scalar(tp, raw, ctx, where, r)
     if origin in (tuple, list) or tp in (tuple, list):
         return _sequence(tp, origin or tp, args, raw, ctx, where, r)
-    if origin in (dict, Mapping, typing.Mapping) or tp in (dict, Mapping):
+    if origin in (dict, collections.abc.Mapping) or tp in (dict, Mapping, collections.abc.Mapping):
         return _mapping(args, raw, ctx, where, r)
     raise TypeError(f"imucal.files.schema: unsupported annotation {tp!r} at {where}")
 
