@@ -131,7 +131,7 @@ def test_example_config_loads_typed():
     (lambda d: d.pop("temperature"), "temperature: the sensor has a temperature effect but there is no temperature"),
     (lambda d: d["plan"].update(directions="dodecahedron"), "plan.directions: unknown direction set"),
     (lambda d: d["plan"].update(hold=0), "hold, transition and rate must be positive"),
-    (lambda d: d["temperature"].update(tau=-1), "temperature.tau: -1 must be a positive number of seconds"),
+    (lambda d: d["temperature"].update(tau=-1), "temperature.tau: tau -1 must be a positive number of seconds"),
     (lambda d: d.update(seed=-3), "seed: seed -3 must be an integer from 0 to"),
     (lambda d: d["plan"].update(directions="random", n_random=0),
      "plan.n_random: no directions: 'random' needs n_random > 0"),

@@ -115,7 +115,8 @@ def _located(ctx: _Ctx, where: str, make: Any) -> Any:
 
 
 def _fail(ctx: _Ctx, raw: Any, where: str, r: Rule, expect: str) -> ImucalError:
-    msg = r.msg.format(value=short(raw)) if r.msg else f"{short(raw)} must be {expect}"
+    name = where.rsplit(".", 1)[-1]
+    msg = r.msg.format(value=short(raw)) if r.msg else f"{name} {short(raw)} must be {expect}"
     return ctx.error(msg, where, r.fix)
 
 
@@ -205,6 +206,8 @@ def _number_text(tp: type, r: Rule) -> str:
         text = f"a positive {noun}"
     elif r.ge == 0 and r.lt is None and r.le is None:
         text = f"a non-negative {noun}"
+    elif r.ge is not None and r.le is not None:
+        text = f"a{'n' if tp is int else ''} {noun} from {r.ge:g} to {r.le:g}"
     elif (r.gt, r.ge) != (None, None) or (r.lt, r.le) != (None, None):
         lo = "(" + f"{r.gt:g}" if r.gt is not None else "[" + f"{r.ge:g}" if r.ge is not None else "(-inf"
         hi = f"{r.lt:g})" if r.lt is not None else f"{r.le:g}]" if r.le is not None else "inf)"
@@ -248,8 +251,10 @@ def _sequence(tp: Any, origin: Any, args: tuple, raw: Any, ctx: _Ctx, where: str
             raise _fail(ctx, raw, where, r, _describe(tp, r))
         items = args
     else:
-        if not r.min_len <= len(raw) <= (r.max_len or math.inf):
-            raise ctx.error(f"{len(raw)} entries, must be {r.min_len} to {r.max_len or 'any number'}", where, r.fix)
+        if r.max_len is not None and len(raw) > r.max_len:
+            raise ctx.error(f"{len(raw)} entries, above the limit of {r.max_len}", where, r.fix)
+        if len(raw) < r.min_len:
+            raise ctx.error(f"{len(raw)} entries, at least {r.min_len} needed", where, r.fix)
         items = (args[0] if args else Any,) * len(raw)
     inner = dataclasses.replace(r, max_len=None, min_len=0)
     out = [_value(t, v, ctx, f"{where}[{i}]", inner) for i, (t, v) in enumerate(zip(items, raw))]
