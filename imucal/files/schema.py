@@ -37,7 +37,8 @@ class Rule:
     ge: float | None = None
     lt: float | None = None
     le: float | None = None
-    allow_inf: bool = False  #: +-inf accepted (bounds in files); NaN never
+    allow_inf: bool = False  #: +-inf accepted (bounds in files)
+    allow_nan: bool = False  #: NaN accepted (an undetermined standard error)
     max_len: int | None = None  #: longest list or text
     min_len: int = 0
     unit: str = ""  #: named in messages ("a positive number of seconds")
@@ -229,11 +230,14 @@ def _scalar(tp: type, raw: Any, ctx: _Ctx, where: str, r: Rule) -> Any:
     ok = isinstance(raw, int) if tp is int else isinstance(raw, (int, float))
     if isinstance(raw, bool) or not ok:
         raise _fail(ctx, raw, where, r, _number_text(tp, r))
+    name = where.rsplit(".", 1)[-1]
     try:
         x = float(raw)
     except OverflowError:  # an integer beyond the float range
-        raise _fail(ctx, raw, where, r, _number_text(tp, r)) from None
-    if math.isnan(x) or (math.isinf(x) and not r.allow_inf) or not _within(x, r):
+        raise ctx.error(f"{name} {short(raw)} is too large for a float", where, r.fix) from None
+    if (math.isnan(x) and not r.allow_nan) or (math.isinf(x) and not r.allow_inf):
+        raise ctx.error(f"{name} is not finite ({short(raw)})", where, r.fix)
+    if not math.isnan(x) and not _within(x, r):
         raise _fail(ctx, raw, where, r, _number_text(tp, r))
     return raw  # an int stays an int (messages show the value as given)
 
