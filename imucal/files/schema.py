@@ -115,8 +115,13 @@ def _located(ctx: _Ctx, where: str, make: Any) -> Any:
         raise ImucalError(exc.message, file=ctx.path, field=exc.field or where or None, fix=exc.fix) from None
 
 
+def _name(where: str) -> str:
+    """The field's own name in a message: ``M`` for ``accelerometers.M[0][1]``."""
+    return where.rsplit(".", 1)[-1].split("[", 1)[0]
+
+
 def _fail(ctx: _Ctx, raw: Any, where: str, r: Rule, expect: str) -> ImucalError:
-    name = where.rsplit(".", 1)[-1]
+    name = _name(where)
     msg = r.msg.format(value=short(raw)) if r.msg else f"{name} {short(raw)} must be {expect}"
     return ctx.error(msg, where, r.fix)
 
@@ -195,9 +200,7 @@ def _describe(tp: Any, r: Rule) -> str:
         return f"one of {', '.join(map(str, typing.get_args(tp)))}"
     if origin in (tuple, list):
         args = typing.get_args(tp)
-        if args and args[-1] is not Ellipsis:
-            return f"a list of {len(args)} {_describe(args[0], r).removeprefix('a ')}s"
-        return "a list"
+        return f"a list of {len(args)} values" if args and args[-1] is not Ellipsis else "a list"
     return "a mapping"
 
 
@@ -230,7 +233,7 @@ def _scalar(tp: type, raw: Any, ctx: _Ctx, where: str, r: Rule) -> Any:
     ok = isinstance(raw, int) if tp is int else isinstance(raw, (int, float))
     if isinstance(raw, bool) or not ok:
         raise _fail(ctx, raw, where, r, _number_text(tp, r))
-    name = where.rsplit(".", 1)[-1]
+    name = _name(where)
     try:
         x = float(raw)
     except OverflowError:  # an integer beyond the float range
