@@ -60,6 +60,11 @@ def fill(cls: type, raw: Any, path: str | None = None, where: str = "") -> Any:
     return _dataclass(cls, raw, _Ctx(path), where)
 
 
+def keys(cls: type) -> dict[str, Any]:
+    """The keys a file may give for ``cls``, each with its type (internal fields left out)."""
+    return {f.name: tp for f, tp, _ in _fields(cls)}
+
+
 @dataclass(frozen=True)
 class _Ctx:
     path: str | None

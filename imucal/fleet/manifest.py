@@ -35,12 +35,10 @@ import yaml
 
 from imucal import __version__
 from imucal.config.limits import MAX_FLEET_UNITS
-from imucal.config.run import FitSettings, GravitySpec, OutputSettings, RunConfig, config_from_dict
-from imucal.data.load import DataSpec
-from imucal.data.static import StaticSettings
+from imucal.config.run import RunConfig, config_from_dict
 from imucal.errors import ImucalError, short
 from imucal.files.inputs import read_input_text
-from imucal.files.schema import fill, rule
+from imucal.files.schema import fill, keys, rule
 from imucal.files.yamlio import check_structure, key_text, read_yaml
 
 FORMAT = "imucal-fleet-manifest"
@@ -49,14 +47,13 @@ FORMAT_VERSION = 1
 UNIT_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}\Z")
 #: Names the fleet report takes in DIR (imucal.fleet.report): no unit folder may take them.
 REPORT_NAMES = re.compile(r"fleet(\.(csv|txt|parquet)|_.*\.png)\Z", re.IGNORECASE)
+#: The keys of each run-file section, from RunConfig itself (a new section needs no line here); a CSV
+#: override column is checked against them even when all its cells are empty.
+SECTION_KEYS = {name: tuple(keys(tp)) for name, tp in keys(RunConfig).items()}
 #: Run-file sections a manifest may set (output.dir is the batch's --out DIR/<unit>).
-SECTIONS = ("data", "static", "gravity", "fit", "output")
+SECTIONS = tuple(SECTION_KEYS)
 #: Keys that name files: given per unit (data, gyro_data), never as shared settings.
 FILE_KEYS = ("path", "gyro_path")
-#: The keys of each section (a CSV override column is checked against them even when all its cells are empty).
-SECTION_KEYS = {name: tuple(f.name for f in fields(cls)) for name, cls in (
-    ("data", DataSpec), ("static", StaticSettings), ("gravity", GravitySpec), ("fit", FitSettings),
-    ("output", OutputSettings))}
 
 
 _TOLERANCE = rule(ge=0, msg="{value} must be a non-negative number",
