@@ -120,6 +120,8 @@ def test_fit_shorthands_are_the_long_forms() -> None:
 # --- every reader on the command line ----------------------------------------------------------
 PLAN = {"poses": [[0, 0, 1], [0, 1, 0], [1, 0, 0], [0, 0, -1], [0, -1, 0], [-1, 0, 0], [1, 1, 0], [0, 1, 1],
                   [1, 0, 1], [1, 1, 1], [-1, 1, 0], [0, -1, 1]]}
+MADLAB = {"K_a": (np.eye(3) * 200).tolist(), "R_a": np.eye(3).tolist(), "b_a": [1.0, 2.0, 3.0], "cal_type": "Ferraris"}
+MATRIX = {"format": "imucal-affine", "matrix": np.eye(3).tolist(), "offset": [0.0, 0.0, 0.0]}
 KALIBR = {"model": "scale-misalignment", "accelerometers": {"M": [[400.0, 0.0, 0.0], [1.0, 410.0, 0.0],
                                                                  [2.0, 3.0, 405.0]]},
           "imucal_accelerometer_offset": [1.0, 2.0, 3.0]}
@@ -151,6 +153,12 @@ READERS: dict[str, tuple[str, Callable[[], Any], Callable[[Any], str], Callable[
     "kalibr imu.yaml": ("imu.yaml", lambda: copy.deepcopy(KALIBR), yaml.safe_dump,
                         lambda f, tmp: ["compare", V1_CALIBRATION, f, "--format", "kalibr", "--data",
                                         tmp / "never.csv"]),
+    "mad-lab-fau/imucal JSON": ("x.json", lambda: copy.deepcopy(MADLAB), json.dumps,
+                                lambda f, tmp: ["compare", V1_CALIBRATION, f, "--format", "madlab", "--data",
+                                                tmp / "never.csv"]),
+    "imucal matrix JSON": ("m.json", lambda: copy.deepcopy(MATRIX), json.dumps,
+                           lambda f, tmp: ["compare", V1_CALIBRATION, f, "--format", "matrix", "--data",
+                                           tmp / "never.csv"]),
 }
 
 
@@ -220,6 +228,20 @@ BAD = {
          "imucal_accelerometer_offset is not finite (nan)"),
         ("missing required", "accelerometers", _DELETE, "accelerometers", "missing section 'accelerometers'"),
     ],
+    "mad-lab-fau/imucal JSON": [
+        ("wrong type", "K_a", "identity", "K_a", "K_a 'identity' must be a list of 3 values"),
+        ("unknown key", "K_x", 1, "K_x", "unknown key 'K_x'"),
+        ("bool for number", "b_a", [1.0, False, 3.0], "b_a[1]", "b_a False must be a number from"),
+        ("NaN", "b_a", [1.0, 1e999, 3.0], "calibration", "Infinity is not a JSON number"),  # refused by the parser
+        ("missing required", "R_a", _DELETE, "R_a", "missing key 'R_a'"),
+    ],
+    "imucal matrix JSON": [
+        ("wrong type", "gyroscope", 5, "gyroscope", "gyroscope 5 must be a mapping (or null)"),
+        ("unknown key", "matrx", 1, "matrx", "unknown key 'matrx'"),
+        ("bool for number", "offset", [True, 0.0, 0.0], "offset[0]", "offset True must be a number from"),
+        ("NaN", "offset", [0.0, 0.0, 1e999], "matrix", "Infinity is not a JSON number"),
+        ("missing required", "format", _DELETE, "format", "missing key 'format'"),
+    ],
 }
 CASES = [(reader, *case) for reader, cases in BAD.items() for case in cases]
 
@@ -234,6 +256,7 @@ def test_the_good_file_of_each_reader_passes_its_schema(reader: str, tmp_path: P
     """The bad cases differ from a file the reader accepts by the one edit."""
     from imucal.analysis.plan_file import read_plan
     from imucal.analysis.simulate import load_simulation_config
+    from imucal.export.peers import read_peer
     from imucal.export.kalibr import read_kalibr_yaml
     from imucal.fleet.manifest import manifest_from_dict
 
@@ -244,7 +267,8 @@ def test_the_good_file_of_each_reader_passes_its_schema(reader: str, tmp_path: P
             "simulation": lambda: load_simulation_config(str(p)), "plan": lambda: read_plan(str(p)),
             "calibration v1": lambda: load_calibration(p), "calibration v2 gyroscope": lambda: load_calibration(p),
             "fleet manifest": lambda: manifest_from_dict(yaml.safe_load(p.read_text()), str(p)),
-            "kalibr imu.yaml": lambda: read_kalibr_yaml(p)}[reader]
+            "kalibr imu.yaml": lambda: read_kalibr_yaml(p), "mad-lab-fau/imucal JSON": lambda: read_peer(p, "madlab"),
+            "imucal matrix JSON": lambda: read_peer(p, "matrix")}[reader]
     assert read() is not None
 
 

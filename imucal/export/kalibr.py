@@ -39,7 +39,7 @@ from imucal.calibration.frozen import Calibration
 from imucal.errors import ImucalError, short
 from imucal.export.formats import ExportOptions, Exported, KalibrNoise, affine, dropped_effects
 from imucal.export.gyro import kalibr_factors
-from imucal.export.peers import MAX_MAGNITUDE, AffineCalibration, GyroMap, checked, checked_gyro
+from imucal.export.peers import MAGNITUDE, AffineCalibration, GyroMap, Mat3, Vec3, checked, checked_gyro
 from imucal.files.schema import fill, rule
 from imucal.files.yamlio import read_yaml
 
@@ -157,12 +157,8 @@ def to_kalibr(cal: Calibration, opts: ExportOptions) -> Exported:
     return Exported("\n".join(lines) + "\n", tuple(notes))
 
 
-_FIX = "regenerate the file with the tool that made it"
-#: Kalibr's matrices and imucal's offsets: finite numbers of magnitude <= MAX_MAGNITUDE.
-_MAGNITUDE = rule(ge=-MAX_MAGNITUDE, le=MAX_MAGNITUDE, fix=_FIX)
+_MAGNITUDE = MAGNITUDE  #: Kalibr's matrices and imucal's offsets: finite, |x| <= MAX_MAGNITUDE
 _NOISE = rule(gt=0, fix="Kalibr refuses values <= 0; give the value, or null")
-Vec3 = tuple[float, float, float]
-Mat3 = tuple[Vec3, Vec3, Vec3]
 
 
 @dataclass(frozen=True)
