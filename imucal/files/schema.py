@@ -8,15 +8,15 @@ and non-finite numbers, in one line ``FILE: FIELD: what (fix: ...)`` with the fi
 (``fit.effects[2].axes``). Per-field bounds, messages and fixes are field metadata (``rule``);
 checks across fields stay in the dataclass's ``__post_init__`` (raising ImucalError with a field).
 A dataclass may define ``schema_input(cls, raw)`` (a classmethod) to accept a shorthand, e.g. an
-effect given by its name alone. Why not pydantic 2: it adds about 70 ms to start-up (measured in
-docs/architecture.md) and its messages would need translating into this form anyway.
+effect given by its name alone. Why not pydantic 2: its import costs start-up time (measured by
+scripts/bench_schema.py, docs/schema.md) and its messages would need translating into this form.
 """
 from __future__ import annotations
 
+import collections.abc
 import dataclasses
 import functools
 import math
-import collections.abc
 import types
 import typing
 from dataclasses import dataclass
@@ -210,19 +210,22 @@ def _describe(tp: Any, r: Rule) -> str:
 
 
 def _number_text(tp: type, r: Rule) -> str:
+    """What a number field accepts, in words: "a positive number of seconds", "an integer from 0 to 9"."""
     noun = "integer" if tp is int else "number"
-    if r.gt == 0 and r.lt is None and r.le is None:
+    article = "an" if tp is int else "a"
+    upper = (r.lt, r.le) != (None, None)
+    if r.gt == 0 and not upper:
         text = f"a positive {noun}"
-    elif r.ge == 0 and r.lt is None and r.le is None:
+    elif r.ge == 0 and not upper:
         text = f"a non-negative {noun}"
     elif r.ge is not None and r.le is not None:
-        text = f"a{'n' if tp is int else ''} {noun} from {r.ge:g} to {r.le:g}"
-    elif (r.gt, r.ge) != (None, None) or (r.lt, r.le) != (None, None):
-        lo = "(" + f"{r.gt:g}" if r.gt is not None else "[" + f"{r.ge:g}" if r.ge is not None else "(-inf"
+        text = f"{article} {noun} from {r.ge:g} to {r.le:g}"
+    elif (r.gt, r.ge) != (None, None) or upper:
+        lo = f"({r.gt:g}" if r.gt is not None else f"[{r.ge:g}" if r.ge is not None else "(-inf"
         hi = f"{r.lt:g})" if r.lt is not None else f"{r.le:g}]" if r.le is not None else "inf)"
-        text = f"a{'n' if tp is int else ''} {noun} in {lo}, {hi}"
+        text = f"{article} {noun} in {lo}, {hi}"
     else:
-        text = f"a{'n' if tp is int else ''} {noun}" if r.allow_inf or tp is int else f"a finite {noun}"
+        text = f"{article} {noun}" if r.allow_inf or tp is int else f"a finite {noun}"
     return f"{text} of {r.unit}" if r.unit else text
 
 
@@ -280,5 +283,5 @@ def _mapping(args: tuple, raw: Any, ctx: _Ctx, where: str, r: Rule) -> dict:
     out = {}
     for k, v in raw.items():
         key = _value(kt, k, ctx, where, dataclasses.replace(r, msg=None, gt=None, ge=None, lt=None, le=None))
-        out[key] = _value(vt, v, ctx, _join(where, str(k)[:40]), r)
+        out[key] = _value(vt, v, ctx, _join(where, key_text(k)), r)
     return out
