@@ -22,8 +22,7 @@ import typing
 from dataclasses import dataclass
 from typing import Any, Literal, Mapping, Union
 
-from imucal.errors import ImucalError, short
-from imucal.files.yamlio import key_text
+from imucal.errors import ImucalError, key_text, short
 
 #: The metadata key of a field's rule.
 KEY = "imucal.schema"

@@ -36,10 +36,10 @@ import yaml
 from imucal import __version__
 from imucal.config.limits import MAX_FLEET_UNITS
 from imucal.config.run import RunConfig, config_from_dict
-from imucal.errors import ImucalError, short
+from imucal.errors import ImucalError, key_text, short
 from imucal.files.inputs import read_input_text
 from imucal.files.schema import fill, keys, rule
-from imucal.files.yamlio import check_structure, key_text, read_yaml
+from imucal.files.yamlio import check_structure, read_yaml
 
 FORMAT = "imucal-fleet-manifest"
 FORMAT_VERSION = 1
