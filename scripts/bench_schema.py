@@ -37,8 +37,8 @@ from imucal.fleet.manifest import load_manifest  # noqa: E402
 
 DOC = ROOT / "docs" / "schema.md"
 IMPORTS = {
-    "imucal.files.yamlio (PyYAML and the safe loader, which every reader needed before)": "import imucal.files.yamlio",
-    "imucal.files.schema (imports imucal.files.yamlio)": "import imucal.files.schema",
+    "imucal.files.yamlio (PyYAML and the safe loader, which every YAML reader needs)": "import imucal.files.yamlio",
+    "imucal.files.schema (standard library and imucal.errors only)": "import imucal.files.schema",
     "pydantic 2, one strict model with extra='forbid'": (
         "import pydantic\nclass A(pydantic.BaseModel):\n    model_config = pydantic.ConfigDict(extra='forbid', "
         "strict=True)\n    x: int = 0\nA(x=1)"),

@@ -275,7 +275,8 @@ class PlanSection:
     """``plan:`` of a simulation file: a named direction set or a list of [x, y, z], plus random ones."""
 
     directions: str | tuple[tuple[float, float, float], ...] = field(default="faces+edges", metadata=rule(
-        max_len=MAX_SIM_POSES, msg=f"directions must be a set name or a list of at most {MAX_SIM_POSES} [x, y, z]", fix=f"use one of {', '.join(DIRECTION_SETS)} or a list of [x, y, z]"))
+        max_len=MAX_SIM_POSES, msg=f"directions must be a set name or a list of at most {MAX_SIM_POSES} [x, y, z]",
+        fix=f"use one of {', '.join(DIRECTION_SETS)} or a list of [x, y, z]"))
     n_random: int = field(default=0, metadata=rule(ge=0, le=MAX_SIM_POSES, fix="a calibration needs tens of poses"))
     hold: float | None = field(default=None, metadata=rule(ge=0, unit="seconds"))
     transition: float | None = field(default=None, metadata=rule(ge=0, unit="seconds"))

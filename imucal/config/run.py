@@ -116,7 +116,7 @@ class FitSettings:
         if not isinstance(raw, Mapping) or "fix" not in raw:
             return raw
         raw = dict(raw)
-        raw["fix"], held = fix_shorthand(raw["fix"])
+        raw["fix"], held = _fix_shorthand(raw["fix"])
         init = raw.get("initial") or {}
         if held and isinstance(init, Mapping):
             clash = [n for n in held if n in init and init[n] != held[n]]
@@ -166,14 +166,15 @@ class RunConfig:
     gravity: GravitySpec = GravitySpec()
     fit: FitSettings = FitSettings()
     output: OutputSettings = OutputSettings()
-    source: str | None = field(default=None, metadata=rule(internal=True))  #: the YAML file, for messages and relative paths
+    #: the YAML file, for messages and relative paths (not a key of the file)
+    source: str | None = field(default=None, metadata=rule(internal=True))
 
     @property
     def base_dir(self) -> Path | None:
         return Path(self.source).parent if self.source else None
 
 
-def fix_shorthand(fx: Any) -> tuple[tuple[str, ...], dict[str, float]]:
+def _fix_shorthand(fx: Any) -> tuple[tuple[str, ...], dict[str, float]]:
     """fit.fix as a name, a list of names, or a mapping name -> value held."""
     if fx is None:
         return (), {}

@@ -46,7 +46,8 @@ class DataSpec:
     columns: dict = field(default_factory=dict, metadata=rule(msg="must map roles to columns",
                                                               fix="e.g. columns: {t: time, ax: x}"))
     delimiter: str | None = field(default=None, metadata=rule(
-        msg="delimiter {value} must be one character", fix='e.g. delimiter: ","  (omit it to detect , ; tab or spaces)'))
+        msg="delimiter {value} must be one character",
+        fix='e.g. delimiter: ","  (omit it to detect , ; tab or spaces)'))
     skip_rows: int = 0
     sample_rate: float | None = field(default=None, metadata=rule(
         msg="sample rate {value} is not an IMU rate (not a number)", fix="give the logging rate in Hz"))
