@@ -61,3 +61,10 @@ def short(value: object, limit: int = 40) -> str:
         text = f"<{type(value).__name__}>"
     text = " ".join(text.split())
     return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def key_text(key: object) -> str:
+    """A mapping key as a field name in a message: plain when short and printable, else cut."""
+    if isinstance(key, str) and 0 < len(key) <= 40 and key.isprintable():
+        return key
+    return short(key, 40)

@@ -95,7 +95,7 @@ CALIBRATE_CASES: dict[str, Case] = {
         ("run.yaml", "static.window", "must be a positive number of seconds")),
     "YAML bad threshold": lambda tmp, recs, good: (
         [yaml_cfg(tmp, {"data": {"path": str(good)}, "static": {"threshold": "auto"}})],
-        ("run.yaml", "static.threshold", "must be positive")),
+        ("run.yaml", "static.threshold", "'auto' must be a positive number")),
     "YAML bad fit mode": lambda tmp, recs, good: (
         [yaml_cfg(tmp, {"data": {"path": str(good)}, "fit": {"mode": "fast"}})],
         ("run.yaml", "fit.mode", "unknown fit mode 'fast'", "means, samples")),

@@ -708,8 +708,8 @@ def _delete(path: list):
 
 @pytest.mark.parametrize("edit, message", [
     (_set(["format_version"], 99), "format_version: unknown format version 99 (this imucal reads versions 1, 2)"),
-    (_delete(["parameters", "theta"]), "parameters.theta: missing field 'parameters.theta'"),
-    (_delete(["gravity"]), "gravity: missing field 'gravity'"),
+    (_delete(["parameters", "theta"]), "parameters.theta: missing key 'theta'"),
+    (_delete(["gravity"]), "gravity: missing key 'gravity'"),
     (_set(["parameters", "b2", "value"], -400.0), "parameters.b2.value: scale b2 = -400.0 must be positive"),
     (_set(["parameters", "psi", "value"], 3.5), "parameters.psi.value: angle psi = 3.5 rad is outside (0, pi)"),
     (_set(["format"], "something-else"), "format: format 'something-else' is not 'imucal-calibration'"),

@@ -291,7 +291,7 @@ BAD_MANIFESTS = [
     ("units: [{id: U1}]", "units[0].data: no data file"),
     ("units: [{id: U1, data: a.csv, colour: red}]", "units[0].colour: unknown key 'colour'"),
     ("unit: [{id: U1, data: a.csv}]", "unknown key 'unit'"),
-    ("tolerances: {bias_max: 1}\nunits: [{id: U1, data: a.csv}]", "unknown tolerance 'bias_max'"),
+    ("tolerances: {bias_max: 1}\nunits: [{id: U1, data: a.csv}]", "tolerances.bias_max: unknown key 'bias_max'"),
     ("tolerances: {rms_max: -1}\nunits: [{id: U1, data: a.csv}]", "tolerances.rms_max: -1 must be a non-negative"),
     ("settings: {fit: {mode: fast}}\nunits: [{id: U1, data: a.csv}]", "units[0]: fit.mode: unknown fit mode 'fast'"),
     ("settings: {data: {path: x.csv}}\nunits: [{id: U1, data: a.csv}]", "settings.data.path: files are named per unit"),

@@ -165,7 +165,7 @@ def test_apply_interpolates_a_gyro_at_another_rate(two_files_run, run_cli, tmp_p
 @pytest.mark.parametrize("edit, field", [
     (lambda g: g["apply"]["matrix"][0].__setitem__(0, g["apply"]["matrix"][0][0] * 1.001), "gyroscope.apply.matrix"),
     (lambda g: g.__setitem__("kind", "magnetometer"), "gyroscope.kind"),
-    (lambda g: g["parameters"].__setitem__("scale", [1.0, float("nan"), 1.0]), "gyroscope.parameters.scale"),
+    (lambda g: g["parameters"].__setitem__("scale", [1.0, float("nan"), 1.0]), "gyroscope.parameters.scale[1]"),
     (lambda g: g["parameters"].__setitem__("bias", [1.0, 2.0]), "gyroscope.parameters.bias"),
     (lambda g: g["units"].__setitem__("input", "rad/s */ int x; /*"), "gyroscope.units.input"),
 ])

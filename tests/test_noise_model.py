@@ -92,13 +92,13 @@ def _axes(**over):
 
 @pytest.mark.parametrize("name, content, field, words", [
     ("n.json", {"unit": "raw"}, "axes", "missing"),
-    ("n.json", {"unit": "raw", "axes": _axes(white_density=-1)}, "axes.x.white_density", "must be positive"),
-    ("n.json", {"unit": "raw", "axes": _axes(white_density="a")}, "axes.x.white_density", "is not a number"),
-    ("n.json", {"unit": "raw", "axes": _axes(), "extra": 1}, "extra", "unknown field"),
+    ("n.json", {"unit": "raw", "axes": _axes(white_density=-1)}, "axes.x.white_density", "must be a positive number"),
+    ("n.json", {"unit": "raw", "axes": _axes(white_density="a")}, "axes.x.white_density", "'a' must be a positive number"),
+    ("n.json", {"unit": "raw", "axes": _axes(), "extra": 1}, "extra", "unknown key"),
     ("n.json", {"unit": "g", "axes": _axes()}, "unit", "neither the recording's raw unit"),
     ("n.json", "[1, 2", "noise", "JSON"),
     ("imu.yaml", {"accelerometer_random_walk": 0.001}, "accelerometer_noise_density", "missing"),
-    ("imu.yaml", {"accelerometer_noise_density": 0}, "accelerometer_noise_density", "must be positive"),
+    ("imu.yaml", {"accelerometer_noise_density": 0}, "accelerometer_noise_density", "0 must be a positive number"),
     ("n.txt", "x", "noise", "neither .json"),
 ])
 def test_bad_noise_files_are_one_line_errors(name, content, field, words, tmp_path, counts_recording, run_cli):

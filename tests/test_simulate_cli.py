@@ -120,7 +120,7 @@ def test_example_config_loads_typed():
 
 
 @pytest.mark.parametrize("edit,message", [
-    (lambda d: d.update(colour="red"), "sim.yaml: colour: unknown key 'colour' (fix: allowed keys here: seed, gravity"),
+    (lambda d: d.update(colour="red"), "sim.yaml: colour: unknown key 'colour' (fix: allowed top-level keys: seed, gravity"),
     (lambda d: d["sensor"].update(nois=3), "sensor.nois: unknown key 'nois' (fix: allowed keys here:"),
     (lambda d: d["sensor"].update(preset="bmi"), "sensor.preset: unknown preset 'bmi'"),
     (lambda d: d["sensor"].update(b=[1, -1, 1]), "sensor.b: scales must be positive"),
@@ -131,7 +131,7 @@ def test_example_config_loads_typed():
     (lambda d: d.pop("temperature"), "temperature: the sensor has a temperature effect but there is no temperature"),
     (lambda d: d["plan"].update(directions="dodecahedron"), "plan.directions: unknown direction set"),
     (lambda d: d["plan"].update(hold=0), "hold, transition and rate must be positive"),
-    (lambda d: d["temperature"].update(tau=-1), "temperature.tau: tau must be positive"),
+    (lambda d: d["temperature"].update(tau=-1), "temperature.tau: tau -1 must be a positive number of seconds"),
     (lambda d: d.update(seed=-3), "seed: seed -3 must be an integer from 0 to"),
     (lambda d: d["plan"].update(directions="random", n_random=0),
      "plan.n_random: no directions: 'random' needs n_random > 0"),

@@ -19,7 +19,7 @@ import yaml
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from imucal.cli.commands.plan_poses import _read_plan
+from imucal.analysis.plan_file import read_plan as _read_plan
 from imucal.config.run import config_from_dict, load_config
 from imucal.analysis.design import compare, evaluate, optimal_design
 from imucal.errors import ImucalError
@@ -264,9 +264,9 @@ def test_a_listed_simulation_pose_of_huge_numbers_is_a_direction(tmp_path):
 
 PLAN_CASES = [
     ('{"poses": [[0, 0, 1]], "poses": [[1, 0, 0]]}', "evaluate", "duplicate key 'poses'"),
-    ('{"poses": [[0, 0, 1]], "posse": 1}', "evaluate", "unknown key 'posse'"),
+    ('{"poses": [[0, 0, 1]], "posse": 1}', "posse", "unknown key 'posse'"),
     ("[" * 5000, "evaluate", "is nested too deeply"),
-    (json.dumps({"poses": [[0, 0, 1]] * 10001}), "poses", "10001 poses, above the limit of 10000"),
+    (json.dumps({"poses": [[0, 0, 1]] * 10001}), "poses", "10001 entries, above the limit of 10000"),
     (json.dumps({"poses": [[1, 0, 0]] * 12, "format_version": True}), "format_version", "unknown format_version"),
 ]
 

@@ -18,7 +18,7 @@ whole log, not noise of one mean: not used here (fit a drift effect for it).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -26,15 +26,11 @@ import numpy as np
 
 from imucal.analysis.noise import FLICKER_FACTOR
 from imucal.errors import ImucalError, short
-from imucal.export.kalibr import KALIBR_FIELDS
-from imucal.export.peers import _json, _keys, number
+from imucal.export.peers import _json
+from imucal.files.schema import fill, rule
 from imucal.files.yamlio import read_yaml
 
 CALIBRATED = "m/s^2"
-#: Fields of `imucal noise --json` (imucal.cli.commands.noise) and of each of its axes.
-NOISE_JSON_FIELDS = ("unit", "source", "segment", "rate_hz", "axes", "allan", "kalibr")
-AXIS_FIELDS = ("white_density", "white_rel_err", "random_walk", "random_walk_rel_err", "bias_instability",
-               "bias_instability_rel_err", "tau_min")
 FIX = "pass the JSON `imucal noise --json` writes, or a Kalibr imu.yaml"
 
 
@@ -69,42 +65,83 @@ class NoiseModel:
         return np.tile(self.white_density**2 * rate, (count, 1))
 
 
-def _positive(v: Any, path: str, where: str) -> float:
-    x = number(v, path, where)
-    if not x > 0:
-        raise ImucalError(f"{short(v)} must be positive", file=path, field=where, fix=FIX)
-    return x
+_POSITIVE = rule(gt=0, fix=FIX)
 
 
-def _optional(v: Any, path: str, where: str) -> float | None:
-    return None if v is None else _positive(v, path, where)
+@dataclass(frozen=True)
+class AxisNoise:
+    """One axis of `imucal noise --json` (imucal.analysis.noise.NoiseEstimate's fields)."""
+
+    white_density: float = field(metadata=_POSITIVE)
+    white_rel_err: float | None = field(default=None, metadata=_POSITIVE)
+    random_walk: float | None = field(default=None, metadata=_POSITIVE)
+    random_walk_rel_err: float | None = field(default=None, metadata=_POSITIVE)
+    bias_instability: float | None = field(default=None, metadata=_POSITIVE)
+    bias_instability_rel_err: float | None = field(default=None, metadata=_POSITIVE)
+    tau_min: float | None = field(default=None, metadata=_POSITIVE)
+
+
+@dataclass(frozen=True)
+class NoiseAxes:
+    x: AxisNoise
+    y: AxisNoise
+    z: AxisNoise
+
+
+@dataclass(frozen=True)
+class AllanSection:
+    tau_s: tuple[float, ...] = field(default=(), metadata=_POSITIVE)
+    adev: Any = None  #: (taus, 3) Allan deviation; not read
+
+
+@dataclass(frozen=True)
+class NoiseJson:
+    """What `imucal noise --json` writes (imucal.cli.commands.noise)."""
+
+    unit: str = field(metadata=rule(min_len=1, msg="{value} is not a unit name", fix=FIX))
+    axes: NoiseAxes
+    source: str | None = None
+    segment: str | None = None
+    rate_hz: float | None = None
+    allan: AllanSection | None = None
+    kalibr: Mapping[str, float | None] | None = None
+
+
+@dataclass(frozen=True)
+class KalibrNoiseFile:
+    """The noise part of a Kalibr imu.yaml; its intrinsics may be present and are not read here."""
+
+    accelerometer_noise_density: float = field(metadata=_POSITIVE)
+    accelerometer_random_walk: float | None = field(default=None, metadata=_POSITIVE)
+    gyroscope_noise_density: float | None = field(default=None, metadata=_POSITIVE)
+    gyroscope_random_walk: float | None = field(default=None, metadata=_POSITIVE)
+    update_rate: float | None = field(default=None, metadata=_POSITIVE)
+    rostopic: str | None = None
+    model: Any = None
+    accelerometers: Any = None
+    gyroscopes: Any = None
+    T_i_b: Any = None
+    time_offset: Any = None
+    imucal_accelerometer_offset: Any = None
+    imucal_gyroscope_offset: Any = None
 
 
 def _from_noise_json(d: Any, path: str) -> NoiseModel:
-    d = _keys(d, ("unit", "axes"), NOISE_JSON_FIELDS, path, "imucal noise's JSON")
-    if not isinstance(d["unit"], str) or not d["unit"]:
-        raise ImucalError(f"{short(d['unit'])} is not a unit name", file=path, field="unit", fix=FIX)
-    axes = _keys(d["axes"], ("x", "y", "z"), ("x", "y", "z"), path, "the axes section", "axes")
-    taus = (d.get("allan") or {}).get("tau_s") if isinstance(d.get("allan"), Mapping) else None
-    tau_end = max(number(t, path, "allan.tau_s") for t in taus) if isinstance(taus, list) and taus else math.inf
+    f = fill(NoiseJson, d, path)
+    tau_end = max(f.allan.tau_s) if f.allan is not None and f.allan.tau_s else math.inf
     white, floor = np.zeros(3), np.zeros(3)
-    for j, a in enumerate("xyz"):
-        ax = _keys(axes[a], ("white_density",), AXIS_FIELDS, path, "an axis's noise terms", f"axes.{a}")
-        white[j] = _positive(ax["white_density"], path, f"axes.{a}.white_density")
-        for k in AXIS_FIELDS[1:]:
-            if ax.get(k) is not None and k != "tau_min":
-                _positive(ax[k], path, f"axes.{a}.{k}")
-        b, tmin = ax.get("bias_instability"), _optional(ax.get("tau_min"), path, f"axes.{a}.tau_min")
+    for j, ax in enumerate((f.axes.x, f.axes.y, f.axes.z)):
+        white[j] = ax.white_density
+        b, tmin = ax.bias_instability, ax.tau_min
         if b is not None and tmin is not None and tmin <= tau_end / 2:  # turns up over an octave or more
-            floor[j] = FLICKER_FACTOR * _positive(b, path, f"axes.{a}.bias_instability")
-    return NoiseModel(white, floor, d["unit"], path)
+            floor[j] = FLICKER_FACTOR * b
+    return NoiseModel(white, floor, f.unit, path)
 
 
 def _from_kalibr(d: Any, path: str) -> NoiseModel:
     if isinstance(d, dict) and len(d) == 1 and isinstance(next(iter(d)), str) and next(iter(d)).startswith("imu"):
         d = next(iter(d.values()))  # Kalibr's result files nest the IMU under imu0
-    d = _keys(d, ("accelerometer_noise_density",), KALIBR_FIELDS, path, "a Kalibr imu.yaml")
-    nd = _positive(d["accelerometer_noise_density"], path, "accelerometer_noise_density")
+    nd = fill(KalibrNoiseFile, d, path).accelerometer_noise_density
     return NoiseModel(np.full(3, nd), np.zeros(3), CALIBRATED, path)
 
 

@@ -8,7 +8,8 @@ that carry extra motion and vibration so that static detection is exercised.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import Literal, Mapping, Union
 
 import numpy as np
 
@@ -16,7 +17,9 @@ from imucal.constants import RIGHT_ANGLE, STANDARD_GRAVITY
 from imucal.errors import ImucalError, short
 from imucal.model.sensor import frame_np, gram_det_np
 from imucal.config.limits import MAX_SIM_POSES, MAX_SIM_SAMPLES, check_seed
-from imucal.files.yamlio import check_structure, key_text
+from imucal.files.schema import fill, rule
+from imucal.files.yamlio import check_structure, read_yaml
+from imucal.model.effects import effects_from_coefficients
 
 
 def frame_matrix(angles: np.ndarray) -> np.ndarray:
@@ -223,10 +226,10 @@ class TemperatureProfile:
 
     start: float = 20.0
     plateau: float = 35.0
-    tau: float = 60.0  #: warm-up time constant [s]
+    tau: float = field(default=60.0, metadata=rule(gt=0, unit="seconds"))  #: warm-up time constant [s]
     swing: float = 3.0  #: amplitude of the slow swing [deg C]
-    period: float = 300.0  #: period of the swing [s]
-    noise: float = 0.02
+    period: float = field(default=300.0, metadata=rule(gt=0, unit="seconds"))  #: period of the swing [s]
+    noise: float = field(default=0.02, metadata=rule(ge=0, unit="degC"))
 
     def sample(self, t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         warm = self.plateau + (self.start - self.plateau) * np.exp(-t / self.tau)
@@ -256,166 +259,141 @@ class SimulationConfig:
                         temperature=self.temperature)
 
 
-def _section(d: object, where: str, allowed: tuple[str, ...], path: str | None) -> dict:
-    if d is None:
-        return {}
-    if not isinstance(d, dict):
-        raise ImucalError(f"section must be a mapping, got {type(d).__name__}", file=path, field=where)
-    unknown = [k for k in d if k not in allowed]
-    if unknown:
-        raise ImucalError(f"unknown key {short(unknown[0])}", file=path,
-                          field=key_text(unknown[0]) if where == "top level" else f"{where}.{key_text(unknown[0])}",
-                          fix=f"allowed keys here: {', '.join(allowed)}")
-    return dict(d)
+#: Three numbers, or one for all three axes.
+Vec3 = Union[float, tuple[float, float, float], None]
+_VEC3 = rule(msg="{value} must be three finite numbers (or one for all axes)")
 
 
-def _vec3(v: object, path: str | None, where: str) -> tuple[float, float, float]:
-    vals = [v] * 3 if isinstance(v, (int, float)) and not isinstance(v, bool) else v
-    if (not isinstance(vals, (list, tuple)) or len(vals) != 3
-            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x) for x in vals)):
-        raise ImucalError(f"{short(v)} must be three finite numbers (or one for all axes)", file=path, field=where)
-    return tuple(float(x) for x in vals)  # type: ignore[return-value]
+@dataclass(frozen=True)
+class SensorSection:
+    """``sensor:`` of a simulation file: a preset drawn from the seed, explicit values override it."""
 
+    preset: Literal["mems_counts", "si", "none"] = field(default="mems_counts", metadata=rule(
+        msg="unknown preset {value}", fix=f"use one of {', '.join(SENSOR_PRESETS)}"))
+    s: Vec3 = field(default=None, metadata=_VEC3)
+    b: Vec3 = field(default=None, metadata=_VEC3)
+    angles_deg: Vec3 = field(default=None, metadata=_VEC3)
+    noise: Vec3 = field(default=None, metadata=_VEC3)
+    #: a bias random walk [raw / sqrt(s)] and one random bias offset per visit of a pose [raw] (stochastic effects)
+    random_walk: Vec3 = field(default=None, metadata=_VEC3)
+    visit_offset: Vec3 = field(default=None, metadata=_VEC3)
+    quantum: float | None = field(default=None, metadata=rule(ge=0))
+    unit: str | None = field(default=None, metadata=rule(min_len=1, max_len=20, msg="unit {value} must be a short name",
+                                                         fix="e.g. unit: raw or unit: m/s^2"))
+    effects: Mapping[str, Mapping[str, float]] = field(default_factory=dict, metadata=rule(
+        fix="e.g. effects: {bias_temperature: {bias_temperature_x: 2.0}}"))
 
-def _number(v: object, path: str | None, where: str, positive: bool = False, allow_zero: bool = True) -> float:
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
-        raise ImucalError(f"{short(v)} is not a finite number", file=path, field=where)
-    if positive and (v < 0 or (v == 0 and not allow_zero)):
-        raise ImucalError(f"{short(v)} must be {'non-negative' if allow_zero else 'positive'}", file=path, field=where)
-    return float(v)
-
-
-def simulation_from_dict(d: object, path: str | None = None) -> SimulationConfig:
-    """Typed simulation config from a YAML mapping; unknown keys are an error naming the allowed ones.
-
-    Top level: ``seed``, ``gravity`` [m/s^2], ``sensor``, ``plan``, ``temperature`` (omit or null
-    for a recording without a temp column). See configs/simulate_example.yaml.
-    """
-    check_structure(d, path)
-    if not isinstance(d, dict):
-        raise ImucalError("top level must be a mapping", file=path, field="top level",
-                          fix="see configs/simulate_example.yaml")
-    top = _section(d, "top level", ("seed", "gravity", "sensor", "plan", "temperature"), path)
-    try:
-        seed = check_seed(top.get("seed", 0))
-    except ImucalError as exc:
-        raise ImucalError(exc.message, file=path, field="seed", fix=exc.fix) from None
-    gravity = _number(top.get("gravity", STANDARD_GRAVITY), path, "gravity", positive=True, allow_zero=False)
-    rng = np.random.default_rng(seed)
-    # sensor: a random preset drawn from the seed, explicit values override it
-    sd = _section(top.get("sensor"), "sensor", ("preset", "s", "b", "angles_deg", "noise", "quantum", "unit",
-                                                 "effects", "random_walk", "visit_offset"), path)
-    preset = sd.get("preset", "mems_counts")
-    if preset not in SENSOR_PRESETS:
-        raise ImucalError(f"unknown preset {short(preset)}", file=path, field="sensor.preset",
-                          fix=f"use one of {', '.join(SENSOR_PRESETS)}")
-    base = {"mems_counts": lambda: mems_counts_sensor(rng), "si": lambda: si_sensor(rng),
-            "none": SensorSpec}[preset]()
-    kw: dict = {}
-    for key in ("s", "b", "noise", "random_walk", "visit_offset"):
-        if key in sd:
-            kw[key] = _vec3(sd[key], path, f"sensor.{key}")
-    for key in ("random_walk", "visit_offset"):
-        if key in kw and not all(x >= 0 for x in kw[key]):
-            raise ImucalError(f"{key} must be non-negative [raw{' / sqrt(s)' if key == 'random_walk' else ''}]",
-                              file=path, field=f"sensor.{key}")
-    if "b" in kw and not all(x > 0 for x in kw["b"]):
-        raise ImucalError("scales must be positive", file=path, field="sensor.b")
-    if "noise" in kw and not all(x >= 0 for x in kw["noise"]):
-        raise ImucalError("noise must be non-negative", file=path, field="sensor.noise")
-    if "angles_deg" in sd:
-        kw["angles"] = tuple(np.radians(_vec3(sd["angles_deg"], path, "sensor.angles_deg")))
-    if "quantum" in sd:
-        kw["quantum"] = _number(sd["quantum"], path, "sensor.quantum", positive=True)
-    if "unit" in sd:
-        unit = sd["unit"]
-        if not (isinstance(unit, str) and 0 < len(unit) <= 20 and unit.isprintable()):
-            raise ImucalError(f"unit {short(unit)} must be a short name", file=path, field="sensor.unit",
+    def __post_init__(self) -> None:
+        if self.b is not None and not all(x > 0 for x in _three(self.b)):
+            raise ImucalError("scales must be positive", field="sensor.b")
+        if self.noise is not None and not all(x >= 0 for x in _three(self.noise)):
+            raise ImucalError("noise must be non-negative", field="sensor.noise")
+        for key, unit in (("random_walk", "raw / sqrt(s)"), ("visit_offset", "raw")):
+            v = getattr(self, key)
+            if v is not None and not all(x >= 0 for x in _three(v)):
+                raise ImucalError(f"{key} must be non-negative [{unit}]", field=f"sensor.{key}")
+        if self.unit is not None and not self.unit.isprintable():
+            raise ImucalError(f"unit {short(self.unit)} must be a short name", field="sensor.unit",
                               fix="e.g. unit: raw or unit: m/s^2")
-        kw["unit"] = unit
-    effects = sd.get("effects") or {}
-    if not isinstance(effects, dict) or not all(isinstance(v, dict) for v in effects.values()):
-        raise ImucalError("must map effect names to {parameter: value}", file=path, field="sensor.effects",
-                          fix="e.g. effects: {bias_temperature: {bias_temperature_x: 2.0}}")
-    for name, coeffs in effects.items():
-        for k, v in coeffs.items():
-            _number(v, path, f"sensor.effects.{name}.{k}")
-    kw["effects"] = {str(n): {str(k): float(v) for k, v in c.items()} for n, c in effects.items()}
-    from dataclasses import replace
 
-    sensor = replace(base, **kw)
-    try:
-        frame_matrix(np.asarray(sensor.angles))
-        if sensor.effects:
-            from imucal.model.effects import effects_from_coefficients
 
-            effects_from_coefficients(sensor.effects)
-    except ImucalError as exc:
-        raise ImucalError(exc.message, file=path, field=exc.field, fix=exc.fix) from None
-    # pose plan
-    pd = _section(top.get("plan"), "plan", ("directions", "n_random", "hold", "transition", "initial_hold",
-                                             "vibration", "rate"), path)
-    dirs = pd.get("directions", "faces+edges")
-    n_random = pd.get("n_random", 0)
-    if isinstance(n_random, bool) or not isinstance(n_random, int) or not 0 <= n_random <= MAX_SIM_POSES:
-        raise ImucalError(f"n_random {short(n_random)} must be an integer from 0 to {MAX_SIM_POSES}", file=path,
-                          field="plan.n_random", fix="a calibration needs tens of poses")
-    if isinstance(dirs, str):
-        if dirs not in DIRECTION_SETS:
-            raise ImucalError(f"unknown direction set {short(dirs)}", file=path, field="plan.directions",
+@dataclass(frozen=True)
+class PlanSection:
+    """``plan:`` of a simulation file: a named direction set or a list of [x, y, z], plus random ones."""
+
+    directions: str | tuple[tuple[float, float, float], ...] = field(default="faces+edges", metadata=rule(
+        max_len=MAX_SIM_POSES, msg=f"directions must be a set name or a list of at most {MAX_SIM_POSES} [x, y, z]",
+        fix=f"use one of {', '.join(DIRECTION_SETS)} or a list of [x, y, z]"))
+    n_random: int = field(default=0, metadata=rule(ge=0, le=MAX_SIM_POSES, fix="a calibration needs tens of poses"))
+    hold: float | None = field(default=None, metadata=rule(ge=0, unit="seconds"))
+    transition: float | None = field(default=None, metadata=rule(ge=0, unit="seconds"))
+    initial_hold: float | None = field(default=None, metadata=rule(ge=0, unit="seconds"))
+    vibration: float | None = field(default=None, metadata=rule(ge=0, unit="m/s^2"))
+    rate: float | None = field(default=None, metadata=rule(ge=0, unit="Hz"))
+
+    def __post_init__(self) -> None:
+        if isinstance(self.directions, str) and self.directions not in DIRECTION_SETS:
+            raise ImucalError(f"unknown direction set {short(self.directions)}", field="plan.directions",
                               fix=f"use one of {', '.join(DIRECTION_SETS)} or a list of [x, y, z]")
-        parts = [] if dirs == "random" else [cube_directions(dirs)]
+
+
+@dataclass(frozen=True)
+class SimulationFile:
+    """A simulation YAML as written (configs/simulate_example.yaml); ``simulation_from_dict`` builds it."""
+
+    seed: int = 0
+    gravity: float = field(default=STANDARD_GRAVITY, metadata=rule(gt=0, unit="m/s^2"))
+    sensor: SensorSection = SensorSection()
+    plan: PlanSection = PlanSection()
+    temperature: TemperatureProfile | None = None  #: omit or null: no temp column
+
+
+def _three(v: float | tuple[float, ...]) -> tuple[float, float, float]:
+    return (float(v),) * 3 if isinstance(v, (int, float)) else tuple(float(x) for x in v)  # type: ignore[return-value]
+
+
+def _sensor(sd: SensorSection, rng: np.random.Generator) -> SensorSpec:
+    base = {"mems_counts": lambda: mems_counts_sensor(rng), "si": lambda: si_sensor(rng),
+            "none": SensorSpec}[sd.preset]()
+    kw: dict = {k: _three(getattr(sd, k)) for k in ("s", "b", "noise", "random_walk", "visit_offset")
+                if getattr(sd, k) is not None}
+    if sd.angles_deg is not None:
+        kw["angles"] = tuple(np.radians(_three(sd.angles_deg)))
+    kw.update({k: getattr(sd, k) for k in ("quantum", "unit") if getattr(sd, k) is not None})
+    kw["effects"] = {str(n): {str(k): float(v) for k, v in c.items()} for n, c in sd.effects.items()}
+    sensor = replace(base, **kw)
+    frame_matrix(np.asarray(sensor.angles))
+    if sensor.effects:
+        effects_from_coefficients(sensor.effects)
+    return sensor
+
+
+def _plan(pd: PlanSection, rng: np.random.Generator) -> PosePlan:
+    if isinstance(pd.directions, str):
+        parts = [] if pd.directions == "random" else [cube_directions(pd.directions)]
     else:
-        if not (isinstance(dirs, list) and 0 < len(dirs) <= MAX_SIM_POSES and all(
-                isinstance(r, list) and len(r) == 3
-                and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in r) for r in dirs)):
-            raise ImucalError(f"directions must be a set name or a list of at most {MAX_SIM_POSES} [x, y, z]",
-                              file=path, field="plan.directions")
-        arr = np.asarray(dirs, float)
-        largest = np.max(np.abs(arr), axis=1, keepdims=True)
-        if not np.all(np.isfinite(arr)) or np.any(largest == 0):
-            raise ImucalError("directions must be a set name or a list of non-zero [x, y, z]", file=path,
+        arr = np.asarray(pd.directions, float)
+        largest = np.max(np.abs(arr), axis=1, keepdims=True) if arr.size else np.zeros((0, 1))
+        if arr.size == 0 or np.any(largest == 0):
+            raise ImucalError("directions must be a set name or a list of non-zero [x, y, z]",
                               field="plan.directions")
         arr = arr / largest  # scaled first: the norm of [1e308, 1e308, 0] overflows
         parts = [arr / np.linalg.norm(arr, axis=1, keepdims=True)]
-    if n_random:
-        parts.append(random_directions(n_random, rng))
+    if pd.n_random:
+        parts.append(random_directions(pd.n_random, rng))
     if not parts:
-        raise ImucalError("no directions: 'random' needs n_random > 0", file=path, field="plan.n_random")
+        raise ImucalError("no directions: 'random' needs n_random > 0", field="plan.n_random")
     order = np.vstack(parts)
     order = order[rng.permutation(len(order))]  # poses in a shuffled order, as a person would
-    pkw = {k: _number(pd[k], path, f"plan.{k}", positive=True) for k in
-           ("hold", "transition", "initial_hold", "vibration", "rate") if k in pd}
+    pkw = {k: float(getattr(pd, k)) for k in ("hold", "transition", "initial_hold", "vibration", "rate")
+           if getattr(pd, k) is not None}
+    return PosePlan(order, **pkw)
+
+
+def simulation_from_dict(d: object, path: str | None = None) -> SimulationConfig:
+    """Typed simulation config from a YAML mapping (imucal.files.schema: unknown keys are an error
+    naming the allowed ones). Top level: ``seed``, ``gravity`` [m/s^2], ``sensor``, ``plan``,
+    ``temperature`` (omit or null for a recording without a temp column). See
+    configs/simulate_example.yaml.
+    """
+    check_structure(d, path)
+    f = fill(SimulationFile, d, path)
     try:
-        plan = PosePlan(order, **pkw)
+        seed = check_seed(f.seed, "seed")
+        rng = np.random.default_rng(seed)
+        sensor, plan = _sensor(f.sensor, rng), _plan(f.plan, rng)
+        if sensor.effects and f.temperature is None and any(
+                "temp" in e.covariates for e in effects_from_coefficients(sensor.effects)):
+            raise ImucalError("the sensor has a temperature effect but there is no temperature: section",
+                              field="temperature", fix="add temperature: {start: 20, plateau: 35}")
     except ImucalError as exc:
         raise ImucalError(exc.message, file=path, field=exc.field, fix=exc.fix) from None
-    # temperature profile
-    temperature = None
-    if top.get("temperature") is not None:
-        td = _section(top["temperature"], "temperature", ("start", "plateau", "tau", "swing", "period", "noise"),
-                      path)
-        tkw = {k: _number(v, path, f"temperature.{k}") for k, v in td.items()}
-        for k in ("tau", "period"):
-            if k in tkw and tkw[k] <= 0:
-                raise ImucalError(f"{k} must be positive [s]", file=path, field=f"temperature.{k}")
-        if tkw.get("noise", 0) < 0:
-            raise ImucalError("noise must be non-negative [degC]", file=path, field="temperature.noise")
-        temperature = TemperatureProfile(**tkw)
-    if sensor.effects and temperature is None:
-        from imucal.model.effects import effects_from_coefficients
-
-        if any("temp" in e.covariates for e in effects_from_coefficients(sensor.effects)):
-            raise ImucalError("the sensor has a temperature effect but there is no temperature: section",
-                              file=path, field="temperature", fix="add temperature: {start: 20, plateau: 35}")
-    return SimulationConfig(sensor=sensor, plan=plan, temperature=temperature, gravity=gravity, seed=seed,
-                            source=path)
+    return SimulationConfig(sensor=sensor, plan=plan, temperature=f.temperature, gravity=float(f.gravity),
+                            seed=seed, source=path)
 
 
 def load_simulation_config(path: str) -> SimulationConfig:
     """Read a simulation YAML (``yaml.safe_load``) into a SimulationConfig."""
-    from imucal.files.yamlio import read_yaml
-
     d = read_yaml(path, "config", "pass a simulation YAML (see configs/simulate_example.yaml)")
     return simulation_from_dict(d, str(path))
 
@@ -544,8 +522,6 @@ def draw_effect_case(seed: int, effect: str | None = "random", axes: tuple[int, 
         coeffs = {e.coefficient(a): sign * e.coefficient_for_size(size, float(sensor.b[a]), span, g)
                   for a, sign in zip(e.axes, signs)}
         coeffs.update(refs)
-        from dataclasses import replace
-
         sensor = replace(sensor, effects={name: coeffs})
     cfg = SimulationConfig(sensor=sensor, plan=plan, temperature=temperature, gravity=g, seed=int(seed))
     return EffectCase(seed=int(seed), effect=name, axes=tuple(ax), size=size, sigma_mean=sigma_mean, config=cfg)
@@ -571,7 +547,5 @@ def draw_pair_case(seed: int, snr: float = 40.0, noise_mg: float | None = None,
 
 def pair_config(c1: EffectCase, c2: EffectCase) -> SimulationConfig:
     """The simulation of ``c1`` with the effects of both cases (same seed: same sensor and plan)."""
-    from dataclasses import replace
-
     sensor = replace(c1.config.sensor, effects={**c1.config.sensor.effects, **c2.config.sensor.effects})
     return replace(c1.config, sensor=sensor)

@@ -10,8 +10,8 @@ from __future__ import annotations
 import datetime as _dt
 import math
 import os
-from dataclasses import replace
-from typing import Any, Mapping
+from dataclasses import dataclass, field, replace
+from typing import Any, Literal, Mapping
 
 import numpy as np
 import yaml
@@ -22,6 +22,7 @@ from imucal.calibration.gyro import KIND as GYRO_KIND, GyroCalibration
 from imucal.constants import SI_ACCEL_UNIT
 from imucal.errors import ImucalError, short
 from imucal.files.output import write_text_atomic
+from imucal.files.schema import fill, rule
 from imucal.files.yamlio import read_yaml
 from imucal.model.geometry import gram_det_np
 from imucal.model.channels import TEMPERATURE, TIME
@@ -77,139 +78,161 @@ def _f(x: float) -> float | None:
     return x if math.isfinite(x) else (None if math.isnan(x) else x)
 
 
-def _get(d: Mapping, key: str, path: str, where: str) -> Any:
-    if not isinstance(d, Mapping) or key not in d:
-        raise ImucalError(f"missing field {where + key!r}", file=path, field=where + key,
-                          fix="regenerate the file with `imucal calibrate`")
-    return d[key]
+REGEN = "regenerate the file with `imucal calibrate`"
+_NUMBER = rule(msg="{value} is not a number", fix=REGEN)
+_BOUND = rule(msg="{value} is not a number", allow_inf=True, fix=REGEN)
 
 
-def _num(x: Any, path: str, field_: str) -> float:
-    if x is None:
-        return float("nan")
-    if isinstance(x, bool) or not isinstance(x, (int, float)):
-        raise ImucalError(f"{short(x)} is not a number", file=path, field=field_)
-    try:
-        return float(x)
-    except OverflowError:  # an integer beyond the float range
-        raise ImucalError(f"{short(x)} is too large for a float", file=path, field=field_) from None
+@dataclass(frozen=True)
+class ParameterEntry:
+    """One entry of ``parameters:``; ``scale`` is ``solver_scale``'s name in files before the rename."""
+
+    value: float = field(metadata=_NUMBER)
+    std: float | None = field(default=None, metadata=_BOUND)  #: null: not determined
+    unit: str = field(default="", metadata=rule(msg="{value} is not text", fix=REGEN))
+    lower: float | None = field(default=None, metadata=_BOUND)
+    upper: float | None = field(default=None, metadata=_BOUND)
+    fixed: bool = field(default=False, metadata=rule(msg="{value} is not true or false"))
+    solver_scale: float | None = field(default=None, metadata=_NUMBER)
+    scale: float | None = field(default=None, metadata=_NUMBER)
 
 
-def from_dict(d: Mapping[str, Any], path: str = "<calibration>") -> "frozen.Calibration":
-    """Validate a calibration mapping and rebuild the Calibration."""
-    if not isinstance(d, Mapping):
-        raise ImucalError("is not a calibration file (top level is not a mapping)", file=path,
-                          field="format", fix="pass a calibration.yaml written by `imucal calibrate`")
-    fmt = _get(d, "format", path, "")
-    if fmt != FORMAT:
-        raise ImucalError(f"format {fmt!r} is not {FORMAT!r}", file=path, field="format",
-                          fix="pass a calibration.yaml written by `imucal calibrate`")
-    ver = _get(d, "format_version", path, "")
-    if ver not in READABLE_VERSIONS or isinstance(ver, bool):
-        raise ImucalError(f"unknown format version {short(ver)} (this imucal reads versions "
-                          f"{', '.join(map(str, READABLE_VERSIONS))})",
-                          file=path, field="format_version",
-                          fix="regenerate the file with this imucal or upgrade imucal")
-    pd = _get(d, "parameters", path, "")
-    if not isinstance(pd, Mapping) or not all(isinstance(n, str) for n in pd):
-        raise ImucalError("must map parameter names to entries", file=path, field="parameters",
-                          fix="regenerate the file with `imucal calibrate`")
-    effects_in = _section(d, "effects", path, list)
-    effects: list[tuple[str, tuple[int, ...]]] = []
-    for e in effects_in:
-        name = _get(e, "name", path, "effects[].")
-        axes = _get(e, "axes", path, "effects[].")
-        if not isinstance(name, str) or not isinstance(axes, (list, str)) or not axes \
-                or not all(isinstance(a, str) and a in ("x", "y", "z") for a in axes):
-            raise ImucalError(f"effect {name!r} on axes {axes!r} is not a named effect on x, y, z", file=path,
-                              field="effects", fix="regenerate the file with `imucal calibrate`")
-        effects.append((name, tuple("xyz".index(a) for a in axes)))
+@dataclass(frozen=True)
+class EffectEntry:
+    name: str = field(metadata=rule(msg="effect name {value} is not text", fix=REGEN))
+    axes: tuple[Literal["x", "y", "z"], ...] = field(metadata=rule(
+        min_len=1, msg="axis {value} is not x, y or z", fix=REGEN))
+
+    @classmethod
+    def schema_input(cls, raw: Any) -> Any:
+        """Axes as one word ("xz")."""
+        return {**raw, "axes": list(raw["axes"])} if isinstance(raw, Mapping) and isinstance(
+            raw.get("axes"), str) else raw
+
+
+@dataclass(frozen=True)
+class UnitsSection:
+    input: str = field(default="raw", metadata=rule(msg="{value} is not text", fix=REGEN))
+    output: str = SI_ACCEL_UNIT
+    angles: str = "rad"
+    time: str = "s"
+    temperature: str = "degC"
+    gravity: Literal["m/s^2"] = field(default=SI_ACCEL_UNIT, metadata=rule(
+        msg=f"gravity unit {{value}} is not {SI_ACCEL_UNIT}", fix=f"give gravity in {SI_ACCEL_UNIT}"))
+
+
+@dataclass(frozen=True)
+class SoftwareSection:
+    name: str = "imucal"
+    version: str = field(default="", metadata=rule(msg="{value} is not text", fix=REGEN))
+
+
+@dataclass(frozen=True, kw_only=True)
+class CalibrationFile:
+    """The calibration file as ``to_dict`` writes it (version 2; version 1 has no sensors or gyroscope),
+    checked in this order. ``apply`` is derived from the parameters and checked against them."""
+
+    format: Literal["imucal-calibration"] = field(metadata=rule(
+        msg=f"format {{value}} is not {FORMAT!r}", fix="pass a calibration.yaml written by `imucal calibrate`"))
+    format_version: Literal[1, 2] = field(metadata=rule(
+        msg="unknown format version {value} (this imucal reads versions "
+            f"{', '.join(map(str, READABLE_VERSIONS))})", fix="regenerate the file with this imucal or upgrade imucal"))
+    parameters: Mapping[str, ParameterEntry] = field(metadata=rule(fix=REGEN))
+    effects: tuple[EffectEntry, ...] = field(default=(), metadata=rule(fix=REGEN))
+    gravity: float = field(metadata=rule(gt=0, fix=REGEN))
+    units: UnitsSection = UnitsSection()
+    software: SoftwareSection = SoftwareSection()
+    created: str = field(default="", metadata=rule(msg="{value} is not text", fix=REGEN))
+    sensors: tuple[str, ...] | None = field(default=None, metadata=rule(fix=REGEN))
+    model: Any = None  #: checked against the parameters (_check_model_name)
+    output_frame: str | None = None
+    apply: Any = None
+    fit: Mapping[str, Any] = field(default_factory=dict, metadata=rule(fix=REGEN))
+    data: Mapping[str, Any] = field(default_factory=dict, metadata=rule(fix=REGEN))
+    gyroscope: Any = None  #: GyroSection (imucal.calibration.gyro)
+
+    @classmethod
+    def schema_input(cls, raw: Any) -> Any:
+        """YAML reads an unquoted timestamp as a datetime: the text it was."""
+        if isinstance(raw, Mapping) and isinstance(raw.get("created"), _dt.datetime):
+            return {**raw, "created": raw["created"].isoformat()}
+        return raw
+
+
+def _parameters(entries: Mapping[str, ParameterEntry], path: str) -> tuple[Parameters, dict[str, float]]:
+    """The base parameters first, then each effect's in file order."""
     plist: list[Parameter] = []
-    names = list(BASE_NAMES) + [n for n in pd if n not in BASE_NAMES]
     std: dict[str, float] = {}
-    for n in names:
-        e = _get(pd, n, path, "parameters.")
-        where = f"parameters.{n}."
-        val = _num(_get(e, "value", path, where), path, where + "value")
-        if not math.isfinite(val):
-            raise ImucalError("value is not finite", file=path, field=where + "value")
-        lo = _num(e.get("lower", -math.inf), path, where + "lower")
-        hi = _num(e.get("upper", math.inf), path, where + "upper")
-        if "solver_scale" in e and "scale" in e:
+    for n in list(BASE_NAMES) + [n for n in entries if n not in BASE_NAMES]:
+        if n not in entries:
+            raise ImucalError(f"missing key {n!r}", file=path, field=f"parameters.{n}", fix=REGEN)
+        e, where = entries[n], f"parameters.{n}."
+        if e.solver_scale is not None and e.scale is not None:
             raise ImucalError("has both solver_scale and its old name scale", file=path, field=where + "scale",
                               fix="keep only solver_scale")
-        key = "scale" if "scale" in e else "solver_scale"  # "scale" in files before the rename
-        scale = _num(e.get(key, 1.0), path, where + key)
-        fixed = e.get("fixed", False)
-        if not isinstance(fixed, bool):
-            raise ImucalError(f"{fixed!r} is not true or false", file=path, field=where + "fixed")
+        key = "scale" if e.scale is not None else "solver_scale"
         try:
-            plist.append(Parameter(n, val, lower=-math.inf if math.isnan(lo) else lo,
-                                   upper=math.inf if math.isnan(hi) else hi, unit=str(e.get("unit", "")),
-                                   fixed=fixed, scale=scale))
+            plist.append(Parameter(n, float(e.value), lower=-math.inf if e.lower is None else float(e.lower),
+                                   upper=math.inf if e.upper is None else float(e.upper), unit=e.unit,
+                                   fixed=e.fixed, scale=float(getattr(e, key) or 1.0)))
         except ImucalError as exc:
             field_ = where + key if exc.field and exc.field.endswith(".scale") else exc.field
             raise ImucalError(exc.message, file=path, field=field_, fix=exc.fix) from None
-        std[n] = _num(e.get("std"), path, where + "std")
-    params = Parameters(plist)
+        std[n] = math.nan if e.std is None else float(e.std)
+    return Parameters(plist), std
+
+
+def from_dict(d: Mapping[str, Any], path: str = "<calibration>") -> "frozen.Calibration":
+    """Validate a calibration mapping (CalibrationFile) and rebuild the Calibration."""
+    if not isinstance(d, Mapping):
+        raise ImucalError("is not a calibration file (top level is not a mapping)", file=path,
+                          field="format", fix="pass a calibration.yaml written by `imucal calibrate`")
+    f = fill(CalibrationFile, d, path)
+    params, std = _parameters(f.parameters, path)
     validate_parameters(params, path)
-    g = _num(_get(d, "gravity", path, ""), path, "gravity")
-    if not (math.isfinite(g) and g > 0):
-        raise ImucalError(f"gravity {g} must be positive", file=path, field="gravity")
-    units = _section(d, "units", path, Mapping)
-    sw = _section(d, "software", path, Mapping)
-    if units.get("gravity", SI_ACCEL_UNIT) != SI_ACCEL_UNIT:
-        raise ImucalError(f"gravity unit {short(units.get('gravity'))} is not {SI_ACCEL_UNIT}", file=path,
-                          field="units.gravity", fix=f"give gravity in {SI_ACCEL_UNIT}")
-    created = d.get("created", "")
-    if isinstance(created, _dt.datetime):  # YAML reads an unquoted timestamp as a datetime
-        created = created.isoformat()
-    cal = frozen.Calibration(params=params, std=std, gravity=g, raw_unit=_text(units.get("input", "raw"), path, "units.input"),
-                      effects=tuple(effects), fit=dict(_section(d, "fit", path, Mapping)),
-                      data=dict(_section(d, "data", path, Mapping)),
-                      created=_text(created, path, "created"),
-                      software_version=_text(sw.get("version", ""), path, "software.version"))
-    gyro = _gyro_section(d, ver, path)
+    effects = tuple((e.name, tuple("xyz".index(a) for a in e.axes)) for e in f.effects)
+    cal = frozen.Calibration(params=params, std=std, gravity=float(f.gravity), raw_unit=f.units.input,
+                             effects=effects, fit=dict(f.fit), data=dict(f.data), created=f.created,
+                             software_version=f.software.version)
+    gyro = _gyro_section(f, path)
     if gyro is not None:
         cal = replace(cal, gyro=gyro)
     check_text_fields(cal, path)
-    if effects:  # the parameters must be exactly the model's (base + each effect's)
-        try:
-            model_names = cal.model.names
-        except ImucalError as exc:
-            raise ImucalError(exc.message, file=path, field=exc.field or "effects", fix=exc.fix) from None
-        if tuple(params.names) != tuple(model_names):
-            raise ImucalError(f"parameters {list(params.names)} do not match the model's {list(model_names)}",
-                              file=path, field="parameters", fix="regenerate the file with `imucal calibrate`")
-    elif len(params) != len(BASE_NAMES):
-        extra = [n for n in params.names if n not in BASE_NAMES]
-        raise ImucalError(f"parameter(s) {short(extra)} belong to no effect of this calibration", file=path,
-                          field="parameters", fix="regenerate the file with `imucal calibrate`")
-    _check_model_name(d.get("model"), cal, path)
-    _check_derived(d.get("apply"), cal, path)
+    _check_parameter_names(cal, path)
+    _check_model_name(f.model, cal, path)
+    _check_derived(f.apply, cal, path)
     return cal
 
 
-def _gyro_section(d: Mapping, version: int, path: str) -> GyroCalibration | None:
+def _check_parameter_names(cal: "frozen.Calibration", path: str) -> None:
+    """The parameters must be exactly the model's (base + each effect's)."""
+    names = tuple(cal.params.names)
+    if cal.effects:
+        try:
+            model_names = tuple(cal.model.names)
+        except ImucalError as exc:
+            raise ImucalError(exc.message, file=path, field=exc.field or "effects", fix=exc.fix) from None
+        if names != model_names:
+            raise ImucalError(f"parameters {list(names)} do not match the model's {list(model_names)}",
+                              file=path, field="parameters", fix=REGEN)
+    elif len(names) != len(BASE_NAMES):
+        extra = [n for n in names if n not in BASE_NAMES]
+        raise ImucalError(f"parameter(s) {short(extra)} belong to no effect of this calibration", file=path,
+                          field="parameters", fix=REGEN)
+
+
+def _gyro_section(f: CalibrationFile, path: str) -> GyroCalibration | None:
     """The gyroscope part of a version-2 file; ``sensors`` must list exactly what the file holds."""
-    if version == 1:
-        if "gyroscope" in d or "sensors" in d:
+    if f.format_version == 1:
+        if f.gyroscope is not None or f.sensors is not None:
             raise ImucalError("version 1 files hold an accelerometer only", file=path, field="format_version",
                               fix="write format_version: 2 for a file with sensors and a gyroscope section")
         return None
-    sensors = d.get("sensors")
-    want = [ACCELEROMETER] + ([GYRO_KIND] if "gyroscope" in d else [])
-    if sensors != want:
-        raise ImucalError(f"{short(sensors)} does not list the file's sensors {want}", file=path, field="sensors",
-                          fix="regenerate the file with `imucal calibrate`")
-    return GyroCalibration.from_dict(d["gyroscope"], path) if "gyroscope" in d else None
-
-
-def _text(x: Any, path: str, field_: str) -> str:
-    if not isinstance(x, str):
-        raise ImucalError(f"{short(x)} is not text", file=path, field=field_,
-                          fix="regenerate the file with `imucal calibrate`")
-    return x
+    want = (ACCELEROMETER,) + ((GYRO_KIND,) if f.gyroscope is not None else ())
+    if f.sensors != want:
+        raise ImucalError(f"{short(list(f.sensors or ()))} does not list the file's sensors {list(want)}", file=path,
+                          field="sensors", fix=REGEN)
+    return GyroCalibration.from_dict(f.gyroscope, path) if f.gyroscope is not None else None
 
 
 def check_text_fields(cal: "frozen.Calibration", path: str = "<calibration>") -> None:
@@ -283,17 +306,6 @@ def _check_derived(apply: Any, cal: "frozen.Calibration", path: str) -> None:
         if not dev <= DERIVED_RTOL * ref:
             raise ImucalError(f"disagrees with the parameters (max difference {dev:.3g}, relative "
                               f"{dev / ref if ref else math.inf:.3g})", file=path, field=f"apply.{key}", fix=fix)
-
-
-def _section(d: Mapping, key: str, path: str, kind: type) -> Any:
-    """An optional section that must have the given kind (Mapping or list) when present."""
-    v = d.get(key)
-    if v is None:
-        return [] if kind is list else {}
-    if not isinstance(v, kind):
-        raise ImucalError(f"must be a {'list' if kind is list else 'mapping'}, got {type(v).__name__}",
-                          file=path, field=key, fix="regenerate the file with `imucal calibrate`")
-    return v
 
 
 def validate_parameters(params: Parameters, path: str = "<calibration>") -> None:

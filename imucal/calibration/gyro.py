@@ -10,12 +10,13 @@ tools, the derived C, c and D; on load the derived values must match the paramet
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any, Literal, Mapping
 
 import numpy as np
 
 from imucal.calibration.fields import UNIT_PATTERN
-from imucal.errors import ImucalError
+from imucal.errors import ImucalError, short
+from imucal.files.schema import fill, rule
 from imucal.gyro.model import misalignment_entries, rate_map
 from imucal.gyro.result import GyroResult
 
@@ -88,47 +89,68 @@ class GyroCalibration:
 
     @classmethod
     def from_dict(cls, d: Any, path: str) -> "GyroCalibration":
-        where = "gyroscope"
-        if not isinstance(d, Mapping):
-            raise ImucalError("must be a mapping", file=path, field=where, fix="restore the file imucal wrote")
-        if d.get("kind") != KIND:
-            raise ImucalError(f"kind must be {KIND!r}", file=path, field=f"{where}.kind",
-                              fix="restore the file imucal wrote")
-        units = d.get("units")
-        unit = units.get("input") if isinstance(units, Mapping) else None
-        if not isinstance(unit, str) or not UNIT_PATTERN.match(unit):
-            raise ImucalError("missing or invalid unit", file=path, field=f"{where}.units.input",
-                              fix="a short unit such as rad/s, deg/s or LSB")
-        vals = {k: _array(d, "parameters", k, path) for k in _SHAPES}
-        std = {k: _array(d, "std", k, path, allow_nan=True) for k in _SHAPES}
+        """The ``gyroscope:`` section of a calibration file (GyroSection), with its derived map checked."""
+        g = fill(GyroSection, d, path, "gyroscope")
+        vals = {k: np.array(getattr(g.parameters, k), float) for k in _SHAPES}
+        std = {k: np.array(getattr(g.std, k), float) for k in _SHAPES}
+        fix = "restore the file imucal wrote"
         if np.any(vals["scale"] == 0) or np.any(np.diag(vals["misalignment"]) != 1.0):
             raise ImucalError("scales must be non-zero and the misalignment's diagonal 1", file=path,
-                              field=f"{where}.parameters", fix="restore the file imucal wrote")
-        fit = d.get("fit", {})
-        out = cls(unit=unit, std=std, fit=fit if isinstance(fit, Mapping) else {}, **vals)
-        M = vals["misalignment"]
-        if abs(np.linalg.det(M)) < 1e-6:
-            raise ImucalError("the misalignment matrix is singular", file=path, field=f"{where}.parameters",
-                              fix="restore the file imucal wrote")
-        _check_derived(out, d.get("apply"), path)
+                              field="gyroscope.parameters", fix=fix)
+        if abs(np.linalg.det(vals["misalignment"])) < 1e-6:
+            raise ImucalError("the misalignment matrix is singular", file=path, field="gyroscope.parameters", fix=fix)
+        out = cls(unit=g.units.input, std=std, fit=dict(g.fit), **vals)
+        _check_derived(out, g.apply, path)
         return out
 
 
-def _array(d: Mapping, section: str, key: str, path: str, allow_nan: bool = False) -> np.ndarray:
-    fld = f"gyroscope.{section}.{key}"
-    sec = d.get(section)
-    v = sec.get(key) if isinstance(sec, Mapping) else None
-    try:
-        a = np.array(v, dtype=float)
-    except (TypeError, ValueError, OverflowError):
-        a = None
-    if a is None or a.shape != _SHAPES[key] or not (np.all(np.isfinite(a)) or (allow_nan and not np.any(np.isinf(a)))):
-        raise ImucalError(f"must be {'x'.join(map(str, _SHAPES[key]))} finite numbers", file=path, field=fld,
-                          fix="restore the file imucal wrote")
-    if np.any(np.abs(a) > 1e15):
-        raise ImucalError("a value is out of range (|x| > 1e15)", file=path, field=fld,
-                          fix="restore the file imucal wrote")
-    return a
+#: Values of the file: finite, |x| <= 1e15; standard errors may be NaN (undetermined).
+_VALUE = rule(ge=-1e15, le=1e15, fix="restore the file imucal wrote")
+_STD = rule(ge=-1e15, le=1e15, allow_nan=True, fix="restore the file imucal wrote")
+Vec3 = tuple[float, float, float]
+Mat3 = tuple[Vec3, Vec3, Vec3]
+
+
+@dataclass(frozen=True)
+class GyroValues:
+    bias: Vec3 = field(metadata=_VALUE)
+    scale: Vec3 = field(metadata=_VALUE)
+    misalignment: Mat3 = field(metadata=_VALUE)
+    gsens: Mat3 = field(metadata=_VALUE)
+
+
+@dataclass(frozen=True)
+class GyroStd:
+    bias: Vec3 = field(metadata=_STD)
+    scale: Vec3 = field(metadata=_STD)
+    misalignment: Mat3 = field(metadata=_STD)
+    gsens: Mat3 = field(metadata=_STD)
+
+
+@dataclass(frozen=True)
+class GyroUnits:
+    input: str = field(metadata=rule(fix="a short unit such as rad/s, deg/s or LSB"))
+    output: Literal["rad/s"] = OUTPUT_UNIT
+    gsens: str = "(rad/s)/(m/s^2)"
+
+    def __post_init__(self) -> None:
+        if not UNIT_PATTERN.match(self.input):
+            raise ImucalError(f"{short(self.input)} is not a unit", field="gyroscope.units.input",
+                              fix="a short unit such as rad/s, deg/s or LSB")
+
+
+@dataclass(frozen=True)
+class GyroSection:
+    """The ``gyroscope:`` section as ``to_dict`` writes it."""
+
+    kind: Literal["gyroscope"] = field(metadata=rule(msg=f"kind {{value}} is not {KIND!r}",
+                                                     fix="restore the file imucal wrote"))
+    units: GyroUnits
+    parameters: GyroValues
+    std: GyroStd
+    model: str | None = None
+    apply: Any = None  #: derived from the parameters; checked against them
+    fit: Mapping[str, Any] = field(default_factory=dict)
 
 
 def _check_derived(g: GyroCalibration, apply: Any, path: str) -> None:

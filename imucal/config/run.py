@@ -1,14 +1,14 @@
-"""Run configuration: typed dataclasses, filled from YAML (``yaml.safe_load``).
+"""Run configuration: typed dataclasses, filled from YAML by imucal.files.schema.
 
-Unknown keys are an error that names the key and the allowed ones.
+Unknown keys are an error that names the key and the allowed ones. A new section is one
+dataclass and one line in RunConfig.
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 import os
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -19,9 +19,9 @@ from imucal.errors import ImucalError, short
 from imucal.model.gravity import normal_gravity
 from imucal.model.parameters import BASE_NAMES
 from imucal.data.static import StaticSettings
-from imucal.files.yamlio import check_structure, key_text
 from imucal.constants import STANDARD_GRAVITY
-from imucal.files.yamlio import read_yaml
+from imucal.files.schema import fill, rule
+from imucal.files.yamlio import check_structure, read_yaml
 
 FIT_MODES = ("means", "samples")
 WEIGHTS = ("auto", "noise", "uniform")
@@ -31,9 +31,12 @@ WEIGHTS = ("auto", "noise", "uniform")
 class GravitySpec:
     """Local gravity: a value [m/s^2], or latitude [deg] and height [m] (WGS84 normal gravity)."""
 
-    value: float | None = None
-    latitude: float | None = None
-    height: float = 0.0
+    value: float | None = field(default=None, metadata=rule(
+        msg="gravity {value} m/s^2 is not a local gravity on Earth", fix="give local g in m/s^2 (9.78 .. 9.84)"))
+    latitude: float | None = field(default=None, metadata=rule(
+        msg="latitude {value} is not a number of degrees", fix="latitude in degrees, height in metres"))
+    height: float = field(default=0.0, metadata=rule(
+        msg="height {value} is not a number of metres", fix="latitude in degrees, height in metres"))
 
     def __post_init__(self) -> None:
         if self.value is not None and self.latitude is not None:
@@ -72,7 +75,16 @@ def _is_real(v: Any) -> bool:
 @dataclass(frozen=True)
 class EffectSpec:
     name: str
-    axes: tuple[str, ...] = ("x", "y", "z")
+    axes: tuple[str, ...] = field(default=("x", "y", "z"), metadata=rule(fix="e.g. axes: [x, z]"))
+
+    @classmethod
+    def schema_input(cls, raw: Any) -> Any:
+        """An effect by its name alone, and axes as one word ("xz")."""
+        if isinstance(raw, str):
+            return {"name": raw}
+        if isinstance(raw, Mapping) and isinstance(raw.get("axes"), str):
+            return {**raw, "axes": list(raw["axes"])}
+        return raw
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str):
@@ -94,11 +106,29 @@ class FitSettings:
     weights: str = "auto"
     angle_tolerance: float = DEFAULT_ANGLE_TOL  #: angles in pi/2 (1 +- tol)
     fix: tuple[str, ...] = ()  #: parameters held at their initial value
-    initial: Mapping[str, float] = field(default_factory=dict)  #: overrides of the initial guess
-    effects: tuple[EffectSpec, ...] = ()
+    initial: Mapping[str, float] = field(default_factory=dict, metadata=rule(  #: overrides of the initial guess
+        msg="initial value {value} is not a finite number", fix="e.g. initial: {s1: 0.0}"))
+    effects: tuple[EffectSpec, ...] = field(default=(), metadata=rule(fix="e.g. effects: [bias_temperature]"))
     #: `imucal noise --json` output or a Kalibr imu.yaml: the interval means' noise from its
     #: white-noise density (imucal.analysis.noise_model) instead of their own scatter
-    noise: str | None = None
+    noise: str | None = field(default=None, metadata=rule(
+        min_len=1, msg="noise {value} must be a file name", fix="give the JSON of `imucal noise --json` or a Kalibr imu.yaml"))
+
+    @classmethod
+    def schema_input(cls, raw: Any) -> Any:
+        """``fix: {phi: 1.5708}`` holds phi AT the value: the value joins ``initial``."""
+        if not isinstance(raw, Mapping) or "fix" not in raw:
+            return raw
+        raw = dict(raw)
+        raw["fix"], held = _fix_shorthand(raw["fix"])
+        init = raw.get("initial") or {}
+        if held and isinstance(init, Mapping):
+            clash = [n for n in held if n in init and init[n] != held[n]]
+            if clash:
+                raise ImucalError(f"{clash[0]} is given in fit.fix and fit.initial with different values",
+                                  field=f"fit.fix.{clash[0]}", fix="give the value once")
+            raw["initial"] = {**init, **held}
+        return raw
 
     def __post_init__(self) -> None:
         if self.noise is not None and (not isinstance(self.noise, str) or not self.noise):
@@ -148,8 +178,8 @@ class GyroSettings:
 
 @dataclass(frozen=True)
 class OutputSettings:
-    dir: str = "out"
-    figures: bool = True
+    dir: str = field(default="out", metadata=rule(msg="dir {value} must be a directory name", min_len=1))
+    figures: bool = field(default=True, metadata=rule(msg="figures {value} must be true or false"))
 
     def __post_init__(self) -> None:
         if not isinstance(self.dir, str) or not self.dir:
@@ -160,41 +190,21 @@ class OutputSettings:
 
 @dataclass(frozen=True)
 class RunConfig:
-    data: DataSpec
+    data: DataSpec = field(metadata=rule(fix="add data: {path: RECORDING}"))
     static: StaticSettings = StaticSettings()
     gravity: GravitySpec = GravitySpec()
     fit: FitSettings = FitSettings()
     output: OutputSettings = OutputSettings()
     gyro: GyroSettings = GyroSettings()
-    source: str | None = None  #: the YAML file, for messages and relative paths
+    #: the YAML file, for messages and relative paths (not a key of the file)
+    source: str | None = field(default=None, metadata=rule(internal=True))
 
     @property
     def base_dir(self) -> Path | None:
         return Path(self.source).parent if self.source else None
 
 
-def _fill(cls: type, raw: Any, where: str, path: str | None) -> Any:
-    if raw is None:
-        raw = {}
-    if not isinstance(raw, Mapping):
-        raise ImucalError(f"section must be a mapping, got {type(raw).__name__}", file=path,
-                          field=where or "top level")
-    allowed = [f.name for f in dataclasses.fields(cls) if f.name != "source"]
-    unknown = [k for k in raw if k not in allowed]
-    if unknown:
-        raise ImucalError(f"unknown key {short(unknown[0])}", file=path,
-                          field=f"{where}{key_text(unknown[0])}", fix=f"allowed keys here: {', '.join(allowed)}")
-    try:
-        return cls(**raw)
-    except ImucalError as exc:
-        if exc.file is None:
-            exc = ImucalError(exc.message, file=path, field=exc.field, fix=exc.fix)
-        raise exc from None
-    except TypeError as exc:
-        raise ImucalError(f"bad values: {exc}", file=path, field=where.rstrip(".")) from None
-
-
-def _fix_list(fx: Any, path: str | None) -> tuple[tuple[str, ...], dict[str, float]]:
+def _fix_shorthand(fx: Any) -> tuple[tuple[str, ...], dict[str, float]]:
     """fit.fix as a name, a list of names, or a mapping name -> value held."""
     if fx is None:
         return (), {}
@@ -205,64 +215,17 @@ def _fix_list(fx: Any, path: str | None) -> tuple[tuple[str, ...], dict[str, flo
     if isinstance(fx, Mapping) and all(isinstance(n, str) for n in fx):
         for n, v in fx.items():
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise ImucalError(f"value {short(v)} to hold {n} at is not a finite number", file=path,
+                raise ImucalError(f"value {short(v)} to hold {n} at is not a finite number",
                                   field=f"fit.fix.{n}", fix="e.g. fix: {phi: 1.5708} or fix: [phi]")
         return tuple(fx), {n: float(v) for n, v in fx.items()}
     raise ImucalError(f"{short(fx)} is not a parameter name, a list of names or a mapping of names to values",
-                      file=path, field="fit.fix", fix="e.g. fix: [phi, psi, theta] or fix: {s1: 0.0}")
+                      field="fit.fix", fix="e.g. fix: [phi, psi, theta] or fix: {s1: 0.0}")
 
 
 def config_from_dict(d: Any, path: str | None = None) -> RunConfig:
+    """A RunConfig from a YAML mapping (imucal.files.schema: unknown keys, types, one-line errors)."""
     check_structure(d, path)
-    if not isinstance(d, Mapping):
-        raise ImucalError("top level must be a mapping with a data: section", file=path, field="top level",
-                          fix="see the YAML schema in the README")
-    allowed = ("data", "static", "gravity", "fit", "output", "gyro")
-    unknown = [k for k in d if k not in allowed]
-    if unknown:
-        raise ImucalError(f"unknown key {short(unknown[0])}", file=path, field=key_text(unknown[0]),
-                          fix=f"allowed top-level keys: {', '.join(allowed)}")
-    if "data" not in d or d["data"] is None:
-        raise ImucalError("missing section 'data'", file=path, field="data",
-                          fix="add data: {path: RECORDING}")
-    data = dict(d["data"]) if isinstance(d["data"], Mapping) else d["data"]
-    if isinstance(data, Mapping) and "path" not in data:
-        raise ImucalError("missing key 'path'", file=path, field="data.path", fix="add data.path: RECORDING")
-    if isinstance(data, Mapping) and "columns" in data and not isinstance(data["columns"], Mapping):
-        raise ImucalError("must map roles to columns", file=path, field="data.columns")
-    fitraw = d.get("fit") or {}
-    if isinstance(fitraw, Mapping):
-        fitraw = dict(fitraw)
-        if "fix" in fitraw:
-            fitraw["fix"], held = _fix_list(fitraw["fix"], path)
-            if held:  # fix: {phi: 1.5708}: held AT the given value
-                init = dict(fitraw.get("initial") or {})
-                clash = [n for n in held if n in init and init[n] != held[n]]
-                if clash:
-                    raise ImucalError(f"{clash[0]} is given in fit.fix and fit.initial with different values",
-                                      file=path, field=f"fit.fix.{clash[0]}", fix="give the value once")
-                fitraw["initial"] = {**init, **held}
-        if "initial" in fitraw and not isinstance(fitraw["initial"], Mapping):
-            raise ImucalError("must map parameter names to values", file=path, field="fit.initial")
-        if "effects" in fitraw:
-            effs = []
-            if not isinstance(fitraw["effects"] or [], list):
-                raise ImucalError("must be a list of effects", file=path, field="fit.effects",
-                                  fix="e.g. effects: [bias_temperature]")
-            for i, e in enumerate(fitraw["effects"] or []):
-                e = {"name": e} if isinstance(e, str) else e
-                es = _fill(EffectSpec, e, f"fit.effects[{i}].", path)
-                effs.append(EffectSpec(es.name, tuple(es.axes)))
-            fitraw["effects"] = tuple(effs)
-    return RunConfig(
-        data=_fill(DataSpec, data, "data.", path),
-        static=_fill(StaticSettings, d.get("static"), "static.", path),
-        gravity=_fill(GravitySpec, d.get("gravity"), "gravity.", path),
-        fit=_fill(FitSettings, fitraw, "fit.", path),
-        output=_fill(OutputSettings, d.get("output"), "output.", path),
-        gyro=_fill(GyroSettings, d.get("gyro"), "gyro.", path),
-        source=path,
-    )
+    return replace(fill(RunConfig, d, path), source=path)
 
 
 def load_config(path: str | os.PathLike) -> RunConfig:

@@ -16,6 +16,7 @@ from imucal.errors import ImucalError, short
 from imucal.data.rosbag import is_bag, read_bag
 from imucal.files.inputs import max_data_bytes, open_regular
 from imucal.model.channels import ACCELERATION, ANGULAR_RATE, TEMPERATURE, TIME, Channel
+from imucal.files.schema import rule
 
 FORMATS = ("auto", "csv", "whitespace")
 #: How a recording is read: in chunks (imucal.data.stream) above STREAM_BYTES ("auto"), always, never.
@@ -51,12 +52,16 @@ class DataSpec:
     (REP 103) and counts otherwise.
     """
 
-    path: str
+    path: str = field(metadata=rule(fix="add data.path: RECORDING", msg="path {value} must be a file name"))
     format: str = "auto"
-    columns: dict = field(default_factory=dict)
-    delimiter: str | None = None
+    columns: dict = field(default_factory=dict, metadata=rule(msg="must map roles to columns",
+                                                              fix="e.g. columns: {t: time, ax: x}"))
+    delimiter: str | None = field(default=None, metadata=rule(
+        msg="delimiter {value} must be one character",
+        fix='e.g. delimiter: ","  (omit it to detect , ; tab or spaces)'))
     skip_rows: int = 0
-    sample_rate: float | None = None
+    sample_rate: float | None = field(default=None, metadata=rule(
+        msg="sample rate {value} is not an IMU rate (not a number)", fix="give the logging rate in Hz"))
     time_unit: str = "auto"
     unit: str = "raw"
     gyro_unit: str = "auto"  #: the gyroscope's raw unit, one of GYRO_UNIT_CHOICES

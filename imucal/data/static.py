@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from imucal.errors import ImucalError, short
+from imucal.files.schema import rule
 
 #: Batches per interval for the batch-means estimate of a mean's noise.
 _BATCHES = 8
@@ -34,10 +35,12 @@ QUANTUM_ROWS = 20000
 class StaticSettings:
     """Detector settings (the YAML ``static:`` section). Times in seconds."""
 
-    window: float = 0.5  #: moving-variance window [s]
-    min_duration: float = 1.5  #: shortest interval kept [s]
-    threshold: float | None = None  #: moving-variance threshold [raw^2]; None = automatic
-    trim: float = 0.25  #: dropped from each end of an interval [s]
+    window: float = field(default=0.5, metadata=rule(gt=0, unit="seconds"))  #: moving-variance window [s]
+    min_duration: float = field(default=1.5, metadata=rule(gt=0, unit="seconds"))  #: shortest interval kept [s]
+    #: moving-variance threshold [raw^2]; None = automatic
+    threshold: float | None = field(default=None, metadata=rule(
+        gt=0, fix="omit it to set it automatically from the data"))
+    trim: float = field(default=0.25, metadata=rule(ge=0, unit="seconds"))  #: dropped from each end of an interval [s]
 
     def __post_init__(self) -> None:
         for name in ("window", "min_duration"):

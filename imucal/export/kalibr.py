@@ -27,9 +27,9 @@ refuses values <= 0): accelerometer_noise_density [m/s^2/sqrt(Hz)], acceleromete
 """
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 import yaml
@@ -39,15 +39,12 @@ from imucal.calibration.frozen import Calibration
 from imucal.errors import ImucalError, short
 from imucal.export.formats import ExportOptions, Exported, KalibrNoise, affine, dropped_effects
 from imucal.export.gyro import kalibr_factors
-from imucal.export.peers import AffineCalibration, GyroMap, _keys, checked, checked_gyro, number, numbers
+from imucal.export.peers import MAGNITUDE, AffineCalibration, GyroMap, Mat3, Vec3, checked, checked_gyro
+from imucal.files.schema import fill, rule
 from imucal.files.yamlio import read_yaml
 
 NOISE_FIELDS = ("accelerometer_noise_density", "accelerometer_random_walk", "gyroscope_noise_density",
                 "gyroscope_random_walk")
-#: The keys of Kalibr's IMU configuration (ConfigReader.ImuParameters, IccSensors.py) and imucal's one.
-KALIBR_FIELDS = NOISE_FIELDS + ("update_rate", "rostopic", "model", "accelerometers", "gyroscopes", "T_i_b",
-                                "time_offset", "imucal_accelerometer_offset", "imucal_gyroscope_offset")
-GYRO_FIELDS = ("M", "A", "C_gyro_i")
 #: How far C_gyro_i may be from a rotation (Kalibr writes it from a unit quaternion).
 ROTATION_TOL = 1e-6
 MODEL = "scale-misalignment"
@@ -160,13 +157,47 @@ def to_kalibr(cal: Calibration, opts: ExportOptions) -> Exported:
     return Exported("\n".join(lines) + "\n", tuple(notes))
 
 
-def _positive_or_null(v: Any, path: str, key: str) -> float | None:
-    if v is None:
-        return None
-    x = number(v, path, key)
-    if not x > 0:
-        raise ImucalError(f"{short(v)} must be positive (Kalibr refuses values <= 0)", file=path, field=key)
-    return x
+_MAGNITUDE = MAGNITUDE  #: Kalibr's matrices and imucal's offsets: finite, |x| <= MAX_MAGNITUDE
+_NOISE = rule(gt=0, fix="Kalibr refuses values <= 0; give the value, or null")
+
+
+@dataclass(frozen=True)
+class KalibrAccelerometers:
+    M: Mat3 = field(metadata=_MAGNITUDE)
+
+
+@dataclass(frozen=True)
+class KalibrGyroscopes:
+    M: Mat3 = field(metadata=_MAGNITUDE)
+    A: Mat3 = field(metadata=_MAGNITUDE)
+    C_gyro_i: Mat3 = field(metadata=_MAGNITUDE)
+
+
+@dataclass(frozen=True, kw_only=True)
+class KalibrImu:
+    """Kalibr's IMU configuration (ConfigReader.ImuParameters, IccSensors.py) and imucal's two offsets."""
+
+    model: str = field(metadata=rule(fix="only the scale-misalignment intrinsics hold an accelerometer matrix"))
+    accelerometers: KalibrAccelerometers
+    gyroscopes: KalibrGyroscopes | None = None
+    accelerometer_noise_density: float | None = field(default=None, metadata=_NOISE)
+    accelerometer_random_walk: float | None = field(default=None, metadata=_NOISE)
+    gyroscope_noise_density: float | None = field(default=None, metadata=_NOISE)
+    gyroscope_random_walk: float | None = field(default=None, metadata=_NOISE)
+    update_rate: float | None = field(default=None, metadata=_NOISE)
+    rostopic: str | None = field(default=None, metadata=rule(msg="{value} is not a topic name"))
+    T_i_b: Any = None
+    time_offset: Any = None
+    imucal_accelerometer_offset: Vec3 | None = field(default=None, metadata=_MAGNITUDE)
+    imucal_gyroscope_offset: Vec3 | None = field(default=None, metadata=_MAGNITUDE)
+
+    def __post_init__(self) -> None:
+        if self.model != MODEL:
+            raise ImucalError(f"model {short(self.model)} is not {MODEL!r}", field="model",
+                              fix="only the scale-misalignment intrinsics hold an accelerometer matrix")
+        if self.gyroscopes is None and self.imucal_gyroscope_offset is not None:
+            raise ImucalError("is given without a gyroscopes section", field="imucal_gyroscope_offset",
+                              fix="add gyroscopes: {M, A, C_gyro_i} or drop the offset")
 
 
 def read_kalibr_yaml(path: str | Path) -> AffineCalibration:
@@ -178,45 +209,33 @@ def read_kalibr_yaml(path: str | Path) -> AffineCalibration:
     d = read_yaml(p, "kalibr imu.yaml", "pass an imu.yaml with model: scale-misalignment")
     if isinstance(d, dict) and len(d) == 1 and isinstance(next(iter(d)), str) and next(iter(d)).startswith("imu"):
         d = next(iter(d.values()))  # Kalibr's result files nest the IMU under imu0
-    d = _keys(d, ("model", "accelerometers"), KALIBR_FIELDS, p, "a Kalibr imu.yaml")
-    if d["model"] != MODEL:
-        raise ImucalError(f"model {short(d['model'])} is not {MODEL!r}", file=p, field="model",
-                          fix="only the scale-misalignment intrinsics hold an accelerometer matrix")
-    acc = _keys(d["accelerometers"], ("M",), ("M",), p, "Kalibr's accelerometers section", "accelerometers")
-    M = numbers(acc["M"], (3, 3), p, "accelerometers.M")
+    k = fill(KalibrImu, d, p)
+    M = np.array(k.accelerometers.M, float)
     if np.any(M[np.triu_indices(3, 1)] != 0):
         raise ImucalError("is not lower triangular (Kalibr's M_accel is)", file=p, field="accelerometers.M")
-    held = "imucal_accelerometer_offset" in d
-    o = numbers(d["imucal_accelerometer_offset"], (3,), p, "imucal_accelerometer_offset") if held else np.zeros(3)
-    extra: dict[str, Any] = {k: _positive_or_null(d.get(k), p, k) for k in NOISE_FIELDS}
-    extra["update_rate"] = _positive_or_null(d.get("update_rate"), p, "update_rate")
-    topic = d.get("rostopic")
-    if topic is not None and not isinstance(topic, str):
-        raise ImucalError(f"{short(topic)} is not a topic name", file=p, field="rostopic")
-    extra.update(rostopic=topic, offset_held=held)
+    held = k.imucal_accelerometer_offset is not None
+    o = np.array(k.imucal_accelerometer_offset, float) if held else np.zeros(3)
+    extra: dict[str, Any] = {n: None if getattr(k, n) is None else float(getattr(k, n))
+                             for n in NOISE_FIELDS + ("update_rate",)}
+    extra.update(rostopic=k.rostopic, offset_held=held)
     checked(M, o, p, "accelerometers.M", "kalibr")
-    if "gyroscopes" not in d and "imucal_gyroscope_offset" in d:
-        raise ImucalError("is given without a gyroscopes section", file=p, field="imucal_gyroscope_offset",
-                          fix="add gyroscopes: {M, A, C_gyro_i} or drop the offset")
-    gyro = _kalibr_gyro(d, p, extra) if "gyroscopes" in d else None
+    gyro = _kalibr_gyro(k, p, extra) if k.gyroscopes is not None else None
     return replace(checked(np.linalg.inv(M), o, p, "accelerometers.M", "kalibr", extra), gyro=gyro)
 
 
-def _kalibr_gyro(d: Mapping, p: str, extra: dict[str, Any]) -> GyroMap:
+def _kalibr_gyro(k: KalibrImu, p: str, extra: dict[str, Any]) -> GyroMap:
     """omega = (M C)^-1 (measurement - b_g) - (M C)^-1 A C a (module docstring); b_g is
     imucal_gyroscope_offset when present, else zero (``extra['gyro_offset_held']``)."""
-    gy = _keys(d["gyroscopes"], GYRO_FIELDS, GYRO_FIELDS, p, "Kalibr's gyroscopes section", "gyroscopes")
-    M = numbers(gy["M"], (3, 3), p, "gyroscopes.M")
-    A = numbers(gy["A"], (3, 3), p, "gyroscopes.A")
-    R = numbers(gy["C_gyro_i"], (3, 3), p, "gyroscopes.C_gyro_i")
+    gy = k.gyroscopes
+    M, A, R = (np.array(x, float) for x in (gy.M, gy.A, gy.C_gyro_i))
     if np.any(M[np.triu_indices(3, 1)] != 0):
         raise ImucalError("is not lower triangular (Kalibr's M_gyro is)", file=p, field="gyroscopes.M")
     dev = float(np.abs(R @ R.T - np.eye(3)).max())
     if not (dev <= ROTATION_TOL and np.linalg.det(R) > 0):
         raise ImucalError(f"is not a rotation (|C C^T - I| = {dev:.3g}, det {np.linalg.det(R):.3g})", file=p,
                           field="gyroscopes.C_gyro_i", fix="Kalibr writes a rotation matrix here")
-    held = "imucal_gyroscope_offset" in d
-    b = numbers(d["imucal_gyroscope_offset"], (3,), p, "imucal_gyroscope_offset") if held else np.zeros(3)
+    held = k.imucal_gyroscope_offset is not None
+    b = np.array(k.imucal_gyroscope_offset, float) if held else np.zeros(3)
     extra["gyro_offset_held"] = held
     checked(M, b, p, "gyroscopes.M", "kalibr")
     C = np.linalg.inv(M @ R)

@@ -19,18 +19,23 @@ import math
 import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Literal, Mapping
 
 import numpy as np
 
 from imucal.errors import ImucalError, short
 from imucal.files.inputs import read_input_text
+from imucal.files.schema import fill, rule
 
 #: Largest magnitude accepted for any number in a peer's file: far above any offset in counts
 #: (2^32) or scale, far below float overflow in the products that follow.
 MAX_MAGNITUDE = 1e12
 #: Largest condition number of a peer's matrix: beyond it the map loses every digit of a reading.
 MAX_CONDITION = 1e12
+#: A number in a peer's mapping file (imucal.files.schema): finite, |x| <= MAX_MAGNITUDE.
+MAGNITUDE = rule(ge=-MAX_MAGNITUDE, le=MAX_MAGNITUDE, fix="regenerate the file with the tool that made it")
+Vec3 = tuple[float, float, float]
+Mat3 = tuple[Vec3, Vec3, Vec3]
 
 
 @dataclass(frozen=True)
@@ -161,20 +166,6 @@ def checked_gyro(C: np.ndarray, o: np.ndarray, D: np.ndarray, path: str, field_:
     return GyroMap(C=C, o=o, D=D)
 
 
-def _keys(d: Any, required: tuple[str, ...], allowed: tuple[str, ...], path: str, what: str,
-          where: str = "format") -> Mapping:
-    if not isinstance(d, Mapping):
-        raise ImucalError(f"is not {what} (not a mapping)", file=path, field=where)
-    unknown = [k for k in d if k not in allowed]
-    if unknown:
-        raise ImucalError(f"unknown field {short(str(unknown[0]))}", file=path, field=str(unknown[0])[:40],
-                          fix=f"{what} has only {', '.join(allowed)}")
-    missing = [k for k in required if k not in d]
-    if missing:
-        raise ImucalError("missing", file=path, field=missing[0], fix=f"{what} needs {', '.join(required)}")
-    return d
-
-
 def _json(path: str, field_: str) -> Any:
     """JSON without NaN/Infinity constants (not JSON) and without duplicate keys."""
     def no_constant(name: str) -> None:
@@ -234,49 +225,83 @@ def read_tomisuarez_params(path: str | Path) -> AffineCalibration:
     return checked(T @ np.diag(v[3:6]), -v[6:9], p, "params", "tomisuarez")  # "+ b": offset is -b
 
 
-#: mad-lab-fau/imucal FerrarisCalibrationInfo / TurnTableCalibrationInfo fields (format 2.0).
-MADLAB_FIELDS = ("acc_unit", "gyr_unit", "from_acc_unit", "from_gyr_unit", "comment", "K_a", "R_a", "b_a",
-                 "K_g", "R_g", "K_ga", "b_g", "cal_type", "_format_version")
-
-
 #: The gyroscope's fields of a mad-lab-fau/imucal Ferraris file, and the output units imucal converts.
 MADLAB_GYRO = ("K_g", "R_g", "b_g", "K_ga")
 MADLAB_RATE_UNITS = {"deg/s": math.pi / 180.0, "rad/s": 1.0}
+
+
+@dataclass(frozen=True, kw_only=True)
+class MadlabFile:
+    """mad-lab-fau/imucal FerrarisCalibrationInfo / TurnTableCalibrationInfo fields (format 2.0)."""
+
+    cal_type: Literal["Ferraris", "Turntable"] = field(metadata=rule(  # CalibrationInfo.CAL_TYPE
+        msg="cal_type {value} is not Ferraris or Turntable"))
+    K_a: Mat3 = field(metadata=MAGNITUDE)
+    R_a: Mat3 = field(metadata=MAGNITUDE)
+    b_a: Vec3 = field(metadata=MAGNITUDE)
+    K_g: Mat3 | None = field(default=None, metadata=MAGNITUDE)
+    R_g: Mat3 | None = field(default=None, metadata=MAGNITUDE)
+    K_ga: Mat3 | None = field(default=None, metadata=MAGNITUDE)
+    b_g: Vec3 | None = field(default=None, metadata=MAGNITUDE)
+    acc_unit: Any = None
+    gyr_unit: str = "deg/s"  #: FerrarisCalibrationInfo's default
+    from_acc_unit: Any = None
+    from_gyr_unit: Any = None
+    comment: Any = None
+    _format_version: Any = None
+
+    def __post_init__(self) -> None:
+        held = [k for k in MADLAB_GYRO if getattr(self, k) is not None]
+        if held and len(held) != len(MADLAB_GYRO):
+            raise ImucalError("missing", field=next(k for k in MADLAB_GYRO if getattr(self, k) is None),
+                              fix=f"a gyroscope part needs {', '.join(MADLAB_GYRO)}")
+        if held and self.gyr_unit not in MADLAB_RATE_UNITS:
+            raise ImucalError(f"gyr_unit {short(self.gyr_unit)} is not one of {', '.join(MADLAB_RATE_UNITS)}",
+                              field="gyr_unit", fix="the calibrated rate's unit: deg/s (Ferraris) or rad/s")
 
 
 def read_madlab_calibration(path: str | Path) -> AffineCalibration:
     """mad-lab-fau/imucal calibration JSON: a = R_a^-1 K_a^-1 (raw - b_a) and, when the file has
     them, gyr = R_g^-1 K_g^-1 (gyr_raw - K_ga a - b_g) in ``gyr_unit`` (ferraris_calibration_info.py)."""
     p = str(path)
-    d = _keys(_json(p, "calibration"), ("K_a", "R_a", "b_a", "cal_type"), MADLAB_FIELDS, p,
-              "a mad-lab-fau/imucal calibration")
-    if d["cal_type"] not in ("Ferraris", "Turntable"):  # FerrarisCalibrationInfo / TurntableCalibrationInfo.CAL_TYPE
-        raise ImucalError(f"cal_type {short(d['cal_type'])} is not Ferraris or Turntable", file=p, field="cal_type")
-    K, R = numbers(d["K_a"], (3, 3), p, "K_a"), numbers(d["R_a"], (3, 3), p, "R_a")
-    b = numbers(d["b_a"], (3,), p, "b_a")
+    d = fill(MadlabFile, _json(p, "calibration"), p)
+    K, R, b = (np.array(x, float) for x in (d.K_a, d.R_a, d.b_a))
     for name, m in (("K_a", K), ("R_a", R)):
         checked(m, b, p, name, "madlab")
     out = checked(np.linalg.inv(R) @ np.linalg.inv(K), b, p, "K_a/R_a", "madlab")
-    held = [k for k in MADLAB_GYRO if k in d]
-    if not held:
+    if d.K_g is None:
         return out
-    if len(held) != len(MADLAB_GYRO):
-        raise ImucalError("missing", file=p, field=next(k for k in MADLAB_GYRO if k not in d),
-                          fix=f"a gyroscope part needs {', '.join(MADLAB_GYRO)}")
-    unit = d.get("gyr_unit", "deg/s")  # FerrarisCalibrationInfo's default
-    if unit not in MADLAB_RATE_UNITS:
-        raise ImucalError(f"gyr_unit {short(unit)} is not one of {', '.join(MADLAB_RATE_UNITS)}", file=p,
-                          field="gyr_unit", fix="the calibrated rate's unit: deg/s (Ferraris) or rad/s")
-    Kg, Rg = numbers(d["K_g"], (3, 3), p, "K_g"), numbers(d["R_g"], (3, 3), p, "R_g")
-    bg, Kga = numbers(d["b_g"], (3,), p, "b_g"), numbers(d["K_ga"], (3, 3), p, "K_ga")
+    Kg, Rg, bg, Kga = (np.array(x, float) for x in (d.K_g, d.R_g, d.b_g, d.K_ga))
     for name, m in (("K_g", Kg), ("R_g", Rg)):
         checked(m, bg, p, name, "madlab")
-    C = MADLAB_RATE_UNITS[unit] * np.linalg.inv(Rg) @ np.linalg.inv(Kg)  # to rad/s
+    C = MADLAB_RATE_UNITS[d.gyr_unit] * np.linalg.inv(Rg) @ np.linalg.inv(Kg)  # to rad/s
     return replace(out, gyro=checked_gyro(C, bg, C @ Kga, p, "K_g/R_g"))
 
 
-MATRIX_FIELDS = ("format", "equation", "input_unit", "output_unit", "matrix", "offset", "note", "gyroscope")
-MATRIX_GYRO_FIELDS = ("equation", "input_unit", "output_unit", "matrix", "offset", "acc_matrix")
+@dataclass(frozen=True)
+class MatrixGyro:
+    """The gyroscope section of imucal's plain matrix file: omega = matrix raw + offset - acc_matrix a."""
+
+    matrix: Mat3 = field(metadata=MAGNITUDE)
+    offset: Vec3 = field(metadata=MAGNITUDE)
+    acc_matrix: Mat3 = field(metadata=MAGNITUDE)
+    equation: Any = None
+    input_unit: Any = None
+    output_unit: Literal["rad/s"] = field(default="rad/s", metadata=rule(msg="{value} is not rad/s"))
+
+
+@dataclass(frozen=True, kw_only=True)
+class MatrixFile:
+    """imucal's plain matrix file (JSON): a = matrix raw + offset."""
+
+    format: Literal["imucal-affine"] = field(metadata=rule(msg="format {value} is not 'imucal-affine'"))
+    matrix: Mat3 = field(metadata=MAGNITUDE)
+    offset: Vec3 = field(metadata=MAGNITUDE)
+    gyroscope: MatrixGyro | None = None
+    equation: Any = None
+    input_unit: Any = None
+    output_unit: Any = None
+    note: Any = None
 
 
 def _matrix_gyro(C: np.ndarray, c: np.ndarray, D: np.ndarray, p: str, field_: str) -> GyroMap:
@@ -304,18 +329,12 @@ def read_matrix(path: str | Path) -> AffineCalibration:
             g = np.array(v[3:])
             gyro = _matrix_gyro(g[:, :3], g[:, 3], g[:, 4:], p, "matrix")
     else:
-        d = _keys(_json(p, "matrix"), ("format", "matrix", "offset"), MATRIX_FIELDS, p, "an imucal matrix file")
-        if d["format"] != "imucal-affine":
-            raise ImucalError(f"format {short(d['format'])} is not 'imucal-affine'", file=p, field="format")
-        A, c = numbers(d["matrix"], (3, 3), p, "matrix"), numbers(d["offset"], (3,), p, "offset")
-        if "gyroscope" in d:
-            g = _keys(d["gyroscope"], ("matrix", "offset", "acc_matrix"), MATRIX_GYRO_FIELDS, p,
-                      "the matrix file's gyroscope section", "gyroscope")
-            if g.get("output_unit", "rad/s") != "rad/s":
-                raise ImucalError(f"{short(g['output_unit'])} is not rad/s", file=p, field="gyroscope.output_unit")
-            gyro = _matrix_gyro(numbers(g["matrix"], (3, 3), p, "gyroscope.matrix"),
-                                numbers(g["offset"], (3,), p, "gyroscope.offset"),
-                                numbers(g["acc_matrix"], (3, 3), p, "gyroscope.acc_matrix"), p, "gyroscope.matrix")
+        d = fill(MatrixFile, _json(p, "matrix"), p)
+        A, c = np.array(d.matrix, float), np.array(d.offset, float)
+        if d.gyroscope is not None:
+            g = d.gyroscope
+            gyro = _matrix_gyro(*(np.array(x, float) for x in (g.matrix, g.offset, g.acc_matrix)), p,
+                                "gyroscope.matrix")
     checked(A, c, p, "matrix", "matrix")
     return replace(checked(A, -np.linalg.solve(A, c), p, "matrix", "matrix"), gyro=gyro)  # a = A (raw - o)
 

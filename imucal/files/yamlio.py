@@ -90,13 +90,6 @@ def _check_values(obj: Any, depth: int = 0, where: str = "", seen: set | None = 
             raise _TooLarge(where[:80] or "top level") from None
 
 
-def key_text(key: Any) -> str:
-    """A mapping key as a field name in a message: plain when short and printable, else cut."""
-    if isinstance(key, str) and 0 < len(key) <= 40 and key.isprintable():
-        return key
-    return short(key, 40)
-
-
 def check_structure(obj: Any, path: str | None = None, field: str = "config") -> None:
     """Refuse integers no float holds and nesting deeper than MAX_DEPTH, in one line.
 

@@ -26,22 +26,20 @@ import csv
 import hashlib
 import io
 import json
-import math
 import re
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Literal, Mapping
 
 import yaml
 
 from imucal import __version__
 from imucal.config.limits import MAX_FLEET_UNITS
-from imucal.config.run import FitSettings, GravitySpec, OutputSettings, RunConfig, config_from_dict
-from imucal.data.load import DataSpec
-from imucal.data.static import StaticSettings
-from imucal.errors import ImucalError, short
+from imucal.config.run import RunConfig, config_from_dict
+from imucal.errors import ImucalError, key_text, short
 from imucal.files.inputs import read_input_text
-from imucal.files.yamlio import check_structure, key_text, read_yaml
+from imucal.files.schema import fill, keys, rule
+from imucal.files.yamlio import check_structure, read_yaml
 
 FORMAT = "imucal-fleet-manifest"
 FORMAT_VERSION = 1
@@ -49,16 +47,18 @@ FORMAT_VERSION = 1
 UNIT_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}\Z")
 #: Names the fleet report takes in DIR (imucal.fleet.report): no unit folder may take them.
 REPORT_NAMES = re.compile(r"fleet(\.(csv|txt|parquet)|_.*\.png)\Z", re.IGNORECASE)
+#: The keys of each run-file section, from RunConfig itself (a new section needs no line here); a CSV
+#: override column is checked against them even when all its cells are empty.
+SECTION_KEYS = {name: tuple(keys(tp)) for name, tp in keys(RunConfig).items()}
 #: Run-file sections a manifest may set (output.dir is the batch's --out DIR/<unit>).
-SECTIONS = ("data", "static", "gravity", "fit", "output")
+SECTIONS = tuple(SECTION_KEYS)
 #: Keys that name files: given per unit (data, gyro_data), never as shared settings.
 FILE_KEYS = ("path", "gyro_path")
-#: The keys of each section (a CSV override column is checked against them even when all its cells are empty).
-SECTION_KEYS = {name: tuple(f.name for f in fields(cls)) for name, cls in (
-    ("data", DataSpec), ("static", StaticSettings), ("gravity", GravitySpec), ("fit", FitSettings),
-    ("output", OutputSettings))}
-TOP_KEYS = ("format", "format_version", "config", "settings", "tolerances", "units", "folder", "pattern")
-UNIT_KEYS = ("id", "data", "gyro_data", "settings")
+
+
+_TOLERANCE = rule(ge=0, msg="{value} must be a non-negative number",
+                  fix="e.g. tolerances: {bias_abs_max: 0.5, angle_deg_from_90_max: 0.5, rms_max: 0.01} "
+                      "(m/s^2 and degrees)")
 
 
 @dataclass(frozen=True)
@@ -71,20 +71,13 @@ class Tolerances:
     ``scale_min``, ``scale_max`` [raw per m/s^2]: range of each scale b_i.
     """
 
-    bias_abs_max: float | None = None
-    angle_deg_from_90_max: float | None = None
-    rms_max: float | None = None
-    scale_min: float | None = None
-    scale_max: float | None = None
+    bias_abs_max: float | None = field(default=None, metadata=_TOLERANCE)
+    angle_deg_from_90_max: float | None = field(default=None, metadata=_TOLERANCE)
+    rms_max: float | None = field(default=None, metadata=_TOLERANCE)
+    scale_min: float | None = field(default=None, metadata=_TOLERANCE)
+    scale_max: float | None = field(default=None, metadata=_TOLERANCE)
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            v = getattr(self, f.name)
-            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)
-                                  or v < 0):
-                raise ImucalError(f"{short(v)} must be a non-negative number", field=f"tolerances.{f.name}",
-                                  fix="e.g. tolerances: {bias_abs_max: 0.5, angle_deg_from_90_max: 0.5, "
-                                      "rms_max: 0.01} (m/s^2 and degrees)")
         if self.scale_min is not None and self.scale_max is not None and self.scale_min > self.scale_max:
             raise ImucalError(f"scale_min {self.scale_min:g} is above scale_max {self.scale_max:g}",
                               field="tolerances.scale_min")
@@ -268,78 +261,61 @@ def _run_file_settings(config: str | Path) -> dict:
     return _settings(d, str(config), "top level")
 
 
+@dataclass(frozen=True)
+class UnitEntry:
+    """One unit of a YAML manifest's ``units:`` list (id, files and settings are checked by _collect)."""
+
+    id: Any = field(metadata=rule(fix="give each unit an id"))
+    data: Any = None
+    gyro_data: Any = None
+    settings: Any = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class ManifestFile:
+    """A YAML manifest as written (module docstring), checked in this order."""
+
+    format: Literal["imucal-fleet-manifest"] = field(default=FORMAT, metadata=rule(
+        msg="format {value} is not a fleet manifest", fix=f"format: {FORMAT}"))
+    format_version: Literal[1] = field(default=FORMAT_VERSION, metadata=rule(
+        msg="format_version {value} is not supported", fix=f"this imucal reads version {FORMAT_VERSION}"))
+    config: str | None = field(default=None, metadata=rule(msg="{value} is not a file name"))
+    settings: Any = None  #: run-file sections (_settings)
+    tolerances: Tolerances = Tolerances()
+    units: str | tuple[UnitEntry, ...] | None = field(default=None, metadata=rule(
+        msg="units must be a list or a CSV file name, got {value}"))
+    folder: str | None = None
+    pattern: str | None = None
+
+    def __post_init__(self) -> None:
+        if (self.units is None) == (self.folder is None):
+            raise ImucalError("give either units: or folder:", field="units",
+                              fix="units: [{id: U1, data: U1.csv}, ...], units: listing.csv, or folder: recordings/")
+        if self.pattern is not None and self.folder is None:
+            raise ImucalError("pattern is used only with folder:", field="pattern")
+        if self.pattern is not None and ("/" in self.pattern or ".." in self.pattern):
+            raise ImucalError("pattern must be a file pattern such as *.csv", field="pattern")
+
+
 def manifest_from_dict(d: Any, path: str, shared: dict | None = None) -> Manifest:
     """A Manifest from a YAML mapping (``path`` names it in messages and anchors relative paths)."""
     check_structure(d, path)
-    if not isinstance(d, Mapping):
-        raise ImucalError("top level must be a mapping with units: or folder:", file=path, field="top level",
-                          fix="see docs/fleet.md")
-    unknown = [k for k in d if k not in TOP_KEYS]
-    if unknown:
-        raise ImucalError(f"unknown key {short(unknown[0])}", file=path, field=key_text(unknown[0]),
-                          fix=f"allowed keys: {', '.join(TOP_KEYS)}")
-    if "format" in d and d["format"] != FORMAT:
-        raise ImucalError(f"format {short(d['format'])} is not a fleet manifest", file=path, field="format",
-                          fix=f"format: {FORMAT}")
-    if "format_version" in d and d["format_version"] != FORMAT_VERSION:
-        raise ImucalError(f"format_version {short(d['format_version'])} is not supported", file=path,
-                          field="format_version", fix=f"this imucal reads version {FORMAT_VERSION}")
+    m = fill(ManifestFile, d, path)
     base = Path(path).parent
     if shared is None:
-        shared = {}
-        if d.get("config") is not None:
-            if not isinstance(d["config"], str):
-                raise ImucalError(f"{short(d['config'])} is not a file name", file=path, field="config")
-            shared = _run_file_settings(base / d["config"])
-    elif d.get("config") is not None:
+        shared = _run_file_settings(base / m.config) if m.config is not None else {}
+    elif m.config is not None:
         raise ImucalError("the manifest names a run file and --config gives another", file=path, field="config",
                           fix="give the shared settings once")
-    shared = _merge(shared, _settings(d.get("settings"), path, "settings"))
-    tol = d.get("tolerances")
-    if tol is not None and not isinstance(tol, Mapping):
-        raise ImucalError("must be a mapping", file=path, field="tolerances", fix="e.g. tolerances: {rms_max: 0.01}")
-    allowed = [f.name for f in fields(Tolerances)]
-    bad = [k for k in (tol or {}) if k not in allowed]
-    if bad:
-        raise ImucalError(f"unknown tolerance {short(bad[0])}", file=path, field=f"tolerances.{key_text(bad[0])}",
-                          fix=f"allowed: {', '.join(allowed)}")
-    try:
-        tolerances = Tolerances(**dict(tol or {}))
-    except ImucalError as exc:
-        raise ImucalError(exc.message, file=path, field=exc.field, fix=exc.fix) from None
-    has_units, has_folder = d.get("units") is not None, d.get("folder") is not None
-    if has_units == has_folder:
-        raise ImucalError("give either units: or folder:", file=path, field="units",
-                          fix="units: [{id: U1, data: U1.csv}, ...], units: listing.csv, or folder: recordings/")
-    if "pattern" in d and not has_folder:
-        raise ImucalError("pattern is used only with folder:", file=path, field="pattern")
-    if has_folder:
-        pattern = d.get("pattern", "*.csv")
-        if not isinstance(d["folder"], str) or not isinstance(pattern, str) or "/" in pattern or ".." in pattern:
-            raise ImucalError("folder must be a folder name and pattern a file pattern such as *.csv", file=path,
-                              field="folder")
-        listing = _folder_units(base / d["folder"], pattern, path, "folder")
-    elif isinstance(d["units"], str):
-        csv_path = base / d["units"]
+    shared = _merge(shared, _settings(m.settings, path, "settings"))
+    if m.folder is not None:
+        listing = _folder_units(base / m.folder, m.pattern or "*.csv", path, "folder")
+    elif isinstance(m.units, str):
+        csv_path = base / m.units
         text = read_input_text(csv_path, field="units", fix="give a CSV listing: unit,data[,gyro_data]")
         listing = _csv_units(text, str(csv_path))
         base = csv_path.parent
-    elif isinstance(d["units"], list):
-        listing = []
-        for i, u in enumerate(d["units"]):
-            where = f"units[{i}]"
-            if not isinstance(u, Mapping):
-                raise ImucalError("must be a mapping with id and data", file=path, field=where,
-                                  fix="e.g. - {id: U0001, data: U0001.csv}")
-            extra = [k for k in u if k not in UNIT_KEYS]
-            if extra:
-                raise ImucalError(f"unknown key {short(extra[0])}", file=path, field=f"{where}.{key_text(extra[0])}",
-                                  fix=f"allowed keys: {', '.join(UNIT_KEYS)}")
-            if "id" not in u:
-                raise ImucalError("missing id", file=path, field=f"{where}.id", fix="give each unit an id")
-            listing.append((u["id"], u.get("data"), u.get("gyro_data"),
-                            _settings(u.get("settings"), path, f"{where}.settings"), where))
     else:
-        raise ImucalError(f"units must be a list or a CSV file name, got {type(d['units']).__name__}", file=path,
-                          field="units")
-    return Manifest(source=path, units=_collect(listing, shared, base, path), tolerances=tolerances)
+        listing = [(u.id, u.data, u.gyro_data, _settings(u.settings, path, f"units[{i}].settings"), f"units[{i}]")
+                   for i, u in enumerate(m.units or ())]
+    return Manifest(source=path, units=_collect(listing, shared, base, path), tolerances=m.tolerances)

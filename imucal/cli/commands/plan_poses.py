@@ -32,78 +32,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=run)
 
 
-#: Keys of a plan file: only "poses" is read; the rest are what plan-poses --json writes beside it
-#: (its results; scoring uses this command's options).
-PLAN_KEYS = ("format", "format_version", "poses", "instructions", "criterion", "n", "n_distinct", "noise_m_s2", "free",
-             "criterion_value", "log_det_fisher", "predicted_std", "label", "comparison", "random")
-#: Largest plan file read (a plan of 10000 poses is about 0.5 MB).
-MAX_PLAN_BYTES = 4 << 20
-
-
-def _read_plan(path: str):
-    """The gravity directions of a pose plan: a JSON list of [gx, gy, gz], or an object with 'poses'
-    (plan-poses --json output). Duplicate and unknown keys are refused, like in the YAML files."""
-    import json
-
-    import numpy as np
-
-    from imucal.errors import ImucalError, short
-    from imucal.files.inputs import read_input_text
-    from imucal.config.limits import MAX_SIM_POSES
-
-    text = read_input_text(path, field="evaluate", fix="give a JSON plan with 'poses'", max_bytes=MAX_PLAN_BYTES)
-
-    def unique(pairs: list) -> dict:
-        keys = [k for k, _ in pairs]
-        dup = next((k for i, k in enumerate(keys) if k in keys[:i]), None)
-        if dup is not None:
-            raise ImucalError(f"duplicate key {short(dup)}", file=path, field="evaluate",
-                              fix="write each key once")
-        return dict(pairs)
-
-    try:
-        obj = json.loads(text, object_pairs_hook=unique)
-    except RecursionError:
-        raise ImucalError("is nested too deeply", file=path, field="evaluate",
-                          fix="give a JSON plan with 'poses'") from None
-    except ValueError as exc:  # JSONDecodeError, or an integer with too many digits
-        raise ImucalError(f"is not readable JSON: {short(str(exc), 80)}", file=path, field="evaluate") from None
-    if isinstance(obj, dict):
-        unknown = [k for k in obj if k not in PLAN_KEYS]
-        if unknown:
-            raise ImucalError(f"unknown key {short(unknown[0])}", file=path, field="evaluate",
-                              fix="a plan has 'poses' (and what plan-poses --json writes)")
-        fmt = obj.get("format", "imucal-pose-plan")
-        if fmt != "imucal-pose-plan":
-            raise ImucalError(f"format {short(fmt)} is not a pose plan", file=path, field="format",
-                              fix="write {\"poses\": [[gx, gy, gz], ...]}")
-        ver = obj.get("format_version", 1)
-        if ver != 1 or isinstance(ver, bool):
-            raise ImucalError(f"unknown format_version {short(ver)}", file=path, field="format_version",
-                              fix="this imucal reads version 1")
-        if "poses" not in obj:
-            raise ImucalError("missing key 'poses'", file=path, field="poses",
-                              fix="list the gravity direction of each pose, e.g. \"poses\": [[0, 0, 1], ...]")
-        obj = obj["poses"]
-    if isinstance(obj, list) and len(obj) > MAX_SIM_POSES:
-        raise ImucalError(f"{len(obj)} poses, above the limit of {MAX_SIM_POSES}", file=path, field="poses",
-                          fix="a calibration needs tens of poses")
-    if not isinstance(obj, list) or not obj or not all(
-            isinstance(r, list) and len(r) == 3 and all(_finite_number(x) for x in r) for r in obj):
-        raise ImucalError("poses must be a non-empty list of [gx, gy, gz] numbers", file=path, field="poses")
-    return np.array(obj, float)
-
-
-def _finite_number(x: object) -> bool:
-    """A finite int or float (an integer too large for a float, e.g. 10**400, is not)."""
-    if isinstance(x, bool) or not isinstance(x, (int, float)):
-        return False
-    try:
-        return math.isfinite(x)
-    except OverflowError:
-        return False
-
-
 def _units(name: str) -> tuple[float, str]:
     """Display factor and unit for the ideal SI sensor the design is evaluated at."""
     if name.startswith("s"):
@@ -150,6 +78,7 @@ def run(args: argparse.Namespace) -> int:
     from imucal.analysis.design import (BASE_NAMES, DEFAULT_NOISE, SIX_NAMES, compare, evaluate, optimal_design,
                           scheme_directions)
     from imucal.errors import ImucalError
+    from imucal.analysis.plan_file import read_plan
     from imucal.analysis.pose_instructions import instructions
     from imucal.files.output import OutputSet, check_outputs
 
@@ -164,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
         raise ImucalError("give exactly one of --n, --evaluate, --scheme", field="arguments",
                           fix="e.g. imucal plan-poses --n 12")
     if args.evaluate or args.scheme:
-        dirs = _read_plan(args.evaluate) if args.evaluate else scheme_directions(args.scheme)
+        dirs = read_plan(args.evaluate) if args.evaluate else scheme_directions(args.scheme)
         label = args.evaluate or args.scheme
         design = evaluate(dirs, args.criterion, noise, free=free, label=label)
     else:
