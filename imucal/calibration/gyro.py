@@ -10,14 +10,15 @@ tools, the derived C, c and D; on load the derived values must match the paramet
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
 
 from imucal.calibration.fields import UNIT_PATTERN
 from imucal.errors import ImucalError
-from imucal.gyro.model import misalignment_entries, rate_map
-from imucal.gyro.result import GyroResult
+
+if TYPE_CHECKING:  # imucal.gyro (its package imports the whole gyro fit) only when a gyroscope is used
+    from imucal.gyro.result import GyroResult
 
 KIND = "gyroscope"
 OUTPUT_UNIT = "rad/s"
@@ -54,6 +55,8 @@ class GyroCalibration:
 
     def rate_map(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(C, c, D) with omega = C raw + c - D a."""
+        from imucal.gyro.model import misalignment_entries, rate_map
+
         C, D = rate_map(self.scale, misalignment_entries(self.misalignment), self.gsens)
         return C, -C @ self.bias, D
 

@@ -5,6 +5,7 @@ import hashlib
 import io
 import math
 import os
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -238,11 +239,11 @@ def parse_block(lines: list[str], first_lineno: int, delimiter: str | None, usec
     if not any(ln.strip() and not ln.lstrip().startswith("#") for ln in lines):
         raise ImucalError("has no data rows", file=str(path), field="data",
                           fix="record samples after the header")
-    ncol = max(usecols) + 1
+    text = "\n".join(lines)
     try:
-        arr = np.loadtxt(io.StringIO("\n".join(lines)), delimiter=delimiter, usecols=usecols,
+        arr = np.loadtxt(io.StringIO(text), delimiter=delimiter, usecols=usecols,
                          ndmin=2, dtype=float, comments="#")
-        if arr.shape[0] == len([ln for ln in lines if ln.strip() and not ln.lstrip().startswith("#")]):
+        if arr.shape[0] == data_line_count(lines, text):
             bad = ~np.isfinite(arr).all(axis=1)
             if bad.any():
                 k = int(np.flatnonzero(bad)[0])
@@ -256,6 +257,22 @@ def parse_block(lines: list[str], first_lineno: int, delimiter: str | None, usec
         pass
     check_lines(lines, first_lineno, delimiter, usecols, path)
     raise unparsed(path)
+
+
+#: A line of nothing but whitespace (what str.strip removes, which is what \s matches), in lines
+#: joined by "\n".
+_BLANK_LINE = re.compile(r"\n[^\S\n]*\n")
+
+
+def data_line_count(lines: list[str], text: str) -> int:
+    """How many of ``lines`` (``text`` = the lines joined by "\\n") are neither blank nor comments.
+
+    Without a "#" or a blank line in the text every line counts, found by two scans in C rather
+    than a Python test of each line (a tenth of the loading time of a 50,000-line file).
+    """
+    if "#" not in text and not _BLANK_LINE.search(f"\n{text}\n"):
+        return len(lines)
+    return sum(1 for ln in lines if ln.strip() and not ln.lstrip().startswith("#"))
 
 
 def unparsed(path: Path) -> ImucalError:
