@@ -14,6 +14,7 @@ import numpy as np
 
 from imucal.constants import TIME_UNIT_CHOICES, TIME_UNITS
 from imucal.errors import ImucalError, short
+from imucal.solve.stats import median
 from imucal.data.rosbag import is_bag, read_bag
 from imucal.files.inputs import max_data_bytes, open_regular
 
@@ -372,7 +373,7 @@ def _no_header_layout(ncol: int, path: Path) -> dict[str, int]:
 
 def infer_time_unit(stamps: np.ndarray) -> tuple[str, str]:
     """The unit (s, ms, us, ns) of time stamps and a sentence saying why (see time_unit_from_step)."""
-    dt = float(np.median(np.diff(stamps))) if stamps.size > 1 else float("nan")
+    dt = median(np.diff(stamps)) if stamps.size > 1 else float("nan")
     head = stamps[:TIME_HEAD_ROWS]
     return time_unit_from_step(dt, float(stamps[0]) if stamps.size else float("nan"),
                                bool(np.all(head == np.round(head))))

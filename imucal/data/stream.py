@@ -34,6 +34,7 @@ from imucal.data.static import (QUANTUM_ROWS, Intervals, MovingVariance, Segment
                                 auto_threshold, candidate_runs, intervals_from, quantum, segment, window_samples)
 from imucal.data.rosbag import is_bag
 from imucal.errors import ImucalError
+from imucal.solve.stats import median
 from imucal.files.inputs import open_regular
 
 #: Recordings above this size are read in chunks when data.stream is "auto" [bytes].
@@ -407,7 +408,7 @@ class StreamedRecording:
                 t = self._times(arr, n, unit, t_first)
                 t_steps.add(t)
                 if w is None:
-                    w = window_samples(self.settings, float(np.median(np.diff(t)))) if t.size > 1 else 3
+                    w = window_samples(self.settings, median(np.diff(t))) if t.size > 1 else 3
                 if mv is None:
                     mv = MovingVariance(w)
                 raw = self._raw(arr)
@@ -528,7 +529,7 @@ class StreamedRecording:
 
 
 def _infer(stamps: np.ndarray, head: np.ndarray) -> tuple[str, str]:
-    dt = float(np.median(np.diff(stamps))) if stamps.size > 1 else float("nan")
+    dt = median(np.diff(stamps)) if stamps.size > 1 else float("nan")
     return time_unit_from_step(dt, float(stamps[0]), bool(np.all(head == np.round(head))))
 
 

@@ -23,6 +23,7 @@ import numpy as np
 
 from imucal.model.sensor import SensorModel
 from imucal.solve import ipopt
+from imucal.solve.stats import median
 from imucal.solve.vectorize import Vectorized
 
 #: Rows per block: small enough for the temporaries to stay in the CPU cache (measured fastest
@@ -111,9 +112,9 @@ def noise_sigma(fns: RowFunctions, rows: Rows, raw_var: np.ndarray, pfree, pfix,
     for sl, raw, cov in rows.blocks():
         Jraw = fns.derivatives(raw, cov, pfree, pfix, [g])[2]
         s[sl] = np.sqrt(np.sum(Jraw**2 * raw_var[sl].T, axis=0))
-    floor = max(float(np.median(s)) * 1e-3, 1e-12)
+    floor = max(median(s) * 1e-3, 1e-12)
     if weights == "uniform":
-        return np.full_like(s, max(float(np.median(s)), floor))
+        return np.full_like(s, max(median(s), floor))
     return np.maximum(s, floor)
 
 
