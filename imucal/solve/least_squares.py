@@ -162,14 +162,16 @@ class Problem:
         return self.off + self.scale * np.asarray(x, float).ravel()
 
     def value(self, x) -> float:
-        if self._key == np.asarray(x, float).tobytes():
+        x = np.asarray(x, float)  # IPOPT's point arrives as a CasADi DM: converted once
+        if self._key == x.tobytes():
             return self._val[0]
         r = residuals(self.fns, self.rows, self.p_of(x), self.pfix, self.g)
         return 0.5 * float(np.dot(self.w * r, r))
 
     def derivatives(self, x) -> tuple[float, np.ndarray, np.ndarray]:
         """f, grad and Hessian in x; IPOPT asks them at the same point: computed once."""
-        key = np.asarray(x, float).tobytes()
+        x = np.asarray(x, float)
+        key = x.tobytes()
         if self._key != key:
             f, g, H = normal_equations(self.fns, self.rows, self.w, self.p_of(x), self.pfix, self.g,
                                        self.exact)
