@@ -11,6 +11,7 @@ resident set (ru_maxrss) is that process's own.
     python scripts/bench_memory.py                      # 10, 100, 1000 tiles
     python scripts/bench_memory.py --sizes 10,100       # skip the 3 GB file
     python scripts/bench_memory.py --whole 10,100       # also read whole (--stream never) at these
+    python scripts/bench_memory.py --imutk /tmp/imutk/test_imu_calib   # imu_tk beside (scripts/build_imutk.sh)
 """
 from __future__ import annotations
 
@@ -33,13 +34,16 @@ XSENS = ROOT / "data" / "xsens-mti-imutk" / "xsens_acc.mat"
 GRAVITY = "9.81744"  # the Xsens recording's g (imu_tk's test)
 
 
-def tile(k: int, folder: Path, sep: str = " ") -> Path:
-    """The Xsens log tiled ``k`` times (written once, reused while its size matches)."""
-    lines = [ln for ln in XSENS.read_text().splitlines() if ln.strip()]
+def tile(k: int, folder: Path, sep: str = " ", src: Path = XSENS) -> Path:
+    """The Xsens log ``src`` tiled ``k`` times (written once, reused while its size matches); the
+    shift is the accelerometer log's span, so the gyroscope log tiled alike keeps its time base."""
+    lines = [ln for ln in src.read_text().splitlines() if ln.strip()]
     t = np.array([float(ln.split()[0]) for ln in lines])
     rest = [sep.join(ln.split()[1:]) if sep != " " else ln.lstrip().split(None, 1)[1] for ln in lines]
-    span = t[-1] - t[0] + float(np.median(np.diff(t)))
-    path = folder / f"xsens_x{k}{'.csv' if sep == ',' else '.txt'}"
+    t_acc = np.loadtxt(XSENS, usecols=0)
+    span = t_acc[-1] - t_acc[0] + float(np.median(np.diff(t_acc)))
+    name = "xsens" if src == XSENS else src.stem
+    path = folder / f"{name}_x{k}{'.csv' if sep == ',' else '.txt'}"
     if path.exists():  # written whole under another name, then renamed
         return path
     folder.mkdir(parents=True, exist_ok=True)
@@ -52,7 +56,7 @@ def tile(k: int, folder: Path, sep: str = " ") -> Path:
     return path
 
 
-def measured(cmd: list[str]) -> dict:
+def measured(cmd: list[str], cwd: str | Path = ROOT) -> dict:
     """Wall time, peak RSS and exit status of one run of ``cmd`` in a child process."""
     code = ("import resource, subprocess, sys, time, json; t0 = time.perf_counter(); "
             "p = subprocess.run(sys.argv[1:], capture_output=True, text=True); "
@@ -61,9 +65,20 @@ def measured(cmd: list[str]) -> dict:
             "'cpu_s': u.ru_utime + u.ru_stime, "
             "'err': p.stderr.strip()[-300:], "
             "'maxrss_mb': u.ru_maxrss / 1024}))")
-    p = subprocess.run([sys.executable, "-c", code, *cmd], capture_output=True, text=True, cwd=ROOT,
+    p = subprocess.run([sys.executable, "-c", code, *cmd], capture_output=True, text=True, cwd=cwd,
                        env={**os.environ, "PYTHONPATH": str(ROOT)})
     return json.loads(p.stdout)
+
+
+def imutk(exe: str, k: int, folder: Path) -> dict:
+    """imu_tk's test_imu_calib (scripts/build_imutk.sh) on the ``k``-tile accelerometer and gyroscope logs:
+    it reads both whole and calibrates both (there is no accelerometer-only test program)."""
+    acc, gyro = tile(k, folder), tile(k, folder, src=XSENS.with_name("xsens_gyro.mat"))
+    work = tempfile.mkdtemp(prefix="imucal-imutk-")  # it writes test_imu_acc.calib into its working folder
+    r = measured([str(Path(exe).resolve()), str(acc), str(gyro)], cwd=work)
+    cal = Path(work) / "test_imu_acc.calib"
+    r["acc_calib"] = cal.read_text() if cal.exists() else None
+    return r
 
 
 def calibrate(data: Path, stream: str) -> dict:
@@ -172,6 +187,8 @@ def markdown(r: dict, cmdline: str) -> str:
                  f"{row['cpu_s']:.1f} | "
                  f"{row['maxrss_mb']:.0f} | {row['maxrss_mb'] * 2**20 / row['samples']:.0f} | "
                  f"{row.get('intervals', '')} | {res} |")
+    if r.get("imutk"):
+        L += side_by_side(r)
     s = r.get("shipped")
     if s:
         L += ["", f"Shipped recording (`data/xsens-mti-imutk/xsens_acc.mat`, 3.3 MB, read whole): median "
@@ -192,6 +209,26 @@ def markdown(r: dict, cmdline: str) -> str:
             else:
                 L.append(f"| {name} | {inp} | {x['s']:.2f} | {x['rows'] / x['s']:.3g} | {x['maxrss_mb']:.0f} |")
     return "\n".join(L) + "\n"
+
+
+def side_by_side(r: dict) -> list[str]:
+    """imucal (read in chunks) beside imu_tk on the same tiled logs."""
+    ours = {row["k"]: row for row in r["calibrate"] if row["how"] == "chunks"}
+    L = ["", "Beside imu_tk's test_imu_calib (C++/Ceres, built by `scripts/build_imutk.sh`, given with `--imutk`) on "
+         "the same logs. imu_tk has no accelerometer-only program: it reads the accelerometer and the gyroscope "
+         "log (tiled alike) whole and calibrates both, re-fitting the accelerometer for 9 thresholds; imucal "
+         "calibrates the accelerometer. CPU is user + system time.", "",
+         "| tiles | samples | imucal wall [s] | imucal CPU [s] | imucal peak RSS [MB] | imu_tk wall [s] | "
+         "imu_tk CPU [s] | imu_tk peak RSS [MB] | imu_tk result |", "|---|---|---|---|---|---|---|---|---|"]
+    for k, it in sorted(r["imutk"].items()):
+        o = ours.get(k, {})
+        res = "exit 0" if it["code"] == 0 else f"exit {it['code']}: {(it['err'].splitlines() or [''])[-1][:60]}"
+        if it["code"] == 0 and not it.get("acc_calib"):
+            res += ", no calibration written"
+        L.append(f"| {k} | {51175 * k:,} | {o.get('wall_s', float('nan')):.1f} | {o.get('cpu_s', float('nan')):.1f} | "
+                 f"{o.get('maxrss_mb', float('nan')):.0f} | {it['wall_s']:.1f} | {it['cpu_s']:.1f} | "
+                 f"{it['maxrss_mb']:.0f} | {res} |")
+    return L
 
 
 def compare_files(whole: str, chunks: str) -> str:
@@ -223,6 +260,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--tmp", default="/tmp/imucal-tiles", help="folder for the tiled files")
     ap.add_argument("--parse-k", type=int, default=100, help="tile count of the parse-floor file")
     ap.add_argument("--shipped-runs", type=int, default=7)
+    ap.add_argument("--imutk", help="imu_tk's test_imu_calib (scripts/build_imutk.sh), run beside on the tiled logs")
+    ap.add_argument("--imutk-sizes", default="10,100,1000", help="tile counts imu_tk is run on")
     ap.add_argument("--out", default=str(ROOT / "docs" / "benchmarks_memory.md"))
     ap.add_argument("--child", nargs=2, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -250,6 +289,11 @@ def main(argv: list[str] | None = None) -> int:
         if "never" in results and "always" in results and results["never"]["calibration"]:
             r["calibrate"][-1]["same_as_whole"] = compare_files(results["never"]["calibration"],
                                                                 results["always"]["calibration"])
+    if args.imutk:  # last: at 1000 tiles it runs for minutes
+        r["imutk"] = {}
+        for k in (int(x) for x in args.imutk_sizes.split(",") if x):
+            print(f"imu_tk x{k} ...", file=sys.stderr)
+            r["imutk"][k] = imutk(args.imutk, k, folder)
     print("shipped ...", file=sys.stderr)
     r["shipped"] = shipped(args.shipped_runs)
     print("parse floor ...", file=sys.stderr)

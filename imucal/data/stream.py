@@ -36,6 +36,7 @@ from imucal.data.rosbag import is_bag
 from imucal.errors import ImucalError
 from imucal.solve.stats import median
 from imucal.files.inputs import open_regular
+from imucal.report.progress import progress
 
 #: Recordings above this size are read in chunks when data.stream is "auto" [bytes].
 STREAM_BYTES = 64 * 1024**2
@@ -190,7 +191,8 @@ class _File:
         left in ``self.sha`` when ``hash_it``."""
         h = hashlib.sha256() if hash_it else None
         at = self.offset
-        with self._open() as f:
+        shown = progress(f"reading {self.path.name}", total=self.stamp[0], unit="B", scale=True)
+        with self._open() as f, shown as step:
             if h is not None:
                 h.update(f.read(self.offset))
             else:
@@ -198,6 +200,7 @@ class _File:
             carry = b""
             while True:
                 data = f.read(CHUNK_BYTES)
+                step(len(data))  # a bar on a terminal (imucal.report.progress)
                 if h is not None:
                     h.update(data)
                 if not data:

@@ -20,6 +20,7 @@ from imucal.solve.stats import between_excess, chi2_sf
 from imucal.errors import ImucalError
 from imucal.model.sensor import SensorModel
 from imucal.model.parameters import Parameters, model_label
+from imucal.report.progress import progress
 
 _STATUS_WORDS, _CONVERGED = ipopt.STATUS_WORDS, ipopt.CONVERGED
 #: weights="auto": the noise-only chi-square test at which a between-interval excess is used.
@@ -148,26 +149,30 @@ def fit(data: FitData, params: Parameters, model: SensorModel, gravity: float,
     iters, excess, passes = 0, 0.0, 0
     # Weights from the noise propagated at the current estimate; refreshed once at the solution
     # (and, with weights="auto", until the between-interval excess settles).
-    while True:
-        sigma0 = lsq.noise_sigma(fns, rows, data.raw_var, p_now, pfix, gravity, weights)
-        sigma = np.sqrt(sigma0**2 + excess)
-        R = lsq.weighted_r_factor(fns, rows, sigma, p_now, pfix, gravity)
-        d = _step_scale(R, scale)  # p = p0 + d * x
-        problem = lsq.Problem(fns, rows, 1.0 / sigma**2, pfix, gravity, p_now, d, exact=hessian == "exact")
-        x, stats = lsq.solve(problem, (lo - p_now) / d, (hi - p_now) / d)
-        iters += int(stats.get("iter_count", 0))
-        p_now = np.clip(p_now + d * x, lo, hi)
-        passes += 1
-        if passes < 2:
-            continue
-        if weights != "auto" or data.mode != "means" or dof < 1 or passes >= MAX_PASSES:
-            break
-        r0 = lsq.residuals(fns, rows, p_now, pfix, gravity)
-        s0 = lsq.noise_sigma(fns, rows, data.raw_var, p_now, pfix, gravity, weights)
-        new = between_excess(r0, s0, dof) if chi2_sf(float(np.sum((r0 / s0) ** 2)), dof) < EXCESS_P else 0.0
-        if abs(new - excess) <= 1e-4 * max(new, excess) or (new == 0.0 and excess == 0.0):
-            break
-        excess = new
+    # samples mode: a terminal shows its passes over the samples (imucal.report.progress)
+    shown = None if data.mode == "samples" else False
+    with progress(f"samples fit ({n:,} samples)", unit="pass", enabled=shown) as step:
+        while True:
+            sigma0 = lsq.noise_sigma(fns, rows, data.raw_var, p_now, pfix, gravity, weights)
+            sigma = np.sqrt(sigma0**2 + excess)
+            R = lsq.weighted_r_factor(fns, rows, sigma, p_now, pfix, gravity)
+            d = _step_scale(R, scale)  # p = p0 + d * x
+            problem = lsq.Problem(fns, rows, 1.0 / sigma**2, pfix, gravity, p_now, d, exact=hessian == "exact",
+                                   step=step)
+            x, stats = lsq.solve(problem, (lo - p_now) / d, (hi - p_now) / d)
+            iters += int(stats.get("iter_count", 0))
+            p_now = np.clip(p_now + d * x, lo, hi)
+            passes += 1
+            if passes < 2:
+                continue
+            if weights != "auto" or data.mode != "means" or dof < 1 or passes >= MAX_PASSES:
+                break
+            r0 = lsq.residuals(fns, rows, p_now, pfix, gravity)
+            s0 = lsq.noise_sigma(fns, rows, data.raw_var, p_now, pfix, gravity, weights)
+            new = between_excess(r0, s0, dof) if chi2_sf(float(np.sum((r0 / s0) ** 2)), dof) < EXCESS_P else 0.0
+            if abs(new - excess) <= 1e-4 * max(new, excess) or (new == 0.0 and excess == 0.0):
+                break
+            excess = new
     solve_time = time.perf_counter() - t0
     status = str(stats.get("return_status", "unknown"))
     pfree = p_now

@@ -15,6 +15,7 @@ takes this path with the one option set of imucal.solve.ipopt.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -152,9 +153,11 @@ class Problem:
     """One weighted least-squares problem in scaled unknowns x: pfree = off + scale * x."""
 
     def __init__(self, fns: RowFunctions, rows: Rows, w: np.ndarray, pfix: np.ndarray, gravity: float,
-                 off: np.ndarray, scale: np.ndarray, exact: bool = False) -> None:
+                 off: np.ndarray, scale: np.ndarray, exact: bool = False,
+                 step: Callable[[], None] | None = None) -> None:
         self.fns, self.rows, self.w, self.pfix, self.g = fns, rows, w, pfix, gravity
         self.off, self.scale, self.exact = off, scale, exact
+        self.step = step  #: called after every pass over the rows (a progress bar, imucal.report.progress)
         self._key: bytes | None = None
         self._val: tuple = ()
 
@@ -166,6 +169,8 @@ class Problem:
         if self._key == x.tobytes():
             return self._val[0]
         r = residuals(self.fns, self.rows, self.p_of(x), self.pfix, self.g)
+        if self.step is not None:
+            self.step()
         return 0.5 * float(np.dot(self.w * r, r))
 
     def derivatives(self, x) -> tuple[float, np.ndarray, np.ndarray]:
@@ -175,6 +180,8 @@ class Problem:
         if self._key != key:
             f, g, H = normal_equations(self.fns, self.rows, self.w, self.p_of(x), self.pfix, self.g,
                                        self.exact)
+            if self.step is not None:
+                self.step()
             self._key, self._val = key, (f, g * self.scale, H * np.outer(self.scale, self.scale))
         return self._val
 
