@@ -26,7 +26,6 @@ from __future__ import annotations
 import argparse
 import math
 import multiprocessing as mp
-import sys
 import tempfile
 import time
 import zlib
