@@ -12,6 +12,7 @@ resident set (ru_maxrss) is that process's own.
     python scripts/bench_memory.py --sizes 10,100       # skip the 3 GB file
     python scripts/bench_memory.py --whole 10,100       # also read whole (--stream never) at these
     python scripts/bench_memory.py --imutk /tmp/imutk/test_imu_acc     # imu_tk beside (scripts/build_imutk.sh)
+    python scripts/bench_memory.py --resume ...         # after a stop: measure only what is missing
 """
 from __future__ import annotations
 
@@ -278,6 +279,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--tmp", default="/tmp/imucal-tiles", help="folder for the tiled files")
     ap.add_argument("--parse-k", type=int, default=100, help="tile count of the parse-floor file")
     ap.add_argument("--shipped-runs", type=int, default=7)
+    ap.add_argument("--resume", action="store_true", help="keep the measurements a stopped run saved in --tmp")
     ap.add_argument("--samples-mode", default="200", help="tile counts also calibrated in samples mode (chunks)")
     ap.add_argument("--imutk", help="imu_tk's test_imu_acc (scripts/build_imutk.sh), run beside on the tiled logs")
     ap.add_argument("--imutk-sizes", default="10,100,1000", help="tile counts imu_tk is run on")
@@ -290,7 +292,12 @@ def main(argv: list[str] | None = None) -> int:
         child(*args.child)
         return 0
     folder = Path(args.tmp)
+    raw = folder / "bench_memory_raw.json"
     r: dict = {"load": os.getloadavg(), "calibrate": []}
+    if args.resume and raw.exists():  # the measurements a stopped run saved, not repeated
+        r = json.loads(raw.read_text())
+        r["imutk"] = {int(k): v for k, v in r.get("imutk", {}).items()}
+    done = {(row["k"], row["how"]) for row in r["calibrate"]}
     sizes = [int(x) for x in args.sizes.split(",") if x]
     whole = {int(x) for x in args.whole.split(",") if x}
     for k in sorted(set(sizes) | whole):
@@ -298,6 +305,8 @@ def main(argv: list[str] | None = None) -> int:
         samples = 51175 * k
         results = {}
         for how in (["never"] if k in whole else []) + (["always"] if k in sizes else []):
+            if (k, "whole" if how == "never" else "chunks") in done:
+                continue
             print(f"calibrate x{k} {how} ...", file=sys.stderr)
             x = calibrate(path, how)
             results[how] = x
@@ -312,6 +321,8 @@ def main(argv: list[str] | None = None) -> int:
             r["calibrate"][-1]["same_as_whole"] = compare_files(results["never"]["calibration"],
                                                                 results["always"]["calibration"])
     for k in (int(x) for x in args.samples_mode.split(",") if x):  # samples mode: every static sample kept
+        if (k, "chunks, samples mode") in done:
+            continue
         print(f"calibrate x{k} always, samples mode ...", file=sys.stderr)
         path = tile(k, folder)
         x = calibrate(path, "always", mode="samples")
@@ -323,12 +334,14 @@ def main(argv: list[str] | None = None) -> int:
         r["calibrate"].append(row)
         save_raw(r, folder)
     if args.imutk:  # last: at 1000 tiles it runs for minutes
-        r["imutk"] = {}
+        r["imutk"] = r.get("imutk") or {}
         for k in (int(x) for x in args.imutk_sizes.split(",") if x):
+            if k in r["imutk"]:
+                continue
             print(f"imu_tk x{k} ...", file=sys.stderr)
             r["imutk"][k] = imutk(args.imutk, k, folder)
             save_raw(r, folder)
-        if args.imutk_full:
+        if args.imutk_full and "imutk_full" not in r:
             k = min(int(x) for x in args.imutk_sizes.split(",") if x)
             print(f"imu_tk test_imu_calib x{k} ...", file=sys.stderr)
             r["imutk_full"] = {"k": k, **imutk_full(args.imutk_full, k, folder)}
