@@ -184,7 +184,7 @@ def markdown(r: dict, cmdline: str) -> str:
          "<!-- begin:summary -->",
          "| tiles | samples | file [MB] | read | wall [s] | CPU [s] | peak RSS [MB] | bytes/sample | intervals | result |",
          "|---|---|---|---|---|---|---|---|---|---|"]
-    for row in r["calibrate"]:
+    for row in sorted(r["calibrate"], key=lambda row: (row["k"], row["how"] != "whole", row["how"])):
         res = "exit 0" if row["code"] == 0 else f"exit {row['code']}: {row['err'].splitlines()[-1][:80] if row['err'] else ''}"
         if row.get("same_as_whole") is not None:
             res += {"identical": "; calibration file identical to reading whole",
