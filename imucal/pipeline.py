@@ -6,6 +6,7 @@ from contextlib import contextmanager
 import math
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -26,11 +27,11 @@ from imucal.constants import RIGHT_ANGLE
 from imucal.model.parameters import ANGLE_NAMES, BASE_NAMES, Parameters, base_parameters
 from imucal.data.static import Intervals, detect_static
 from imucal.solve.stats import chi2_sf
-from imucal.gyro.fit import GyroOptions
-from imucal.gyro.result import GyroResult
-from imucal.gyro.run import calibrate_gyro
 from imucal.model.effects_registry import effects_from_specs
 from imucal.model.effects import prepare_parameters
+
+if TYPE_CHECKING:  # the gyroscope's modules are imported only for a recording that has one
+    from imucal.gyro.result import GyroResult
 
 
 @dataclass(frozen=True)
@@ -353,6 +354,11 @@ def calibrate_imu(config: RunConfig, recording: Recording | None = None,
     """The accelerometer (``calibrate``), then the gyroscope when the recording has gx, gy, gz
     or ``gyro_file`` (imu_tk's second file) is given: one calibration holding both sensors."""
     run = calibrate(config, recording)
+    if gyro_file is None and getattr(run.recording, "gyro", None) is None:
+        return run  # no gyroscope (a file read in chunks never has one)
+    from imucal.gyro.fit import GyroOptions  # here: 10 modules a run without a gyroscope skips
+    from imucal.gyro.run import calibrate_gyro
+
     res = calibrate_gyro(run, gyro_file, GyroOptions(**asdict(config.gyro)))
     if res is None:
         return run

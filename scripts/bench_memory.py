@@ -11,6 +11,8 @@ resident set (ru_maxrss) is that process's own.
     python scripts/bench_memory.py                      # 10, 100, 1000 tiles
     python scripts/bench_memory.py --sizes 10,100       # skip the 3 GB file
     python scripts/bench_memory.py --whole 10,100       # also read whole (--stream never) at these
+    python scripts/bench_memory.py --imutk /tmp/imutk/test_imu_acc     # imu_tk beside (scripts/build_imutk.sh)
+    python scripts/bench_memory.py --resume ...         # after a stop: measure only what is missing
 """
 from __future__ import annotations
 
@@ -33,13 +35,16 @@ XSENS = ROOT / "data" / "xsens-mti-imutk" / "xsens_acc.mat"
 GRAVITY = "9.81744"  # the Xsens recording's g (imu_tk's test)
 
 
-def tile(k: int, folder: Path, sep: str = " ") -> Path:
-    """The Xsens log tiled ``k`` times (written once, reused while its size matches)."""
-    lines = [ln for ln in XSENS.read_text().splitlines() if ln.strip()]
+def tile(k: int, folder: Path, sep: str = " ", src: Path = XSENS) -> Path:
+    """The Xsens log ``src`` tiled ``k`` times (written once, reused while its size matches); the
+    shift is the accelerometer log's span, so the gyroscope log tiled alike keeps its time base."""
+    lines = [ln for ln in src.read_text().splitlines() if ln.strip()]
     t = np.array([float(ln.split()[0]) for ln in lines])
     rest = [sep.join(ln.split()[1:]) if sep != " " else ln.lstrip().split(None, 1)[1] for ln in lines]
-    span = t[-1] - t[0] + float(np.median(np.diff(t)))
-    path = folder / f"xsens_x{k}{'.csv' if sep == ',' else '.txt'}"
+    t_acc = np.loadtxt(XSENS, usecols=0)
+    span = t_acc[-1] - t_acc[0] + float(np.median(np.diff(t_acc)))
+    name = "xsens" if src == XSENS else src.stem
+    path = folder / f"{name}_x{k}{'.csv' if sep == ',' else '.txt'}"
     if path.exists():  # written whole under another name, then renamed
         return path
     folder.mkdir(parents=True, exist_ok=True)
@@ -52,7 +57,7 @@ def tile(k: int, folder: Path, sep: str = " ") -> Path:
     return path
 
 
-def measured(cmd: list[str]) -> dict:
+def measured(cmd: list[str], cwd: str | Path = ROOT) -> dict:
     """Wall time, peak RSS and exit status of one run of ``cmd`` in a child process."""
     code = ("import resource, subprocess, sys, time, json; t0 = time.perf_counter(); "
             "p = subprocess.run(sys.argv[1:], capture_output=True, text=True); "
@@ -61,15 +66,32 @@ def measured(cmd: list[str]) -> dict:
             "'cpu_s': u.ru_utime + u.ru_stime, "
             "'err': p.stderr.strip()[-300:], "
             "'maxrss_mb': u.ru_maxrss / 1024}))")
-    p = subprocess.run([sys.executable, "-c", code, *cmd], capture_output=True, text=True, cwd=ROOT,
+    p = subprocess.run([sys.executable, "-c", code, *cmd], capture_output=True, text=True, cwd=cwd,
                        env={**os.environ, "PYTHONPATH": str(ROOT)})
     return json.loads(p.stdout)
 
 
-def calibrate(data: Path, stream: str) -> dict:
+def imutk(exe: str, k: int, folder: Path) -> dict:
+    """imu_tk's accelerometer calibration (test_imu_acc, scripts/build_imutk.sh: its test program
+    without the gyroscope) on the ``k``-tile log. It reads the file whole."""
+    work = tempfile.mkdtemp(prefix="imucal-imutk-")  # it writes test_imu_acc.calib into its working folder
+    r = measured([str(Path(exe).resolve()), str(tile(k, folder))], cwd=work)
+    cal = Path(work) / "test_imu_acc.calib"
+    r["acc_calib"] = cal.read_text() if cal.exists() else None
+    return r
+
+
+def imutk_full(exe: str, k: int, folder: Path) -> dict:
+    """imu_tk's test_imu_calib (accelerometer and gyroscope) on the ``k``-tile logs of both sensors."""
+    work = tempfile.mkdtemp(prefix="imucal-imutk-")
+    return measured([str(Path(exe).resolve()), str(tile(k, folder)),
+                     str(tile(k, folder, src=XSENS.with_name("xsens_gyro.mat")))], cwd=work)
+
+
+def calibrate(data: Path, stream: str, mode: str = "means") -> dict:
     out = tempfile.mkdtemp(prefix="imucal-bench-")
     r = measured([sys.executable, "-m", "imucal", "calibrate", "--data", str(data), "--gravity", GRAVITY,
-                  "--out", out, "--no-figures", "--quiet", "--stream", stream])
+                  "--out", out, "--no-figures", "--quiet", "--stream", stream, "--mode", mode])
     cal = Path(out) / "calibration.yaml"
     r["calibration"] = cal.read_text() if cal.exists() else None
     return r
@@ -157,11 +179,12 @@ def markdown(r: dict, cmdline: str) -> str:
          "the process) is the steadier figure.", "",
          "The Xsens MTi recording (51,175 samples, 100 Hz, 38 poses) tiled k times, time stamps continued; "
          "`imucal calibrate --data FILE --gravity 9.81744 --no-figures --quiet`. Read whole (`--stream never`, "
-         "the loader of issue 6) and in chunks (`--stream always`; `auto` chooses it above 64 MB).", "",
+         "the loader of issue 6) and in chunks (`--stream always`; `auto` chooses it above 64 MB); with "
+         "`--mode samples` the fit takes every static sample (kept in memory) instead of the interval means.", "",
          "<!-- begin:summary -->",
          "| tiles | samples | file [MB] | read | wall [s] | CPU [s] | peak RSS [MB] | bytes/sample | intervals | result |",
          "|---|---|---|---|---|---|---|---|---|---|"]
-    for row in r["calibrate"]:
+    for row in sorted(r["calibrate"], key=lambda row: (row["k"], row["how"] != "whole", row["how"])):
         res = "exit 0" if row["code"] == 0 else f"exit {row['code']}: {row['err'].splitlines()[-1][:80] if row['err'] else ''}"
         if row.get("same_as_whole") is not None:
             res += {"identical": "; calibration file identical to reading whole",
@@ -172,6 +195,8 @@ def markdown(r: dict, cmdline: str) -> str:
                  f"{row['cpu_s']:.1f} | "
                  f"{row['maxrss_mb']:.0f} | {row['maxrss_mb'] * 2**20 / row['samples']:.0f} | "
                  f"{row.get('intervals', '')} | {res} |")
+    if r.get("imutk"):
+        L += side_by_side(r)
     s = r.get("shipped")
     if s:
         L += ["", f"Shipped recording (`data/xsens-mti-imutk/xsens_acc.mat`, 3.3 MB, read whole): median "
@@ -192,6 +217,37 @@ def markdown(r: dict, cmdline: str) -> str:
             else:
                 L.append(f"| {name} | {inp} | {x['s']:.2f} | {x['rows'] / x['s']:.3g} | {x['maxrss_mb']:.0f} |")
     return "\n".join(L) + "\n"
+
+
+def side_by_side(r: dict) -> list[str]:
+    """imucal (read in chunks) beside imu_tk on the same tiled logs."""
+    ours = {row["k"]: row for row in r["calibrate"] if row["how"] == "chunks"}
+    L = ["", "Beside imu_tk (C++/Ceres) on the same logs: its test program `test_imu_calib` with the gyroscope file "
+         "and calls removed (`test_imu_acc`, built by `scripts/build_imutk.sh`, given with `--imutk`): it reads the "
+         "log whole and calibrates the accelerometer, re-fitting it for 9 static-detection thresholds. CPU is "
+         "user + system time.", ""]
+    full = r.get("imutk_full")
+    if full:
+        L += [f"The full `test_imu_calib` (`--imutk-full`) on the accelerometer and gyroscope logs tiled alike, "
+              f"{full['k']} tiles: {full['wall_s']:.1f} s, {full['cpu_s']:.1f} s CPU, peak {full['maxrss_mb']:.0f} MB "
+              f"(exit {full['code']}): its gyroscope part needs far more memory than its accelerometer part, so it "
+              "is not run on the larger logs.", ""]
+    L += ["| tiles | samples | imucal wall [s] | imucal CPU [s] | imucal peak RSS [MB] | imu_tk wall [s] | "
+          "imu_tk CPU [s] | imu_tk peak RSS [MB] | imu_tk result |", "|---|---|---|---|---|---|---|---|---|"]
+    for k, it in sorted(r["imutk"].items()):
+        o = ours.get(k, {})
+        res = "exit 0" if it["code"] == 0 else f"exit {it['code']}: {(it['err'].splitlines() or [''])[-1][:60]}"
+        if it["code"] == 0 and not it.get("acc_calib"):
+            res += ", no calibration written"
+        L.append(f"| {k} | {51175 * k:,} | {o.get('wall_s', float('nan')):.1f} | {o.get('cpu_s', float('nan')):.1f} | "
+                 f"{o.get('maxrss_mb', float('nan')):.0f} | {it['wall_s']:.1f} | {it['cpu_s']:.1f} | "
+                 f"{it['maxrss_mb']:.0f} | {res} |")
+    return L
+
+
+def save_raw(r: dict, folder: Path) -> None:
+    """The measurements so far, as JSON beside the tiled files (a run that is stopped keeps them)."""
+    (folder / "bench_memory_raw.json").write_text(json.dumps(r, default=str, indent=1))
 
 
 def compare_files(whole: str, chunks: str) -> str:
@@ -223,6 +279,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--tmp", default="/tmp/imucal-tiles", help="folder for the tiled files")
     ap.add_argument("--parse-k", type=int, default=100, help="tile count of the parse-floor file")
     ap.add_argument("--shipped-runs", type=int, default=7)
+    ap.add_argument("--resume", action="store_true", help="keep the measurements a stopped run saved in --tmp")
+    ap.add_argument("--samples-mode", default="200", help="tile counts also calibrated in samples mode (chunks)")
+    ap.add_argument("--imutk", help="imu_tk's test_imu_acc (scripts/build_imutk.sh), run beside on the tiled logs")
+    ap.add_argument("--imutk-sizes", default="10,100,1000", help="tile counts imu_tk is run on")
+    ap.add_argument("--imutk-full", help="imu_tk's test_imu_calib (accelerometer + gyroscope), run once at the "
+                                         "smallest of --imutk-sizes")
     ap.add_argument("--out", default=str(ROOT / "docs" / "benchmarks_memory.md"))
     ap.add_argument("--child", nargs=2, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -230,7 +292,12 @@ def main(argv: list[str] | None = None) -> int:
         child(*args.child)
         return 0
     folder = Path(args.tmp)
+    raw = folder / "bench_memory_raw.json"
     r: dict = {"load": os.getloadavg(), "calibrate": []}
+    if args.resume and raw.exists():  # the measurements a stopped run saved, not repeated
+        r = json.loads(raw.read_text())
+        r["imutk"] = {int(k): v for k, v in r.get("imutk", {}).items()}
+    done = {(row["k"], row["how"]) for row in r["calibrate"]}
     sizes = [int(x) for x in args.sizes.split(",") if x]
     whole = {int(x) for x in args.whole.split(",") if x}
     for k in sorted(set(sizes) | whole):
@@ -238,6 +305,8 @@ def main(argv: list[str] | None = None) -> int:
         samples = 51175 * k
         results = {}
         for how in (["never"] if k in whole else []) + (["always"] if k in sizes else []):
+            if (k, "whole" if how == "never" else "chunks") in done:
+                continue
             print(f"calibrate x{k} {how} ...", file=sys.stderr)
             x = calibrate(path, how)
             results[how] = x
@@ -247,9 +316,35 @@ def main(argv: list[str] | None = None) -> int:
                 row["intervals"] = next((ln.split(":")[1].strip() for ln in x["calibration"].splitlines()
                                          if ln.strip().startswith("n_intervals:")), "")
             r["calibrate"].append(row)
+            save_raw(r, folder)
         if "never" in results and "always" in results and results["never"]["calibration"]:
             r["calibrate"][-1]["same_as_whole"] = compare_files(results["never"]["calibration"],
                                                                 results["always"]["calibration"])
+    for k in (int(x) for x in args.samples_mode.split(",") if x):  # samples mode: every static sample kept
+        if (k, "chunks, samples mode") in done:
+            continue
+        print(f"calibrate x{k} always, samples mode ...", file=sys.stderr)
+        path = tile(k, folder)
+        x = calibrate(path, "always", mode="samples")
+        row = {"k": k, "samples": 51175 * k, "mb": path.stat().st_size / 2**20, "how": "chunks, samples mode",
+               **{f: x[f] for f in ("wall_s", "cpu_s", "code", "err", "maxrss_mb")}}
+        if x["calibration"]:
+            row["intervals"] = next((ln.split(":")[1].strip() for ln in x["calibration"].splitlines()
+                                     if ln.strip().startswith("n_intervals:")), "")
+        r["calibrate"].append(row)
+        save_raw(r, folder)
+    if args.imutk:  # last: at 1000 tiles it runs for minutes
+        r["imutk"] = r.get("imutk") or {}
+        for k in (int(x) for x in args.imutk_sizes.split(",") if x):
+            if k in r["imutk"]:
+                continue
+            print(f"imu_tk x{k} ...", file=sys.stderr)
+            r["imutk"][k] = imutk(args.imutk, k, folder)
+            save_raw(r, folder)
+        if args.imutk_full and "imutk_full" not in r:
+            k = min(int(x) for x in args.imutk_sizes.split(",") if x)
+            print(f"imu_tk test_imu_calib x{k} ...", file=sys.stderr)
+            r["imutk_full"] = {"k": k, **imutk_full(args.imutk_full, k, folder)}
     print("shipped ...", file=sys.stderr)
     r["shipped"] = shipped(args.shipped_runs)
     print("parse floor ...", file=sys.stderr)

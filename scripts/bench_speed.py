@@ -153,7 +153,8 @@ def child(case: str, n: int, repeats: int) -> None:
     t0 = time.perf_counter()
     out = {"fit-means": case_fit_means, "fit-samples": case_fit_samples, "apply": case_apply}[case](n, repeats)
     out["wall_s"] = time.perf_counter() - t0
-    out["maxrss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    u = resource.getrusage(resource.RUSAGE_SELF)
+    out["maxrss_mb"], out["cpu_s"] = u.ru_maxrss / 1024, u.ru_utime + u.ru_stime
     print(json.dumps(out))
 
 
@@ -167,9 +168,35 @@ def run_child(case: str, n: int, repeats: int, env: dict | None = None) -> dict:
 
 # --- end-to-end calibrate ----------------------------------------------------------------------
 def calibrate_cmd(out: str) -> list[str]:
-    exe = shutil.which("imucal") or f"{sys.executable} -m imucal"
-    return [*exe.split(), "calibrate", "--data", str(XSENS), "--gravity", "9.81744", "--out", out,
+    """The repository's `imucal calibrate` (run with PYTHONPATH=ROOT: this checkout's code, whatever is installed)."""
+    return [sys.executable, "-m", "imucal", "calibrate", "--data", str(XSENS), "--gravity", "9.81744", "--out", out,
             "--no-figures", "--quiet"]
+
+
+ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
+
+
+def timed_runs(cmd: list[str], runs: int, warmup: int = 2, cwd: str | None = None) -> tuple[list[float], list[float]]:
+    """Wall and CPU (user + system) time [s] of ``runs`` runs of ``cmd``, after ``warmup`` untimed ones."""
+    walls, cpus = [], []
+    for i in range(runs + warmup):
+        r0, t0 = resource.getrusage(resource.RUSAGE_CHILDREN), time.perf_counter()
+        subprocess.run(cmd, capture_output=True, check=True, env=ENV, cwd=cwd)
+        t1, r1 = time.perf_counter(), resource.getrusage(resource.RUSAGE_CHILDREN)
+        if i >= warmup:
+            walls.append(t1 - t0)
+            cpus.append(r1.ru_utime - r0.ru_utime + r1.ru_stime - r0.ru_stime)
+    return walls, cpus
+
+
+def bench_imutk(exe: str, runs: int) -> dict:
+    """imu_tk's test_imu_calib (scripts/build_imutk.sh) on the shipped accelerometer and gyroscope files."""
+    tmp = tempfile.mkdtemp(prefix="imucal-imutk-")  # it writes its .calib files into its working folder
+    walls, cpus = timed_runs([str(Path(exe).resolve()), str(XSENS), str(XSENS.with_name("xsens_gyro.mat"))], runs,
+                             warmup=1, cwd=tmp)
+    shutil.rmtree(tmp, ignore_errors=True)
+    return {"median_s": statistics.median(walls), "min_s": min(walls), "cpu_median_s": statistics.median(cpus),
+            "runs": runs}
 
 
 def bench_calibrate(runs: int) -> dict:
@@ -184,31 +211,24 @@ def bench_calibrate(runs: int) -> dict:
     if hf:
         jpath = Path(tmp) / "hf.json"
         subprocess.run([hf, "--warmup", "2", "--runs", str(runs), "--export-json", str(jpath), "-N",
-                        " ".join(cmd)], capture_output=True, text=True, check=True)
+                        " ".join(cmd)], capture_output=True, text=True, check=True, env=ENV)
         r = json.loads(jpath.read_text())["results"][0]
         res.update(tool="hyperfine", median_s=r["median"], mean_s=r["mean"], stddev_s=r["stddev"],
-                   min_s=r["min"], runs=len(r["times"]), user_s=r["user"], system_s=r["system"])
+                   min_s=r["min"], runs=len(r["times"]), user_s=r["user"], system_s=r["system"],
+                   cpu_median_s=r["user"] + r["system"])
     else:
-        ts = []
-        for i in range(runs + 2):
-            t0 = time.perf_counter()
-            subprocess.run(cmd, capture_output=True, check=True)
-            if i >= 2:
-                ts.append(time.perf_counter() - t0)
-        res.update(tool="subprocess loop", median_s=statistics.median(ts), min_s=min(ts), runs=len(ts))
+        walls, cpus = timed_runs(cmd, runs)
+        res.update(tool="subprocess loop", median_s=statistics.median(walls), min_s=min(walls), runs=len(walls),
+                   cpu_median_s=statistics.median(cpus), cpu_min_s=min(cpus))
     # peak memory of one run
     p = subprocess.run([sys.executable, "-c",
                         "import resource, subprocess, sys; subprocess.run(sys.argv[1:], capture_output=True); "
                         "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)", *cmd],
-                       capture_output=True, text=True)
+                       capture_output=True, text=True, env=ENV)
     res["maxrss_mb"] = int(p.stdout.strip()) / 1024
     # interpreter + import floor
-    ts = []
-    for _ in range(7):
-        t0 = time.perf_counter()
-        subprocess.run([sys.executable, "-c", "import numpy, casadi"], capture_output=True)
-        ts.append(time.perf_counter() - t0)
-    res["floor_numpy_casadi_s"] = statistics.median(ts)
+    walls, cpus = timed_runs([sys.executable, "-c", "import numpy, casadi"], 7, warmup=1)
+    res["floor_numpy_casadi_s"], res["floor_cpu_s"] = statistics.median(walls), statistics.median(cpus)
     res["import_top"] = import_profile(cmd)
     shutil.rmtree(tmp, ignore_errors=True)
     return res
@@ -216,8 +236,9 @@ def bench_calibrate(runs: int) -> dict:
 
 def import_profile(cmd: list[str], top: int = 8) -> list[tuple[str, float]]:
     """Largest cumulative import times (python -X importtime) of one calibrate run [s]."""
-    args = cmd[1:] if cmd[0].endswith("imucal") else cmd[3:]
-    p = subprocess.run([sys.executable, "-X", "importtime", "-m", "imucal", *args], capture_output=True, text=True)
+    args = cmd[3:]  # after `python -m imucal`
+    p = subprocess.run([sys.executable, "-X", "importtime", "-m", "imucal", *args], capture_output=True, text=True,
+                       env=ENV)
     rows = []
     for line in p.stderr.splitlines():
         if not line.startswith("import time:") or "cumulative" in line:
@@ -236,9 +257,12 @@ def summary(r: dict) -> list[str]:
     L = ["<!-- begin:summary -->", "| what | measured |", "|---|---|"]
     c = r.get("calibrate")
     if c:
+        it = r.get("imutk")
         L.append(f"| end-to-end `imucal calibrate --no-figures`, Xsens (51,175 samples, 38 intervals) | "
-                 f"{c['median_s']:.3f} s median ({c['tool']}, {c['runs']} runs), peak {c['maxrss_mb']:.0f} MB; "
-                 "imu_tk: about 0.35 s |")
+                 f"{c['median_s']:.3f} s median, {c['cpu_median_s']:.3f} s CPU ({c['tool']}, {c['runs']} runs), "
+                 f"peak {c['maxrss_mb']:.0f} MB; floor `import numpy, casadi` {c['floor_numpy_casadi_s']:.3f} s"
+                 + (f"; imu_tk (accelerometer and gyroscope) {it['median_s']:.3f} s, {it['cpu_median_s']:.3f} s CPU"
+                    if it else "") + " |")
     for x in r.get("fit-means") or []:
         if "error" not in x and x["n"] in (10, 1000):
             L.append(f"| fit of {x['n']:,} interval means | {x['cached_median_s']:.3f} s (first call "
@@ -262,12 +286,15 @@ def markdown(r: dict, args) -> str:
     except (OSError, StopIteration):
         model = cpu
     L = ["# Benchmarks", "",
-         f"Generated by `python scripts/bench_speed.py{' --quick' if args.quick else ''}` on {model}, "
+         f"Generated by `python scripts/bench_speed.py{' --quick' if args.quick else ''}"
+         f"{' --imutk IMUTK' if args.imutk else ''}"
+         f"{f' --samples-max {args.samples_max}' if args.samples_max != 10_000_000 else ''}` on {model}, "
          f"{os.cpu_count()} cores, Python {platform.python_version()}, casadi "
          f"{__import__('casadi').__version__}, numpy {np.__version__}. Every case runs in a fresh process; "
          "memory is that process's peak resident set (ru_maxrss). Do not edit by hand.", "",
-         f"Load average when the run started: {r.get('load', (math.nan,) * 3)[0]:.2f} (1 min) on {os.cpu_count()} "
-         "cores: this machine is shared, so wall times carry the noise of other jobs; `user` CPU time (hyperfine) "
+         f"Load average when the run started: {r.get('load', (math.nan,) * 3)[0]:.2f} and when it ended: "
+         f"{r.get('load_end', (math.nan,) * 3)[0]:.2f} (1 min) on {os.cpu_count()} "
+         "cores: this machine is shared, so wall times carry the noise of other jobs; CPU time (user + system) "
          "is the steadier figure.", ""]
     L += summary(r) + [""]
     c = r.get("calibrate")
@@ -276,13 +303,20 @@ def markdown(r: dict, args) -> str:
               f"    {c['command']}", "",
               "With the package byte-compiled first, as `pip install` leaves it (this machine sets "
               "PYTHONDONTWRITEBYTECODE, under which an editable install recompiles every module at every run).", "",
-              "| tool | runs | median [s] | min [s] | user CPU [s] | system CPU [s] | peak RSS [MB] | "
-              "floor: `python -c 'import numpy, casadi'` [s] |",
-              "|---|---|---|---|---|---|---|---|",
-              f"| {c['tool']} | {c['runs']} | {c['median_s']:.3f} | {c['min_s']:.3f} | {c.get('user_s', math.nan):.3f} | "
-              f"{c.get('system_s', math.nan):.3f} | {c['maxrss_mb']:.0f} | {c['floor_numpy_casadi_s']:.3f} |", "",
-              "imu_tk (C++/Ceres) takes about 0.35 s for the same file on these machines (whole process, "
-              "accelerometer part, including its re-fits for 9 thresholds).", "",
+              "| tool | runs | median [s] | min [s] | CPU (user + system), median [s] | peak RSS [MB] | "
+              "floor: `python -c 'import numpy, casadi'`, wall / CPU [s] |",
+              "|---|---|---|---|---|---|---|",
+              f"| {c['tool']} | {c['runs']} | {c['median_s']:.3f} | {c['min_s']:.3f} | {c['cpu_median_s']:.3f} | "
+              f"{c['maxrss_mb']:.0f} | {c['floor_numpy_casadi_s']:.3f} / {c.get('floor_cpu_s', math.nan):.3f} |", ""]
+        it = r.get("imutk")
+        L += ([f"imu_tk's test_imu_calib (C++/Ceres, built by scripts/build_imutk.sh, given with --imutk) on the "
+               "same file and the gyroscope file beside it (it calibrates both, and re-fits the accelerometer "
+               f"for 9 thresholds): {it['median_s']:.3f} s median (min {it['min_s']:.3f} s), "
+               f"{it['cpu_median_s']:.3f} s CPU, {it['runs']} runs.", ""] if it else
+              ["imu_tk not timed here: give its test program with --imutk (scripts/build_imutk.sh builds it).", ""])
+        L += ["Start-up: the modules a run without a gyroscope, figures or chunked reading does not use are not "
+              "imported (matplotlib, pandas, numpy.ma, the gyroscope fit, discovery; asserted by "
+              "tests/test_startup.py).", "",
               "Largest top-level imports in one run (`python -X importtime`, cumulative):", "",
               "| module | s |", "|---|---|"] + [f"| {m} | {t:.3f} |" for m, t in c["import_top"]] + [""]
     fm = r.get("fit-means")
@@ -313,13 +347,16 @@ def markdown(r: dict, args) -> str:
         L += ["## Samples mode: fit time against the number of samples", "",
               "50 poses, 4 counts white noise per sample; `imucal.solve.fit.fit` with `mode=\"samples\"` (the same "
               "least-squares path, blocks of 8192 rows, Gauss-Newton Hessian). Time of the fit call only (data in memory).",
-              "", "| samples | median [s] | min [s] | IPOPT iterations | peak RSS [MB] |", "|---|---|---|---|---|"]
+              "Peak RSS and CPU are the whole child process's: it also holds the simulated samples (raw "
+              "readings, their variances and pose index: 56 bytes a sample) and draws them for every repeat.",
+              "", "| samples | median [s] | min [s] | IPOPT iterations | process CPU [s] | peak RSS [MB] |",
+              "|---|---|---|---|---|---|"]
         for x in fs:
             if "error" in x:
-                L.append(f"| {x['n']:,} | error: {x['error']} | | | |")
+                L.append(f"| {x['n']:,} | error: {x['error']} | | | | |")
                 continue
             L.append(f"| {x['n']:,} | {x['median_s']:.3f} | {x['min_s']:.3f} | {x['iterations']} | "
-                     f"{x['maxrss_mb']:.0f} |")
+                     f"{x.get('cpu_s', math.nan):.1f} | {x['maxrss_mb']:.0f} |")
         L.append("")
     ap, ap1 = r.get("apply"), r.get("apply_1thread")
     if ap and "error" not in ap:
@@ -345,6 +382,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--only", default="calibrate,fit-means,fit-samples,apply")
+    ap.add_argument("--imutk", help="imu_tk's test_imu_calib (scripts/build_imutk.sh), timed beside calibrate")
+    ap.add_argument("--samples-max", type=int, default=10_000_000, help="largest samples-mode fit (full run)")
     ap.add_argument("--out", default=str(ROOT / "docs" / "benchmarks.md"))
     ap.add_argument("--child", help=argparse.SUPPRESS)
     ap.add_argument("--size", type=int, help=argparse.SUPPRESS)
@@ -358,6 +397,8 @@ def main(argv: list[str] | None = None) -> int:
     if "calibrate" in only:
         print("calibrate ...", file=sys.stderr)
         r["calibrate"] = bench_calibrate(5 if args.quick else 20)
+        if args.imutk:
+            r["imutk"] = bench_imutk(args.imutk, 3 if args.quick else 10)
     if "fit-means" in only:
         sizes = (10, 100) if args.quick else (10, 30, 100, 300, 1000)
         r["fit-means"] = []
@@ -365,16 +406,18 @@ def main(argv: list[str] | None = None) -> int:
             print(f"fit-means {n} ...", file=sys.stderr)
             r["fit-means"].append(run_child("fit-means", n, 3 if args.quick else 10))
     if "fit-samples" in only:
-        sizes = (10_000, 100_000) if args.quick else (10_000, 100_000, 1_000_000)
+        sizes = (10_000, 100_000) if args.quick else tuple(
+            n for n in (10_000, 100_000, 1_000_000, 10_000_000) if n <= args.samples_max)
         r["fit-samples"] = []
         for n in sizes:
             print(f"fit-samples {n} ...", file=sys.stderr)
-            r["fit-samples"].append(run_child("fit-samples", n, 2 if args.quick else 3))
+            r["fit-samples"].append(run_child("fit-samples", n, 2 if args.quick or n >= 10_000_000 else 3))
     if "apply" in only:
         print("apply ...", file=sys.stderr)
         n_apply = 10**6 if args.quick else 10**7
         r["apply"] = run_child("apply", n_apply, 3 if args.quick else 7)
         r["apply_1thread"] = run_child("apply", n_apply, 3 if args.quick else 7, {"OPENBLAS_NUM_THREADS": "1"})
+    r["load_end"] = os.getloadavg()
     text = markdown(r, args)
     from imucal.files.output import write_text_atomic
 

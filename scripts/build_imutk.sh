@@ -1,9 +1,10 @@
 #!/bin/sh
 # Build imu_tk's test program (acc + gyro calibration of two files) without its Qt/OpenGL viewer,
-# for scripts/bench_gyro.py. Needs g++, libceres-dev, libeigen3-dev, libboost-dev.
+# for scripts/bench_gyro.py, and the same program calibrating the accelerometer alone (one file),
+# for scripts/bench_memory.py. Needs g++, libceres-dev, libeigen3-dev, libboost-dev.
 #
 #   git clone https://github.com/Kyle-ak/imu_tk SRC   # imu_tk, BSD licence
-#   sh scripts/build_imutk.sh SRC OUT                 # writes OUT/test_imu_calib
+#   sh scripts/build_imutk.sh SRC OUT                 # writes OUT/test_imu_calib and OUT/test_imu_acc
 #
 # Changes to imu_tk's sources, none to its maths: the plot and the wait for a key in verbose mode
 # are removed (src/calibration.cpp), verbose output is off in the test program, and three setters
@@ -25,4 +26,12 @@ sed -e '/visualization.h/d' -e 's/enableVerboseOutput(true)/enableVerboseOutput(
 g++ -O2 -std=c++17 -DNDEBUG -Werror=return-type -I "$OUT/inc" -I /usr/include/eigen3 \
     "$OUT/calibration.cpp" "$SRC/src/filters.cpp" "$SRC/src/io_utils.cpp" "$OUT/test_imu_calib.cpp" \
     -o "$OUT/test_imu_calib" -lceres -lglog -lgflags -lpthread
+# test_imu_acc: the same program with its gyroscope file and calls removed (calibrateAcc, one file).
+sed -e '/importAsciiData( argv\[2\]/d' -e '/argv\[2\]/d' -e 's/argc < 3/argc < 2/' \
+    -e 's/mp_calib.calibrateAccGyro(acc_data, gyro_data );/mp_calib.calibrateAcc(acc_data);/' \
+    -e '/getGyroCalib().save/d' "$OUT/test_imu_calib.cpp" > "$OUT/test_imu_acc.cpp"
+g++ -O2 -std=c++17 -DNDEBUG -Werror=return-type -I "$OUT/inc" -I /usr/include/eigen3 \
+    "$OUT/calibration.cpp" "$SRC/src/filters.cpp" "$SRC/src/io_utils.cpp" "$OUT/test_imu_acc.cpp" \
+    -o "$OUT/test_imu_acc" -lceres -lglog -lgflags -lpthread
 echo "$OUT/test_imu_calib"
+echo "$OUT/test_imu_acc"

@@ -34,6 +34,7 @@ import numpy as np  # noqa: E402
 
 from imucal.constants import STANDARD_GRAVITY  # noqa: E402
 from imucal.model.effects import CLASSIC, EFFECTS  # noqa: E402
+from imucal.report.progress import progress  # noqa: E402
 
 #: "reliably": the right effect and axes in at least this share of the cases.
 RELIABLE = 0.9
@@ -143,11 +144,10 @@ def main(argv: list[str] | None = None) -> int:
                 seed += 1
     t0 = time.perf_counter()
     rows = []
-    with mp.get_context("fork").Pool(a.jobs) as pool:
-        for k, row in enumerate(pool.imap_unordered(run_case, jobs, chunksize=2), 1):
+    with mp.get_context("fork").Pool(a.jobs) as pool, progress("cases", total=len(jobs), unit="case") as step:
+        for row in pool.imap_unordered(run_case, jobs, chunksize=2):
             rows.append(row)
-            if k % 25 == 0 or k == len(jobs):
-                print(f"{k}/{len(jobs)} cases, {time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)
+            step()
     rows.sort(key=lambda r: r["seed"])
     wall = time.perf_counter() - t0
     text = report(rows, a, wall)

@@ -26,6 +26,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from imucal.files.output import write_text_atomic  # noqa: E402
+from imucal.report.progress import progress  # noqa: E402
 from imucal.gyro import GyroOptions  # noqa: E402
 from imucal.gyro.coverage import Z95, Coverage, binomial_band, monte_carlo, names  # noqa: E402
 from imucal.gyro.simulate import GyroTruth  # noqa: E402
@@ -125,14 +126,16 @@ def main() -> None:
     body, summ = [], ["<!-- begin:summary -->",
                       "| setting | sessions | estimates | inside ±1.96 std | inside ±t(dof) std | binomial band (95 %) "
                       "| median reduced chi-square |", "|---|---|---|---|---|---|---|"]
-    for title, truth, session in SETTINGS:
-        t0 = time.perf_counter()
-        cov = study(truth, session, a.seeds, a.jobs)
-        body += section(title, cov, a.seeds, time.perf_counter() - t0)
-        frac, ft, k, lo, hi = pooled(cov)
-        summ.append(f"| {title} | {a.seeds} | {k} | {frac:.3f} | {ft:.3f} | {lo:.3f} - {hi:.3f} "
-                    f"| {np.median(cov.redchi):.2f} |")
-        print(summ[-1], flush=True)
+    with progress("settings", total=len(SETTINGS), unit="setting", delay=0) as step:
+        for title, truth, session in SETTINGS:
+            t0 = time.perf_counter()
+            cov = study(truth, session, a.seeds, a.jobs)
+            step()
+            body += section(title, cov, a.seeds, time.perf_counter() - t0)
+            frac, ft, k, lo, hi = pooled(cov)
+            summ.append(f"| {title} | {a.seeds} | {k} | {frac:.3f} | {ft:.3f} | {lo:.3f} - {hi:.3f} "
+                        f"| {np.median(cov.redchi):.2f} |")
+            print(summ[-1], flush=True)
     L += ["## Summary", ""] + summ + ["<!-- end:summary -->", ""] + body
     if a.seeds >= 40:
         write_text_atomic(OUT, "\n".join(L) + "\n")

@@ -26,7 +26,6 @@ from __future__ import annotations
 import argparse
 import math
 import multiprocessing as mp
-import sys
 import tempfile
 import time
 import zlib
@@ -301,30 +300,6 @@ def summarise(setting: Setting, recs: list[dict]) -> Summary:
                    refusal=refusal_message(setting), notes=sorted({r["error"] for r in recs if "error" in r}))
 
 
-# --- progress bar ---------------------------------------------------------------------------
-class Progress:
-    """A one-line progress bar on stderr (no dependency)."""
-
-    def __init__(self, total: int, label: str = "") -> None:
-        self.total, self.label, self.done = total, label, 0
-        self.t0 = self.last = time.perf_counter()
-
-    def update(self, k: int) -> None:
-        self.done += k
-        now = time.perf_counter()
-        if now - self.last < 0.2 and self.done < self.total:
-            return
-        self.last = now
-        frac = self.done / max(self.total, 1)
-        el = now - self.t0
-        eta = el / frac - el if frac > 0 else float("nan")
-        bar = "#" * int(30 * frac) + "." * (30 - int(30 * frac))
-        sys.stderr.write(f"\r{self.label} [{bar}] {self.done}/{self.total}  {el:5.0f} s, eta {eta:5.0f} s ")
-        if self.done >= self.total:
-            sys.stderr.write("\n")
-        sys.stderr.flush()
-
-
 # --- the study --------------------------------------------------------------------------------
 def settings_for(quick: bool) -> list[Setting]:
     if quick:
@@ -347,17 +322,19 @@ def run_study(settings: list[Setting], n: int, n_series: int, seed: int, jobs: i
         reps = list(range(n_series if s.series else int(round(n * s.weight))))
         tasks += [(i, s, reps[a:a + chunk], seed) for a in range(0, len(reps), chunk)]
     results: dict[int, list] = {i: [] for i in range(len(settings))}
-    bar = Progress(sum(len(t[2]) for t in tasks), "fits")
-    if jobs > 1:
-        with mp.get_context("fork").Pool(jobs) as pool:
-            for i, recs in pool.imap_unordered(run_chunk, tasks):
+    from imucal.report.progress import progress  # a bar on a terminal, nothing in a log
+
+    with progress("fits", total=sum(len(t[2]) for t in tasks), unit="fit") as step:
+        if jobs > 1:
+            with mp.get_context("fork").Pool(jobs) as pool:
+                for i, recs in pool.imap_unordered(run_chunk, tasks):
+                    results[i] += recs
+                    step(len(recs))
+        else:
+            for t in tasks:
+                i, recs = run_chunk(t)
                 results[i] += recs
-                bar.update(len(recs))
-    else:
-        for t in tasks:
-            i, recs = run_chunk(t)
-            results[i] += recs
-            bar.update(len(recs))
+                step(len(recs))
     return results
 
 

@@ -3,6 +3,7 @@ and the default segments are chosen by the data (imucal.gyro.lead_in)."""
 from __future__ import annotations
 
 import dataclasses
+import types
 
 import numpy as np
 import pytest
@@ -13,6 +14,7 @@ from imucal.cli.main import build_parser
 from imucal.config.run import GyroSettings, config_from_dict
 from imucal.errors import ImucalError
 from imucal.gyro import GyroOptions, fit_gyro
+from imucal.gyro import run as gyro_run
 from imucal.gyro.lead_in import LEAD_IN_S, lead_in_for
 from imucal.gyro.simulate import GyroTruth, hand_held
 
@@ -24,8 +26,9 @@ TRUTH = GyroTruth(bias=np.array([0.01, -0.02, 0.005]), scale=np.array([1.01, 0.9
 def _options_used(monkeypatch, cfg) -> GyroOptions:
     """The GyroOptions calibrate_imu hands to the gyro fit (the accelerometer fit stubbed out)."""
     seen = []
-    monkeypatch.setattr(pipeline, "calibrate", lambda config, recording=None: "run")
-    monkeypatch.setattr(pipeline, "calibrate_gyro", lambda run, gyro_file, opts: seen.append(opts))
+    run = types.SimpleNamespace(recording=types.SimpleNamespace(gyro=np.zeros((3, 3))))  # a recording with a gyro
+    monkeypatch.setattr(pipeline, "calibrate", lambda config, recording=None: run)
+    monkeypatch.setattr(gyro_run, "calibrate_gyro", lambda run, gyro_file, opts: seen.append(opts))
     pipeline.calibrate_imu(cfg)
     return seen[0]
 

@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Mapping, Sequence
+from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -441,14 +441,25 @@ def _setup(n: int, criterion: str, sensor: DesignSensor, gravity: float, free: t
     return _Scorer(criterion, len(free)), _RowMap(sensor, gravity, idx_p, sensor.column_scale(gravity)[idx_p])
 
 
+def _refined(U: np.ndarray, scorer: _Scorer, rowfn: _RowMap, step: Callable[[], None] | None):
+    """_refine, then one progress step."""
+    out = _refine(U, scorer, rowfn)
+    if step is not None:
+        step()
+    return out
+
+
 def _exchange_starts(cand: np.ndarray, n: int, scorer: _Scorer, rowfn: _RowMap, rng: np.random.Generator,
-                     starts: int, distinct: bool) -> list[tuple[float, np.ndarray]]:
+                     starts: int, distinct: bool, step: Callable[[], None] | None = None
+                     ) -> list[tuple[float, np.ndarray]]:
     rows_c = rowfn(cand)
     found = []
     for _ in range(max(1, starts)):
         start = rng.choice(cand.shape[0], size=n, replace=n > cand.shape[0])
         idx, v = _exchange(cand, rows_c, start, scorer, distinct)
         found.append((v, cand[idx]))
+        if step is not None:
+            step()
     return sorted(found, key=lambda t: -t[0])
 
 
@@ -469,13 +480,15 @@ def best_cube_subset(n: int, criterion: str = "D", noise: float = DEFAULT_NOISE,
 
 def optimal_design(n: int, criterion: str = "D", noise: float = DEFAULT_NOISE,
                    sensor: DesignSensor = DesignSensor(), gravity: float = STANDARD_GRAVITY,
-                   free: Sequence[str] = BASE_NAMES, seed: int = 0, starts: int = 6, grid: int = 600) -> Design:
+                   free: Sequence[str] = BASE_NAMES, seed: int = 0, starts: int = 6, grid: int = 600,
+                   progress: Callable[[], None] | None = None) -> Design:
     """N poses maximising the information on the free parameters.
 
     Coordinate exchange from ``starts`` seeded random subsets of a Fibonacci grid (plus the 26 cube
     directions); the common schemes with N poses and the best N-subset of the cube directions join
     as starting designs; the best three are polished by a pattern search on the sphere. The result
-    therefore never scores below those schemes.
+    therefore never scores below those schemes. ``progress`` is called after each start and each
+    polish (``starts`` + 3 calls; imucal.report.progress).
     """
 
     free = tuple(free)
@@ -484,7 +497,7 @@ def optimal_design(n: int, criterion: str = "D", noise: float = DEFAULT_NOISE,
     check_count(grid, "grid", 1, MAX_DESIGN_GRID)
     rng = np.random.default_rng(check_seed(seed))
     cand = np.vstack([cube_directions("faces+edges+corners"), fibonacci_sphere(grid)])
-    found = _exchange_starts(cand, n, scorer, rowfn, rng, starts, distinct=False)
+    found = _exchange_starts(cand, n, scorer, rowfn, rng, starts, distinct=False, step=progress)
     seeds = [scheme_directions(k) for k, m in SCHEMES.items() if m == n]
     if n <= 26:
         seeds.append(best_cube_subset(n, criterion, noise, sensor, gravity, free, seed=seed).directions)
@@ -493,7 +506,7 @@ def optimal_design(n: int, criterion: str = "D", noise: float = DEFAULT_NOISE,
         found.append((scorer.score(R.T @ R), U))
     found.sort(key=lambda t: -t[0])
     # polish the three best off the grid; refinement only improves a design
-    best_u, _ = max((_refine(U, scorer, rowfn) for _, U in found[:3]), key=lambda t: t[1])
+    best_u, _ = max((_refined(U, scorer, rowfn, progress) for _, U in found[:3]), key=lambda t: t[1])
     d = evaluate(best_u, criterion, noise, sensor, gravity, free, label=f"planned-{criterion}",
                  check_distinct=False)
     return Design(**{**d.__dict__, "meta": {"seed": seed, "starts": starts, "grid": grid}})

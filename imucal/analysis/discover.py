@@ -36,7 +36,7 @@ import dataclasses
 import itertools
 import math
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -325,7 +325,8 @@ def _p_noise(res: FitResult) -> float:
 class _Problem:
     """The fixed parts of one discovery: data, template config, and the fits it makes."""
 
-    def __init__(self, config: RunConfig, base: CalibrationRun) -> None:
+    def __init__(self, config: RunConfig, base: CalibrationRun, step: Callable[[], None] | None = None) -> None:
+        self.step = step or (lambda: None)  #: called after every fit (a progress bar, imucal.report.progress)
         self.config = config
         self.run = base
         self.iv = base.intervals
@@ -348,7 +349,9 @@ class _Problem:
 
     def fit(self, effects: list[AxisEffect], start: dict[str, float]) -> FitResult:
         model, params = self.parameters(effects, start)
-        return fit(self.data(model), params, model, self.gravity, source=self.rec.source)
+        res = fit(self.data(model), params, model, self.gravity, source=self.rec.source)
+        self.step()
+        return res
 
 
 def _screen(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]],
@@ -659,8 +662,11 @@ def _simplify(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[i
     return current, cur_effects, found_names
 
 
-def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings()) -> Discovery:
-    """Fit the base model, test its residual against the noise, add effects while they are needed."""
+def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings(),
+             progress: Callable[[], None] | None = None) -> Discovery:
+    """Fit the base model, test its residual against the noise, add effects while they are needed.
+
+    ``progress`` is called after every candidate fit (imucal.report.progress)."""
     notes: list[str] = []
     if config.fit.weights == "auto":  # discovery tests the residual against the noise alone
         config = dataclasses.replace(config, fit=dataclasses.replace(config.fit, weights="noise"))
@@ -674,7 +680,7 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings())
             raise
         raise ImucalError(f"discover fits interval means: {exc.message}", file=exc.file, field=exc.field,
                           fix="record more static orientations (e.g. 18 to 30 holds of 3 s)") from None
-    prob = _Problem(config, base)
+    prob = _Problem(config, base, progress)
     iv, src = base.intervals, base.recording.source
     names = _testable(list(settings.candidates), iv, src, notes)
     n_free0 = len(base.result.free_names)

@@ -5,6 +5,7 @@ import hashlib
 import io
 import math
 import os
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -13,6 +14,7 @@ import numpy as np
 
 from imucal.constants import GYRO_UNIT_CHOICES, TIME_UNIT_CHOICES, TIME_UNITS
 from imucal.errors import ImucalError, short
+from imucal.solve.stats import median
 from imucal.data.rosbag import is_bag, read_bag
 from imucal.files.inputs import max_data_bytes, open_regular
 from imucal.model.channels import ACCELERATION, ANGULAR_RATE, TEMPERATURE, TIME, Channel
@@ -269,10 +271,13 @@ def parse_block(lines: list[str], first_lineno: int, delimiter: str | None, usec
     if not any(ln.strip() and not ln.lstrip().startswith("#") for ln in lines):
         raise ImucalError("has no data rows", file=str(path), field="data",
                           fix="record samples after the header")
+    text = "\n".join(lines)
+    count = data_line_count(lines, text)
+    buf = io.StringIO(text)
+    del text  # the buffer holds its own copy: one copy of the text at a time
     try:
-        arr = np.loadtxt(io.StringIO("\n".join(lines)), delimiter=delimiter, usecols=usecols,
-                         ndmin=2, dtype=float, comments="#")
-        if arr.shape[0] == len([ln for ln in lines if ln.strip() and not ln.lstrip().startswith("#")]):
+        arr = np.loadtxt(buf, delimiter=delimiter, usecols=usecols, ndmin=2, dtype=float, comments="#")
+        if arr.shape[0] == count:
             bad = ~np.isfinite(arr).all(axis=1)
             if bad.any():
                 k = int(np.flatnonzero(bad)[0])
@@ -286,6 +291,24 @@ def parse_block(lines: list[str], first_lineno: int, delimiter: str | None, usec
         pass
     check_lines(lines, first_lineno, delimiter, usecols, path)
     raise unparsed(path)
+
+
+#: A line of nothing but whitespace (what str.strip removes, which is what \s matches), in lines
+#: joined by "\n".
+_BLANK_LINE = re.compile(r"\n[^\S\n]*\n")
+
+
+def data_line_count(lines: list[str], text: str) -> int:
+    """How many of ``lines`` (``text`` = the lines joined by "\\n") are neither blank nor comments.
+
+    Without a "#" or a blank line in the text every line counts, found by scans in C rather than
+    a Python test of each line.
+    """
+    if not lines:
+        return 0
+    if "#" not in text and lines[0].strip() and lines[-1].strip() and not _BLANK_LINE.search(text):
+        return len(lines)
+    return sum(1 for ln in lines if ln.strip() and not ln.lstrip().startswith("#"))
 
 
 def unparsed(path: Path) -> ImucalError:
@@ -385,7 +408,7 @@ def _no_header_layout(ncol: int, path: Path) -> dict[str, int]:
 
 def infer_time_unit(stamps: np.ndarray) -> tuple[str, str]:
     """The unit (s, ms, us, ns) of time stamps and a sentence saying why (see time_unit_from_step)."""
-    dt = float(np.median(np.diff(stamps))) if stamps.size > 1 else float("nan")
+    dt = median(np.diff(stamps)) if stamps.size > 1 else float("nan")
     head = stamps[:TIME_HEAD_ROWS]
     return time_unit_from_step(dt, float(stamps[0]) if stamps.size else float("nan"),
                                bool(np.all(head == np.round(head))))

@@ -15,6 +15,7 @@ import numpy as np
 
 from imucal.errors import ImucalError, short
 from imucal.files.schema import rule
+from imucal.solve.stats import median
 
 #: Batches per interval for the batch-means estimate of a mean's noise.
 _BATCHES = 8
@@ -382,7 +383,7 @@ def _on_rail(frac: np.ndarray, scatter: np.ndarray, j: int) -> np.ndarray:
     if not cand.any():
         return cand
     pool = scatter[~cand, j] if (~cand).any() else np.delete(scatter, j, axis=1).ravel()
-    ref = float(np.median(pool))
+    ref = median(pool)
     return cand & (scatter[:, j] <= SATURATION_STD_RATIO * ref) & (ref > 0)
 
 
@@ -435,7 +436,7 @@ def intervals_from(segs: list[Segment], threshold: float, q: float, settings: St
     std = np.array([g.std for g in segs]).reshape(k, 3)
     ratios = [r for g in segs for r in g.ratios]
     # Pooled over all intervals and axes: robust to the few degrees of freedom per interval.
-    inflation = float(max(1.0, np.median(ratios))) if ratios else 1.0
+    inflation = max(1.0, median(ratios)) if ratios else 1.0
     nn = (end - start)[:, None].astype(float)
     var_mean = std**2 / nn * inflation
     if q > 0:
@@ -469,7 +470,7 @@ def detect_static(t: np.ndarray, raw: np.ndarray, settings: StaticSettings = Sta
     if n < 3:
         raise ImucalError(f"only {n} samples", file=source, field="data",
                           fix="record several seconds in each orientation")
-    dt = float(np.median(np.diff(t)))
+    dt = median(np.diff(t))
     mv = MovingVariance(window_samples(settings, dt))
     mv.add(np.asarray(raw, float))
     var = mv.finish()

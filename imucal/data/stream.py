@@ -34,7 +34,9 @@ from imucal.data.static import (QUANTUM_ROWS, Intervals, MovingVariance, Segment
                                 auto_threshold, candidate_runs, intervals_from, quantum, segment, window_samples)
 from imucal.data.rosbag import is_bag
 from imucal.errors import ImucalError
+from imucal.solve.stats import median
 from imucal.files.inputs import open_regular
+from imucal.report.progress import progress
 
 #: Recordings above this size are read in chunks when data.stream is "auto" [bytes].
 STREAM_BYTES = 64 * 1024**2
@@ -189,7 +191,8 @@ class _File:
         left in ``self.sha`` when ``hash_it``."""
         h = hashlib.sha256() if hash_it else None
         at = self.offset
-        with self._open() as f:
+        shown = progress(f"reading {self.path.name}", total=self.stamp[0], unit="B", scale=True)
+        with self._open() as f, shown as step:
             if h is not None:
                 h.update(f.read(self.offset))
             else:
@@ -197,6 +200,7 @@ class _File:
             carry = b""
             while True:
                 data = f.read(CHUNK_BYTES)
+                step(len(data))  # a bar on a terminal (imucal.report.progress)
                 if h is not None:
                     h.update(data)
                 if not data:
@@ -429,7 +433,7 @@ class StreamedRecording:
         t = self._times(arr, st.n, st.unit, st.t_first)
         st.t_steps.add(t)
         if st.w is None:
-            st.w = window_samples(self.settings, float(np.median(np.diff(t)))) if t.size > 1 else 3
+            st.w = window_samples(self.settings, median(np.diff(t))) if t.size > 1 else 3
         if st.mv is None:
             st.mv = MovingVariance(st.w)
         raw = self._raw(arr)
@@ -552,7 +556,7 @@ class StreamedRecording:
 
 
 def _infer(stamps: np.ndarray, head: np.ndarray) -> tuple[str, str]:
-    dt = float(np.median(np.diff(stamps))) if stamps.size > 1 else float("nan")
+    dt = median(np.diff(stamps)) if stamps.size > 1 else float("nan")
     return time_unit_from_step(dt, float(stamps[0]), bool(np.all(head == np.round(head))))
 
 

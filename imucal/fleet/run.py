@@ -18,7 +18,6 @@ import json
 import multiprocessing
 import os
 import signal
-import sys
 import time
 from pathlib import Path
 from typing import Any, Callable, Iterator
@@ -27,6 +26,7 @@ from imucal.errors import ImucalError, short
 from imucal.files.inputs import max_data_bytes, open_regular, read_input_text
 from imucal.files.output import OutputSet, write_json_atomic
 from imucal.fleet.manifest import Manifest, Unit
+from imucal.report.progress import progress
 from imucal.report.run_files import calibrate_files, stage_files
 
 DONE_FILE, SUMMARY_FILE = "done.json", "summary.json"
@@ -183,20 +183,12 @@ def run_units(manifest: Manifest, out: str | Path, pool: cf.Executor,
 
 @contextlib.contextmanager
 def progress_bar(total: int, enabled: bool | None = None) -> Iterator[Callable[[dict], None]]:
-    """A progress callback: a tqdm bar on stderr when it is a terminal, else nothing."""
-    from tqdm import tqdm
-
-    show = sys.stderr.isatty() if enabled is None else enabled
-    bar = tqdm(total=total, unit="unit", file=sys.stderr, disable=not show, dynamic_ncols=True)
+    """A progress callback: the terminal-only bar (imucal.report.progress) counting units and failures."""
     failed = 0
+    with progress("units", total=total, unit="unit", enabled=enabled, delay=0, leave=True) as step:
+        def on_unit(rec: dict) -> None:
+            nonlocal failed
+            failed += rec["status"] != OK
+            step(1, note=f"{failed} not ok")
 
-    def step(rec: dict) -> None:
-        nonlocal failed
-        failed += rec["status"] != OK
-        bar.set_postfix_str(f"{failed} not ok", refresh=False)
-        bar.update(1)
-
-    try:
-        yield step
-    finally:
-        bar.close()
+        yield on_unit

@@ -12,16 +12,18 @@ import html
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable, Mapping
+from typing import TYPE_CHECKING, Iterable, Mapping
 
 import numpy as np
 
-from imucal.analysis.discover import Discovery
 from imucal.pipeline import POOR_FIT_P, POOR_FIT_REDCHI, CalibrationRun
 from imucal.report.text import interval_residuals, t_quantile_975
 from imucal.solve.stats import chi2_sf
 from imucal import __version__
 import io
+
+if TYPE_CHECKING:  # discovery pages only: `imucal calibrate` does not import the discovery modules
+    from imucal.analysis.discover import Discovery
 
 #: No network, no scripts: images only from data: URLs, styles only inline.
 CSP = "default-src 'none'; img-src data:; style-src 'unsafe-inline'"

@@ -10,16 +10,19 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from imucal.config.run import RunConfig
 from imucal.data.stream import has_gyro, use_stream
 from imucal.errors import ImucalError
 from imucal.files.output import OutputSet
-from imucal.gyro.result import GyroResult
 from imucal.pipeline import CalibrationRun, calibrate_imu
 from imucal.report.figures import FIGURES
 from imucal.report.html import calibration_html, render_png
 from imucal.report.text import fit_report, summary
+
+if TYPE_CHECKING:
+    from imucal.gyro.result import GyroResult
 
 CALIBRATION_FILE, REPORT_FILE, HTML_FILE = "calibration.yaml", "report.txt", "report.html"
 

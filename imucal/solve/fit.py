@@ -21,6 +21,7 @@ from imucal.solve.stats import between_excess, chi2_sf
 from imucal.errors import ImucalError
 from imucal.model.sensor import SensorModel
 from imucal.model.parameters import Parameters, model_label
+from imucal.report.progress import progress
 
 _STATUS_WORDS, _CONVERGED = ipopt.STATUS_WORDS, ipopt.CONVERGED
 #: weights="auto": the noise-only chi-square test at which a between-interval excess is used.
@@ -162,27 +163,30 @@ def fit(data: FitData, params: Parameters, model: SensorModel, gravity: float,
     # (and, with weights="auto", until the between-interval excess settles). With a bias random
     # walk the rows are correlated: V = diag(sigma0^2 + excess) + q^2 K_W, and the fit is generalised
     # least squares (rows whitened by L^-1, V = L L^T).
-    while True:
-        sigma0 = lsq.noise_sigma(fns, rows, data.raw_var, p_now, pfix, gravity, weights)
-        sigma, W, white = _weights(fns, rows, data, params, p_now, pfix, gravity, sigma0, excess, q2)
-        R = lsq.weighted_r_factor(fns, rows, sigma if white is None else white, p_now, pfix, gravity)
-        d = _step_scale(R, scale)  # p = p0 + d * x
-        problem = lsq.Problem(fns, rows, W, pfix, gravity, p_now, d, exact=hessian == "exact")
-        x, stats = lsq.solve(problem, (lo - p_now) / d, (hi - p_now) / d)
-        iters += int(stats.get("iter_count", 0))
-        p_now = np.clip(p_now + d * x, lo, hi)
-        passes += 1
-        if passes < 2:
-            continue
-        if weights != "auto" or data.mode != "means" or dof < 1 or passes >= MAX_PASSES:
-            break
-        r0 = lsq.residuals(fns, rows, p_now, pfix, gravity)
-        s0 = lsq.noise_sigma(fns, rows, data.raw_var, p_now, pfix, gravity, weights)
-        new, new_q2, sto = _excess(fns, rows, data, params, p_now, pfix, gravity, r0, s0, dof)
-        if (abs(new - excess) <= 1e-4 * max(new, excess) and abs(new_q2 - q2) <= 1e-4 * max(new_q2, q2)) or (
-                new == 0.0 and excess == 0.0 and new_q2 == 0.0 and q2 == 0.0):
-            break
-        excess, q2 = new, new_q2
+    # samples mode: a terminal shows its passes over the samples (imucal.report.progress)
+    shown = None if data.mode == "samples" else False
+    with progress(f"samples fit ({n:,} samples)", unit="pass", enabled=shown) as step:
+        while True:
+            sigma0 = lsq.noise_sigma(fns, rows, data.raw_var, p_now, pfix, gravity, weights)
+            sigma, W, white = _weights(fns, rows, data, params, p_now, pfix, gravity, sigma0, excess, q2)
+            R = lsq.weighted_r_factor(fns, rows, sigma if white is None else white, p_now, pfix, gravity)
+            d = _step_scale(R, scale)  # p = p0 + d * x
+            problem = lsq.Problem(fns, rows, W, pfix, gravity, p_now, d, exact=hessian == "exact", step=step)
+            x, stats = lsq.solve(problem, (lo - p_now) / d, (hi - p_now) / d)
+            iters += int(stats.get("iter_count", 0))
+            p_now = np.clip(p_now + d * x, lo, hi)
+            passes += 1
+            if passes < 2:
+                continue
+            if weights != "auto" or data.mode != "means" or dof < 1 or passes >= MAX_PASSES:
+                break
+            r0 = lsq.residuals(fns, rows, p_now, pfix, gravity)
+            s0 = lsq.noise_sigma(fns, rows, data.raw_var, p_now, pfix, gravity, weights)
+            new, new_q2, sto = _excess(fns, rows, data, params, p_now, pfix, gravity, r0, s0, dof)
+            if (abs(new - excess) <= 1e-4 * max(new, excess) and abs(new_q2 - q2) <= 1e-4 * max(new_q2, q2)) or (
+                    new == 0.0 and excess == 0.0 and new_q2 == 0.0 and q2 == 0.0):
+                break
+            excess, q2 = new, new_q2
     solve_time = time.perf_counter() - t0
     status = str(stats.get("return_status", "unknown"))
     pfree = p_now

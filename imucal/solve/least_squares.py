@@ -16,6 +16,7 @@ takes this path with the one option set of imucal.solve.ipopt.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -24,6 +25,7 @@ import numpy as np
 
 from imucal.model.sensor import SensorModel
 from imucal.solve import ipopt
+from imucal.solve.stats import median
 from imucal.solve.vectorize import Vectorized
 
 #: Rows per block: small enough for the temporaries to stay in the CPU cache (measured fastest
@@ -112,9 +114,9 @@ def noise_sigma(fns: RowFunctions, rows: Rows, raw_var: np.ndarray, pfree, pfix,
     for sl, raw, cov in rows.blocks():
         Jraw = fns.derivatives(raw, cov, pfree, pfix, [g])[2]
         s[sl] = np.sqrt(np.sum(Jraw**2 * raw_var[sl].T, axis=0))
-    floor = max(float(np.median(s)) * 1e-3, 1e-12)
+    floor = max(median(s) * 1e-3, 1e-12)
     if weights == "uniform":
-        return np.full_like(s, max(float(np.median(s)), floor))
+        return np.full_like(s, max(median(s), floor))
     return np.maximum(s, floor)
 
 
@@ -167,9 +169,11 @@ class Problem:
     """One weighted least-squares problem in scaled unknowns x: pfree = off + scale * x."""
 
     def __init__(self, fns: RowFunctions, rows: Rows, w: np.ndarray, pfix: np.ndarray, gravity: float,
-                 off: np.ndarray, scale: np.ndarray, exact: bool = False) -> None:
+                 off: np.ndarray, scale: np.ndarray, exact: bool = False,
+                 step: Callable[[], None] | None = None) -> None:
         self.fns, self.rows, self.w, self.pfix, self.g = fns, rows, w, pfix, gravity
         self.off, self.scale, self.exact = off, scale, exact
+        self.step = step  #: called after every pass over the rows (a progress bar, imucal.report.progress)
         self._key: bytes | None = None
         self._val: tuple = ()
 
@@ -181,17 +185,23 @@ class Problem:
         return self.off + self.scale * np.asarray(x, float).ravel()
 
     def value(self, x) -> float:
-        if self._key == np.asarray(x, float).tobytes():
+        x = np.asarray(x, float)  # IPOPT's point arrives as a CasADi DM: converted once
+        if self._key == x.tobytes():
             return self._val[0]
         r = residuals(self.fns, self.rows, self.p_of(x), self.pfix, self.g)
+        if self.step is not None:
+            self.step()
         return 0.5 * float(r @ (self.w @ r if self.w.ndim == 2 else self.w * r))
 
     def derivatives(self, x) -> tuple[float, np.ndarray, np.ndarray]:
         """f, grad and Hessian in x; IPOPT asks them at the same point: computed once."""
-        key = np.asarray(x, float).tobytes()
+        x = np.asarray(x, float)
+        key = x.tobytes()
         if self._key != key:
             f, g, H = normal_equations(self.fns, self.rows, self.w, self.p_of(x), self.pfix, self.g,
                                        self.exact)
+            if self.step is not None:
+                self.step()
             self._key, self._val = key, (f, g * self.scale, H * np.outer(self.scale, self.scale))
         return self._val
 

@@ -5,6 +5,26 @@ import math
 import numpy as np
 
 
+def median(x) -> float:
+    """``float(np.median(x))``, bit for bit, without numpy.ma.
+
+    np.median's NaN check imports numpy.ma on its first call: about 9 ms of CPU, a twentieth of
+    `imucal calibrate`'s own start-up (python -X importtime). The same middle order statistics,
+    by np.partition in the input's float type (the mean of the two middle values of an even
+    count summed in that type, as np.mean does); NaN when any value is NaN or there is none.
+    """
+    a = np.asarray(x)
+    a = (a if a.dtype.kind == "f" else a.astype(float)).ravel()
+    n = a.size
+    if n == 0 or np.isnan(a).any():
+        return float("nan")
+    k = n // 2
+    if n % 2:
+        return float(np.partition(a, k)[k])
+    p = np.partition(a, (k - 1, k))
+    return float((p[k - 1] + p[k]) / 2)
+
+
 def chi2_sf(x: float, k: int) -> float:
     """P(chi-square(k) > x) for integer k >= 1, in closed form (log-space sums)."""
     if k < 1:

@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from imucal.solve import least_squares as lsq
-from imucal.solve.stats import chi2_sf
+from imucal.solve.stats import chi2_sf, median
 
 INSTABILITY, RANDOM_WALK = "bias_instability", "bias_random_walk"
 MODELS = ("none", INSTABILITY, RANDOM_WALK, "both")
@@ -113,7 +113,7 @@ def fit_model(c: Components, name: str, ml: bool = False) -> ModelFit:
     """Maximise the REML (or, ``ml``, the full) likelihood over the model's free components (>= 0):
     log grid, then Fisher scoring."""
     free = np.array(_FREE[name])
-    s2 = float(np.median(c.sigma**2))
+    s2 = median(c.sigma**2)
     scale = np.array([s2, s2 / max(float(np.max(c.t)), 1e-9)])
     if not free.any():
         return ModelFit(name, 0.0, 0.0, reml(c, 0.0, 0.0, ml=ml)[0], np.zeros((2, 2)))

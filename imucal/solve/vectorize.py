@@ -89,18 +89,20 @@ class Vectorized:
         self._run: Callable = namespace["_generated"]
         self._dense = [(f.sparsity_out(k).row(), f.sparsity_out(k).get_col(), f.size1_out(k))
                        for k in range(f.n_out())]
+        # sizes read once: the evaluator runs hundreds of times per fit (each CasADi query is a call)
+        self._nnz_in = [f.nnz_in(k) for k in range(f.n_in())]
+        self._numel_out = [f.numel_out(k) for k in range(f.n_out())]
 
     def __call__(self, *args: np.ndarray | Sequence[float]) -> list[np.ndarray]:
-        f = self.function
         ins = [np.asarray(a, float) for a in args]
-        ins = [a if a.ndim == 2 else a.reshape(f.nnz_in(k)) for k, a in enumerate(ins)]
+        ins = [a if a.ndim == 2 else a.reshape(self._nnz_in[k]) for k, a in enumerate(ins)]
         n = max((a.shape[1] for a in ins if a.ndim == 2), default=None)
         with np.errstate(all="ignore"):
             raw = self._run(*[list(a) for a in ins])
         res = []
         for k, nz in enumerate(raw):
             rows, cols, n1 = self._dense[k]
-            out = np.zeros((f.numel_out(k),) + ((n,) if n is not None else ()))
+            out = np.zeros((self._numel_out[k],) + ((n,) if n is not None else ()))
             for v, i, j in zip(nz, rows, cols):
                 out[i + j * n1] = v
             res.append(out)

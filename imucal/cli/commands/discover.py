@@ -48,6 +48,7 @@ def run(args: argparse.Namespace) -> int:
     from imucal.files.output import OutputSet, check_outputs
     from imucal.report.discover_figures import FIGURES
     from imucal.report.html import discovery_html, render_png
+    from imucal.report.progress import progress
 
     cfg = _config(args)
     inputs = [args.config, options.data_path(cfg)]
@@ -58,7 +59,8 @@ def run(args: argparse.Namespace) -> int:
     check_outputs(inputs, [args.json, *plot_names, *outs, page_path])
     settings = DiscoverSettings(candidates=tuple(args.candidates or EFFECTS), alpha_noise=args.alpha,
                                 alpha_effect=args.alpha, max_effects=args.max_effects)
-    result = discover(cfg, settings)
+    with progress("discover", unit="fit") as step:  # a bar on a terminal only
+        result = discover(cfg, settings, step)
     text = result.report()
     written = []
     pngs = {name: render_png(fn, result) for name, fn in FIGURES.items()} if page_dir else {}

@@ -75,6 +75,7 @@ def format_design(design, comparison=None) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from imucal.report.progress import progress
     from imucal.analysis.design import (BASE_NAMES, DEFAULT_NOISE, SIX_NAMES, compare, evaluate, optimal_design,
                           scheme_directions)
     from imucal.errors import ImucalError
@@ -97,7 +98,8 @@ def run(args: argparse.Namespace) -> int:
         label = args.evaluate or args.scheme
         design = evaluate(dirs, args.criterion, noise, free=free, label=label)
     else:
-        design = optimal_design(args.n, args.criterion, noise, free=free, seed=args.seed)
+        with progress("plan-poses: exchange starts and polish", unit="step") as step:  # on a terminal only
+            design = optimal_design(args.n, args.criterion, noise, free=free, seed=args.seed, progress=step)
     comp = None if args.no_compare else compare(design, seed=args.seed)
     print(format_design(design, comp))
     insts = instructions(design.directions)

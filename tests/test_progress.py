@@ -1,0 +1,86 @@
+"""Progress bars (imucal.report.progress): a bar on a terminal, nothing (and no tqdm) otherwise."""
+from __future__ import annotations
+
+import fcntl
+import json
+import os
+import pty
+import struct
+import subprocess
+import sys
+import termios
+from pathlib import Path
+
+import numpy as np
+
+from imucal.report.progress import progress
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_quiet_when_stderr_is_not_a_terminal(capsys) -> None:
+    with progress("work", total=3, delay=0) as step:  # pytest captures stderr: not a terminal
+        for _ in range(3):
+            step(note="x")
+    assert capsys.readouterr().err == ""
+
+
+def test_every_hooked_path_is_silent_and_imports_no_tqdm_off_a_terminal(tmp_path: Path) -> None:
+    """Samples mode (fit and a file read in chunks), plan-poses' design and discover's fits, with
+    stderr a pipe: nothing on stderr, tqdm never imported."""
+    code = f"""
+import json, sys
+import numpy as np
+from imucal.analysis.design import optimal_design
+from imucal.config.run import config_from_dict
+from imucal.pipeline import calibrate
+steps = []
+optimal_design(9, progress=lambda: steps.append(1))
+cfg = config_from_dict({{"data": {{"path": {str(ROOT / "data" / "xsens-mti-imutk" / "xsens_acc.mat")!r},
+                                  "stream": "always"}}, "gravity": {{"value": 9.81744}}, "fit": {{"mode": "samples"}}}})
+run = calibrate(cfg)
+print(json.dumps([len(steps), run.result.mode, "tqdm" in sys.modules]))
+"""
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, timeout=300,
+                       env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert p.returncode == 0, p.stderr
+    n_steps, mode, tqdm_loaded = json.loads(p.stdout.strip().splitlines()[-1])
+    assert n_steps == 6 + 3  # the default 6 exchange starts and 3 polished designs
+    assert mode == "samples" and not tqdm_loaded
+    assert p.stderr == ""
+
+
+def test_bar_appears_on_a_pseudo_terminal() -> None:
+    code = ("from imucal.report.progress import progress\n"
+            "with progress('hooked work', total=3, unit='fit', delay=0, leave=True) as step:\n"
+            "    for _ in range(3):\n        step(note='0 failed')\n")
+    pid, fd = pty.fork()
+    if pid == 0:  # child: stdin, stdout and stderr are the pseudo-terminal, 100 columns wide
+        fcntl.ioctl(0, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))
+        os.environ["PYTHONPATH"] = str(ROOT)
+        os.execv(sys.executable, [sys.executable, "-c", code])
+    out = b""
+    while True:
+        try:
+            chunk = os.read(fd, 4096)
+        except OSError:  # the child closed the terminal
+            break
+        if not chunk:
+            break
+        out += chunk
+    _, status = os.waitpid(pid, 0)
+    text = out.decode(errors="replace")
+    assert os.WEXITSTATUS(status) == 0, text
+    assert "hooked work" in text and "3/3" in text and "0 failed" in text
+
+
+def test_discover_calls_its_hook_once_per_fit() -> None:
+    from imucal.analysis.discover import DiscoverSettings, discover
+    from imucal.config.run import config_from_dict
+
+    calls = []
+    cfg = config_from_dict({"data": {"path": str(ROOT / "data" / "xsens-mti-imutk" / "xsens_acc.mat")},
+                            "gravity": {"value": 9.81744}})
+    d = discover(cfg, DiscoverSettings(candidates=("bias_drift",), max_effects=1), lambda: calls.append(1))
+    fitted = sum(1 for s in d.steps for c in s.candidates if np.isfinite(getattr(c, "chi2", np.nan)))
+    assert len(calls) >= 1 and len(calls) >= fitted

@@ -1,0 +1,56 @@
+"""Start-up of `imucal calibrate` (issue 13: the shipped Xsens run under 0.25 s): the modules a run
+without a gyroscope, figures or chunked reading does not need stay unimported, and the shortcuts
+taken for speed give what the long forms give."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from imucal.data.load import data_line_count
+from imucal.solve.stats import median
+
+ROOT = Path(__file__).resolve().parents[1]
+XSENS = ROOT / "data" / "xsens-mti-imutk" / "xsens_acc.mat"
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32, np.int64])
+def test_median_is_numpy_median_bit_for_bit(dtype) -> None:
+    rng = np.random.default_rng(3)
+    for n in [*range(1, 30), 1000, 1001, 65536, 65537]:
+        for x in ((rng.normal(size=n) * 1e3).astype(dtype), rng.integers(0, 3, n).astype(dtype)):
+            assert median(x) == float(np.median(x))
+            assert isinstance(median(x), float)
+    assert median([1.0, float("nan"), 2.0]) != median([1.0, float("nan"), 2.0])  # NaN, as np.median
+    assert median([]) != median([])
+
+
+def _slow_count(lines: list[str]) -> int:
+    return sum(1 for ln in lines if ln.strip() and not ln.lstrip().startswith("#"))
+
+
+@pytest.mark.parametrize("lines", [
+    ["1 2 3 4"] * 5, ["1 2 3 4", "", "5 6 7 8"], ["", "1 2"], ["1 2", ""], ["  ", "1 2"], ["1 2", " \t "],
+    ["# c", "1 2"], ["1 2 # tail", "3 4"], ["  # c", "1 2"], ["1 2", "\xa0", "3 4"], ["1 2", "\u3000\x0c"],
+    ["1 2", "\x0b"], [""], [" "], [], ["1,2;3", "4,5;6"],
+])
+def test_data_line_count_agrees_with_the_line_by_line_test(lines: list[str]) -> None:
+    assert data_line_count(lines, "\n".join(lines)) == _slow_count(lines)
+
+
+def test_calibrate_imports_only_what_it_uses(tmp_path: Path) -> None:
+    code = ("import json, sys\nfrom imucal.cli.main import main\n"
+            f"rc = main(['calibrate', '--data', {str(XSENS)!r}, '--gravity', '9.81744', '--out', {str(tmp_path)!r}, "
+            "'--no-figures', '--quiet'])\nprint(json.dumps([rc, sorted(sys.modules)]))")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path,
+                       env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=120)
+    rc, mods = json.loads(p.stdout.strip().splitlines()[-1])
+    assert rc == 0, p.stderr
+    unused = {"numpy.ma", "imucal.gyro.fit", "imucal.gyro.run", "imucal.analysis.discover", "matplotlib", "pandas", "pyarrow", "tqdm"}
+    assert unused.isdisjoint(mods), unused & set(mods)
+    assert (tmp_path / "calibration.yaml").exists()
