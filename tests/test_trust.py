@@ -20,6 +20,7 @@ import pytest
 import yaml
 
 from conftest import RATE, calibrate_file, real_file, write_simulation
+from imucal.solve.ipopt import CONVERGED
 from imucal.data.load import load_recording, parse_columns
 from imucal.errors import EXIT_INTERNAL, ImucalError
 from imucal.analysis.simulate import SensorSpec, cube_directions
@@ -264,7 +265,7 @@ def test_poor_fit_warns_with_the_command_that_investigates(run_cli, tmp_path):
     assert "imucal: warning: reduced chi-square 8.13 against the noise (29 dof" in r2.err
     assert "bias_instability" not in r2.err
     assert yaml.safe_load((tmp_path / "o" / "calibration.yaml").read_text())["fit"]["warnings"] == w
-    assert json.loads(js.read_text())["solver_status"] == "Solve_Succeeded"
+    assert json.loads(js.read_text())["solver_status"] in CONVERGED
 
 
 def test_clean_fit_has_no_warning(si_run):
@@ -290,7 +291,7 @@ def test_the_unit_of_the_readings_does_not_change_the_answer(tmp_path, factor):
     ref = calibrate_file(real_file(*XSENS), gravity={"value": 9.81744}).result
     src = save(tmp_path / "k.txt", np.column_stack([d[:, 0], d[:, 1:] * factor]))
     res = calibrate_file(src, gravity={"value": 9.81744}).result
-    assert res.success and res.status == ref.status
+    assert res.success and res.status in CONVERGED and ref.status in CONVERGED  # which criterion stops IPOPT may differ
     for n, p in ref.params.items():
         k = factor if n[0] in "sb" else 1.0
         assert res.params[n].value / k == pytest.approx(p.value, rel=1e-9), n
