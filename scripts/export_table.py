@@ -35,8 +35,9 @@ from imucal.config.run import load_config  # noqa: E402
 from imucal.data.load import load_recording  # noqa: E402
 from imucal.data.static import detect_static  # noqa: E402
 from imucal.export.autopilot import gyro_fit  # noqa: E402
-from imucal.export.formats import FORMATS, ExportOptions, export  # noqa: E402
-from imucal.export.peers import read_imutk_calib, read_peer  # noqa: E402
+from imucal.export.formats import ExportOptions  # noqa: E402
+from imucal.export.peers import read_imutk_calib  # noqa: E402
+from imucal.export.registry import FORMATS, export, read_peer  # noqa: E402
 from imucal.gyro.run import gyro_on_accel_samples  # noqa: E402
 from imucal.files.output import write_text_atomic  # noqa: E402
 from imucal.model.effects import make_effect  # noqa: E402

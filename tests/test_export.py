@@ -10,7 +10,7 @@ import pytest
 from conftest import calibrate_file, real_file
 from imucal.calibration.frozen import Calibration
 from imucal.model.effects import make_effect
-from imucal.export.formats import export_text
+from imucal.export.registry import export_text
 
 XSENS = ("xsens-mti-imutk", "xsens_acc.mat")
 
@@ -83,7 +83,7 @@ def test_cli_export_and_its_refusals(xsens, run_cli, tmp_path, unchanged):
     eff = Calibration(params=params, std={n: 0.0 for n in params}, gravity=cal.gravity,
                       effects=(("bias_drift", (0,)),), data=cal.data, created=cal.created)
     # effects are not affine: the map at their reference point is written, and the export says so
-    from imucal.export.formats import export
+    from imucal.export.registry import export
 
     out = export(eff, "imutk")
     assert out.notes == ("effects not exported: bias_drift (x); the map written is the calibration's at t = 0 s "

@@ -16,8 +16,9 @@ import yaml
 from conftest import real_file
 from imucal.calibration.gyro import GyroCalibration
 from imucal.errors import ImucalError
-from imucal.export.formats import ExportOptions, export
-from imucal.export.peers import read_imutk_calib, read_peer
+from imucal.export.formats import ExportOptions
+from imucal.export.peers import read_imutk_calib
+from imucal.export.registry import export, read_peer
 from test_export import imutk_apply
 from test_export_peers import ardupilot_apply, best_rotation, px4_apply, sphere, synthetic
 

@@ -15,8 +15,8 @@ import yaml
 from conftest import calibrate_file, real_file
 from imucal.calibration.frozen import Calibration
 from imucal.errors import ImucalError
-from imucal.export.formats import FORMATS, ExportOptions, export
-from imucal.export.peers import read_peer
+from imucal.export.formats import ExportOptions
+from imucal.export.registry import FORMATS, export, read_peer
 from imucal.model.effects import make_effect
 from imucal.model.parameters import base_parameters
 

@@ -12,8 +12,7 @@ import numpy as np
 import pytest
 
 from imucal.calibration.frozen import Calibration
-from imucal.export.formats import export
-from imucal.export.peers import read_peer
+from imucal.export.registry import export, read_peer
 from imucal.model.effects import make_effect
 from imucal.model.parameters import base_parameters
 

@@ -257,7 +257,7 @@ def test_the_good_file_of_each_reader_passes_its_schema(reader: str, tmp_path: P
     """The bad cases differ from a file the reader accepts by the one edit."""
     from imucal.analysis.plan_file import read_plan
     from imucal.analysis.simulate import load_simulation_config
-    from imucal.export.peers import read_peer
+    from imucal.export.registry import read_peer
     from imucal.export.kalibr import read_kalibr_yaml
     from imucal.fleet.manifest import manifest_from_dict
 

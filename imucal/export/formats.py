@@ -27,13 +27,11 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
 from imucal.calibration.frozen import Calibration
 from imucal.constants import SI_ACCEL_UNIT, SI_RATE_UNIT
-from imucal.errors import ImucalError
 from imucal.export.gyro import MADLAB_GYR_UNIT, forward, gsens_sentence, imutk_factors, madlab_factors
 
 
@@ -164,49 +162,3 @@ def to_matrix(cal: Calibration, opts: ExportOptions) -> Exported:
     if notes:
         d["note"] = " ".join(notes)
     return Exported(json.dumps(d, indent=2) + "\n", notes)
-
-
-def _kalibr(cal: Calibration, opts: ExportOptions) -> Exported:
-    from imucal.export.kalibr import to_kalibr
-
-    return to_kalibr(cal, opts)
-
-
-def _ardupilot(cal: Calibration, opts: ExportOptions) -> Exported:
-    from imucal.export.autopilot import to_ardupilot
-
-    return to_ardupilot(cal, opts)
-
-
-def _px4(cal: Calibration, opts: ExportOptions) -> Exported:
-    from imucal.export.autopilot import to_px4
-
-    return to_px4(cal, opts)
-
-
-#: Format name -> (writer, what it is).
-FORMATS: dict[str, tuple[Callable[[Calibration, ExportOptions], Exported], str]] = {
-    "imutk": (to_imutk, "imu_tk .calib text (a = T K (raw - b)); the gyroscope in a second .calib"),
-    "madlab": (to_madlab, "mad-lab-fau/imucal Ferraris JSON 2.0 (a = R_a^-1 K_a^-1 (raw - b_a), "
-                          "gyr = R_g^-1 K_g^-1 (raw_g - K_ga a - b_g))"),
-    "matrix": (to_matrix, "JSON matrix and offset (a = matrix raw + offset; omega = matrix raw_g + offset - "
-                          "acc_matrix a); CSV when the file ends in .csv"),
-    "kalibr": (_kalibr, "Kalibr imu.yaml, scale-misalignment intrinsics (raw = M a + bias; "
-                        "raw_g = M C_gyro_i omega + A C_gyro_i a + bias)"),
-    "ardupilot": (_ardupilot, "ArduPilot parameters INS_ACCOFFS/INS_ACCSCAL (a = (raw - offset) * scale), "
-                              "INS_GYROFFS (omega = reading - offset)"),
-    "px4": (_px4, "PX4 parameters CAL_ACC0_*OFF/*SCALE (a = (raw - offset) * scale), CAL_GYRO0_*OFF "
-                  "(omega = reading - offset)"),
-}
-
-
-def export(cal: Calibration, fmt: str, opts: ExportOptions = ExportOptions()) -> Exported:
-    """The calibration in format ``fmt``, with what the format could not hold."""
-    if fmt not in FORMATS:
-        raise ImucalError(f"unknown format {fmt!r}", field="--format", fix=f"use one of {', '.join(FORMATS)}")
-    return FORMATS[fmt][0](cal, opts)
-
-
-def export_text(cal: Calibration, fmt: str, filename: str = "") -> str:
-    """The calibration's text in format ``fmt`` (see :func:`export` for the notes)."""
-    return export(cal, fmt, ExportOptions(filename=filename)).text

@@ -35,7 +35,9 @@ import numpy as np
 import yaml
 
 from imucal import __version__
+from imucal.analysis.noise import allan_deviation, estimate
 from imucal.calibration.frozen import Calibration
+from imucal.data.static import detect_static
 from imucal.errors import ImucalError, short
 from imucal.export.formats import ExportOptions, Exported, KalibrNoise, affine, dropped_effects
 from imucal.export.gyro import kalibr_factors
@@ -56,9 +58,6 @@ def still_noise(cal: Calibration, t: np.ndarray, raw: np.ndarray, rate: float,
     still, as `imucal noise` chooses), calibrated to m/s^2 and, with ``gyro_raw`` (the gyroscope on
     the same samples) and a gyroscope calibration, to rad/s; the worst axis, as Kalibr takes one
     number per sensor."""
-    from imucal.analysis.noise import allan_deviation, estimate
-    from imucal.data.static import detect_static
-
     iv = detect_static(t, raw)
     sel, what = slice(None), "the whole log"
     if iv.n and int(iv.n_samples.max()) < 0.9 * raw.shape[0]:

@@ -16,10 +16,9 @@ from __future__ import annotations
 import io
 import json
 import math
-import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Callable, Literal, Mapping
+from typing import Any, Literal, Mapping
 
 import numpy as np
 
@@ -337,62 +336,3 @@ def read_matrix(path: str | Path) -> AffineCalibration:
                                 "gyroscope.matrix")
     checked(A, c, p, "matrix", "matrix")
     return replace(checked(A, -np.linalg.solve(A, c), p, "matrix", "matrix"), gyro=gyro)  # a = A (raw - o)
-
-
-def read_kalibr(path: str | Path) -> AffineCalibration:
-    """Kalibr imu.yaml with scale-misalignment intrinsics (see imucal.export.kalibr)."""
-    from imucal.export.kalibr import read_kalibr_yaml
-
-    return read_kalibr_yaml(path)
-
-
-def read_ardupilot(path: str | Path) -> AffineCalibration:
-    from imucal.export.autopilot import read_ardupilot_params
-
-    return read_ardupilot_params(path)
-
-
-def read_px4(path: str | Path) -> AffineCalibration:
-    from imucal.export.autopilot import read_px4_params
-
-    return read_px4_params(path)
-
-
-def read_imucal(path: str | Path) -> Any:
-    """imucal's own calibration.yaml (a Calibration: applies itself, with its effects)."""
-    from imucal.calibration.fileformat import load_calibration
-
-    return load_calibration(path)
-
-
-#: Format name -> reader. The same names as the export formats, plus imucal's own file.
-READERS: dict[str, Callable[[str | Path], Any]] = {
-    "imucal": read_imucal, "imutk": read_imutk_calib, "madlab": read_madlab_calibration,
-    "matrix": read_matrix, "kalibr": read_kalibr, "ardupilot": read_ardupilot, "px4": read_px4,
-    "tomisuarez": read_tomisuarez_params,
-}
-
-_IMUCAL_TAG = re.compile(r"^format:\s*imucal-calibration\s*$", re.M)
-
-
-def guess_format(path: str | Path) -> str:
-    """The format of a calibration file from its name (and, for .yaml/.json, a look at its text)."""
-    p = str(path).lower()
-    for end, fmt in ((".calib", "imutk"), (".param", "ardupilot"), (".parm", "ardupilot"),
-                     (".params", "px4"), (".csv", "matrix")):
-        if p.endswith(end):
-            return fmt
-    if p.endswith((".yaml", ".yml")):
-        return "imucal" if _IMUCAL_TAG.search(read_input_text(path, field="calibration")) else "kalibr"
-    if p.endswith(".json"):
-        return "madlab" if '"cal_type"' in read_input_text(path, field="calibration") else "matrix"
-    raise ImucalError("cannot tell the calibration format from the file name", file=str(path), field="--format",
-                      fix=f"give --format, one of {', '.join(READERS)}")
-
-
-def read_peer(path: str | Path, fmt: str | None = None) -> Any:
-    """Any calibration file: imucal's own (a Calibration) or a peer's (an AffineCalibration)."""
-    fmt = fmt or guess_format(path)
-    if fmt not in READERS:
-        raise ImucalError(f"unknown format {short(fmt)}", field="--format", fix=f"use one of {', '.join(READERS)}")
-    return READERS[fmt](path)

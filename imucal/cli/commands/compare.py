@@ -31,7 +31,7 @@ def run(args: argparse.Namespace) -> int:
     from imucal.calibration.fileformat import load_calibration
     from imucal.data.load import load_recording, rails
     from imucal.data.static import detect_static
-    from imucal.export.peers import guess_format, read_peer
+    from imucal.export.registry import guess_format, read_peer
     from imucal.files.output import check_outputs, write_json_atomic
 
     cfg = options.run_config(args, args.config)

@@ -39,7 +39,8 @@ def gyro_out_name(out: str) -> str:
 def run(args: argparse.Namespace) -> int:
     from imucal.calibration.fileformat import load_calibration
     from imucal.errors import ImucalError
-    from imucal.export.formats import FORMATS, ExportOptions, export
+    from imucal.export.formats import ExportOptions
+    from imucal.export.registry import FORMATS, export
     from imucal.files.output import OutputSet, check_outputs
 
     noise_data = bool(args.data or args.config or args.gyro_data)
