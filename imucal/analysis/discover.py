@@ -44,6 +44,7 @@ from imucal.config.run import EffectSpec, RunConfig
 from imucal.model.effects import (AXIS_NAMES, EFFECTS, MIN_DOF, MIN_TEMPERATURE_SPREAD, AxisEffect, Term, make_effect,
                                   fit_to_data, prepare_parameters, temperature_spread)
 from imucal.analysis.f_test import f_sf
+from imucal.analysis.min_p import MinPNull, min_p_null
 from imucal.solve.stats import between_excess, chi2_sf
 from imucal.errors import ImucalError
 from imucal.solve.fit import FitData, FitResult, fit, jacobian_rows
@@ -51,8 +52,13 @@ from imucal.solve.fit import FitData, FitResult, fit, jacobian_rows
 from imucal.model.sensor import build_model
 from imucal.pipeline import CalibrationRun, calibrate, fit_data, make_parameters
 
-#: chi-square(1) upper quantile at p = 1e-3: the price of one more coefficient when ranking.
+#: chi-square(1) upper quantiles at p = 1e-3 and 1e-2.
 CHI2_1_P1E3 = 10.828
+#: The price of one more coefficient when ranking candidates and pruning axes: an axis joins a
+#: term (or stays in it) when it removes more than chi-square(1) at p = 0.01. Significance is the
+#: family-wise test, not this; the price only chooses among significant models (a clean axis joins
+#: a true term in ~1 % of cases, a true axis of a weak term is kept more often than at p = 1e-3).
+CHI2_1_P1E2 = 6.635
 #: Extra room [chi-square] when choosing which screened candidates to fit in full for the
 #: ambiguity check (the Gauss-Newton screen matches full fits to ~0.1 on simulated data).
 _SCREEN_SLACK = 5.0
@@ -69,7 +75,7 @@ class DiscoverSettings:
     candidates: tuple[str, ...] = tuple(EFFECTS)  #: effect names to try
     alpha_noise: float = 1e-3  #: chi-square test: p below this means "residual disagrees with the noise"
     alpha_effect: float = 1e-3  #: family-wise level for adding an effect (Bonferroni over a round)
-    penalty: float = CHI2_1_P1E3  #: chi-square per added coefficient when ranking candidates
+    penalty: float = CHI2_1_P1E2  #: chi-square per added coefficient when ranking candidates and pruning axes
     ambiguity: float = 10.0  #: competitors within this (scaled chi-square) are "cannot tell apart"
     max_effects: int = 3  #: effects added at most
     full_fits: int = 4  #: candidates fitted in full per round (best by the screening score)
@@ -133,6 +139,7 @@ class Step:
     ambiguous_with: tuple[Candidate, ...] = ()
     scale: float = 1.0  #: the misfit scale used to compare candidates
     jointly_with: str | None = None  #: the second effect that made the chosen one significant (lookahead)
+    p_scan: float = math.nan  #: family-wise p of the best screened candidate (min-p over the round)
 
 
 @dataclass(frozen=True)
@@ -433,17 +440,37 @@ def _candidates(names: Sequence[str], cur_effects: dict[str, tuple[int, ...]], n
     return out
 
 
-def _round(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]], names: Sequence[str],
-           cands: list, settings: DiscoverSettings, index: int, notes: list[str]
-           ) -> tuple[Step, dict[int, FitResult]]:
-    """Screen every candidate, fit the finalists, test them, pick the winner (if any)."""
-    # Screening: Gauss-Newton chi-square of each candidate from the current fit.
+@dataclass(frozen=True)
+class _Scan:
+    """A round's screen: every candidate's linearised chi-square, and the min-p null over them."""
+
+    screened: list[Candidate]
+    null: MinPNull
+    p: float  #: family-wise p of the best screened candidate (linearised, unscaled)
+
+
+def _scan(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]], names: Sequence[str],
+          cands: list) -> _Scan:
+    """Gauss-Newton chi-square of each candidate from the current fit, and the joint null of
+    their statistics (``imucal.analysis.min_p``): the round's multiple-testing correction."""
     screens, rw, col, cur_free = _screen(prob, current, cur_effects, names)
     base_cols = [col[n] for n in cur_free]
-    screened = []
+    screened, family = [], []
     for n, merged, new in cands:
         chi2, start = _screen_candidate(screens, rw, base_cols, col, n, new)
-        screened.append(Candidate(n, merged, new, chi2_screen=chi2, extra=_extra(n, cur_effects), start=start))
+        c = Candidate(n, merged, new, chi2_screen=chi2, extra=_extra(n, cur_effects), start=start)
+        screened.append(c)
+        family.append(([col[x] for x in make_effect(n, new).coefficient_names], c.k, c.extra > 0))
+    null = min_p_null([Jw for Jw, _ in screens], base_cols, family)
+    p_best = min((chi2_sf(max(0.0, current.chi2 - c.chi2_screen), c.k) for c in screened), default=1.0)
+    return _Scan(screened, null, null.adjust(p_best))
+
+
+def _round(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]], names: Sequence[str],
+           scan: _Scan, settings: DiscoverSettings, index: int, notes: list[str]
+           ) -> tuple[Step, dict[int, FitResult]]:
+    """Fit the best screened candidates, test them (family-wise, min-p), pick the winner (if any)."""
+    screened = list(scan.screened)
     # Full fits: the best few by the screening score, and every non-nested competitor close
     # enough to the best to matter for the ambiguity check.
     def pre(c: Candidate) -> float:
@@ -455,7 +482,6 @@ def _round(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int,
     pick += [i for i in order[settings.full_fits:]
              if pre(screened[i]) - pre(top) < settings.ambiguity + _SCREEN_SLACK and not _nested(screened[i], top)]
     pick = pick[: 2 * settings.full_fits]
-    M = len(screened)  # Bonferroni over every candidate of the round, screened or fitted
     fits: dict[int, FitResult] = {}
     for i in pick:
         c = screened[i]
@@ -480,9 +506,10 @@ def _round(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int,
         # A fit that stopped early has a chi2 above its optimum, so its LR errs on the small side.
         lr = max(0.0, (current.chi2 - res.chi2) / max(1.0, res.redchi))
         p = _p_lr(lr, c.k, res, settings.alpha_noise)
+        p_adj = scan.null.adjust(p)  # family-wise over every candidate of the round, screened or fitted
         screened[i] = dataclasses.replace(c, chi2=res.chi2, dof=res.dof, lr=lr, p_value=p,
-                                          p_adjusted=min(1.0, p * M), fitted=True, converged=res.success,
-                                          significant=bool(np.isfinite(res.chi2)) and p * M < settings.alpha_effect)
+                                          p_adjusted=p_adj, fitted=True, converged=res.success,
+                                          significant=bool(np.isfinite(res.chi2)) and p_adj < settings.alpha_effect)
     sig = [i for i in fits if screened[i].significant]
     # The misfit scale candidates are ranked on: the least misfit among the significant ones (or
     # among all fitted ones when none is significant, for the report).
@@ -490,13 +517,13 @@ def _round(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int,
     for i in fits:
         screened[i] = dataclasses.replace(screened[i], score=screened[i].chi2 / common + settings.penalty * screened[i].k)
     if not sig:
-        step = Step(index, current.chi2, current.dof, tuple(screened), None, scale=common)
+        step = Step(index, current.chi2, current.dof, tuple(screened), None, scale=common, p_scan=scan.p)
         return _lookahead(prob, current, cur_effects, names, step, fits, settings, notes)
     best = min(sig, key=lambda i: screened[i].score)
     chosen = screened[best]
     amb = tuple(screened[i] for i in sig if i != best and not _nested(screened[i], chosen)
                 and screened[i].score - chosen.score < settings.ambiguity)
-    return Step(index, current.chi2, current.dof, tuple(screened), chosen, amb, common), {best: fits[best]}
+    return Step(index, current.chi2, current.dof, tuple(screened), chosen, amb, common, p_scan=scan.p), {best: fits[best]}
 
 
 def _lookahead(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]], names: Sequence[str],
@@ -686,22 +713,29 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings())
     disagreement: list[tuple[str, float]] = []
     verdict = (f"consistent with noise: chi2/dof = {current.redchi:.3g} (p = {p_before:.3g}); "
                "the base model explains the data")
-    while not consistent:
+    while True:  # a round runs while the residual disagrees with the noise or a candidate stands out
         if len(steps) >= settings.max_effects:
-            verdict = f"stopped after {settings.max_effects} effects; the residual still disagrees with the noise"
+            if not consistent:
+                verdict = f"stopped after {settings.max_effects} effects; the residual still disagrees with the noise"
             break
         cands = _candidates(names, cur_effects, len(current.free_names), iv.n, base.observability.n_distinct)
         if not cands:
-            notes.append(f"no candidate fits: {iv.n} intervals ({base.observability.n_distinct} distinct "
-                         f"orientations) leave too few degrees of freedom for {len(current.free_names)} + 1 "
-                         "free parameters")
-            verdict = "disagreement, but too few intervals to test more effects"
+            if not consistent:
+                notes.append(f"no candidate fits: {iv.n} intervals ({base.observability.n_distinct} distinct "
+                             f"orientations) leave too few degrees of freedom for {len(current.free_names)} + 1 "
+                             "free parameters")
+                verdict = "disagreement, but too few intervals to test more effects"
             break
-        step, fits = _round(prob, current, cur_effects, names, cands, settings, len(steps) + 1, notes)
-        steps.append(step)
+        scan = _scan(prob, current, cur_effects, names, cands)
+        if consistent and scan.p >= settings.alpha_effect:
+            break  # the omnibus test passes and no single candidate stands out from the noise
+        step, fits = _round(prob, current, cur_effects, names, scan, settings, len(steps) + 1, notes)
         if step.index == 1:  # where the base model disagrees: single-axis patterns, linearised
             disagreement = sorted(((c.label, current.chi2 - c.chi2_screen) for c in step.candidates
                                    if len(c.axes) == 1 and c.axes == c.new_axes), key=lambda t: -t[1])
+        if step.chosen is None and consistent:
+            break  # the candidate that stood out in the screen is not significant when fitted
+        steps.append(step)
         if step.chosen is None:
             tau = math.sqrt(between_excess(current.residuals, current.sigma, current.dof))
             verdict = (f"disagreement not explained by any candidate: chi2/dof = {current.redchi:.3g} "
