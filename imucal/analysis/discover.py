@@ -74,7 +74,10 @@ class DiscoverSettings:
 
     candidates: tuple[str, ...] = tuple(EFFECTS)  #: effect names to try
     alpha_noise: float = 1e-3  #: chi-square test: p below this means "residual disagrees with the noise"
-    alpha_effect: float = 1e-3  #: family-wise level for adding an effect (Bonferroni over a round)
+    alpha_effect: float = 1e-3  #: family-wise level for adding an effect (min-p over a round's candidates)
+    #: family-wise level when the omnibus chi-square test passes: a round then runs only when one
+    #: candidate stands out at this stricter level (the two paths together keep clean data clean)
+    alpha_scan: float = 1e-4
     penalty: float = CHI2_1_P1E2  #: chi-square per added coefficient when ranking candidates and pruning axes
     ambiguity: float = 10.0  #: competitors within this (scaled chi-square) are "cannot tell apart"
     max_effects: int = 3  #: effects added at most
@@ -88,7 +91,7 @@ class DiscoverSettings:
                               fix=f"choose from {', '.join(EFFECTS)}")
         if not self.candidates:
             raise ImucalError("no candidate effects", field="candidates", fix=f"choose from {', '.join(EFFECTS)}")
-        for name in ("alpha_noise", "alpha_effect"):
+        for name in ("alpha_noise", "alpha_effect", "alpha_scan"):
             v = getattr(self, name)
             if not 0 < v < 1:
                 raise ImucalError(f"{name} {v!r} must lie in (0, 1)", field=name)
@@ -227,7 +230,7 @@ class Discovery:
             "model_before": b.model_name, "model_after": f.model_name,
             "disagreement": [{"pattern": p, "chi2_removed": num(v)} for p, v in self.disagreement],
             "steps": [{"round": s.index, "chi2_before": s.chi2_before, "dof_before": s.dof_before,
-                       "scale": s.scale, "chosen": s.chosen.label if s.chosen else None,
+                       "scale": s.scale, "p_scan": num(s.p_scan), "chosen": s.chosen.label if s.chosen else None,
                        "jointly_with": s.jointly_with,
                        "ambiguous_with": [c.label for c in s.ambiguous_with],
                        "candidates": [{"effect": c.label, "new_axes": [AXIS_NAMES[a] for a in c.new_axes],
@@ -268,7 +271,8 @@ class Discovery:
             L.append(f"    {p:<28s} {v:10.4g}")
         for s in self.steps:
             L.append(f"[[Round {s.index}]]  chi2 = {s.chi2_before:.6g} on {s.dof_before} dof, "
-                     f"{len(s.candidates)} candidates, misfit scale {s.scale:.3g}")
+                     f"{len(s.candidates)} candidates, misfit scale {s.scale:.3g}, family-wise p of the best "
+                     f"screened {s.p_scan:.3g}")
             shown = sorted(s.candidates, key=lambda c: (not c.fitted, c.score if c.fitted else c.chi2_screen))
             for c in shown[:10]:
                 if c.fitted:
@@ -467,9 +471,10 @@ def _scan(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, 
 
 
 def _round(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]], names: Sequence[str],
-           scan: _Scan, settings: DiscoverSettings, index: int, notes: list[str]
+           scan: _Scan, settings: DiscoverSettings, index: int, notes: list[str], level: float
            ) -> tuple[Step, dict[int, FitResult]]:
-    """Fit the best screened candidates, test them (family-wise, min-p), pick the winner (if any)."""
+    """Fit the best screened candidates, test them (family-wise p, min-p, below ``level``), pick the
+    winner (if any)."""
     screened = list(scan.screened)
     # Full fits: the best few by the screening score, and every non-nested competitor close
     # enough to the best to matter for the ambiguity check.
@@ -509,7 +514,7 @@ def _round(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int,
         p_adj = scan.null.adjust(p)  # family-wise over every candidate of the round, screened or fitted
         screened[i] = dataclasses.replace(c, chi2=res.chi2, dof=res.dof, lr=lr, p_value=p,
                                           p_adjusted=p_adj, fitted=True, converged=res.success,
-                                          significant=bool(np.isfinite(res.chi2)) and p_adj < settings.alpha_effect)
+                                          significant=bool(np.isfinite(res.chi2)) and p_adj < level)
     sig = [i for i in fits if screened[i].significant]
     # The misfit scale candidates are ranked on: the least misfit among the significant ones (or
     # among all fitted ones when none is significant, for the report).
@@ -727,9 +732,10 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings())
                 verdict = "disagreement, but too few intervals to test more effects"
             break
         scan = _scan(prob, current, cur_effects, names, cands)
-        if consistent and scan.p >= settings.alpha_effect:
+        if consistent and scan.p >= settings.alpha_scan:
             break  # the omnibus test passes and no single candidate stands out from the noise
-        step, fits = _round(prob, current, cur_effects, names, scan, settings, len(steps) + 1, notes)
+        level = settings.alpha_effect if not consistent else settings.alpha_scan
+        step, fits = _round(prob, current, cur_effects, names, scan, settings, len(steps) + 1, notes, level)
         if step.index == 1:  # where the base model disagrees: single-axis patterns, linearised
             disagreement = sorted(((c.label, current.chi2 - c.chi2_screen) for c in step.candidates
                                    if len(c.axes) == 1 and c.axes == c.new_axes), key=lambda t: -t[1])
