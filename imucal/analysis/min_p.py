@@ -27,6 +27,8 @@ from imucal.solve.stats import chi2_sf_array
 DRAWS = 100000
 #: Fixed seed: a discovery is reproducible to the bit.
 SEED = 20240612
+#: Draws per block of the null (memory: columns x _CHUNK doubles).
+_CHUNK = 10000
 #: Singular values below this (relative to the largest) are dependent columns.
 _RANK_TOL = 1e-9
 
@@ -43,12 +45,14 @@ class MinPNull:
         return (1 + hits) / (1 + self.min_p.size)
 
 
-def _basis(A: np.ndarray) -> np.ndarray:
-    """Orthonormal basis of the column space of A (SVD, dependent columns dropped)."""
+def _basis(A: np.ndarray, scale: float | None = None) -> np.ndarray:
+    """Orthonormal basis of the column space of A (SVD; directions with a singular value below
+    _RANK_TOL x ``scale``, default the largest one, are dependent and dropped)."""
     if A.shape[1] == 0:
         return A
     U, s, _ = np.linalg.svd(A, full_matrices=False)
-    return U[:, s > _RANK_TOL * max(s[0], 1e-300)] if s.size else U[:, :0]
+    ref = scale if scale is not None else (s[0] if s.size else 0.0)
+    return U[:, s > _RANK_TOL * max(ref, 1e-300)]
 
 
 def min_p_null(screens: Sequence[np.ndarray], base_cols: Sequence[int],
@@ -62,17 +66,23 @@ def min_p_null(screens: Sequence[np.ndarray], base_cols: Sequence[int],
     """
     J0 = screens[0]
     B = _basis(J0[:, list(base_cols)])
-    rng = np.random.default_rng(seed)
-    E = rng.standard_normal((J0.shape[0], draws))
-    R = E - B @ (B.T @ E)  # r = P e: what the current fit leaves of pure noise
-    best: dict[int, np.ndarray] = {}  # k -> largest d_c per draw (p_c falls with d_c at fixed k)
+    blocks, ks = [], []
     for cols, k, profiled in candidates:
         for Jw in (screens if profiled else screens[:1]):
             A = Jw[:, list(cols)]
-            Q = _basis(A - B @ (B.T @ A))
-            d = np.sum((Q.T @ R) ** 2, axis=0)
-            best[k] = np.maximum(best[k], d) if k in best else d
-    if not best:
+            Q = _basis(A - B @ (B.T @ A), scale=float(np.linalg.norm(A)))  # what the base model leaves
+            if Q.shape[1]:
+                blocks.append(Q)
+                ks.append(k)
+    if not blocks:
         return MinPNull(np.ones(draws))
-    min_p = np.min([chi2_sf_array(d, k) for k, d in best.items()], axis=0)
-    return MinPNull(np.sort(min_p))
+    Q = np.hstack(blocks)  # Q_c is orthogonal to the base: Q_c^T P e = Q_c^T e
+    starts = np.cumsum([0] + [b.shape[1] for b in blocks[:-1]])
+    ks_arr = np.array(ks)
+    rng = np.random.default_rng(seed)
+    out = []
+    for m in np.diff(np.r_[0:draws:_CHUNK, draws]):
+        d = np.add.reduceat((Q.T @ rng.standard_normal((Q.shape[0], m))) ** 2, starts, axis=0)
+        # p_c falls with d_c at fixed k: only the largest d per k matters in each draw
+        out.append(np.min([chi2_sf_array(d[ks_arr == k].max(axis=0), int(k)) for k in np.unique(ks_arr)], axis=0))
+    return MinPNull(np.sort(np.concatenate(out)))
