@@ -15,12 +15,15 @@ The workflow (``discover``), on interval means:
    most promising ones are fitted in full (one IPOPT NLP each, warm-started).
    A candidate c with k_c new coefficients is significant when its likelihood-ratio statistic
        LR_c = (chi2_current - chi2_c) / max(1, chi2_c / dof_c)
-   has p_c = P(chi2(k_c) > LR_c) below ``alpha_effect / M`` (Bonferroni over the M candidates
-   of the round). The division by the remaining misfit is the honest part: when the noise of the
+   has a family-wise p below ``alpha_effect``: P(min over the round's candidates of p_c' <= p_c),
+   p_c = P(chi2(k_c) > LR_c), from the joint null of the screened statistics
+   (``imucal.analysis.min_p``; Bonferroni p_c * M overstated the overlapping candidates'
+   multiplicity). A round also runs when the omnibus test passes but one screened candidate
+   stands out at the stricter family-wise level ``alpha_scan``, which it must then also pass. The division by the remaining misfit is the honest part: when the noise of the
    means is underestimated (real sensors, chi2/dof >> 1 for reasons no candidate explains) an
    effect must remove a share of the misfit, not merely a few "sigmas" of an optimistic sigma.
    Among significant candidates the one with the lowest chi2_c / scale + penalty * k_c wins
-   (``penalty`` = chi-square(1) at p = 1e-3 per coefficient, so an axis joins only when it earns
+   (``penalty`` = chi-square(1) at p = 0.01 per coefficient, so an axis joins only when it earns
    its coefficient). A non-nested competitor (another effect, or disjoint axes) within
    ``ambiguity`` of the winner is reported as ambiguous: the data cannot tell them apart.
 4. Add the winner, refit, and repeat while the residual still disagrees with the noise.

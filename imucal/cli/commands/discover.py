@@ -57,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
     page_path = Path(page_dir) / "report.html" if page_dir else None
     check_outputs(inputs, [args.json, *plot_names, *outs, page_path])
     settings = DiscoverSettings(candidates=tuple(args.candidates or EFFECTS), alpha_noise=args.alpha,
-                                alpha_effect=args.alpha, max_effects=args.max_effects)
+                                alpha_effect=args.alpha, alpha_scan=args.alpha / 10, max_effects=args.max_effects)
     result = discover(cfg, settings)
     text = result.report()
     written = []
