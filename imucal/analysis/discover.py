@@ -15,12 +15,15 @@ The workflow (``discover``), on interval means:
    most promising ones are fitted in full (one IPOPT NLP each, warm-started).
    A candidate c with k_c new coefficients is significant when its likelihood-ratio statistic
        LR_c = (chi2_current - chi2_c) / max(1, chi2_c / dof_c)
-   has p_c = P(chi2(k_c) > LR_c) below ``alpha_effect / M`` (Bonferroni over the M candidates
-   of the round). The division by the remaining misfit is the honest part: when the noise of the
+   has a family-wise p below ``alpha_effect``: P(min over the round's candidates of p_c' <= p_c),
+   p_c = P(chi2(k_c) > LR_c), from the joint null of the screened statistics
+   (``imucal.analysis.min_p``; Bonferroni p_c * M overstated the overlapping candidates'
+   multiplicity). A round also runs when the omnibus test passes but one screened candidate
+   stands out at the stricter family-wise level ``alpha_scan``, which it must then also pass. The division by the remaining misfit is the honest part: when the noise of the
    means is underestimated (real sensors, chi2/dof >> 1 for reasons no candidate explains) an
    effect must remove a share of the misfit, not merely a few "sigmas" of an optimistic sigma.
    Among significant candidates the one with the lowest chi2_c / scale + penalty * k_c wins
-   (``penalty`` = chi-square(1) at p = 1e-3 per coefficient, so an axis joins only when it earns
+   (``penalty`` = chi-square(1) at p = 0.01 per coefficient, so an axis joins only when it earns
    its coefficient). A non-nested competitor (another effect, or disjoint axes) within
    ``ambiguity`` of the winner is reported as ambiguous: the data cannot tell them apart.
 4. Add the winner, refit, and repeat while the residual still disagrees with the noise.
@@ -45,6 +48,7 @@ from imucal.model.effects import (AXIS_NAMES, EFFECTS, MIN_DOF, MIN_TEMPERATURE_
                                   fit_to_data, prepare_parameters, temperature_spread)
 from imucal.analysis.f_test import f_sf
 from imucal.analysis import stochastic as stoch
+from imucal.analysis.min_p import MinPNull, min_p_null
 from imucal.solve.stats import between_excess, chi2_sf
 from imucal.errors import ImucalError
 from imucal.solve.fit import FitData, FitResult, fit, jacobian_rows
@@ -52,8 +56,13 @@ from imucal.solve.fit import FitData, FitResult, fit, jacobian_rows
 from imucal.model.sensor import build_model
 from imucal.pipeline import CalibrationRun, calibrate, fit_data, make_parameters
 
-#: chi-square(1) upper quantile at p = 1e-3: the price of one more coefficient when ranking.
+#: chi-square(1) upper quantiles at p = 1e-3 and 1e-2.
 CHI2_1_P1E3 = 10.828
+#: The price of one more coefficient when ranking candidates and pruning axes: an axis joins a
+#: term (or stays in it) when it removes more than chi-square(1) at p = 0.01. Significance is the
+#: family-wise test, not this; the price only chooses among significant models (a clean axis joins
+#: a true term in ~1 % of cases, a true axis of a weak term is kept more often than at p = 1e-3).
+CHI2_1_P1E2 = 6.635
 #: Extra room [chi-square] when choosing which screened candidates to fit in full for the
 #: ambiguity check (the Gauss-Newton screen matches full fits to ~0.1 on simulated data).
 _SCREEN_SLACK = 5.0
@@ -69,8 +78,11 @@ class DiscoverSettings:
 
     candidates: tuple[str, ...] = tuple(EFFECTS)  #: effect names to try
     alpha_noise: float = 1e-3  #: chi-square test: p below this means "residual disagrees with the noise"
-    alpha_effect: float = 1e-3  #: family-wise level for adding an effect (Bonferroni over a round)
-    penalty: float = CHI2_1_P1E3  #: chi-square per added coefficient when ranking candidates
+    alpha_effect: float = 1e-3  #: family-wise level for adding an effect (min-p over a round's candidates)
+    #: family-wise level when the omnibus chi-square test passes: a round then runs only when one
+    #: candidate stands out at this stricter level (the two paths together keep clean data clean)
+    alpha_scan: float = 1e-4
+    penalty: float = CHI2_1_P1E2  #: chi-square per added coefficient when ranking candidates and pruning axes
     ambiguity: float = 10.0  #: competitors within this (scaled chi-square) are "cannot tell apart"
     max_effects: int = 3  #: effects added at most
     full_fits: int = 4  #: candidates fitted in full per round (best by the screening score)
@@ -83,7 +95,7 @@ class DiscoverSettings:
                               fix=f"choose from {', '.join(EFFECTS)}")
         if not self.candidates:
             raise ImucalError("no candidate effects", field="candidates", fix=f"choose from {', '.join(EFFECTS)}")
-        for name in ("alpha_noise", "alpha_effect"):
+        for name in ("alpha_noise", "alpha_effect", "alpha_scan"):
             v = getattr(self, name)
             if not 0 < v < 1:
                 raise ImucalError(f"{name} {v!r} must lie in (0, 1)", field=name)
@@ -134,6 +146,7 @@ class Step:
     ambiguous_with: tuple[Candidate, ...] = ()
     scale: float = 1.0  #: the misfit scale used to compare candidates
     jointly_with: str | None = None  #: the second effect that made the chosen one significant (lookahead)
+    p_scan: float = math.nan  #: family-wise p of the best screened candidate (min-p over the round)
 
 
 @dataclass(frozen=True)
@@ -223,7 +236,7 @@ class Discovery:
             "model_before": b.model_name, "model_after": f.model_name,
             "disagreement": [{"pattern": p, "chi2_removed": num(v)} for p, v in self.disagreement],
             "steps": [{"round": s.index, "chi2_before": s.chi2_before, "dof_before": s.dof_before,
-                       "scale": s.scale, "chosen": s.chosen.label if s.chosen else None,
+                       "scale": s.scale, "p_scan": num(s.p_scan), "chosen": s.chosen.label if s.chosen else None,
                        "jointly_with": s.jointly_with,
                        "ambiguous_with": [c.label for c in s.ambiguous_with],
                        "candidates": [{"effect": c.label, "new_axes": [AXIS_NAMES[a] for a in c.new_axes],
@@ -266,7 +279,8 @@ class Discovery:
             L.append(f"    {p:<28s} {v:10.4g}")
         for s in self.steps:
             L.append(f"[[Round {s.index}]]  chi2 = {s.chi2_before:.6g} on {s.dof_before} dof, "
-                     f"{len(s.candidates)} candidates, misfit scale {s.scale:.3g}")
+                     f"{len(s.candidates)} candidates, misfit scale {s.scale:.3g}, family-wise p of the best "
+                     f"screened {s.p_scan:.3g}")
             shown = sorted(s.candidates, key=lambda c: (not c.fitted, c.score if c.fitted else c.chi2_screen))
             for c in shown[:10]:
                 if c.fitted:
@@ -442,17 +456,38 @@ def _candidates(names: Sequence[str], cur_effects: dict[str, tuple[int, ...]], n
     return out
 
 
-def _round(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]], names: Sequence[str],
-           cands: list, settings: DiscoverSettings, index: int, notes: list[str]
-           ) -> tuple[Step, dict[int, FitResult]]:
-    """Screen every candidate, fit the finalists, test them, pick the winner (if any)."""
-    # Screening: Gauss-Newton chi-square of each candidate from the current fit.
+@dataclass(frozen=True)
+class _Scan:
+    """A round's screen: every candidate's linearised chi-square, and the min-p null over them."""
+
+    screened: list[Candidate]
+    null: MinPNull
+    p: float  #: family-wise p of the best screened candidate (linearised, unscaled)
+
+
+def _scan(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]], names: Sequence[str],
+          cands: list) -> _Scan:
+    """Gauss-Newton chi-square of each candidate from the current fit, and the joint null of
+    their statistics (``imucal.analysis.min_p``): the round's multiple-testing correction."""
     screens, rw, col, cur_free = _screen(prob, current, cur_effects, names)
     base_cols = [col[n] for n in cur_free]
-    screened = []
+    screened, family = [], []
     for n, merged, new in cands:
         chi2, start = _screen_candidate(screens, rw, base_cols, col, n, new)
-        screened.append(Candidate(n, merged, new, chi2_screen=chi2, extra=_extra(n, cur_effects), start=start))
+        c = Candidate(n, merged, new, chi2_screen=chi2, extra=_extra(n, cur_effects), start=start)
+        screened.append(c)
+        family.append(([col[x] for x in make_effect(n, new).coefficient_names], c.k, c.extra > 0))
+    null = min_p_null([Jw for Jw, _ in screens], base_cols, family)
+    p_best = min((chi2_sf(max(0.0, current.chi2 - c.chi2_screen), c.k) for c in screened), default=1.0)
+    return _Scan(screened, null, null.adjust(p_best))
+
+
+def _round(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]], names: Sequence[str],
+           scan: _Scan, settings: DiscoverSettings, index: int, notes: list[str], level: float
+           ) -> tuple[Step, dict[int, FitResult]]:
+    """Fit the best screened candidates, test them (family-wise p, min-p, below ``level``), pick the
+    winner (if any)."""
+    screened = list(scan.screened)
     # Full fits: the best few by the screening score, and every non-nested competitor close
     # enough to the best to matter for the ambiguity check.
     def pre(c: Candidate) -> float:
@@ -464,7 +499,6 @@ def _round(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int,
     pick += [i for i in order[settings.full_fits:]
              if pre(screened[i]) - pre(top) < settings.ambiguity + _SCREEN_SLACK and not _nested(screened[i], top)]
     pick = pick[: 2 * settings.full_fits]
-    M = len(screened)  # Bonferroni over every candidate of the round, screened or fitted
     fits: dict[int, FitResult] = {}
     for i in pick:
         c = screened[i]
@@ -489,9 +523,10 @@ def _round(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int,
         # A fit that stopped early has a chi2 above its optimum, so its LR errs on the small side.
         lr = max(0.0, (current.chi2 - res.chi2) / max(1.0, res.redchi))
         p = _p_lr(lr, c.k, res, settings.alpha_noise)
+        p_adj = scan.null.adjust(p)  # family-wise over every candidate of the round, screened or fitted
         screened[i] = dataclasses.replace(c, chi2=res.chi2, dof=res.dof, lr=lr, p_value=p,
-                                          p_adjusted=min(1.0, p * M), fitted=True, converged=res.success,
-                                          significant=bool(np.isfinite(res.chi2)) and p * M < settings.alpha_effect)
+                                          p_adjusted=p_adj, fitted=True, converged=res.success,
+                                          significant=bool(np.isfinite(res.chi2)) and p_adj < level)
     sig = [i for i in fits if screened[i].significant]
     # The misfit scale candidates are ranked on: the least misfit among the significant ones (or
     # among all fitted ones when none is significant, for the report).
@@ -499,13 +534,13 @@ def _round(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int,
     for i in fits:
         screened[i] = dataclasses.replace(screened[i], score=screened[i].chi2 / common + settings.penalty * screened[i].k)
     if not sig:
-        step = Step(index, current.chi2, current.dof, tuple(screened), None, scale=common)
+        step = Step(index, current.chi2, current.dof, tuple(screened), None, scale=common, p_scan=scan.p)
         return _lookahead(prob, current, cur_effects, names, step, fits, settings, notes)
     best = min(sig, key=lambda i: screened[i].score)
     chosen = screened[best]
     amb = tuple(screened[i] for i in sig if i != best and not _nested(screened[i], chosen)
                 and screened[i].score - chosen.score < settings.ambiguity)
-    return Step(index, current.chi2, current.dof, tuple(screened), chosen, amb, common), {best: fits[best]}
+    return Step(index, current.chi2, current.dof, tuple(screened), chosen, amb, common, p_scan=scan.p), {best: fits[best]}
 
 
 def _lookahead(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]], names: Sequence[str],
@@ -698,22 +733,30 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings(),
     disagreement: list[tuple[str, float]] = []
     verdict = (f"consistent with noise: chi2/dof = {current.redchi:.3g} (p = {p_before:.3g}); "
                "the base model explains the data")
-    while not consistent:
+    while True:  # a round runs while the residual disagrees with the noise or a candidate stands out
         if len(steps) >= settings.max_effects:
-            verdict = f"stopped after {settings.max_effects} effects; the residual still disagrees with the noise"
+            if not consistent:
+                verdict = f"stopped after {settings.max_effects} effects; the residual still disagrees with the noise"
             break
         cands = _candidates(names, cur_effects, len(current.free_names), iv.n, base.observability.n_distinct)
         if not cands:
-            notes.append(f"no candidate fits: {iv.n} intervals ({base.observability.n_distinct} distinct "
-                         f"orientations) leave too few degrees of freedom for {len(current.free_names)} + 1 "
-                         "free parameters")
-            verdict = "disagreement, but too few intervals to test more effects"
+            if not consistent:
+                notes.append(f"no candidate fits: {iv.n} intervals ({base.observability.n_distinct} distinct "
+                             f"orientations) leave too few degrees of freedom for {len(current.free_names)} + 1 "
+                             "free parameters")
+                verdict = "disagreement, but too few intervals to test more effects"
             break
-        step, fits = _round(prob, current, cur_effects, names, cands, settings, len(steps) + 1, notes)
-        steps.append(step)
+        scan = _scan(prob, current, cur_effects, names, cands)
+        if consistent and scan.p >= settings.alpha_scan:
+            break  # the omnibus test passes and no single candidate stands out from the noise
+        level = settings.alpha_effect if not consistent else settings.alpha_scan
+        step, fits = _round(prob, current, cur_effects, names, scan, settings, len(steps) + 1, notes, level)
         if step.index == 1:  # where the base model disagrees: single-axis patterns, linearised
             disagreement = sorted(((c.label, current.chi2 - c.chi2_screen) for c in step.candidates
                                    if len(c.axes) == 1 and c.axes == c.new_axes), key=lambda t: -t[1])
+        if step.chosen is None and consistent:
+            break  # the candidate that stood out in the screen is not significant when fitted
+        steps.append(step)
         if step.chosen is None:
             tau = math.sqrt(between_excess(current.residuals, current.sigma, current.dof))
             verdict = (f"disagreement not explained by any candidate: chi2/dof = {current.redchi:.3g} "

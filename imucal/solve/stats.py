@@ -46,6 +46,28 @@ def chi2_sf(x: float, k: int) -> float:
     return min(1.0, head)
 
 
+
+_ERFC = np.frompyfunc(math.erfc, 1, 1)
+
+
+def chi2_sf_array(x: np.ndarray, k: int) -> np.ndarray:
+    """``chi2_sf`` over an array (same closed form: erfc head for odd k plus the Poisson-type sum)."""
+    if k < 1:
+        raise ValueError("k must be >= 1")
+    x = np.maximum(np.asarray(x, float), 0.0)
+    h = x / 2.0
+    with np.errstate(divide="ignore"):
+        logh = np.log(h)
+    if k % 2 == 0:
+        head, terms = np.zeros_like(h), [(j, math.lgamma(j + 1)) for j in range(k // 2)]
+    else:
+        head = _ERFC(np.sqrt(h)).astype(float)
+        terms = [(j - 0.5, math.lgamma(j + 0.5)) for j in range(1, (k - 1) // 2 + 1)]
+    for power, lg in terms:  # exp(-h) h^power / Gamma(power + 1)
+        with np.errstate(invalid="ignore"):
+            head = head + np.where(h > 0, np.exp(-h + power * logh - lg), 1.0 if power == 0 else 0.0)
+    return np.minimum(1.0, head)
+
 def between_excess(r, sigma, dof: int) -> float:
     """Paule-Mandel estimate of a common excess variance s^2 between rows: the s^2 >= 0 with
     sum r_k^2 / (sigma_k^2 + s^2) = dof (the random-effects moment equation that REML solves

@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     page_path = Path(page_dir) / "report.html" if page_dir else None
     check_outputs(inputs, [args.json, *plot_names, *outs, page_path])
     settings = DiscoverSettings(candidates=tuple(args.candidates or EFFECTS), alpha_noise=args.alpha,
-                                alpha_effect=args.alpha, max_effects=args.max_effects)
+                                alpha_effect=args.alpha, alpha_scan=args.alpha / 10, max_effects=args.max_effects)
     with progress("discover", unit="fit") as step:  # a bar on a terminal only
         result = discover(cfg, settings, step)
     text = result.report()
