@@ -8,6 +8,8 @@ that carry extra motion and vibration so that static detection is exercised.
 """
 from __future__ import annotations
 
+import io
+import itertools
 from dataclasses import dataclass, field, replace
 from typing import Literal, Mapping, Union
 
@@ -19,7 +21,7 @@ from imucal.model.sensor import frame_np, gram_det_np
 from imucal.config.limits import MAX_SIM_POSES, MAX_SIM_SAMPLES, check_seed
 from imucal.files.schema import fill, rule
 from imucal.files.yamlio import check_structure, read_yaml
-from imucal.model.effects import effects_from_coefficients
+from imucal.model.effects import CLASSIC, EFFECTS, Term, effects_from_coefficients, make_effect, simulate_effects
 
 
 def frame_matrix(angles: np.ndarray) -> np.ndarray:
@@ -58,8 +60,6 @@ class SensorSpec:
         """raw from measured values m (N x 3), noise-free. Effects add their terms."""
         raw = np.asarray(self.s) + np.asarray(self.b) * m
         if self.effects:
-            from imucal.model.effects import simulate_effects
-
             raw = simulate_effects(self, m, t, temp, raw)
         return raw
 
@@ -139,8 +139,6 @@ class Simulation:
     hold_bounds: np.ndarray  #: (n, 2) sample index ranges of the holds
 
     def to_csv_text(self) -> str:
-        import io
-
         cols = [self.t, *self.raw.T] + ([self.temp] if self.temp is not None else [])
         head = "t,ax,ay,az" + (",temp" if self.temp is not None else "")
         buf = io.StringIO()
@@ -439,8 +437,6 @@ class EffectCase:
 
 
 def _axis_subsets() -> list[tuple[int, ...]]:
-    import itertools
-
     return [c for r in (1, 2, 3) for c in itertools.combinations(range(3), r)]
 
 
@@ -459,7 +455,6 @@ def draw_effect_case(seed: int, effect: str | None = "random", axes: tuple[int, 
     ``counts``: raw counts with quantisation (True) or factory-scaled m/s^2 (False); default random.
     18 to 26 poses of 3 s at 100 Hz, so a case simulates in milliseconds and fits in well under a second.
     """
-    from imucal.model.effects import CLASSIC, EFFECTS, Term, make_effect
 
     rng = np.random.default_rng([seed, 20240611])
     counts = bool(rng.integers(2)) if counts is None else counts
@@ -535,7 +530,6 @@ def draw_pair_case(seed: int, snr: float = 40.0, noise_mg: float | None = None,
     single-effect cases; the recording is ``pair_config(...)`` of them (the first case's sensor,
     plan and temperature with both effects).
     """
-    from imucal.model.effects import CLASSIC
 
     rng = np.random.default_rng([seed, 977])
     names = list(candidates or CLASSIC)
