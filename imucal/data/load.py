@@ -17,7 +17,7 @@ from imucal.errors import ImucalError, short
 from imucal.solve.stats import median
 from imucal.data.rosbag import is_bag, read_bag
 from imucal.files.inputs import max_data_bytes, open_regular
-from imucal.model.channels import ACCELERATION, ANGULAR_RATE, TEMPERATURE, TIME, Channel
+from imucal.data.recording import MAX_ABS_VALUE, MAX_RATE_HZ, MIN_RATE_HZ, Recording  # noqa: F401 (re-exported)
 from imucal.files.schema import rule
 
 FORMATS = ("auto", "csv", "whitespace")
@@ -25,11 +25,6 @@ FORMATS = ("auto", "csv", "whitespace")
 STREAM_CHOICES = ("auto", "always", "never")
 #: Column roles: time, acceleration, angular rate, temperature.
 ROLES = ("t", "ax", "ay", "az", "gx", "gy", "gz", "temp")
-#: Plausible IMU sample rates [Hz]: anything outside is a wrong time unit or a wrong rate.
-MIN_RATE_HZ, MAX_RATE_HZ = 1.0, 1.0e5
-#: Largest magnitude accepted in a data column: beyond it a value is corrupt, not a reading
-#: (squares of it would overflow double precision in the fit).
-MAX_ABS_VALUE = 1.0e30
 _MAX_SCAN_LINES = 50
 def gyro_unit(spec: DataSpec, bag: bool = False) -> str:
     """The gyro unit a fit uses: raw (counts, scale searched), deg/s or rad/s; ``bag``: a ROS bag's default."""
@@ -137,48 +132,6 @@ class DataSpec:
         if self.gyro_path is not None and not (isinstance(self.gyro_path, str) and self.gyro_path):
             raise ImucalError(f"gyro_path {short(self.gyro_path)} must be a file name", field="data.gyro_path",
                               fix="give the gyroscope recording's path as text")
-
-
-@dataclass(frozen=True)
-class Recording:
-    """A loaded recording: time [s], raw readings (N x 3), optional temperature [deg C]."""
-
-    t: np.ndarray  #: [s], from 0
-    raw: np.ndarray  #: (N, 3) accelerometer readings [unit]
-    temp: np.ndarray | None
-    unit: str
-    source: str
-    sha256: str
-    gyro: np.ndarray | None = None  #: (N, 3) angular-rate readings when mapped (gx, gy, gz)
-    t_source: np.ndarray | None = None  #: the time column exactly as read (unit and origin kept)
-    time_unit: str = "s"  #: unit of t_source
-    time_note: str = ""  #: how the time base was obtained (given, inferred, or from the rate)
-    time_column: str = "t"  #: the time column's name in the file
-    gyro_unit: str = "raw"  #: unit of ``gyro`` (and of a second gyro file): raw (counts), deg/s or rad/s
-
-    @property
-    def n(self) -> int:
-        return self.raw.shape[0]
-
-    @property
-    def channels(self) -> tuple[Channel, ...]:
-        """The channels this recording carries, with their units (a sensor is data)."""
-        out = [TIME, ACCELERATION.with_unit(self.unit)]
-        if self.gyro is not None:
-            out.append(ANGULAR_RATE)
-        if self.temp is not None:
-            out.append(TEMPERATURE)
-        return tuple(out)
-
-    @property
-    def sample_rate(self) -> float:
-        if self.n < 2:
-            return float("nan")
-        return float((self.n - 1) / (self.t[-1] - self.t[0]))
-
-    @property
-    def duration(self) -> float:
-        return float(self.t[-1] - self.t[0]) if self.n else 0.0
 
 
 def _finite(x: int | float) -> bool:

@@ -12,15 +12,11 @@ from __future__ import annotations
 import hashlib
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING
-
 import numpy as np
 
+from imucal.data.recording import MAX_ABS_VALUE, MAX_RATE_HZ, MIN_RATE_HZ, Recording
 from imucal.errors import ImucalError
 from imucal.files.inputs import max_data_bytes, open_regular
-
-if TYPE_CHECKING:
-    from imucal.data.load import Recording
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
 TEMP_TYPE = "sensor_msgs/msg/Temperature"
@@ -67,8 +63,6 @@ def _stamp_ns(msg: object) -> int:
 
 def read_bag(path: str | os.PathLike, topic: str | None, temp_topic: str | None = None) -> Recording:
     """The Recording (imucal.data.load.Recording) of the IMU messages on ``topic``."""
-    from imucal.data.load import MAX_ABS_VALUE, MAX_RATE_HZ, MIN_RATE_HZ, Recording  # load imports this module
-
     path = Path(path)
     if not path.exists():
         raise ImucalError("file not found", file=str(path), field="data.path",

@@ -1,0 +1,57 @@
+"""A loaded recording and the limits every reader applies (CSV/MAT in data/load.py, bags in
+data/rosbag.py, chunks in data/stream.py)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from imucal.model.channels import ACCELERATION, ANGULAR_RATE, TEMPERATURE, TIME, Channel
+
+#: Plausible IMU sample rates [Hz]: anything outside is a wrong time unit or a wrong rate.
+MIN_RATE_HZ, MAX_RATE_HZ = 1.0, 1.0e5
+#: Largest magnitude accepted in a data column: beyond it a value is corrupt, not a reading
+#: (squares of it would overflow double precision in the fit).
+MAX_ABS_VALUE = 1.0e30
+
+
+@dataclass(frozen=True)
+class Recording:
+    """A loaded recording: time [s], raw readings (N x 3), optional temperature [deg C]."""
+
+    t: np.ndarray  #: [s], from 0
+    raw: np.ndarray  #: (N, 3) accelerometer readings [unit]
+    temp: np.ndarray | None
+    unit: str
+    source: str
+    sha256: str
+    gyro: np.ndarray | None = None  #: (N, 3) angular-rate readings when mapped (gx, gy, gz)
+    t_source: np.ndarray | None = None  #: the time column exactly as read (unit and origin kept)
+    time_unit: str = "s"  #: unit of t_source
+    time_note: str = ""  #: how the time base was obtained (given, inferred, or from the rate)
+    time_column: str = "t"  #: the time column's name in the file
+    gyro_unit: str = "raw"  #: unit of ``gyro`` (and of a second gyro file): raw (counts), deg/s or rad/s
+
+    @property
+    def n(self) -> int:
+        return self.raw.shape[0]
+
+    @property
+    def channels(self) -> tuple[Channel, ...]:
+        """The channels this recording carries, with their units (a sensor is data)."""
+        out = [TIME, ACCELERATION.with_unit(self.unit)]
+        if self.gyro is not None:
+            out.append(ANGULAR_RATE.with_unit(self.gyro_unit))
+        if self.temp is not None:
+            out.append(TEMPERATURE)
+        return tuple(out)
+
+    @property
+    def sample_rate(self) -> float:
+        if self.n < 2:
+            return float("nan")
+        return float((self.n - 1) / (self.t[-1] - self.t[0]))
+
+    @property
+    def duration(self) -> float:
+        return float(self.t[-1] - self.t[0]) if self.n else 0.0
