@@ -91,3 +91,18 @@ def test_any_argument_vector_gets_imucals_own_answer(files, capsys, data):
         assert "Traceback" not in err and "internal error" not in err, (args, err)
         lines = [ln for ln in err.splitlines() if ln.startswith("imucal")]
         assert len(lines) == 1, (args, err)
+
+
+@pytest.mark.parametrize("argv", [
+    ["calibrate", "--data", "L", "--out", "o"], ["calibrate", "--data", "x.csv", "--out", "L/x"],
+    ["noise", "--data", "L"], ["batch", "L", "--out", "o"], ["discover", "--data", "L"],
+    ["apply", "L", "--data", "L", "--out", "o.csv"], ["codegen", "L", "--out", "o"],
+])
+def test_a_name_too_long_for_the_system_is_bad_input(tmp_path, monkeypatch, capsys, argv):
+    """ENAMETOOLONG from any lookup is the user's path, not an internal error (found by the fuzz test)."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "x.csv").write_text("t,ax,ay,az\n")
+    long = "a" * 300
+    code = main([a.replace("L", long) if a in ("L", "L/x") else a for a in argv])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "internal" not in err, err

@@ -6,6 +6,7 @@ definitions only, no heavy imports) and ``run(args) -> int``.
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import signal
 import sys
@@ -117,6 +118,12 @@ def main(argv: list[str] | None = None) -> int:
             sys.stderr.write("imucal: terminated; nothing was written\n" if _SIGNALLED
                              else "imucal: interrupted; nothing was written\n")
             return EXIT_INTERRUPTED
+        if isinstance(exc, OSError) and exc.errno in (errno.ENAMETOOLONG, errno.ELOOP):
+            # a path the system cannot look up (too long, a symbolic-link loop): bad input, not a bug
+            name = short(str(exc.filename), 80) if exc.filename is not None else "a path given"
+            sys.stderr.write(f"imucal: error: {name}: path: {str(exc.strerror).lower()} (fix: give a shorter "
+                             "path, without a symbolic-link loop)\n")
+            return EXIT_BAD_INPUT
         if args.debug:
             traceback.print_exc()
         sys.stderr.write(f"imucal: internal error: {type(exc).__name__}: {short(str(exc), 200)} "

@@ -27,7 +27,8 @@ def is_bag(path: str | os.PathLike) -> bool:
     """A ROS 1 bag (``.bag`` file), a ROS 2 MCAP file (``.mcap``) or a ROS 2 bag folder (holding
     metadata.yaml)."""
     p = Path(path)
-    return p.suffix in (".bag", ".mcap") or (p.is_dir() and (p / "metadata.yaml").is_file())
+    # os.path answers False for a name the system cannot look up (too long), where Path raises
+    return p.suffix in (".bag", ".mcap") or (os.path.isdir(p) and os.path.isfile(p / "metadata.yaml"))
 
 
 def _bag_files(path: Path) -> list[Path]:

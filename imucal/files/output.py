@@ -77,7 +77,7 @@ def check_destination(path: str | os.PathLike) -> Path:
     """``path`` can be written as a file: it is not a directory, and its nearest existing
     ancestor is a directory. Raises ImucalError (before any work is done) otherwise."""
     path = Path(path)
-    if len(path.name.encode()) > 255 or len(os.fsencode(path)) > 4000:
+    if any(len(part.encode()) > 255 for part in path.parts) or len(os.fsencode(path)) > 4000:
         raise ImucalError("file name too long", file=str(path)[:80] + "...", field="output",
                           fix="choose a shorter output name")
     if path.is_dir():

@@ -24,6 +24,7 @@ from __future__ import annotations
 import copy
 import csv
 import hashlib
+import os
 import io
 import json
 import re
@@ -240,7 +241,7 @@ def load_manifest(path: str | Path, config: str | Path | None = None) -> Manifes
     p = Path(path)
     src = str(p)
     shared = _run_file_settings(config) if config is not None else {}
-    if p.is_dir():
+    if os.path.isdir(p):  # False, not OSError, for a name too long
         units = _collect(_folder_units(p, "*.csv", src, "folder"), shared, p, src)
         return Manifest(source=src, units=units, tolerances=Tolerances())
     if p.suffix.lower() == ".csv":

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -43,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
                               fix="the cluster sets the workers: drop --workers")
     out = Path(args.out)
     inputs = [args.manifest, args.config]
-    if Path(args.manifest).is_dir() and same_file(args.manifest, out):
+    if os.path.isdir(args.manifest) and same_file(args.manifest, out):  # False, not OSError, for bad names
         raise ImucalError("is the folder of recordings", file=args.out, field="--out",
                           fix="write the results to another folder (its fleet.csv would become a unit)")
     check_outputs(inputs, [out / REPORT_CSV, out / REPORT_TEXT, out / REPORT_PARQUET])
