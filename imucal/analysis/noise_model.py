@@ -26,7 +26,7 @@ import numpy as np
 
 from imucal.analysis.noise import FLICKER_FACTOR
 from imucal.errors import ImucalError, short
-from imucal.export.peers import _json
+from imucal.files.inputs import read_json
 from imucal.files.schema import fill, rule
 from imucal.files.yamlio import read_yaml
 
@@ -149,7 +149,7 @@ def load_noise_model(path: str | Path) -> NoiseModel:
     """The noise model in ``path``: `imucal noise --json` output (.json) or a Kalibr imu.yaml."""
     p = str(path)
     if p.lower().endswith(".json"):
-        return _from_noise_json(_json(p, "noise"), p)
+        return _from_noise_json(read_json(p, "noise"), p)
     if p.lower().endswith((".yaml", ".yml")):
         return _from_kalibr(read_yaml(p, "noise", FIX), p)
     raise ImucalError("is neither .json (imucal noise --json) nor .yaml (Kalibr imu.yaml)", file=p,

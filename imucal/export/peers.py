@@ -14,7 +14,6 @@ non-numeric values, missing and unknown fields, and singular maps, in one line. 
 from __future__ import annotations
 
 import io
-import json
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -23,7 +22,7 @@ from typing import Any, Literal, Mapping
 import numpy as np
 
 from imucal.errors import ImucalError, short
-from imucal.files.inputs import read_input_text
+from imucal.files.inputs import read_input_text, read_json
 from imucal.files.schema import fill, rule
 
 #: Largest magnitude accepted for any number in a peer's file: far above any offset in counts
@@ -165,26 +164,6 @@ def checked_gyro(C: np.ndarray, o: np.ndarray, D: np.ndarray, path: str, field_:
     return GyroMap(C=C, o=o, D=D)
 
 
-def _json(path: str, field_: str) -> Any:
-    """JSON without NaN/Infinity constants (not JSON) and without duplicate keys."""
-    def no_constant(name: str) -> None:
-        raise ValueError(f"{name} is not a JSON number")
-
-    def no_duplicates(pairs: list) -> dict:
-        d: dict = {}
-        for k, v in pairs:
-            if k in d:
-                raise ValueError(f"duplicate key {short(k)}")
-            d[k] = v
-        return d
-
-    try:
-        return json.loads(read_input_text(path, field=field_), parse_constant=no_constant,
-                          object_pairs_hook=no_duplicates)
-    except (ValueError, RecursionError) as exc:
-        raise ImucalError(f"is not valid JSON: {' '.join(str(exc).split())[:80]}", file=path, field=field_) from None
-
-
 # --- readers --------------------------------------------------------------------------------
 def _imutk_triad(path: str) -> tuple[np.ndarray, np.ndarray]:
     """T K and b of one imu_tk .calib text: T (3x3), blank, K (3x3), blank, b (3 lines)."""
@@ -263,7 +242,7 @@ def read_madlab_calibration(path: str | Path) -> AffineCalibration:
     """mad-lab-fau/imucal calibration JSON: a = R_a^-1 K_a^-1 (raw - b_a) and, when the file has
     them, gyr = R_g^-1 K_g^-1 (gyr_raw - K_ga a - b_g) in ``gyr_unit`` (ferraris_calibration_info.py)."""
     p = str(path)
-    d = fill(MadlabFile, _json(p, "calibration"), p)
+    d = fill(MadlabFile, read_json(p, "calibration"), p)
     K, R, b = (np.array(x, float) for x in (d.K_a, d.R_a, d.b_a))
     for name, m in (("K_a", K), ("R_a", R)):
         checked(m, b, p, name, "madlab")
@@ -328,7 +307,7 @@ def read_matrix(path: str | Path) -> AffineCalibration:
             g = np.array(v[3:])
             gyro = _matrix_gyro(g[:, :3], g[:, 3], g[:, 4:], p, "matrix")
     else:
-        d = fill(MatrixFile, _json(p, "matrix"), p)
+        d = fill(MatrixFile, read_json(p, "matrix"), p)
         A, c = np.array(d.matrix, float), np.array(d.offset, float)
         if d.gyroscope is not None:
             g = d.gyroscope

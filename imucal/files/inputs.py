@@ -7,11 +7,13 @@ descriptor (no race with a rename), and refused above a size limit before anythi
 """
 from __future__ import annotations
 
+import json
 import os
 import stat
 from pathlib import Path
+from typing import Any
 
-from imucal.errors import ImucalError
+from imucal.errors import ImucalError, short
 
 #: Largest text file read whole [bytes]: YAML configs, calibrations, plans.
 MAX_TEXT_BYTES = 16 * 1024 * 1024
@@ -114,3 +116,23 @@ def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:
     except OSError:
         pass
     return Path(os.path.abspath(a)).resolve() == Path(os.path.abspath(b)).resolve()
+
+
+def read_json(path: str, field_: str) -> Any:
+    """JSON without NaN/Infinity constants (not JSON) and without duplicate keys."""
+    def no_constant(name: str) -> None:
+        raise ValueError(f"{name} is not a JSON number")
+
+    def no_duplicates(pairs: list) -> dict:
+        d: dict = {}
+        for k, v in pairs:
+            if k in d:
+                raise ValueError(f"duplicate key {short(k)}")
+            d[k] = v
+        return d
+
+    try:
+        return json.loads(read_input_text(path, field=field_), parse_constant=no_constant,
+                          object_pairs_hook=no_duplicates)
+    except (ValueError, RecursionError) as exc:
+        raise ImucalError(f"is not valid JSON: {' '.join(str(exc).split())[:80]}", file=path, field=field_) from None

@@ -159,6 +159,7 @@ def fit(data: FitData, params: Parameters, model: SensorModel, gravity: float,
     dof = n - len(free)
     t0 = time.perf_counter()
     iters, excess, q2, sto, passes = 0, 0.0, 0.0, None, 0
+    walk_test = True  # the REML random-walk test (imucal.solve.stochastic) runs until it rejects a walk once
     # Weights from the noise propagated at the current estimate; refreshed once at the solution
     # (and, with weights="auto", until the between-interval excess settles). With a bias random
     # walk the rows are correlated: V = diag(sigma0^2 + excess) + q^2 K_W, and the fit is generalised
@@ -182,7 +183,8 @@ def fit(data: FitData, params: Parameters, model: SensorModel, gravity: float,
                 break
             r0 = lsq.residuals(fns, rows, p_now, pfix, gravity)
             s0 = lsq.noise_sigma(fns, rows, data.raw_var, p_now, pfix, gravity, weights)
-            new, new_q2, sto = _excess(fns, rows, data, params, p_now, pfix, gravity, r0, s0, dof)
+            new, new_q2, sto = _excess(fns, rows, data, params, p_now, pfix, gravity, r0, s0, dof, walk_test)
+            walk_test = sto is not None  # the REML test rejected a walk once: later passes only re-estimate tau^2
             if (abs(new - excess) <= 1e-4 * max(new, excess) and abs(new_q2 - q2) <= 1e-4 * max(new_q2, q2)) or (
                     new == 0.0 and excess == 0.0 and new_q2 == 0.0 and q2 == 0.0):
                 break
@@ -236,7 +238,7 @@ def _weights(fns, rows, data: FitData, params: Parameters, p_now, pfix, gravity:
 
 
 def _excess(fns, rows, data: FitData, params: Parameters, p_now, pfix, gravity: float, r0: np.ndarray,
-            s0: np.ndarray, dof: int) -> tuple[float, float, "stochastic.StochasticFit | None"]:
+            s0: np.ndarray, dof: int, walk_test: bool = True) -> tuple[float, float, "stochastic.StochasticFit | None"]:
     """weights="auto": (tau^2, q^2, the test) when the residuals exceed the noise at p < EXCESS_P.
 
     A bias random walk named by the REML test (imucal.solve.stochastic), and told apart from
@@ -244,8 +246,8 @@ def _excess(fns, rows, data: FitData, params: Parameters, p_now, pfix, gravity: 
     """
     if chi2_sf(float(np.sum((r0 / s0) ** 2)), dof) >= EXCESS_P:
         return 0.0, 0.0, None
-    if data.t is not None and len(r0) > len(params.free_names) + 3 and float(np.sum((r0 / s0) ** 2)) / dof < (
-            STOCHASTIC_MAX_REDCHI):
+    if walk_test and data.t is not None and len(r0) > len(params.free_names) + 3 and (
+            float(np.sum((r0 / s0) ** 2)) / dof < STOCHASTIC_MAX_REDCHI):
         sto = stochastic.select(_components(fns, rows, data, params, p_now, pfix, gravity, s0))
         if stochastic.RANDOM_WALK in sto.named and not sto.ambiguous:  # undecided: the per-visit excess
             return sto.chosen.tau2, sto.chosen.q2, sto
