@@ -151,22 +151,66 @@ def fit(data: FitData, params: Parameters, model: SensorModel, gravity: float,
                           field="intervals",
                           fix="hold the sensor still in more orientations, or fit samples (fit.mode: samples)")
     pfix = np.array(params.values(), float)
-    scale = np.array([params[nm].scale for nm in free])
-    lo = np.array([params[nm].lower for nm in free])
-    hi = np.array([params[nm].upper for nm in free])
-    p_now = np.array([params[nm].value for nm in free])
     fns, rows = lsq.row_functions(model, free), lsq.Rows(data.raw, data.cov)
-    dof = n - len(free)
     t0 = time.perf_counter()
+    it = _iterate(fns, rows, data, params, pfix, gravity, weights, hessian)
+    solve_time = time.perf_counter() - t0
+    status = str(it.stats.get("return_status", "unknown"))
+    dof = n - len(free)
+    r = lsq.residuals(fns, rows, it.p, pfix, gravity)
+    R = lsq.weighted_r_factor(fns, rows, it.sigma if it.white is None else it.white, it.p, pfix, gravity)
+    fitted = params.with_values(dict(zip(free, it.p)))
+    chi2 = float(np.sum((r / it.sigma) ** 2)) if it.white is None else float(np.sum((it.white @ r) ** 2))
+    redchi = chi2 / dof if dof > 0 else float("nan")
+    # Covariance from the Jacobian at the solution (via its SVD, symmetric by construction),
+    # scaled by the residual variance as lmfit's scale_covar does: (J^T W J)^-1 chi2/dof.
+    # With no degrees of freedom left, the noise-only covariance (J^T W J)^-1.
+    cov = unscaled_covariance(R) * (redchi if dof > 0 else 1.0)
+    sd = np.sqrt(np.clip(np.diag(cov), 0, None))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        corr = cov / np.outer(sd, sd)
+    std = {nm: float("nan") for nm in names}
+    if dof > 0 or data.mode != "means":  # no residual left to scale by: std not estimable
+        std.update({nm: float(v) for nm, v in zip(free, sd)})
+    at_bound = {nm: b for nm in free if (b := fitted[nm].at_bound()) is not None}
+    return FitResult(params=fitted, initial=params, std=std, covariance=cov, correlation=corr,
+                     free_names=free, gravity=gravity, mode=data.mode, residuals=r, sigma=it.sigma,
+                     chi2=chi2, dof=dof, status=status, success=status in _CONVERGED, iterations=it.iterations,
+                     solve_time=solve_time, model_name=model_label(model.name, params), at_bound=at_bound,
+                     excess=it.excess, chi2_noise=float(np.sum((r / it.sigma0) ** 2)), random_walk=it.q2,
+                     stochastic=it.sto if it.q2 > 0 else None)
+
+
+@dataclass
+class _Iterated:
+    """Where the weighted fit and its weights settled."""
+
+    p: np.ndarray  #: free parameters
+    sigma0: np.ndarray  #: noise of each row alone
+    sigma: np.ndarray  #: with the between-interval excess
+    white: np.ndarray | None  #: L^-1 of the rows' covariance (a bias random walk), else None
+    excess: float
+    q2: float
+    sto: "stochastic.StochasticFit | None"
+    iterations: int
+    stats: dict
+
+
+def _iterate(fns, rows, data: FitData, params: Parameters, pfix: np.ndarray, gravity: float, weights: str,
+             hessian: str) -> _Iterated:
+    """IPOPT on the weighted rows, the weights refreshed from the noise propagated at the estimate;
+    once at the solution and, with weights="auto", until the between-interval excess settles. With a
+    bias random walk the rows are correlated: V = diag(sigma0^2 + excess) + q^2 K_W, and the fit is
+    generalised least squares (rows whitened by L^-1, V = L L^T)."""
+    free = params.free_names
+    scale = np.array([params[nm].scale for nm in free])
+    lo, hi = np.array([params[nm].lower for nm in free]), np.array([params[nm].upper for nm in free])
+    p_now = np.array([params[nm].value for nm in free])
+    dof = data.raw.shape[0] - len(free)
     iters, excess, q2, sto, passes = 0, 0.0, 0.0, None, 0
     walk_test = True  # the REML random-walk test (imucal.solve.stochastic) runs until it rejects a walk once
-    # Weights from the noise propagated at the current estimate; refreshed once at the solution
-    # (and, with weights="auto", until the between-interval excess settles). With a bias random
-    # walk the rows are correlated: V = diag(sigma0^2 + excess) + q^2 K_W, and the fit is generalised
-    # least squares (rows whitened by L^-1, V = L L^T).
-    # samples mode: a terminal shows its passes over the samples (imucal.report.progress)
-    shown = None if data.mode == "samples" else False
-    with progress(f"samples fit ({n:,} samples)", unit="pass", enabled=shown) as step:
+    shown = None if data.mode == "samples" else False  # samples mode: a bar on a terminal (report.progress)
+    with progress(f"samples fit ({data.raw.shape[0]:,} samples)", unit="pass", enabled=shown) as step:
         while True:
             sigma0 = lsq.noise_sigma(fns, rows, data.raw_var, p_now, pfix, gravity, weights)
             sigma, W, white = _weights(fns, rows, data, params, p_now, pfix, gravity, sigma0, excess, q2)
@@ -189,33 +233,7 @@ def fit(data: FitData, params: Parameters, model: SensorModel, gravity: float,
                     new == 0.0 and excess == 0.0 and new_q2 == 0.0 and q2 == 0.0):
                 break
             excess, q2 = new, new_q2
-    solve_time = time.perf_counter() - t0
-    status = str(stats.get("return_status", "unknown"))
-    pfree = p_now
-    r = lsq.residuals(fns, rows, pfree, pfix, gravity)
-    R = lsq.weighted_r_factor(fns, rows, sigma if white is None else white, pfree, pfix, gravity)
-    fitted = params.with_values(dict(zip(free, pfree)))
-    chi2 = float(np.sum((r / sigma) ** 2)) if white is None else float(np.sum((white @ r) ** 2))
-    chi2_noise = float(np.sum((r / sigma0) ** 2))
-    redchi = chi2 / dof if dof > 0 else float("nan")
-    # Covariance from the Jacobian at the solution (via its SVD, symmetric by construction),
-    # scaled by the residual variance as lmfit's scale_covar does: (J^T W J)^-1 chi2/dof.
-    # With no degrees of freedom left, the noise-only covariance (J^T W J)^-1.
-    cov = unscaled_covariance(R) * (redchi if dof > 0 else 1.0)
-    sd = np.sqrt(np.clip(np.diag(cov), 0, None))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        corr = cov / np.outer(sd, sd)
-    std = {nm: float("nan") for nm in names}
-    if dof > 0 or data.mode != "means":  # no residual left to scale by: std not estimable
-        std.update({nm: float(v) for nm, v in zip(free, sd)})
-    at_bound = {nm: b for nm in free if (b := fitted[nm].at_bound()) is not None}
-    success = status in _CONVERGED
-    return FitResult(params=fitted, initial=params, std=std, covariance=cov, correlation=corr,
-                     free_names=free, gravity=gravity, mode=data.mode, residuals=r, sigma=sigma,
-                     chi2=chi2, dof=dof, status=status, success=success, iterations=iters,
-                     solve_time=solve_time, model_name=model_label(model.name, params), at_bound=at_bound,
-                     excess=excess, chi2_noise=chi2_noise, random_walk=q2,
-                     stochastic=sto if q2 > 0 else None)
+    return _Iterated(p_now, sigma0, sigma, white, excess, q2, sto, iters, stats)
 
 
 def _components(fns, rows, data: FitData, params: Parameters, p_now, pfix, gravity: float,
