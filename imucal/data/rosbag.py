@@ -10,6 +10,7 @@ has no gyro channel.
 from __future__ import annotations
 
 import hashlib
+from dataclasses import dataclass, field
 import os
 from pathlib import Path
 import numpy as np
@@ -63,7 +64,7 @@ def _stamp_ns(msg: object) -> int:
 
 
 def read_bag(path: str | os.PathLike, topic: str | None, temp_topic: str | None = None) -> Recording:
-    """The Recording (imucal.data.load.Recording) of the IMU messages on ``topic``."""
+    """The Recording (imucal.data.recording.Recording) of the IMU messages on ``topic``."""
     path = Path(path)
     if not path.exists():
         raise ImucalError("file not found", file=str(path), field="data.path",
@@ -74,38 +75,14 @@ def read_bag(path: str | os.PathLike, topic: str | None, temp_topic: str | None 
     except ImportError:
         raise ImucalError("reading ROS bags needs the rosbags library", file=str(path), field="data.path",
                           fix=_INSTALL) from None
-    files = _bag_files(path)
-    sha = _sha256(files)
+    sha = _sha256(_bag_files(path))
     where = "data.path"
     try:
         with AnyReader([path], default_typestore=get_typestore(Stores.LATEST)) as reader:
-            imu_topics = sorted({c.topic for c in reader.connections if c.msgtype == IMU_TYPE})
-            present = ", ".join(imu_topics) or "none"
-            if not topic:
-                raise ImucalError("a ROS bag needs the IMU topic to read", file=str(path), field="data.topic",
-                                  fix=f"give --topic (data.topic); IMU topics in the bag: {present}")
-            conns = [c for c in reader.connections if c.topic == topic]
-            if not conns:
-                raise ImucalError(f"topic {topic} is not in the bag", file=str(path), field="data.topic",
-                                  fix=f"IMU topics in the bag: {present}")
-            bad = sorted({c.msgtype for c in conns if c.msgtype != IMU_TYPE})
-            if bad:
-                raise ImucalError(f"topic {topic} carries {bad[0]}, not {IMU_TYPE}", file=str(path),
-                                  field="data.topic", fix=f"IMU topics in the bag: {present}")
+            conns, present = _imu_connections(reader, path, topic)
             where = f"topic {topic}"
-            stamps, recv, acc, gyr, no_gyro, no_acc = [], [], [], [], True, False
-            for conn, t_recv, data in reader.messages(connections=conns):
-                m = reader.deserialize(data, conn.msgtype)
-                stamps.append(_stamp_ns(m))
-                recv.append(int(t_recv))
-                a, w = m.linear_acceleration, m.angular_velocity
-                acc.append((a.x, a.y, a.z))
-                gyr.append((w.x, w.y, w.z))
-                no_gyro = no_gyro and float(m.angular_velocity_covariance[0]) == -1.0
-                no_acc = no_acc or float(m.linear_acceleration_covariance[0]) == -1.0
-            temp = None
-            if temp_topic:
-                temp = _temperature(reader, path, temp_topic)
+            msgs = _imu_messages(reader, conns)
+            temp = _temperature(reader, path, temp_topic) if temp_topic else None
     except ImucalError:
         raise
     except Exception as exc:  # rosbags raises many types on a corrupt bag (its own, struct, KeyError, sqlite)
@@ -113,16 +90,72 @@ def read_bag(path: str | os.PathLike, topic: str | None, temp_topic: str | None 
         raise ImucalError(f"cannot read the bag ({type(exc).__name__}: {text})", file=str(path), field=where,
                           fix="check that the bag is complete (ROS 1: rosbag reindex; ROS 2: ros2 bag reindex)"
                           ) from None
-    if not stamps:
+    if not msgs.stamps:
         raise ImucalError(f"topic {topic} holds no messages", file=str(path), field="data.topic",
                           fix=f"record IMU messages on it, or choose another: {present}")
-    if no_acc:
+    if msgs.no_acc:
         raise ImucalError("linear_acceleration is marked as not measured (covariance[0] = -1)", file=str(path),
                           field=f"{topic}.linear_acceleration", fix="record a topic with accelerometer data")
-    ns = np.array(stamps, dtype=np.int64)
+    ns, note = _time_base(msgs, path, topic)
+    raw = np.array(msgs.acc, float)
+    gyro = None if msgs.no_gyro else np.array(msgs.gyr, float)
+    _check_values(raw, gyro, path, topic)
+    t = (ns - ns[0]) * 1e-9
+    if temp is not None:
+        temp = np.interp(ns - ns[0], temp[0] - ns[0], temp[1])  # held at the ends beyond the temperature messages
+    return Recording(t=t, raw=raw, temp=temp, unit="m/s^2", source=str(path), sha256=sha, gyro=gyro,
+                     t_source=ns * 1e-9, time_unit="s", time_note=note, time_column="t", gyro_unit="rad/s")
+
+
+def _imu_connections(reader: object, path: Path, topic: str | None) -> tuple[list, str]:
+    """The connections of ``topic`` (sensor_msgs/msg/Imu only) and the bag's IMU topics, for messages."""
+    imu_topics = sorted({c.topic for c in reader.connections if c.msgtype == IMU_TYPE})
+    present = ", ".join(imu_topics) or "none"
+    if not topic:
+        raise ImucalError("a ROS bag needs the IMU topic to read", file=str(path), field="data.topic",
+                          fix=f"give --topic (data.topic); IMU topics in the bag: {present}")
+    conns = [c for c in reader.connections if c.topic == topic]
+    if not conns:
+        raise ImucalError(f"topic {topic} is not in the bag", file=str(path), field="data.topic",
+                          fix=f"IMU topics in the bag: {present}")
+    bad = sorted({c.msgtype for c in conns if c.msgtype != IMU_TYPE})
+    if bad:
+        raise ImucalError(f"topic {topic} carries {bad[0]}, not {IMU_TYPE}", file=str(path),
+                          field="data.topic", fix=f"IMU topics in the bag: {present}")
+    return conns, present
+
+
+@dataclass
+class _ImuMessages:
+    stamps: list = field(default_factory=list)  #: header.stamp [ns]
+    recv: list = field(default_factory=list)  #: the bag's receive time [ns]
+    acc: list = field(default_factory=list)
+    gyr: list = field(default_factory=list)
+    no_gyro: bool = True  #: every message marks angular_velocity as not measured (covariance[0] = -1)
+    no_acc: bool = False  #: some message marks linear_acceleration as not measured
+
+
+def _imu_messages(reader: object, conns: list) -> _ImuMessages:
+    out = _ImuMessages()
+    for conn, t_recv, data in reader.messages(connections=conns):
+        m = reader.deserialize(data, conn.msgtype)
+        out.stamps.append(_stamp_ns(m))
+        out.recv.append(int(t_recv))
+        a, w = m.linear_acceleration, m.angular_velocity
+        out.acc.append((a.x, a.y, a.z))
+        out.gyr.append((w.x, w.y, w.z))
+        out.no_gyro = out.no_gyro and float(m.angular_velocity_covariance[0]) == -1.0
+        out.no_acc = out.no_acc or float(m.linear_acceleration_covariance[0]) == -1.0
+    return out
+
+
+def _time_base(msgs: _ImuMessages, path: Path, topic: str) -> tuple[np.ndarray, str]:
+    """Stamps [ns] (header.stamp, or the receive time when every stamp is zero), strictly increasing,
+    at an IMU's rate."""
+    ns = np.array(msgs.stamps, dtype=np.int64)
     note = "header.stamp of each message [s]"
     if not ns.any():
-        ns = np.array(recv, dtype=np.int64)
+        ns = np.array(msgs.recv, dtype=np.int64)
         note = "every header.stamp is zero: the bag's receive time of each message [s]"
     d = np.diff(ns)
     if (d <= 0).any():
@@ -130,24 +163,21 @@ def read_bag(path: str | os.PathLike, topic: str | None, temp_topic: str | None 
         raise ImucalError(f"stamps are not strictly increasing at message {k} "
                           f"({ns[k - 1]} ns then {ns[k]} ns)", file=str(path), field=f"{topic}.header.stamp",
                           fix="drop duplicate or reordered messages before calibrating")
-    raw = np.array(acc, float)
-    gyro = None if no_gyro else np.array(gyr, float)
+    if ns.size > 1:
+        rate = (ns.size - 1) / float((ns[-1] - ns[0]) * 1e-9)
+        if not MIN_RATE_HZ <= rate <= MAX_RATE_HZ:
+            raise ImucalError(f"the stamps give {rate:.4g} Hz, not an IMU sample rate ({MIN_RATE_HZ:g} Hz to "
+                              f"{MAX_RATE_HZ:g} Hz)", file=str(path), field=f"{topic}.header.stamp",
+                              fix="check the driver's time stamps")
+    return ns, note
+
+
+def _check_values(raw: np.ndarray, gyro: np.ndarray | None, path: Path, topic: str) -> None:
     for name, arr in (("linear_acceleration", raw), ("angular_velocity", gyro)):
         if arr is not None and not (np.isfinite(arr).all() and (np.abs(arr) <= MAX_ABS_VALUE).all()):
             k = int(np.flatnonzero(~(np.isfinite(arr) & (np.abs(arr) <= MAX_ABS_VALUE)).all(axis=1))[0])
             raise ImucalError(f"message {k} holds NaN, Inf or a corrupt value", file=str(path),
                               field=f"{topic}.{name}", fix="drop the corrupt messages before calibrating")
-    t = (ns - ns[0]) * 1e-9
-    if ns.size > 1:
-        rate = (ns.size - 1) / float(t[-1])
-        if not MIN_RATE_HZ <= rate <= MAX_RATE_HZ:
-            raise ImucalError(f"the stamps give {rate:.4g} Hz, not an IMU sample rate ({MIN_RATE_HZ:g} Hz to "
-                              f"{MAX_RATE_HZ:g} Hz)", file=str(path), field=f"{topic}.header.stamp",
-                              fix="check the driver's time stamps")
-    if temp is not None:
-        temp = np.interp(ns - ns[0], temp[0] - ns[0], temp[1])  # held at the ends beyond the temperature messages
-    return Recording(t=t, raw=raw, temp=temp, unit="m/s^2", source=str(path), sha256=sha, gyro=gyro,
-                     t_source=ns * 1e-9, time_unit="s", time_note=note, time_column="t", gyro_unit="rad/s")
 
 
 def _temperature(reader: object, path: Path, topic: str) -> tuple[np.ndarray, np.ndarray]:
