@@ -724,9 +724,56 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings(),
                           f"parameters, one effect coefficient more needs at least {n_free0 + 1 + MIN_DOF} intervals",
                           file=src, field="intervals", fix="record more static orientations (e.g. 18 to 30 holds of 3 s)")
 
+    p_before = _p_noise(base.result)
+    st = _backward(prob, base, _search(prob, base, names, settings, notes, p_before), settings, notes)
+    current, cur_effects, found, verdict = st.current, st.cur_effects, st.found, st.verdict
+    try:
+        final = _final_run(config, base, found, cur_effects, current, notes)
+    except ImucalError as exc:  # the calibration refuses the model found (e.g. a parameter undetermined)
+        notes.append(f"the calibration with {_added(found, cur_effects)} was refused: {exc.message}")
+        final, found, cur_effects = base, [], {}
+        verdict = (f"disagreement not explained by any candidate: chi2/dof = {base.result.redchi:.3g} "
+                   f"(p = {p_before:.3g}); the model found cannot be calibrated from these poses")
+    final, found, cur_effects, verdict = _beaten(config, base, final, found, cur_effects, current, verdict,
+                                                 settings, notes)
+    if found and verdict.startswith("explained"):  # name the effects as kept after the backward step
+        verdict = (f"explained: after adding {_added(found, cur_effects)} chi2/dof = {final.result.redchi:.3g} "
+                   f"(p = {_p_noise(final.result):.3g}), at noise level")
+    elif found and verdict.startswith("partly"):
+        verdict = f"partly explained by {_added(found, cur_effects)}; the remaining " + verdict.split("; the remaining ", 1)[1]
+    _axis_notes(cur_effects, found, final, notes)
+    last = {n: (lr, p, amb) for n, lr, p, amb in found}
+    effects = tuple(_found(n, ax, final.result, *last[n]) for n, ax in
+                    sorted(cur_effects.items(), key=lambda kv: _EFFECT_ORDER[kv[0]]) if n in last)
+    p_after = _p_noise(final.result)
+    sto = stoch.assess(final, settings.alpha_noise) if p_after < settings.alpha_noise else None
+    verdict = _stochastic_verdict(verdict, sto)
+    return Discovery(base=base, final=final, steps=tuple(st.steps), effects=effects, verdict=verdict,
+                     consistent_before=p_before >= settings.alpha_noise,
+                     consistent_after=p_after >= settings.alpha_noise, p_before=p_before, p_after=p_after,
+                     disagreement=tuple(st.disagreement), notes=tuple(notes) + (sto.notes if sto else ()),
+                     settings=settings, stochastic=sto, allan=stoch.allan_view(final, sto))
+
+
+@dataclass
+class _State:
+    """Where the forward search stands: the current fit, its effects, and what was found."""
+
+    current: FitResult
+    cur_effects: dict
+    steps: list = field(default_factory=list)
+    found: list = field(default_factory=list)  #: (name, lr, p, ambiguous labels)
+    disagreement: list = field(default_factory=list)
+    verdict: str = ""
+
+
+def _search(prob: "_Problem", base: CalibrationRun, names: list[str], settings: DiscoverSettings,
+            notes: list[str], p_before: float) -> _State:
+    """Forward rounds: a round runs while the residual disagrees with the noise or a candidate
+    stands out; each adds the most significant candidate (family-wise min-p level)."""
+    iv = base.intervals
     current = base.result
     cur_effects = _as_dict(base.calibration.effect_objects())
-    p_before = _p_noise(current)
     consistent = p_before >= settings.alpha_noise
     steps: list[Step] = []
     found: list[tuple[str, float, float, tuple[str, ...]]] = []  # name, lr, p, ambiguous
@@ -775,6 +822,13 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings(),
         if consistent:
             verdict = (f"explained: after adding {_added(found, cur_effects)} "
                        f"chi2/dof = {current.redchi:.3g} (p = {_p_noise(current):.3g}), at noise level")
+    return _State(current, cur_effects, steps, found, disagreement, verdict)
+
+
+def _backward(prob: "_Problem", base: CalibrationRun, st: _State, settings: DiscoverSettings,
+              notes: list[str]) -> _State:
+    """Simplify, prune and shape-check what the forward rounds found."""
+    current, cur_effects, found, verdict = st.current, st.cur_effects, st.found, st.verdict
     if found:
         current, cur_effects, kept = _simplify(prob, current, cur_effects, {f[0] for f in found}, settings, notes)
         found = [f if f[0] in kept else (EFFECTS[f[0]].simpler, *f[1:]) for f in found]
@@ -792,20 +846,11 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings(),
                        "the grammar (a piecewise-constant shape fits significantly better)")
             if found:
                 verdict = f"partly explained by {_added(found, cur_effects)}; the remaining {verdict}"
-    try:
-        final = _final_run(config, base, found, cur_effects, current, notes)
-    except ImucalError as exc:  # the calibration refuses the model found (e.g. a parameter undetermined)
-        notes.append(f"the calibration with {_added(found, cur_effects)} was refused: {exc.message}")
-        final, found, cur_effects = base, [], {}
-        verdict = (f"disagreement not explained by any candidate: chi2/dof = {base.result.redchi:.3g} "
-                   f"(p = {p_before:.3g}); the model found cannot be calibrated from these poses")
-    final, found, cur_effects, verdict = _beaten(config, base, final, found, cur_effects, current, verdict,
-                                                 settings, notes)
-    if found and verdict.startswith("explained"):  # name the effects as kept after the backward step
-        verdict = (f"explained: after adding {_added(found, cur_effects)} chi2/dof = {final.result.redchi:.3g} "
-                   f"(p = {_p_noise(final.result):.3g}), at noise level")
-    elif found and verdict.startswith("partly"):
-        verdict = f"partly explained by {_added(found, cur_effects)}; the remaining " + verdict.split("; the remaining ", 1)[1]
+    return dataclasses.replace(st, current=current, cur_effects=cur_effects, found=found, verdict=verdict)
+
+
+def _axis_notes(cur_effects: dict, found: list, final: CalibrationRun, notes: list[str]) -> None:
+    """Effects whose axis static poses cannot tell (the sum of their coefficients is determined)."""
     for n, ax in cur_effects.items():
         if n in {f[0] for f in found} and not EFFECTS[n].axes_observable:
             e = make_effect(n, ax)
@@ -813,17 +858,6 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings(),
             notes.append(f"{n}: static poses determine only the sum of its coefficients over the axes "
                          f"({v:.4g} {final.result.params[e.coefficient_names[0]].unit}; |a|^2 changes by 2 (q_x + q_y "
                          f"+ q_z) m_x m_y m_z), not which axis carries it: axis {_label(n, ax)[-2]} is a convention")
-    last = {n: (lr, p, amb) for n, lr, p, amb in found}
-    effects = tuple(_found(n, ax, final.result, *last[n]) for n, ax in
-                    sorted(cur_effects.items(), key=lambda kv: _EFFECT_ORDER[kv[0]]) if n in last)
-    p_after = _p_noise(final.result)
-    sto = stoch.assess(final, settings.alpha_noise) if p_after < settings.alpha_noise else None
-    verdict = _stochastic_verdict(verdict, sto)
-    return Discovery(base=base, final=final, steps=tuple(steps), effects=effects, verdict=verdict,
-                     consistent_before=p_before >= settings.alpha_noise,
-                     consistent_after=p_after >= settings.alpha_noise, p_before=p_before, p_after=p_after,
-                     disagreement=tuple(disagreement), notes=tuple(notes) + (sto.notes if sto else ()),
-                     settings=settings, stochastic=sto, allan=stoch.allan_view(final, sto))
 
 
 def _beaten(config: RunConfig, base: CalibrationRun, final: CalibrationRun, found: list, cur_effects: dict,
