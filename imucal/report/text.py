@@ -5,9 +5,10 @@ import math
 
 import numpy as np
 
+from imucal.calibration.frozen import Calibration
 from imucal.model.sensor import build_model
 from imucal.pipeline import CalibrationRun, fit_data
-from imucal.solve.fit import jacobian_rows
+from imucal.solve.fit import FitResult, jacobian_rows
 
 #: Correlations above this are listed.
 CORREL_MIN = 0.3
@@ -40,7 +41,15 @@ def _fmt(v: float) -> str:
 
 def fit_report(run: CalibrationRun, correl_min: float = CORREL_MIN) -> str:
     """Values, standard errors (absolute and %), initial values, bounds hit, correlations, status."""
-    res, cal, iv, rec = run.result, run.calibration, run.intervals, run.recording
+    L = [*_calibration_lines(run), *_statistics_lines(run), *_variable_lines(run.result),
+         *_correlation_lines(run.result, correl_min), *_apply_lines(run.calibration), *_interval_lines(run),
+         *_gyro_lines(run)]
+    return "\n".join(L) + "\n"
+
+
+def _calibration_lines(run: CalibrationRun) -> list[str]:
+    """What was calibrated: model, data, gravity."""
+    res, cal, rec = run.result, run.calibration, run.recording
     L: list[str] = []
     L.append("[[Calibration]]")
     L.append(f"    model              = {res.model_name}")
@@ -50,6 +59,13 @@ def fit_report(run: CalibrationRun, correl_min: float = CORREL_MIN) -> str:
     if rec.time_note:
         L.append(f"    time               = {rec.time_note}")
     L.append(f"    gravity            = {cal.gravity:.6f} m/s^2 ({run.gravity_source})")
+    return L
+
+
+def _statistics_lines(run: CalibrationRun) -> list[str]:
+    """Solver, chi-square, the stochastic excess, RMS, conditioning, warnings."""
+    res, cal, iv = run.result, run.calibration, run.intervals
+    L: list[str] = []
     L.append("[[Fit Statistics]]")
     L.append(f"    solver             = IPOPT: {res.status_words}")
     L.append(f"    # iterations       = {res.iterations}")
@@ -86,6 +102,12 @@ def fit_report(run: CalibrationRun, correl_min: float = CORREL_MIN) -> str:
                              for n in run.observability.poorly_determined))
     for wtext in cal.fit.get("warnings", []):
         L.append(f"    WARNING            = {wtext}")
+    return L
+
+
+def _variable_lines(res: FitResult) -> list[str]:
+    """Each parameter with its standard error, initial value and bound."""
+    L: list[str] = []
     L.append("[[Variables]]")
     w = max(len(n) for n in res.params)
     for n, p in res.params.items():
@@ -101,6 +123,12 @@ def fit_report(run: CalibrationRun, correl_min: float = CORREL_MIN) -> str:
     if any(n in res.params and n in ("phi", "psi", "theta") for n in res.free_names):
         L.append("    angles in degrees: " + ", ".join(
             f"{n} = {math.degrees(res.params[n].value):.4f}" for n in ("phi", "psi", "theta")))
+    return L
+
+
+def _correlation_lines(res: FitResult, correl_min: float) -> list[str]:
+    """Correlations above ``correl_min``, largest first."""
+    L: list[str] = []
     L.append(f"[[Correlations]] (unreported correlations are < {correl_min:.3f})")
     pairs = []
     fn = res.free_names
@@ -111,11 +139,24 @@ def fit_report(run: CalibrationRun, correl_min: float = CORREL_MIN) -> str:
                 pairs.append((abs(c), fn[i], fn[j], c))
     for _, a, b, c in sorted(pairs, reverse=True):
         L.append(f"    C({a}, {b}) = {c:+.4f}")
+    return L
+
+
+def _apply_lines(cal: Calibration) -> list[str]:
+    """The apply map as applied."""
+    L: list[str] = []
     A, c = cal.linear_map()
     L.append("[[Apply map]]  a = A raw + c  (Theorem; A lower triangular, output in m/s^2)" if not cal.effects
              else f"[[Apply map]]  {cal.equation}; A, c:")
     for i in range(3):
         L.append("    " + " ".join(f"{v:+.9e}" for v in A[i]) + f"   | {c[i]:+.9e}")
+    return L
+
+
+def _interval_lines(run: CalibrationRun) -> list[str]:
+    """The static intervals, dropped ones, and the residual of each."""
+    res, cal, iv = run.result, run.calibration, run.intervals
+    L: list[str] = []
     L.append(f"[[Static intervals]]  times in s, means and std in {cal.raw_unit}, directions unit vectors")
     L.append(iv.table(run.directions))
     for d in cal.data.get("dropped_intervals", []):
@@ -125,6 +166,13 @@ def fit_report(run: CalibrationRun, correl_min: float = CORREL_MIN) -> str:
     if r is not None:
         for k in range(iv.n):
             L.append(f"    {k:3d} {r[k]:+.6f} +/- {res.sigma[k]:.6f}  ({r[k] / res.sigma[k]:+.2f} sigma)")
+    return L
+
+
+def _gyro_lines(run: CalibrationRun) -> list[str]:
+    """The gyroscope's report and apply map, when there is one."""
+    cal = run.calibration
+    L: list[str] = []
     if run.gyro is not None:
         L.append("[[Gyroscope]]")
         L.append(run.gyro.report())
@@ -134,7 +182,7 @@ def fit_report(run: CalibrationRun, correl_min: float = CORREL_MIN) -> str:
         for i in range(3):
             L.append("    " + " ".join(f"{v:+.9e}" for v in C[i]) + f"   | {c[i]:+.9e}   | "
                      + " ".join(f"{v:+.6e}" for v in D[i]))
-    return "\n".join(L) + "\n"
+    return L
 
 
 def summary(run: CalibrationRun) -> dict:
