@@ -266,6 +266,26 @@ def test_histograms_written(fleet, batch, tmp_path):
     pngs = sorted(p.name for p in out.glob("fleet_*.png"))
     assert pngs == sorted(f"fleet_{n}.png" for n in (*BASE_NAMES, "rms_residual"))
     assert all((out / p).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for p in pngs)
+    page = (out / "report.html").read_text()
+    assert page.count("data:image/png;base64,") == len(pngs)  # the same histograms, inline
+
+
+def test_fleet_page_puts_the_yield_first_and_flags_the_bad_units(batch, truth):
+    out = batch[0]
+    page = (Path(out) / "report.html").read_text()
+    good = N_UNITS - N_CORRUPT - N_DEFECTIVE
+    assert "Content-Security-Policy" in page and "<script" not in page.lower()
+    head, rest = page.split('id="flagged"', 1)
+    assert f"yield {good}/{N_UNITS} = {100 * good / N_UNITS:.1f} % pass" in head
+    flagged, every = rest.split('id="units"', 1)
+    bad = {u for u, t in truth.items() if t["corrupt"] or t["defect"]}
+    assert all(f"<td>{u}</td>" in flagged for u in bad)
+    assert not any(f"<td>{u}</td>" in flagged for u in set(truth) - bad if not _outlier(out, u))
+    assert all(f"<td>{u}</td>" in every for u in truth)
+
+
+def _outlier(out: Path, unit: str) -> bool:
+    return bool(_table(Path(out))[unit]["outlier"])
 
 
 def test_csv_manifest_and_folder(fleet, tmp_path):

@@ -47,7 +47,7 @@ FORMAT_VERSION = 1
 #: A unit id names its output folder: letters, digits, '.', '_', '-', starting with a letter or digit.
 UNIT_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}\Z")
 #: Names the fleet report takes in DIR (imucal.fleet.report): no unit folder may take them.
-REPORT_NAMES = re.compile(r"fleet(\.(csv|txt|parquet)|_.*\.png)\Z", re.IGNORECASE)
+REPORT_NAMES = re.compile(r"(fleet(\.(csv|txt|parquet)|_.*\.png)|report\.html)\Z", re.IGNORECASE)
 #: The keys of each run-file section, from RunConfig itself (a new section needs no line here); a CSV
 #: override column is checked against them even when all its cells are empty.
 SECTION_KEYS = {name: tuple(keys(tp)) for name, tp in keys(RunConfig).items()}

@@ -11,6 +11,7 @@ import csv
 import io
 import math
 from dataclasses import dataclass
+from typing import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +20,7 @@ from imucal.fleet.manifest import Tolerances
 from imucal.files.output import OutputSet
 from imucal.fleet.run import ERROR, INTERNAL, NOT_CONVERGED, OK
 from imucal.model.parameters import ANGLE_NAMES, BASE_NAMES
+from imucal.report.html import esc, figures_html, num, page_html, table_html
 
 #: Robust z-score above which a parameter marks its unit as an outlier.
 OUTLIER_Z = 5.0
@@ -27,6 +29,8 @@ MAD_SIGMA = 0.6745
 #: Fewest converged units for outlier flags (a median of fewer says little).
 MIN_UNITS_FOR_OUTLIERS = 5
 REPORT_CSV, REPORT_PARQUET, REPORT_TEXT = "fleet.csv", "fleet.parquet", "fleet.txt"
+#: the fleet's page (imucal.report.html), beside each unit's own report.html in its folder
+REPORT_HTML = "report.html"
 
 #: Derived columns checked against tolerances: the zero-g reading [m/s^2] and angle offset [deg].
 BIAS_COLS = ("bias_x", "bias_y", "bias_z")
@@ -204,18 +208,66 @@ def summary_text(table: FleetTable) -> str:
     return "\n".join(lines) + "\n"
 
 
+#: The fleet table's columns shown on the page, with units (COLUMNS).
+FLEET_NUMBERS = (("bias_x", "m/s²"), ("bias_y", "m/s²"), ("bias_z", "m/s²"), ("phi_from_90_deg", "deg"),
+                 ("psi_from_90_deg", "deg"), ("theta_from_90_deg", "deg"), ("rms_residual", "m/s²"))
+
+
+def _fleet_verdict(table: FleetTable) -> str:
+    n, passed = table.n, table.count("verdict", "pass")
+    level = "pass" if n and passed == n else ("fail" if passed == 0 else "check")
+    tol = table.tolerances.given()
+    rows = [["units", str(n)], ["calibrated", str(table.count("status", OK))],
+            ["refused (bad input)", str(table.count("status", ERROR))],
+            ["not converged", str(table.count("status", NOT_CONVERGED))],
+            ["internal errors", str(table.count("status", INTERNAL))],
+            [f"outliers (robust z > {OUTLIER_Z:g} against the fleet)", str(sum(bool(r["outlier"]) for r in table.rows))],
+            ["tolerances", esc(", ".join(f"{k} {v:g}" for k, v in tol.items()) or "none given")]]
+    return (f'<section class="verdict {level}" id="verdict"><h2>yield {passed}/{n} = '
+            f"{num(100 * table.yield_fraction, '.1f')} % pass</h2>"
+            + table_html(["", ""], rows, [False, True]) + "</section>")
+
+
+def _fleet_rows(rows: list[dict]) -> str:
+    head = ["unit", "status", "verdict", "outlier", "why"] + [f"{esc(c)} [{u}]" for c, u in FLEET_NUMBERS]
+    cells = [[esc(r["unit"]), esc(r["status"]), esc(r["verdict"]), esc(r["outlier"] or ""),
+              esc(r["error"] if r["status"] != OK and r["error"] else r["reasons"] or "")]
+             + [num(r.get(c), ".4g") if isinstance(r.get(c), (int, float)) else "n/a" for c, _ in FLEET_NUMBERS]
+             for r in rows]
+    return table_html(head, cells, [False] * 5 + [True] * len(FLEET_NUMBERS),
+                  ["out" if r["verdict"] == "fail" or r["outlier"] else "" for r in rows])
+
+
+def fleet_html(table: FleetTable, figures: Mapping[str, bytes] | None = None, title: str = "imucal fleet") -> str:
+    """The page of ``imucal batch``: the yield first, then the units that fail or stand out, every
+    unit, and the histograms of the parameters across the fleet."""
+    flagged = [r for r in table.rows if r["verdict"] == "fail" or r["outlier"]]
+    sections = [("verdict", "", _fleet_verdict(table)),
+                ("flagged", "Units that fail a tolerance, were refused or stand out",
+                 _fleet_rows(flagged) if flagged else "<p>None.</p>"),
+                ("units", "Every unit", _fleet_rows(table.rows)),
+                ("figures", "Parameters across the fleet", figures_html(figures or {}, {}))]
+    return page_html(f"{title}: {table.n} units", sections)
+
+
 def write_report(table: FleetTable, out: Path, inputs: list[str], figures: bool = True) -> list[Path]:
     """fleet.csv, fleet.parquet (with pyarrow), fleet.txt and fleet_<column>.png, published together."""
-    written = [out / REPORT_CSV, out / REPORT_TEXT]
+    written = [out / REPORT_CSV, out / REPORT_TEXT, out / REPORT_HTML]
+    pngs = {}
+    if figures and table.count("status", OK):  # the same PNGs go on the page and beside it
+        for name in HISTOGRAMS:
+            buf = io.BytesIO()
+            histogram(table, name, buf)
+            pngs[f"fleet_{name}.png"] = buf.getvalue()
     with OutputSet(inputs) as o:
         o.text(out / REPORT_CSV, to_csv(table))
         o.text(out / REPORT_TEXT, summary_text(table))
+        o.text(out / REPORT_HTML, fleet_html(table, pngs))
         pq = parquet_writer(table)
         if pq is not None:
             o.call(out / REPORT_PARQUET, pq)
             written.append(out / REPORT_PARQUET)
-        if figures and table.count("status", OK):
-            for name in HISTOGRAMS:
-                o.call(out / f"fleet_{name}.png", lambda p, name=name: histogram(table, name, p))
-                written.append(out / f"fleet_{name}.png")
+        for name, png in pngs.items():
+            o.bytes(out / name, png)
+            written.append(out / name)
     return written

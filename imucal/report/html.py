@@ -118,7 +118,7 @@ def verdict(run: CalibrationRun) -> Verdict:
     return Verdict(level, headline, tuple(checks), warnings)
 
 
-def _table(head: Iterable[str], rows: Iterable[Iterable[str]], numeric: Iterable[bool] = (),
+def table_html(head: Iterable[str], rows: Iterable[Iterable[str]], numeric: Iterable[bool] = (),
            row_class: Iterable[str] = ()) -> str:
     """A table from already-escaped cells."""
     numeric = list(numeric)
@@ -158,11 +158,11 @@ def _parameters_html(run: CalibrationRun) -> str:
         flag = f" (at {res.at_bound[n]} bound)" if n in res.at_bound else ""
         rows.append([esc(n), num(p.value, ".10g"), num(sd, ".4g"), num(pct, ".3g"), esc(p.unit),
                      num(res.initial[n].value, ".6g") + esc(flag)])
-    body = _table(["parameter", "value", "standard error", "error [%]", "unit", "initial value"], rows,
+    body = table_html(["parameter", "value", "standard error", "error [%]", "unit", "initial value"], rows,
                   [False, True, True, True, False, True])
     angles = [n for n in ("phi", "psi", "theta") if n in res.params]
     if angles:
-        body += _table(["angle", "value [deg]", "standard error [deg]", "from 90° [mrad]"],
+        body += table_html(["angle", "value [deg]", "standard error [deg]", "from 90° [mrad]"],
                        [[esc(n), num(math.degrees(res.params[n].value), ".5f"),
                          num(math.degrees(res.std.get(n, math.nan)), ".3g"),
                          num((res.params[n].value - math.pi / 2) * 1e3, ".4g")] for n in angles],
@@ -178,7 +178,7 @@ def _apply_html(run: CalibrationRun) -> str:
     rows = [[f"a<sub>{'xyz'[i]}</sub>"] + [num(v, "+.9e") for v in A[i]] + [num(c[i], "+.9e")] for i in range(3)]
     return (f"<p>a = A raw + c, with a in m/s², raw in {unit}; A [(m/s²)/{unit}] is lower triangular "
             "(the Theorem).</p>"
-            + _table(["", "A[:, x]", "A[:, y]", "A[:, z]", "c [m/s²]"], rows, [False, True, True, True, True]))
+            + table_html(["", "A[:, x]", "A[:, y]", "A[:, z]", "c [m/s²]"], rows, [False, True, True, True, True]))
 
 
 def _residuals_html(run: CalibrationRun) -> str:
@@ -194,7 +194,7 @@ def _residuals_html(run: CalibrationRun) -> str:
     rms = float(np.sqrt(np.mean(r**2)))
     return (f"<p>|a| − g at each interval mean; σ from the interval's own scatter. RMS {rms * 1e3:.4g} mm/s²; "
             "rows beyond 3σ are shaded.</p>"
-            + _table(["#", "start [s]", "end [s]", "direction (unit vector)", "|a| − g [mm/s²]", "σ [mm/s²]",
+            + table_html(["#", "start [s]", "end [s]", "direction (unit vector)", "|a| − g [mm/s²]", "σ [mm/s²]",
                       "residual / σ"], rows, [True, True, True, False, True, True, True], cls))
 
 
@@ -217,10 +217,10 @@ def _statistics_html(run: CalibrationRun) -> str:
         rows.append(("time", esc(rec.time_note)))
     for d in cal.data.get("dropped_intervals", []):
         rows.append(("dropped interval", f"{d['t_start']:.2f} – {d['t_end']:.2f} s: {esc(d['reason'])}"))
-    return _table(["", ""], [[a, b] for a, b in rows])
+    return table_html(["", ""], [[a, b] for a, b in rows])
 
 
-def _figures_html(figures: Mapping[str, bytes], captions: Mapping[str, str]) -> str:
+def figures_html(figures: Mapping[str, bytes], captions: Mapping[str, str]) -> str:
     out = []
     for name, png in figures.items():
         data = base64.b64encode(png).decode("ascii")
@@ -241,7 +241,7 @@ CAPTIONS = {
 }
 
 
-def _page(title: str, sections: Iterable[tuple[str, str, str]]) -> str:
+def page_html(title: str, sections: Iterable[tuple[str, str, str]]) -> str:
     """sections: (id, escaped heading, html body)."""
     body = "\n".join(f'<section id="{sid}"><h2>{head}</h2>\n{content}\n</section>' if head else content
                      for sid, head, content in sections)
@@ -269,8 +269,8 @@ def calibration_html(run: CalibrationRun, figures: Mapping[str, bytes] | None = 
     sections = [("verdict", "", _verdict_html(verdict(run))), *_calibration_sections(run)]
     for k, (head, text) in enumerate((extra or {}).items()):
         sections.append((f"extra{k}", esc(head), f"<pre>{esc(text)}</pre>"))
-    sections.append(("figures", "Figures", _figures_html(figures or {}, CAPTIONS)))
-    return _page(title, sections)
+    sections.append(("figures", "Figures", figures_html(figures or {}, CAPTIONS)))
+    return page_html(title, sections)
 
 
 def discovery_html(d: Discovery, figures: Mapping[str, bytes] | None = None) -> str:
@@ -279,7 +279,7 @@ def discovery_html(d: Discovery, figures: Mapping[str, bytes] | None = None) -> 
     v = verdict(d.final)
     level = "pass" if d.consistent_after and v.level == "pass" else ("fail" if v.level == "fail" else "check")
     head = (f'<section class="verdict {level}" id="verdict"><h2>{esc(d.verdict)}</h2>'
-            + _table(["", "base model", "final model"],
+            + table_html(["", "base model", "final model"],
                      [["model", esc(b.model_name), esc(f.model_name)],
                       ["RMS |a| − g [mm/s²]", num(d.rms_before * 1e3, ".4g"), num(d.rms_after * 1e3, ".4g")],
                       ["chi-square / dof", f"{num(b.chi2, '.4g')} / {b.dof}", f"{num(f.chi2, '.4g')} / {f.dof}"],
@@ -293,14 +293,14 @@ def discovery_html(d: Discovery, figures: Mapping[str, bytes] | None = None) -> 
         for n, val in e.coefficients.items():
             rows.append([esc(e.label), esc(n), num(val, ".6g"), num(e.std.get(n, math.nan), ".3g"),
                          esc(e.units.get(n, "")), num(e.lr, ".4g"), num(e.p_value, ".3g")])
-    effects = (_table(["effect", "coefficient", "value", "standard error", "unit", "LR", "p (adjusted)"], rows,
+    effects = (table_html(["effect", "coefficient", "value", "standard error", "unit", "LR", "p (adjusted)"], rows,
                       [False, False, True, True, False, True, True]) if rows else "<p>None added.</p>")
     title = f"imucal discover: {Path(d.base.recording.source).name}"
     sections = [("verdict", "", head), ("fit", "", _verdict_html(v)), ("effects", "Effects found", effects),
                 *_calibration_sections(d.final),
                 ("discovery", "Discovery report (text)", f"<pre>{esc(d.report())}</pre>"),
-                ("figures", "Figures", _figures_html(figures or {}, CAPTIONS))]
-    return _page(title, sections)
+                ("figures", "Figures", figures_html(figures or {}, CAPTIONS))]
+    return page_html(title, sections)
 
 
 def render_png(fn, obj) -> bytes:

@@ -34,7 +34,8 @@ def run(args: argparse.Namespace) -> int:
     from imucal.files.inputs import same_file
     from imucal.files.output import check_outputs
     from imucal.fleet.manifest import load_manifest
-    from imucal.fleet.report import REPORT_CSV, REPORT_PARQUET, REPORT_TEXT, fleet_table, summary_text, write_report
+    from imucal.fleet.report import (REPORT_CSV, REPORT_HTML, REPORT_PARQUET, REPORT_TEXT, fleet_table, summary_text,
+                                     write_report)
     from imucal.fleet.run import executor, progress_bar, run_units
 
     if args.workers is not None:
@@ -47,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
     if os.path.isdir(args.manifest) and same_file(args.manifest, out):  # False, not OSError, for bad names
         raise ImucalError("is the folder of recordings", file=args.out, field="--out",
                           fix="write the results to another folder (its fleet.csv would become a unit)")
-    check_outputs(inputs, [out / REPORT_CSV, out / REPORT_TEXT, out / REPORT_PARQUET])
+    check_outputs(inputs, [out / REPORT_CSV, out / REPORT_TEXT, out / REPORT_PARQUET, out / REPORT_HTML])
     manifest = load_manifest(args.manifest, args.config)
     n = len(manifest.units)
     try:
