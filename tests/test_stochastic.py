@@ -160,3 +160,15 @@ def test_discover_names_the_random_walk_with_the_allan_view(tmp_path):
     finally:
         Figure.savefig = orig
     assert saved and axis_problems(saved[0]) == []
+
+
+def test_the_reml_test_is_skipped_above_its_size_limit(monkeypatch):
+    """Dense n x n covariances: above MAX_INTERVALS the auto weights fall back to Paule-Mandel (a
+    tiled 5 M-sample log has thousands of intervals and took minutes before this limit)."""
+    data = _means(1, q=Q)
+    assert _fit(data, "auto").random_walk > 0  # within the limit: the walk is named and weighted
+    monkeypatch.setattr(stochastic, "MAX_INTERVALS", len(data.raw) - 1)
+    assert not stochastic.feasible(len(data.raw))
+    monkeypatch.setattr(stochastic, "select", lambda *a, **k: pytest.fail("the REML test ran above its limit"))
+    res = _fit(data, "auto")
+    assert res.random_walk == 0.0 and res.excess > 0  # Paule-Mandel's per-visit excess instead

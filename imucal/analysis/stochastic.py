@@ -27,8 +27,11 @@ from imucal.solve.stochastic import RANDOM_WALK, StochasticFit
 MIN_ALLAN_SAMPLES = 10_000
 
 
-def assess(run: CalibrationRun, alpha: float = 1e-3) -> StochasticFit:
-    """The REML test of the stochastic biases on ``run``'s interval means, at its fitted values."""
+def assess(run: CalibrationRun, alpha: float = 1e-3) -> StochasticFit | None:
+    """The REML test of the stochastic biases on ``run``'s interval means, at its fitted values;
+    None above imucal.solve.stochastic.MAX_INTERVALS intervals."""
+    if not stochastic.feasible(run.intervals.n):
+        return None
     res, cal = run.result, run.calibration
     model = build_model(cal.effect_objects())
     data = fit_data(model, run.intervals, run.recording, "means", run.recording.source)
@@ -53,7 +56,7 @@ def beaten_terms(run: CalibrationRun, names: set[str], alpha: float = 1e-3) -> d
     Those not significant are returned.
     """
     terms = [n for n in names if "time" in EFFECTS[n].covariates]
-    if not terms:
+    if not terms or not stochastic.feasible(run.intervals.n):
         return {}
     res = run.result
     ax = dict(run.calibration.effects)

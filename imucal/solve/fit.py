@@ -260,11 +260,12 @@ def _excess(fns, rows, data: FitData, params: Parameters, p_now, pfix, gravity: 
     """weights="auto": (tau^2, q^2, the test) when the residuals exceed the noise at p < EXCESS_P.
 
     A bias random walk named by the REML test (imucal.solve.stochastic), and told apart from
-    per-visit offsets, gives its (tau^2, q^2); otherwise the excess is Paule-Mandel's common between-interval variance, as before the test.
+    per-visit offsets, gives its (tau^2, q^2); otherwise (or above stochastic.MAX_INTERVALS intervals)
+    the excess is Paule-Mandel's common between-interval variance, as before the test.
     """
     if chi2_sf(float(np.sum((r0 / s0) ** 2)), dof) >= EXCESS_P:
         return 0.0, 0.0, None
-    if walk_test and data.t is not None and len(r0) > len(params.free_names) + 3 and (
+    if walk_test and data.t is not None and len(params.free_names) + 3 < len(r0) and stochastic.feasible(len(r0)) and (
             float(np.sum((r0 / s0) ** 2)) / dof < STOCHASTIC_MAX_REDCHI):
         sto = stochastic.select(_components(fns, rows, data, params, p_now, pfix, gravity, s0))
         if stochastic.RANDOM_WALK in sto.named and not sto.ambiguous:  # undecided: the per-visit excess

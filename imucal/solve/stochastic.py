@@ -39,6 +39,17 @@ import numpy as np
 from imucal.solve import least_squares as lsq
 from imucal.solve.stats import chi2_sf, median
 
+#: The REML test works on dense n x n covariances of the interval means (a Cholesky factor per
+#: likelihood evaluation, O(n^3)): above this many intervals it is not run, and the between-interval
+#: excess is Paule-Mandel's alone (a 5 M-sample log tiled from Xsens has 3,800 intervals: the test
+#: took minutes and 51 M samples would need 11 GB for one matrix).
+MAX_INTERVALS = 600
+
+
+def feasible(n: int) -> bool:
+    """Whether the REML test runs on ``n`` interval means (MAX_INTERVALS)."""
+    return n <= MAX_INTERVALS
+
 INSTABILITY, RANDOM_WALK = "bias_instability", "bias_random_walk"
 MODELS = ("none", INSTABILITY, RANDOM_WALK, "both")
 #: variance components of each model: (instability, random walk) free?
