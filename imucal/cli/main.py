@@ -130,10 +130,15 @@ def main(argv: list[str] | None = None) -> int:
                          "(rerun with --debug for the traceback)\n")
         return EXIT_INTERNAL
     finally:
+        # Called from code (argv given): give the caller its handlers back. As the program itself
+        # (argv None: the console script, python -m imucal) the run is over and its outputs are
+        # complete: a signal in the last milliseconds of the exit is ignored, not allowed to kill
+        # the finished run (exit -15) by the default action restored here.
+        done = signal.SIG_IGN if argv is None else None
         if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
+            signal.signal(signal.SIGTERM, done or previous)
         if previous_int is not None:
-            signal.signal(signal.SIGINT, previous_int)
+            signal.signal(signal.SIGINT, done or previous_int)
 
 
 if __name__ == "__main__":  # pragma: no cover
