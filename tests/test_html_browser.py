@@ -80,3 +80,21 @@ def test_the_checks_catch_a_broken_page(calibrated, tmp_path):
     shot = tmp_path / "blank.png"
     _chromium(blank, tmp_path, f"--screenshot={shot}")
     assert _screenshot_std(shot) < BLANK_STD
+
+
+def test_the_fleet_page_loads_cleanly_and_shows_the_yield(tmp_path_factory, tmp_path):
+    """`imucal batch`'s report.html: the same checks, and the yield and every unit in the DOM."""
+    root = Path(__file__).resolve().parents[1]
+    d = tmp_path_factory.mktemp("fleetpage")
+    assert main(["simulate", str(root / "configs" / "simulate_fleet.yaml"), "--fleet", "6", "--defective", "1",
+                 "--out", str(d / "sim")]) == 0
+    assert main(["batch", str(d / "sim" / "manifest.yaml"), "--out", str(d / "res"), "--workers", "1"]) == 0
+    page = d / "res" / "report.html"
+    shot = tmp_path / "fleet.png"
+    r = _chromium(page, tmp_path, f"--screenshot={shot}")
+    assert shot.exists(), r.stderr[-2000:]
+    assert _console_errors(r.stderr) == [] and _screenshot_std(shot) > BLANK_STD
+    dom = _chromium(page, tmp_path, "--dump-dom").stdout
+    assert "% pass" in dom and dom.count("<img") == 10  # nine parameters and the RMS, inline
+    units = [p.name for p in (d / "res").iterdir() if p.is_dir()]
+    assert len(units) == 6 and all(f"<td>{u}</td>" in dom for u in units)

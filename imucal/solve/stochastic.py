@@ -40,10 +40,11 @@ from imucal.solve import least_squares as lsq
 from imucal.solve.stats import chi2_sf, median
 
 #: The REML test works on dense n x n covariances of the interval means (a Cholesky factor per
-#: likelihood evaluation, O(n^3)): above this many intervals it is not run, and the between-interval
-#: excess is Paule-Mandel's alone (a 5 M-sample log tiled from Xsens has 3,800 intervals: the test
-#: took minutes and 51 M samples would need 11 GB for one matrix).
-MAX_INTERVALS = 600
+#: likelihood evaluation, O(n^3), some 800 evaluations): above this many intervals it is not run, and
+#: the between-interval excess is Paule-Mandel's alone. Measured (scripts/bench_memory.py): 380
+#: intervals cost 4.5 s of CPU; a 5 M-sample log tiled from Xsens has 3,800 (minutes), and 51 M
+#: samples would need 11 GB for one matrix.
+MAX_INTERVALS = 300
 
 
 def feasible(n: int) -> bool:
