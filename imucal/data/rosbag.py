@@ -107,22 +107,27 @@ def read_bag(path: str | os.PathLike, topic: str | None, temp_topic: str | None 
                      t_source=ns * 1e-9, time_unit="s", time_note=note, time_column="t", gyro_unit="rad/s")
 
 
-def _imu_connections(reader: object, path: Path, topic: str | None) -> tuple[list, str]:
-    """The connections of ``topic`` (sensor_msgs/msg/Imu only) and the bag's IMU topics, for messages."""
-    imu_topics = sorted({c.topic for c in reader.connections if c.msgtype == IMU_TYPE})
-    present = ", ".join(imu_topics) or "none"
-    if not topic:
-        raise ImucalError("a ROS bag needs the IMU topic to read", file=str(path), field="data.topic",
-                          fix=f"give --topic (data.topic); IMU topics in the bag: {present}")
+def _connections(reader: object, path: Path, topic: str, msgtype: str, field: str, what: str) -> tuple[list, str]:
+    """The connections of ``topic``, all of ``msgtype``, and the bag's topics of that type (for messages)."""
+    present = ", ".join(sorted({c.topic for c in reader.connections if c.msgtype == msgtype})) or "none"
     conns = [c for c in reader.connections if c.topic == topic]
     if not conns:
-        raise ImucalError(f"topic {topic} is not in the bag", file=str(path), field="data.topic",
-                          fix=f"IMU topics in the bag: {present}")
-    bad = sorted({c.msgtype for c in conns if c.msgtype != IMU_TYPE})
+        raise ImucalError(f"topic {topic} is not in the bag", file=str(path), field=field,
+                          fix=f"{what} topics in the bag: {present}")
+    bad = sorted({c.msgtype for c in conns if c.msgtype != msgtype})
     if bad:
-        raise ImucalError(f"topic {topic} carries {bad[0]}, not {IMU_TYPE}", file=str(path),
-                          field="data.topic", fix=f"IMU topics in the bag: {present}")
+        raise ImucalError(f"topic {topic} carries {bad[0]}, not {msgtype}", file=str(path), field=field,
+                          fix=f"{what} topics in the bag: {present}")
     return conns, present
+
+
+def _imu_connections(reader: object, path: Path, topic: str | None) -> tuple[list, str]:
+    """The connections of the IMU ``topic`` (sensor_msgs/msg/Imu only) and the bag's IMU topics."""
+    if not topic:
+        present = ", ".join(sorted({c.topic for c in reader.connections if c.msgtype == IMU_TYPE})) or "none"
+        raise ImucalError("a ROS bag needs the IMU topic to read", file=str(path), field="data.topic",
+                          fix=f"give --topic (data.topic); IMU topics in the bag: {present}")
+    return _connections(reader, path, topic, IMU_TYPE, "data.topic", "IMU")
 
 
 @dataclass
@@ -182,15 +187,7 @@ def _check_values(raw: np.ndarray, gyro: np.ndarray | None, path: Path, topic: s
 
 def _temperature(reader: object, path: Path, topic: str) -> tuple[np.ndarray, np.ndarray]:
     """(stamps [ns], temperature [deg C]) of the Temperature messages on ``topic``."""
-    conns = [c for c in reader.connections if c.topic == topic]
-    found = ", ".join(sorted({c.topic for c in reader.connections if c.msgtype == TEMP_TYPE})) or "none"
-    if not conns:
-        raise ImucalError(f"topic {topic} is not in the bag", file=str(path), field="data.temp_topic",
-                          fix=f"temperature topics in the bag: {found}")
-    bad = sorted({c.msgtype for c in conns if c.msgtype != TEMP_TYPE})
-    if bad:
-        raise ImucalError(f"topic {topic} carries {bad[0]}, not {TEMP_TYPE}", file=str(path),
-                          field="data.temp_topic", fix=f"temperature topics in the bag: {found}")
+    conns, _ = _connections(reader, path, topic, TEMP_TYPE, "data.temp_topic", "temperature")
     st, val = [], []
     for conn, t_recv, data in reader.messages(connections=conns):
         m = reader.deserialize(data, conn.msgtype)
