@@ -68,3 +68,10 @@ def key_text(key: object) -> str:
     if isinstance(key, str) and 0 < len(key) <= 40 and key.isprintable():
         return key
     return short(key, 40)
+
+
+def check_choice(value: object, choices: tuple, field: str, what: str, note: str = "") -> None:
+    """Refuse ``value`` outside ``choices``: "unknown WHAT VALUE" with the choices as the fix."""
+    if value not in choices:
+        raise ImucalError(f"unknown {what} {short(value)}", field=field,
+                          fix=f"use one of {', '.join(choices)}" + (f" ({note})" if note else ""))

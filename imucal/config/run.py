@@ -15,7 +15,7 @@ from typing import Any, Mapping
 
 from imucal.constants import DEFAULT_ANGLE_TOL
 from imucal.data.load import DataSpec
-from imucal.errors import ImucalError, short
+from imucal.errors import ImucalError, check_choice, short
 from imucal.model.gravity import normal_gravity
 from imucal.model.parameters import BASE_NAMES
 from imucal.data.static import StaticSettings
@@ -134,12 +134,8 @@ class FitSettings:
         if self.noise is not None and (not isinstance(self.noise, str) or not self.noise):
             raise ImucalError(f"noise {short(self.noise)} must be a file name", field="fit.noise",
                               fix="give the JSON of `imucal noise --json` or a Kalibr imu.yaml")
-        if self.mode not in FIT_MODES:
-            raise ImucalError(f"unknown fit mode {short(self.mode)}", field="fit.mode",
-                              fix=f"use one of {', '.join(FIT_MODES)}")
-        if self.weights not in WEIGHTS:
-            raise ImucalError(f"unknown weights {short(self.weights)}", field="fit.weights",
-                              fix=f"use one of {', '.join(WEIGHTS)}")
+        check_choice(self.mode, FIT_MODES, "fit.mode", "fit mode")
+        check_choice(self.weights, WEIGHTS, "fit.weights", "weights")
         if not (isinstance(self.angle_tolerance, (int, float)) and 0 < self.angle_tolerance < 0.5):
             raise ImucalError(f"angle_tolerance {short(self.angle_tolerance)} must lie in (0, 0.5)",
                               field="fit.angle_tolerance", fix="use e.g. 0.02 (90 deg +- 2 %)")
@@ -166,9 +162,7 @@ class GyroSettings:
     free_bias: bool = False  #: also fit a bias correction in the rotation fit (imu_tk's option)
 
     def __post_init__(self) -> None:
-        if self.gsens not in GYRO_GSENS:
-            raise ImucalError(f"unknown g-sensitivity choice {short(self.gsens)}", field="gyro.gsens",
-                              fix=f"use one of {', '.join(GYRO_GSENS)}")
+        check_choice(self.gsens, GYRO_GSENS, "gyro.gsens", "g-sensitivity choice")
         if self.lead_in_s != "auto" and not (_is_real(self.lead_in_s) and 0 <= self.lead_in_s <= 10):
             raise ImucalError(f"lead_in_s {short(self.lead_in_s)} is not auto or between 0 and 10 s",
                               field="gyro.lead_in_s", fix="give auto, or seconds such as 0.5")

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from imucal.constants import GYRO_UNIT_CHOICES, TIME_UNIT_CHOICES, TIME_UNITS
-from imucal.errors import ImucalError, short
+from imucal.errors import ImucalError, check_choice, short
 from imucal.solve.stats import median
 from imucal.data.rosbag import is_bag, read_bag
 from imucal.files.inputs import max_data_bytes, open_regular
@@ -94,18 +94,11 @@ class DataSpec:
                     or (isinstance(col, str) and col and len(col) <= 200)):
                 raise ImucalError(f"column {short(col)} for {short(role)} must be a header name or a "
                                   "0-based index below 10000", field=f"data.columns.{role if isinstance(role, str) and len(role) <= 20 else short(role, 20)}")
-        if self.format not in FORMATS:
-            raise ImucalError(f"unknown format {short(self.format)}", field="data.format",
-                              fix=f"use one of {', '.join(FORMATS)}")
-        if self.stream not in STREAM_CHOICES:
-            raise ImucalError(f"unknown stream setting {short(self.stream)}", field="data.stream",
-                              fix=f"use one of {', '.join(STREAM_CHOICES)}")
-        if self.gyro_unit not in GYRO_UNIT_CHOICES:
-            raise ImucalError(f"unknown gyro unit {short(self.gyro_unit)}", field="data.gyro_unit",
-                              fix=f"use one of {', '.join(GYRO_UNIT_CHOICES)} (raw and counts: the scale is searched)")
-        if self.time_unit not in TIME_UNIT_CHOICES:
-            raise ImucalError(f"unknown time unit {short(self.time_unit)}", field="data.time_unit",
-                              fix=f"use one of {', '.join(TIME_UNIT_CHOICES)}")
+        check_choice(self.format, FORMATS, "data.format", "format")
+        check_choice(self.stream, STREAM_CHOICES, "data.stream", "stream setting")
+        check_choice(self.gyro_unit, GYRO_UNIT_CHOICES, "data.gyro_unit", "gyro unit",
+                     "raw and counts: the scale is searched")
+        check_choice(self.time_unit, TIME_UNIT_CHOICES, "data.time_unit", "time unit")
         if self.sample_rate is not None and not (_finite(self.sample_rate)
                                                  and MIN_RATE_HZ <= self.sample_rate <= MAX_RATE_HZ):
             raise ImucalError(f"sample rate {short(self.sample_rate)} Hz is not an IMU rate",
