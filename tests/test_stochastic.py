@@ -172,3 +172,19 @@ def test_the_reml_test_is_skipped_above_its_size_limit(monkeypatch):
     monkeypatch.setattr(stochastic, "select", lambda *a, **k: pytest.fail("the REML test ran above its limit"))
     res = _fit(data, "auto")
     assert res.random_walk == 0.0 and res.excess > 0  # Paule-Mandel's per-visit excess instead
+
+
+@pytest.mark.parametrize("ml", [False, True])
+def test_the_grid_likelihood_is_the_likelihood(ml):
+    """reml_grid (one eigendecomposition per tau^2) equals reml() at every grid point, with unequal
+    noise, for REML and ML: it is the same likelihood, not an approximation."""
+    rng = np.random.default_rng(7)
+    n = 40
+    t = np.sort(rng.uniform(0, 400, n))
+    c = stochastic.components(rng.normal(0, 1e-3, n), 3e-4 * rng.uniform(0.5, 2.0, n), rng.normal(size=(n, 9)),
+                              rng.normal(size=(n, 3)), t)
+    grid = np.array([(a, b) for a in [0.0, *(1e-7 * 10.0**stochastic._GRID)] for b in [0.0, 1e-9, 1e-7, 1e-5]])
+    want = np.array([stochastic.reml(c, a, b, ml=ml)[0] for a, b in grid])
+    got = stochastic.reml_grid(c, grid, ml=ml)
+    assert np.allclose(got, want, rtol=0, atol=1e-9 * np.max(np.abs(want)))
+    assert np.argmax(got) == np.argmax(want)

@@ -8,9 +8,16 @@ from __future__ import annotations
 import argparse
 import errno
 import importlib
+import os
 import signal
 import sys
 import traceback
+
+# One BLAS thread unless the user chose otherwise, set before numpy loads: imucal's matrices have a
+# few columns, where the thread pool costs more wall time than it saves (OpenBLAS's pool alone adds
+# some 30 ms to every start; scripts/bench_speed.py measures both). The library itself leaves it alone.
+for _var in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 
 from imucal import __version__
 from imucal.errors import (EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, SIGNALS, ImucalError, Terminated,

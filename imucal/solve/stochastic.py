@@ -110,6 +110,31 @@ def reml(c: Components, tau2: float, q2: float, projector: bool = False, ml: boo
     return float(ll), M.T @ M if not ml else (M.T @ M, Li.T @ Li)
 
 
+def reml_grid(c: Components, theta: np.ndarray, ml: bool = False) -> np.ndarray:
+    """``reml(c, tau2, q2)[0]`` at each row (tau^2, q^2) of ``theta``, by one eigendecomposition per tau^2.
+
+    K_I is diagonal, so D = diag(sigma^2) + tau^2 K_I is too; with D^-1/2 K_W D^-1/2 = U diag(lam) U^T,
+    V = D^1/2 U (I + q^2 diag(lam)) U^T D^1/2: log det V and every product with V^-1 are sums over lam,
+    and the q^2 of one tau^2 cost a p x p solve each (the likelihood of ``reml``, not an approximation).
+    """
+    out = np.empty(len(theta))
+    kI = np.diag(c.K[0])
+    for tau2 in np.unique(theta[:, 0]):
+        rows = np.flatnonzero(theta[:, 0] == tau2)
+        d = c.sigma**2 + tau2 * kI
+        h = 1.0 / np.sqrt(d)
+        lam, U = np.linalg.eigh(c.K[1] * np.outer(h, h))
+        lam = np.clip(lam, 0.0, None)  # K_W is positive semi-definite: rounding only
+        Xt, rt = U.T @ (c.X * h[:, None]), U.T @ (c.r * h)
+        w = 1.0 / (1.0 + theta[rows, 1, None] * lam)  # (q, n): the eigenvalues of V^-1 in this basis
+        A = np.einsum("ki,qk,kj->qij", Xt, w, Xt)  # X^T V^-1 X
+        b = (w * rt) @ Xt  # X^T V^-1 r
+        quad = (w * rt) @ rt - np.einsum("qi,qi->q", b, np.linalg.solve(A, b[..., None])[..., 0])
+        logdet = np.sum(np.log(d)) - np.sum(np.log(w), axis=1)
+        out[rows] = -0.5 * (logdet + (0.0 if ml else np.linalg.slogdet(A)[1]) + quad)
+    return out
+
+
 @dataclass(frozen=True)
 class ModelFit:
     """One model's REML estimate."""
@@ -130,8 +155,10 @@ def fit_model(c: Components, name: str, ml: bool = False) -> ModelFit:
     if not free.any():
         return ModelFit(name, 0.0, 0.0, reml(c, 0.0, 0.0, ml=ml)[0], np.zeros((2, 2)))
     axes = [scale[j] * 10.0**_GRID if free[j] else np.zeros(1) for j in range(2)]
-    best = max(((reml(c, a, b, ml=ml)[0], a, b) for a in axes[0] for b in axes[1]), key=lambda x: x[0])
-    theta, ll = np.array(best[1:]), best[0]
+    grid = np.array([(a, b) for a in axes[0] for b in axes[1]])
+    lls = reml_grid(c, grid, ml=ml)
+    k = int(np.argmax(lls))  # the first of equal maxima, as max() over the same order
+    theta, ll = grid[k].copy(), float(lls[k])
     for _ in range(50):  # Fisher scoring with step halving, projected on theta >= 0
         P, T = _projectors(c, theta, ml)
         PK = [T @ K for K in c.K]
