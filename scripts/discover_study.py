@@ -16,6 +16,7 @@ at the 1e-3 level discovery uses. No method can name a term more often than its 
     python scripts/discover_study.py                 # the full study over the grammar (15 terms)
     python scripts/discover_study.py --quick         # a reduced run (2 cases per cell, SNR 10 and 40)
     python scripts/discover_study.py --classic       # the five effects before the grammar (docs/discover_study.md)
+    python scripts/discover_study.py --visible       # SNR = sqrt(lambda) (docs/discover_visible_study.md)
 For the cross-axis term only the sum of its coefficients over the axes reaches |a| (see
 imucal.model.effects), so "correct" there means the term on one axis.
 Writes docs/discover_grammar_study.md (docs/discover_study.md with --classic) and prints it.
@@ -54,7 +55,7 @@ def oracle_power(lam: float) -> float:
     return 0.5 * math.erfc((s - m) / math.sqrt(2)) + 0.5 * math.erfc((s + m) / math.sqrt(2))
 
 
-def visible_chi2(case, path: str) -> tuple[float, float]:
+def visible_chi2(case, path: str, rel: bool = True) -> tuple[float, float]:
     """(lambda, lambda_rel) of the hidden effect, linearised at the base fit of the clean twin (same
     seed, same noise, no effect) written to ``path``. lambda: the chi-square the noise-free effect adds
     to the base fit. lambda_rel: what is left of it when its closest relative is fitted instead (any
@@ -89,6 +90,8 @@ def visible_chi2(case, path: str) -> tuple[float, float]:
         return float(np.sum((signal - A @ x) ** 2))
 
     lam = left(J[:, [col[n] for n in base.result.free_names]])
+    if not rel:
+        return lam, math.nan
     names = _testable(list(EFFECTS), base.intervals, path, [])
     screens, _, col2, free = _screen(prob, base.result, {}, names)
     base_cols = [col2[n] for n in free]
@@ -103,14 +106,21 @@ def visible_chi2(case, path: str) -> tuple[float, float]:
 
 def run_case(args: tuple) -> dict:
     """Simulate one case, run discover, classify the outcome."""
-    seed, effect, snr, noise_mg, pool = args
+    seed, effect, snr, noise_mg, pool, visible = args
     from imucal.config.run import config_from_dict
     from imucal.analysis.discover import discover
     from imucal.analysis.simulate import draw_effect_case
 
     if effect == "pair":
         return run_pair(seed, snr, noise_mg, pool)
-    case = draw_effect_case(seed, effect=effect, snr=snr, noise_mg=noise_mg)
+    with tempfile.TemporaryDirectory() as d:
+        phys = visible_snr(seed, effect, snr, noise_mg, os.path.join(d, "ref.csv")) if visible and effect else snr
+    if not math.isfinite(phys):  # the base model absorbs this draw entirely: no size makes it visible
+        return {"seed": seed, "effect": effect, "snr": snr, "noise_mg": noise_mg, "outcome": "invisible",
+                "found": [], "truth": effect, "ambiguous": False, "size_mg": math.nan, "sigma_mean_mg": math.nan,
+                "redchi_after": math.nan, "gap_after": math.nan, "gap_before": math.nan, "counts": False,
+                "seconds": 0.0, "lam": 0.0, "lam_rel": 0.0, "oracle": 0.0, "snr_size": math.nan}
+    case = draw_effect_case(seed, effect=effect, snr=phys, noise_mg=noise_mg)
     sim = case.config.run()
     with tempfile.TemporaryDirectory() as d:
         path = os.path.join(d, "case.csv")
@@ -139,7 +149,25 @@ def run_case(args: tuple) -> dict:
             "ambiguous": any(e.ambiguous_with for e in res.effects), "size_mg": case.size / STANDARD_GRAVITY * 1e3,
             "sigma_mean_mg": case.sigma_mean / STANDARD_GRAVITY * 1e3, "redchi_after": res.final.result.redchi,
             "gap_after": res.rms_after / res.rms_noise, "gap_before": res.rms_before / res.rms_noise,
-            "counts": case.config.sensor.unit == "raw", "seconds": dt, "lam": lam, "lam_rel": rel, "oracle": oracle_power(lam)}
+            "counts": case.config.sensor.unit == "raw", "seconds": dt, "lam": lam, "lam_rel": rel, "oracle": oracle_power(lam),
+            "snr_size": phys}
+
+
+#: The physical SNR at which --visible cases are first drawn (lambda is then scaled to the target).
+_REFERENCE_SNR = 10.0
+
+
+def visible_snr(seed: int, effect: str, snr: float, noise_mg: float, path: str) -> float:
+    """The physical SNR (size / sigma_mean) at which this seed's effect has sqrt(lambda) = ``snr``.
+
+    The case is drawn at a reference size; every random draw (sensor, plan, axes, signs, warm-up tau,
+    noise) is independent of the size and the effect is linear in its coefficients, so lambda grows
+    with the square of the size: one reference lambda fixes the size. Infinite when lambda is 0."""
+    from imucal.analysis.simulate import draw_effect_case
+
+    lam0 = visible_chi2(draw_effect_case(seed, effect=effect, snr=_REFERENCE_SNR, noise_mg=noise_mg), path,
+                        rel=False)[0]
+    return _REFERENCE_SNR * snr / math.sqrt(lam0) if lam0 > 1e-9 else math.inf
 
 
 def run_pair(seed: int, snr: float, noise_mg: float, pool: tuple[str, ...]) -> dict:
@@ -184,32 +212,38 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--classic", action="store_true", help="only the five effects before the grammar, with the "
                     "classic study's sizes (noise 0.1 0.3 1, SNR 10-60, 20 cases, 40 clean, pairs at SNR 20 and 40)")
     ap.add_argument("--effects", nargs="+", choices=list(EFFECTS), help="terms to hide (default: the grammar)")
+    ap.add_argument("--visible", action="store_true", help="SNR = sqrt(lambda), what the data can see of the "
+                    "effect (its coefficient in standard errors beside the base model), instead of size / sigma_mean; "
+                    "SNR 5 10 20, no pairs; writes docs/discover_visible_study.md")
     ap.add_argument("--out", help="markdown file to write (default docs/discover_grammar_study.md)")
     a = ap.parse_args(argv)
     size = (dict(noise=[0.1, 0.3, 1.0], snr=[10, 15, 20, 30, 40, 60], cases=20, clean=40, pairs=30, pair_snr=[20, 40])
             if a.classic else dict(noise=[0.3], snr=[5, 10, 20, 40], cases=8, clean=200, pairs=10, pair_snr=[10, 20, 40]))
+    if a.visible:
+        size.update(snr=[5, 10, 20], pairs=0, pair_snr=[])
     if a.quick:
         size.update(noise=[0.3], snr=[10, 40], cases=2, clean=4, pairs=2, pair_snr=[40])
     for k, v in size.items():
         if getattr(a, k) is None:
             setattr(a, k, v)
     if a.out is None:
-        a.out = str(ROOT / "docs" / ("discover_study.md" if a.classic else "discover_grammar_study.md"))
+        a.out = str(ROOT / "docs" / ("discover_study.md" if a.classic else
+                                     "discover_visible_study.md" if a.visible else "discover_grammar_study.md"))
     a.terms = tuple(a.effects or (CLASSIC if a.classic else EFFECTS))
     jobs = []
     seed = a.seed
     for noise in a.noise:
         for _ in range(a.clean):
-            jobs.append((seed, None, 0.0, noise, a.terms))
+            jobs.append((seed, None, 0.0, noise, a.terms, a.visible))
             seed += 1
         for eff in a.terms:
             for snr in a.snr:
                 for _ in range(a.cases):
-                    jobs.append((seed, eff, snr, noise, a.terms))
+                    jobs.append((seed, eff, snr, noise, a.terms, a.visible))
                     seed += 1
         for snr in a.pair_snr:
             for _ in range(a.pairs):
-                jobs.append((seed, "pair", snr, noise, a.terms))
+                jobs.append((seed, "pair", snr, noise, a.terms, a.visible))
                 seed += 1
     t0 = time.perf_counter()
     rows = []
@@ -241,14 +275,16 @@ def visibility(rows: list[dict], cells: dict, a: argparse.Namespace) -> list[str
          "oracle = mean power of a single test at 1e-3 that knows term, axes and signs, "
          "P(chi2_1(lambda) > 10.83). No method detects a term more often than its oracle, nor tells it from "
          "a relative when lambda_rel is a few units.", "",
-         "| effect | " + " | ".join(f"SNR {s:g}: lambda / lambda_rel / oracle" for s in a.snr) + " |",
+         "| effect | " + " | ".join(f"SNR {s:g}: lambda / lambda_rel / oracle{' / size SNR' if a.visible else ''}"
+                                    for s in a.snr) + " |",
          "|---|" + "---|" * len(a.snr)]
     for eff in a.terms:
         vals = []
         for s in a.snr:
             cs = [r for n in a.noise for r in cells[(eff, n, s)]]
             vals.append(f"{np.median([r['lam'] for r in cs]):.3g} / {np.median([r['lam_rel'] for r in cs]):.3g} / "
-                        f"{np.mean([r['oracle'] for r in cs]):.0%}" if cs else "-")
+                        f"{np.mean([r['oracle'] for r in cs]):.0%}"
+                        + (f" / {np.median([r['snr_size'] for r in cs]):.3g}" if a.visible else "") if cs else "-")
         L.append(f"| {eff} | " + " | ".join(vals) + " |")
     single = [r for r in rows if r["effect"] not in (None, "pair")]
     for key, what in (("lam", "lambda"), ("lam_rel", "lambda_rel")):
@@ -267,7 +303,7 @@ def visibility(rows: list[dict], cells: dict, a: argparse.Namespace) -> list[str
 
 def report(rows: list[dict], a: argparse.Namespace, wall: float) -> str:
     L = ["# Discover: detection rate, smallest detectable effect, false positives", "",
-         f"Measured by `python scripts/discover_study.py{' --quick' if a.quick else ''}{' --classic' if a.classic else ''}` ({len(rows)} seeded cases, {wall / 60:.1f} min "
+         f"Measured by `python scripts/discover_study.py{' --quick' if a.quick else ''}{' --classic' if a.classic else ''}{' --visible' if a.visible else ''}` ({len(rows)} seeded cases, {wall / 60:.1f} min "
          f"wall time on {a.jobs} processes, first seed {a.seed}; terms: {', '.join(a.terms)}; noise "
          f"{', '.join(f'{n:g}' for n in a.noise)} mg; SNR {', '.join(f'{s:g}' for s in a.snr)}; {a.cases} cases per cell, "
          f"{a.clean} clean cases and {a.pairs} pairs per SNR {', '.join(f'{s:g}' for s in a.pair_snr)} per noise level). "
@@ -276,8 +312,13 @@ def report(rows: list[dict], a: argparse.Namespace, wall: float) -> str:
          "temperature swing, one effect on a random axis subset with a random sign, or none. "
          "Discover is told nothing.", "",
          "*Size* = largest change of a reading at 1 g over the recording [mg]. *sigma_mean* = noise of one "
-         "interval mean = noise per sample / sqrt(samples per interval) [mg]. *SNR* = size / sigma_mean. "
-         "*Correct* = exactly the hidden effect on exactly its axes, nothing else. *lambda* = the chi-square the "
+         "interval mean = noise per sample / sqrt(samples per interval) [mg]. "
+         + ("*SNR* = sqrt(lambda), lambda as below: the effect's coefficient in standard errors when it is fitted "
+            "beside the base model (the deflection of detection theory). Each case's size is scaled to give it "
+            "(the random draws do not depend on the size); *size SNR* = size / sigma_mean, the physical "
+            "definition of docs/discover_grammar_study.md, is reported beside it. "
+            if a.visible else "*SNR* = size / sigma_mean. ")
+         + "*Correct* = exactly the hidden effect on exactly its axes, nothing else. *lambda* = the chi-square the "
          "noise-free effect adds to the base fit (what the data can see of it), *oracle* = P(chi2_1(lambda) > 10.83).",
          ""]
     clean = [r for r in rows if r["effect"] is None]
@@ -293,7 +334,7 @@ def report(rows: list[dict], a: argparse.Namespace, wall: float) -> str:
           "|---|---|" + "---|" * len(a.snr)]
     cells: dict = defaultdict(list)
     for r in rows:
-        if r["effect"] not in (None, "pair"):
+        if r["effect"] not in (None, "pair") and r["outcome"] != "invisible":  # (listed under All outcomes)
             cells[(r["effect"], r["noise_mg"], r["snr"])].append(r)
     for eff in a.terms:
         for noise in a.noise:
@@ -312,11 +353,13 @@ def report(rows: list[dict], a: argparse.Namespace, wall: float) -> str:
             ok = [s for s in a.snr if cells[(eff, noise, s)]
                   and np.mean([r["outcome"] == "correct" for r in cells[(eff, noise, s)]]) >= RELIABLE]
             smallest = next((s for s in a.snr if all(t in ok for t in a.snr if t >= s)), None)
-            sig = np.mean([r["sigma_mean_mg"] for r in rows if r["noise_mg"] == noise])
+            sig = np.nanmean([r["sigma_mean_mg"] for r in rows if r["noise_mg"] == noise])
             if smallest is None:
                 L.append(f"| {eff} | {noise:g} | {sig:.3g} | > {max(a.snr):g} | - |")
-            else:
-                L.append(f"| {eff} | {noise:g} | {sig:.3g} | {smallest:g} | {smallest * sig:.3g} |")
+            else:  # with --visible the size of a given SNR differs from case to case: the cell's median
+                size = (np.median([r["size_mg"] for r in cells[(eff, noise, smallest)]]) if a.visible
+                        else smallest * sig)
+                L.append(f"| {eff} | {noise:g} | {sig:.3g} | {smallest:g} | {size:.3g} |")
     L.append("")
     pairs = [r for r in rows if r["effect"] == "pair"]
     if pairs:

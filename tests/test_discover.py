@@ -115,7 +115,8 @@ def _per_pose_offsets(sim, scale, seed):
     return dataclasses.replace(sim, raw=raw)
 
 
-def test_unexplained_disagreement_is_not_given_a_name(tmp_path):
+def test_per_pose_offsets_are_named_a_stochastic_bias_not_a_term(tmp_path):
+    """A random offset per pose is bias_instability: no deterministic term is invented for it."""
     rng = np.random.default_rng(40)
     sensor = mems_counts_sensor(rng, noise_counts=4.0)
     dirs = np.vstack([cube_directions("faces+edges"), random_directions(6, rng)])
@@ -125,7 +126,8 @@ def test_unexplained_disagreement_is_not_given_a_name(tmp_path):
     d = _discover_sim(sim, "raw", tmp_path, "offsets")
     assert not d.consistent_before
     assert d.effects == ()
-    assert d.verdict.startswith("disagreement not explained by any candidate")
+    assert d.verdict.startswith("explained by a stochastic bias: bias_instability"), d.verdict
+    assert "no deterministic term helps" in d.verdict
 
 
 def test_real_xsens_recording_gets_no_invented_effect():
@@ -138,7 +140,8 @@ def test_real_xsens_recording_gets_no_invented_effect():
     d = discover(load_config(cfg_path))
     assert d.base.result.redchi > 3
     assert d.effects == ()
-    assert "not explained by any candidate" in d.verdict
+    assert d.verdict.startswith("explained by a stochastic bias"), d.verdict  # named and quantified
+    assert d.stochastic is not None and d.stochastic.named and d.allan is not None
     assert any("no temp column" in n for n in d.notes)
 
 

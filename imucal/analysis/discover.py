@@ -630,6 +630,8 @@ def _prune(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int,
 
 #: Bins of the piecewise-constant alternative in the shape check (quantiles of the covariate).
 SHAPE_BINS = 6
+#: What the verdict says when the shape check drops a term.
+SHAPE_FAILED = "a piecewise-constant shape fits significantly better"
 
 
 def _shape_check(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]],
@@ -843,7 +845,7 @@ def _backward(prob: "_Problem", base: CalibrationRun, st: _State, settings: Disc
             verdict = (f"disagreement not explained by any candidate: chi2/dof = {current.redchi:.3g} "
                        f"(p = {_p_noise(current):.3g}); the residual follows "
                        f"{', '.join(sorted({EFFECTS[n].covariates[0] for n in wrong}))} but not as any term of "
-                       "the grammar (a piecewise-constant shape fits significantly better)")
+                       f"the grammar ({SHAPE_FAILED})")
             if found:
                 verdict = f"partly explained by {_added(found, cur_effects)}; the remaining {verdict}"
     return dataclasses.replace(st, current=current, cur_effects=cur_effects, found=found, verdict=verdict)
@@ -888,8 +890,17 @@ def _stochastic_verdict(verdict: str, sto: "stoch.StochasticFit | None") -> str:
         return verdict
     vals = ", ".join(f"{n} {v:.3g} +/- {s:.2g} {u}" for n, (v, s, u) in sto.values().items())
     amb = (" (the data cannot tell bias_instability from bias_random_walk)" if sto.ambiguous else "")
-    return (f"{verdict}; the scatter between intervals is a stochastic bias: {vals}{amb}, which the default fit "
-            "(weights: auto) includes in its weights and standard errors")
+    fit = "which the default fit (weights: auto) includes in its weights and standard errors"
+    head, unexplained, rest = verdict.partition("disagreement not explained by any candidate: ")
+    if SHAPE_FAILED in verdict:  # a step, say: a walk fits it too, but a step is not a Gaussian walk
+        return (f"{verdict}; a stochastic bias fits the scatter too ({vals}{amb}) but is not claimed: the shape "
+                f"check found structure in time, {fit}")
+    if unexplained and not head:  # no deterministic term helps; a stochastic one of the grammar does
+        return f"explained by a stochastic bias: {vals}{amb}, {fit}; no deterministic term helps ({rest})"
+    if unexplained:  # "partly explained by X; the remaining ..."
+        terms = head.removeprefix("partly explained by ").split("; the remaining", 1)[0]
+        return f"explained by {terms} plus a stochastic bias: {vals}{amb}, {fit} (without it: {rest})"
+    return f"{verdict}; the scatter between intervals is a stochastic bias: {vals}{amb}, {fit}"
 
 
 def _stochastic_lines(d: Discovery) -> list[str]:

@@ -22,9 +22,10 @@ from imucal.solve import stochastic
 from imucal.solve.stats import chi2_sf
 from imucal.solve.stochastic import RANDOM_WALK, StochasticFit
 
-#: The Allan view needs one still interval of at least this many samples (100 x 100 sample
-#: periods: the curve then spans taus up to ~33 s at 100 Hz, 3.5 decades).
-MIN_ALLAN_SAMPLES = 10_000
+#: The Allan view needs one still interval of at least this many samples: the overlapping curve then
+#: spans 3 decades of tau (1 to ~1,300 sample periods; 13 s at 100 Hz), enough to see where a walk's
+#: +1/2 line meets the white noise's -1/2 line when it does so inside the interval.
+MIN_ALLAN_SAMPLES = 4_000
 
 
 def assess(run: CalibrationRun, alpha: float = 1e-3) -> StochasticFit | None:

@@ -14,7 +14,6 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Literal, Mapping
 
 import numpy as np
-import yaml
 
 import imucal.calibration.frozen as frozen
 from imucal.calibration.fields import ACCELEROMETER, NAME_PATTERN, SHA256_PATTERN, UNIT_PATTERN, VERSION_PATTERN
@@ -23,7 +22,7 @@ from imucal.constants import SI_ACCEL_UNIT
 from imucal.errors import ImucalError, short
 from imucal.files.output import write_text_atomic
 from imucal.files.schema import fill, rule
-from imucal.files.yamlio import read_yaml
+from imucal.files.yamlio import dump_yaml, read_yaml
 from imucal.model.geometry import gram_det_np
 from imucal.model.channels import TEMPERATURE, TIME
 from imucal.model.parameters import ANGLE_NAMES, BASE_NAMES, Parameter, Parameters, model_label
@@ -70,7 +69,7 @@ def to_dict(cal: "frozen.Calibration") -> dict[str, Any]:
 
 def save(cal: "frozen.Calibration", path: str | os.PathLike) -> None:
     """Write ``cal`` atomically (never a partial file)."""
-    write_text_atomic(path, yaml.safe_dump(to_dict(cal), sort_keys=False, width=100))
+    write_text_atomic(path, dump_yaml(to_dict(cal), sort_keys=False, width=100))
 
 
 def _f(x: float) -> float | None:

@@ -32,7 +32,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from imucal import __version__
 from imucal.analysis.noise import allan_deviation, estimate
@@ -43,7 +42,7 @@ from imucal.export.formats import ExportOptions, Exported, KalibrNoise, affine, 
 from imucal.export.gyro import kalibr_factors
 from imucal.export.peers import MAGNITUDE, AffineCalibration, GyroMap, Mat3, Vec3, checked, checked_gyro
 from imucal.files.schema import fill, rule
-from imucal.files.yamlio import read_yaml
+from imucal.files.yamlio import dump_yaml, read_yaml
 
 NOISE_FIELDS = ("accelerometer_noise_density", "accelerometer_random_walk", "gyroscope_noise_density",
                 "gyroscope_random_walk")
@@ -85,7 +84,7 @@ def still_noise(cal: Calibration, t: np.ndarray, raw: np.ndarray, rate: float,
 
 def _flow(x: Any) -> str:
     """YAML flow text PyYAML (Kalibr's reader) reads back to the same floats."""
-    return yaml.safe_dump(x, default_flow_style=True, width=1000).strip().removesuffix("...").strip()
+    return dump_yaml(x, default_flow_style=True, width=1000).strip().removesuffix("...").strip()
 
 
 def to_kalibr(cal: Calibration, opts: ExportOptions) -> Exported:

@@ -24,6 +24,16 @@ MAX_NODES = 200_000
 MAX_DEPTH = 50
 
 
+#: libyaml's emitter when PyYAML was built with it (same text as the Python emitter, 4-6x faster on a
+#: calibration file), else the Python one.
+_DUMPER = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
+
+
+def dump_yaml(data: Any, **options: Any) -> str:
+    """``yaml.safe_dump(data, **options)`` as text, by the fastest safe emitter available."""
+    return yaml.dump(data, Dumper=_DUMPER, **options)
+
+
 class _Loader(yaml.SafeLoader):
     """SafeLoader that counts aliases and nodes and refuses duplicate keys."""
 

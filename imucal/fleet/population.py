@@ -14,12 +14,12 @@ from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from imucal.analysis.simulate import SimulationConfig, frame_matrix
 from imucal.config.limits import MAX_FLEET_UNITS, check_count
 from imucal.errors import ImucalError, short
 from imucal.files.output import OutputSet, check_outputs, write_bytes_atomic
+from imucal.files.yamlio import dump_yaml
 from imucal.fleet.manifest import FORMAT, FORMAT_VERSION
 
 #: Tolerances written into the simulated manifest (m/s^2 and degrees).
@@ -145,5 +145,5 @@ def write_fleet(units: list[SimUnit], out: Path, inputs: list[str], tolerances: 
     with OutputSet(inputs) as o:
         o.text(out / TRUTH_FILE, buf.getvalue())
         o.text(out / MANIFEST_FILE, "# imucal batch manifest.yaml --out DIR  (written by imucal simulate --fleet)\n"
-               + yaml.safe_dump(manifest, sort_keys=False))
+               + dump_yaml(manifest, sort_keys=False))
     return out / MANIFEST_FILE
