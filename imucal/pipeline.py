@@ -10,9 +10,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from imucal.analysis.noise_model import NoiseModel, load_noise_model
 from imucal.calibration.frozen import Calibration, now_utc
-from imucal.calibration.gyro import GyroCalibration
 from imucal.config.run import RunConfig
 
 from imucal.data.load import Recording, load_recording, rails
@@ -30,7 +28,8 @@ from imucal.solve.stats import chi2_sf
 from imucal.model.effects_registry import effects_from_specs
 from imucal.model.effects import prepare_parameters
 
-if TYPE_CHECKING:  # the gyroscope's modules are imported only for a recording that has one
+if TYPE_CHECKING:  # imported only when used: the gyroscope's modules, the noise-model reader (fit.noise)
+    from imucal.analysis.noise_model import NoiseModel
     from imucal.gyro.result import GyroResult
 
 
@@ -156,6 +155,8 @@ def measured_noise(config: RunConfig, guess: InitialGuess, rate: float) -> tuple
     """``fit.noise`` (a noise file, relative to the YAML file) in the raw unit, with the rate [Hz]."""
     if config.fit.noise is None:
         return None
+    from imucal.analysis.noise_model import load_noise_model  # measured start-up (docs/architecture.md)
+
     p = Path(config.fit.noise)
     p = p if p.is_absolute() or config.base_dir is None else config.base_dir / p
     return load_noise_model(p).in_raw(config.data.unit, guess.b), float(rate)
@@ -356,7 +357,8 @@ def calibrate_imu(config: RunConfig, recording: Recording | None = None,
     run = calibrate(config, recording)
     if gyro_file is None and getattr(run.recording, "gyro", None) is None:
         return run  # no gyroscope (a file read in chunks never has one)
-    from imucal.gyro.fit import GyroOptions  # here: 10 modules a run without a gyroscope skips
+    from imucal.calibration.gyro import GyroCalibration  # here: 10 modules a run without a gyroscope skips
+    from imucal.gyro.fit import GyroOptions
     from imucal.gyro.run import calibrate_gyro
 
     res = calibrate_gyro(run, gyro_file, GyroOptions(**asdict(config.gyro)))

@@ -315,8 +315,11 @@ def markdown(r: dict, args) -> str:
                f"{it['cpu_median_s']:.3f} s CPU, {it['runs']} runs.", ""] if it else
               ["imu_tk not timed here: give its test program with --imutk (scripts/build_imutk.sh builds it).", ""])
         L += ["Start-up: the modules a run without a gyroscope, figures or chunked reading does not use are not "
-              "imported (matplotlib, pandas, numpy.ma, the gyroscope fit, discovery; asserted by "
-              "tests/test_startup.py).", "",
+              "imported (matplotlib, pandas, numpy.ma, the gyroscope fit and calibration section, the noise-model "
+              "reader, discovery; asserted by tests/test_startup.py). The command runs BLAS on one thread unless "
+              "OPENBLAS_NUM_THREADS (or MKL_NUM_THREADS) is set: its matrices have a few columns, and OpenBLAS's "
+              "thread pool alone costs some 30 ms of wall time per start on this machine (the floor above is "
+              "measured with the pool, as `python -c` starts).", "",
               "Largest top-level imports in one run (`python -X importtime`, cumulative):", "",
               "| module | s |", "|---|---|"] + [f"| {m} | {t:.3f} |" for m, t in c["import_top"]] + [""]
     fm = r.get("fit-means")

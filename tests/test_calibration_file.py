@@ -229,7 +229,7 @@ def test_save_is_atomic(saved, tmp_path, monkeypatch):
     def boom(*a, **k):
         raise RuntimeError("disk full")
 
-    monkeypatch.setattr(mod.yaml, "safe_dump", boom)
+    monkeypatch.setattr(mod, "dump_yaml", boom)
     with pytest.raises(RuntimeError):
         cal.save(tmp_path / "c.yaml")
     assert list(tmp_path.iterdir()) == []

@@ -8,5 +8,6 @@ VERSION_PATTERN = re.compile(r"[0-9A-Za-z][0-9A-Za-z.+_-]{0,39}\Z")
 NAME_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,39}\Z")
 SHA256_PATTERN = re.compile(r"[0-9a-f]{64}\Z")
 
-#: The sensor kind of the paper's model (the gyroscope's is imucal.calibration.gyro.KIND).
-ACCELEROMETER = "accelerometer"
+#: The sensor kinds a calibration file holds: the paper's model, and the gyroscope's
+#: (imucal.calibration.gyro).
+ACCELEROMETER, GYROSCOPE = "accelerometer", "gyroscope"

@@ -11,13 +11,13 @@ import datetime as _dt
 import math
 import os
 from dataclasses import dataclass, field, replace
-from typing import Any, Literal, Mapping
+from typing import TYPE_CHECKING, Any, Literal, Mapping
 
 import numpy as np
 
 import imucal.calibration.frozen as frozen
-from imucal.calibration.fields import ACCELEROMETER, NAME_PATTERN, SHA256_PATTERN, UNIT_PATTERN, VERSION_PATTERN
-from imucal.calibration.gyro import KIND as GYRO_KIND, GyroCalibration
+from imucal.calibration.fields import (ACCELEROMETER, GYROSCOPE, NAME_PATTERN, SHA256_PATTERN, UNIT_PATTERN,
+                                      VERSION_PATTERN)
 from imucal.constants import SI_ACCEL_UNIT
 from imucal.errors import ImucalError, short
 from imucal.files.output import write_text_atomic
@@ -26,6 +26,9 @@ from imucal.files.yamlio import dump_yaml, read_yaml
 from imucal.model.geometry import gram_det_np
 from imucal.model.channels import TEMPERATURE, TIME
 from imucal.model.parameters import ANGLE_NAMES, BASE_NAMES, Parameter, Parameters, model_label
+
+if TYPE_CHECKING:  # the gyroscope's modules load only for a file that has one (docs/architecture.md)
+    from imucal.calibration.gyro import GyroCalibration
 
 
 FORMAT = "imucal-calibration"
@@ -227,11 +230,15 @@ def _gyro_section(f: CalibrationFile, path: str) -> GyroCalibration | None:
             raise ImucalError("version 1 files hold an accelerometer only", file=path, field="format_version",
                               fix="write format_version: 2 for a file with sensors and a gyroscope section")
         return None
-    want = (ACCELEROMETER,) + ((GYRO_KIND,) if f.gyroscope is not None else ())
+    want = (ACCELEROMETER,) + ((GYROSCOPE,) if f.gyroscope is not None else ())
     if f.sensors != want:
         raise ImucalError(f"{short(list(f.sensors or ()))} does not list the file's sensors {list(want)}", file=path,
                           field="sensors", fix=REGEN)
-    return GyroCalibration.from_dict(f.gyroscope, path) if f.gyroscope is not None else None
+    if f.gyroscope is None:
+        return None
+    from imucal.calibration.gyro import GyroCalibration  # measured start-up: only a file with a gyroscope
+
+    return GyroCalibration.from_dict(f.gyroscope, path)
 
 
 def check_text_fields(cal: "frozen.Calibration", path: str = "<calibration>") -> None:

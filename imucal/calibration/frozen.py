@@ -9,18 +9,20 @@ from __future__ import annotations
 import datetime as _dt
 import os
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
 
 from imucal import __version__
 from imucal.calibration import fileformat
-from imucal.calibration.fields import ACCELEROMETER
-from imucal.calibration.gyro import KIND as GYRO_KIND, GyroCalibration
+from imucal.calibration.fields import ACCELEROMETER, GYROSCOPE
 from imucal.errors import ImucalError
 from imucal.model.parameters import BASE_NAMES, Parameters
 from imucal.model.sensor import build_model
 from imucal.model.effects import make_effect
+
+if TYPE_CHECKING:  # the gyroscope's modules load only for a file or run that has one (docs/architecture.md)
+    from imucal.calibration.gyro import GyroCalibration
 
 
 
@@ -42,7 +44,7 @@ class Calibration:
     @property
     def sensors(self) -> tuple[str, ...]:
         """The sensor kinds this calibration holds."""
-        return (ACCELEROMETER,) + ((GYRO_KIND,) if self.gyro is not None else ())
+        return (ACCELEROMETER,) + ((GYROSCOPE,) if self.gyro is not None else ())
 
     # --- the model -------------------------------------------------------------------------
     @property

@@ -14,13 +14,13 @@ from typing import Any, Literal, Mapping
 
 import numpy as np
 
-from imucal.calibration.fields import UNIT_PATTERN
+from imucal.calibration.fields import GYROSCOPE, UNIT_PATTERN
 from imucal.errors import ImucalError, short
 from imucal.files.schema import fill, rule
 from imucal.gyro.model import misalignment_entries, rate_map
 from imucal.gyro.result import GyroResult
 
-KIND = "gyroscope"
+KIND = GYROSCOPE
 OUTPUT_UNIT = "rad/s"
 EQUATION = "omega = matrix @ raw + offset - acc_matrix @ a  (a: calibrated acceleration [m/s^2])"
 #: Relative disagreement between the stored apply map and the parameters' that counts as an edit.
