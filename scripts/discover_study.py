@@ -301,6 +301,29 @@ def visibility(rows: list[dict], cells: dict, a: argparse.Namespace) -> list[str
     return L + [""]
 
 
+def summary_block(rows: list[dict], a: argparse.Namespace) -> list[str]:
+    """The pooled results (the README's block): correct share and oracle by SNR, pairs, clean cases."""
+    single = [r for r in rows if r["effect"] not in (None, "pair") and r["outcome"] != "invisible"]
+    clean = [r for r in rows if r["effect"] is None]
+    L = ["<!-- begin:summary -->",
+         f"Clean recordings: {sum(r['outcome'] == 'false-positive' for r in clean)} of {len(clean)} named an effect.",
+         "", "| SNR | single terms: correct (exact term and axes) | oracle (mean) | terms at >= 90 % | "
+         "pairs: both named |", "|---|---|---|---|---|"]
+    for snr in sorted(set(a.snr) | set(a.pair_snr)):
+        cs = [r for r in single if r["snr"] == snr]
+        ps = [r for r in rows if r["effect"] == "pair" and r["snr"] == snr]
+        good = [t for t in a.terms if (ts := [r for r in cs if r["effect"] == t])
+                and np.mean([r["outcome"] == "correct" for r in ts]) >= RELIABLE]
+        ok = sum(r["outcome"] == "correct" for r in cs)
+        L.append(f"| {snr:g} | " + (f"{ok}/{len(cs)} ({ok / len(cs):.0%}) | {np.mean([r['oracle'] for r in cs]):.0%} | "
+                                    f"{len(good)} of {len(a.terms)} |" if cs else "- | - | - |")
+                 + (f" {sum(r['outcome'] == 'pair-correct' for r in ps)}/{len(ps)} |" if ps else " - |"))
+    wrong = [r for r in single if r["outcome"] == "wrong-effect"]
+    L += ["", f"A wrong term was named in {len(wrong)} of {len(single)} single-term cases; the report flagged the "
+          f"ambiguity in {sum(r['ambiguous'] for r in wrong)} of them.", "<!-- end:summary -->", ""]
+    return L
+
+
 def report(rows: list[dict], a: argparse.Namespace, wall: float) -> str:
     L = ["# Discover: detection rate, smallest detectable effect, false positives", "",
          f"Measured by `python scripts/discover_study.py{' --quick' if a.quick else ''}{' --classic' if a.classic else ''}{' --visible' if a.visible else ''}` ({len(rows)} seeded cases, {wall / 60:.1f} min "
@@ -321,6 +344,7 @@ def report(rows: list[dict], a: argparse.Namespace, wall: float) -> str:
          + "*Correct* = exactly the hidden effect on exactly its axes, nothing else. *lambda* = the chi-square the "
          "noise-free effect adds to the base fit (what the data can see of it), *oracle* = P(chi2_1(lambda) > 10.83).",
          ""]
+    L += summary_block(rows, a)
     clean = [r for r in rows if r["effect"] is None]
     L += ["## False positives on clean data", "", "| noise per sample [mg] | clean cases | effects named |",
           "|---|---|---|"]

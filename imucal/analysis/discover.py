@@ -550,10 +550,12 @@ def _lookahead(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[
     scaled by the misfit it leaves, is small. Try pairs (c, then the best d after c): when the
     pair's misfit scale makes *both* members significant (each tested given the other, Bonferroni
     over all pairs), add c now; the next round finds d with the ordinary test."""
+    fits = dict(fits)
     firsts = sorted(fits, key=lambda i: step.candidates[i].score)[: settings.lookahead]
+    firsts += _other_firsts(prob, current, cur_effects, step, firsts, fits, settings)
     n_distinct = prob.run.observability.n_distinct
     M1 = len(step.candidates)
-    best = None
+    passing: list[tuple[float, int, float, float, str]] = []
     for i in firsts:
         c, res_c = step.candidates[i], fits[i]
         eff_c = {**cur_effects, c.name: c.axes}
@@ -585,15 +587,45 @@ def _lookahead(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[
         p_d = _p_lr(lr_d, k2, res_cd, settings.alpha_noise) * M2
         if p_c < settings.alpha_effect and p_d < settings.alpha_effect:
             total = res_cd.chi2 / s2 + settings.penalty * (c.k + k2)
-            if best is None or total < best[0]:
-                best = (total, i, lr_c, min(1.0, p_c), _label(n2, ax2))
-    if best is None:
-        return step, fits
-    _, i, lr_c, p_c, second = best
+            passing.append((total, i, lr_c, min(1.0, p_c), _label(n2, ax2)))
+    if not passing:
+        return step, {}
+    total, i, lr_c, p_c, second = min(passing)
+    # Another pair (not the same two terms) within the ambiguity margin: the data cannot tell them apart.
+    rivals = tuple(step.candidates[j] for t, j, _, _, d in passing if t - total < settings.ambiguity
+                   and {step.candidates[j].label, d} != {step.candidates[i].label, second})
     cands = list(step.candidates)
     cands[i] = dataclasses.replace(cands[i], lr=lr_c, p_adjusted=p_c, significant=True)
-    return (dataclasses.replace(step, candidates=tuple(cands), chosen=cands[i], jointly_with=second),
-            {i: fits[i]})
+    return (dataclasses.replace(step, candidates=tuple(cands), chosen=cands[i], jointly_with=second,
+                                ambiguous_with=rivals), {i: fits[i]})
+
+
+def _other_firsts(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]], step: Step,
+                  firsts: list[int], fits: dict[int, FitResult], settings: DiscoverSettings) -> list[int]:
+    """More first members for the lookahead: the best-screened candidate of each effect not among
+    ``firsts`` (up to ``settings.lookahead``), fitted here into ``fits``. With two effects the best
+    single fits are often a relative on two axes that absorbs part of each (scale_temperature[yz] for
+    scale_nonlinearity[z] + scale_drift[y]); the true first member is then screened out of them."""
+    names = {step.candidates[i].name for i in firsts}
+    out: list[int] = []
+    for i in sorted(range(len(step.candidates)),
+                    key=lambda j: step.candidates[j].chi2_screen + settings.penalty * step.candidates[j].k):
+        c = step.candidates[i]
+        if len(out) >= settings.lookahead:
+            break
+        if c.name in names:
+            continue
+        names.add(c.name)
+        if i not in fits:
+            try:
+                res = prob.fit(_canonical({**cur_effects, c.name: c.axes}), {**current.values(), **dict(c.start)})
+            except ImucalError:
+                continue
+            if any(n in res.at_bound for n in make_effect(c.name, c.axes).shape_names):
+                continue  # a warm-up with tau on its bound: not this term (as in _round)
+            fits[i] = res
+        out.append(i)
+    return out
 
 
 def _prune(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]], found_names: set[str],
