@@ -246,7 +246,7 @@ def test_chi2_sf_known_values():
 # --- two effects: rounds, lookahead, backward step ----------------------------------------------
 def test_two_comparable_effects_are_both_named(tmp_path):
     """Neither effect alone brings the residual to the noise, so neither passes alone; the pair
-    does (lookahead), and an axis picked up on the way is dropped again (backward step)."""
+    does (lookahead)."""
     from imucal.analysis.simulate import draw_pair_case, pair_config
 
     c1, c2 = draw_pair_case(30)
@@ -255,7 +255,26 @@ def test_two_comparable_effects_are_both_named(tmp_path):
     assert any(s.jointly_with for s in d.steps)
     assert d.consistent_after and d.final.result.redchi < 2.5
     assert "given" in d.report()
-    assert any(n.startswith("dropped scale_nonlinearity on axis y") for n in d.notes)
+
+
+def test_the_backward_step_drops_an_axis_the_data_do_not_need(tmp_path):
+    """An effect fitted on an axis that carries nothing (as a greedy forward search can pick up) is
+    dropped by the backward step, with its note; the true axis stays."""
+    from imucal.analysis.discover import _canonical, _Problem, _prune
+    from imucal.pipeline import calibrate
+
+    case = draw_effect_case(31, effect="scale_nonlinearity", axes=(0,), snr=60.0)
+    path = tmp_path / "c.csv"
+    path.write_text(case.config.run().to_csv_text())
+    cfg = config_from_dict({"data": {"path": str(path), "unit": case.config.sensor.unit}})
+    base = calibrate(cfg)
+    prob = _Problem(cfg, base)
+    wide = {"scale_nonlinearity": (0, 1)}
+    current = prob.fit(_canonical(wide), base.result.values())
+    notes: list[str] = []
+    _, kept = _prune(prob, current, wide, {"scale_nonlinearity"}, DiscoverSettings(), notes)
+    assert kept == {"scale_nonlinearity": (0,)}
+    assert len(notes) == 1 and notes[0].startswith("dropped scale_nonlinearity on axis y"), notes
 
 
 def test_two_effect_cases_score(tmp_path):
