@@ -89,7 +89,9 @@ def main() -> int:
             + ("\n" if d.effects else "")
             + "".join(f"- note: {n}\n" for n in d.notes) + ("\n" if d.notes else "")
             + f"![residuals]({rel}/discover_residuals.png)\n\n![candidates]({rel}/discover_candidates.png)\n\n"
-            f"![gap]({rel}/discover_gap.png)\n")
+            f"![gap]({rel}/discover_gap.png)\n"
+            + (f"\nAllan view: interval {d.allan.interval} ({d.allan.duration:.0f} s still), the walk found beside "
+               f"the curve.\n\n![allan]({rel}/discover_allan.png)\n" if d.allan is not None else ""))
         print(f"{name}: {d.verdict} ({dt:.1f} s)")
     text = "\n".join(L) + "\n\n" + "\n".join(details)
     write_text_atomic(docs / "discover_real.md", text)
