@@ -217,13 +217,11 @@ def parse_block(lines: list[str], first_lineno: int, delimiter: str | None, usec
     if not any(ln.strip() and not ln.lstrip().startswith("#") for ln in lines):
         raise ImucalError("has no data rows", file=str(path), field="data",
                           fix="record samples after the header")
-    text = "\n".join(lines)
-    count = data_line_count(lines, text)
-    buf = io.StringIO(text)
-    del text  # the buffer holds its own copy: one copy of the text at a time
+    buf = io.StringIO("\n".join(lines))  # the buffer holds the one copy of the text
     try:
         arr = np.loadtxt(buf, delimiter=delimiter, usecols=usecols, ndmin=2, dtype=float, comments="#")
-        if arr.shape[0] == count:
+        # A row from every line: none was blank or a comment, so all were parsed (no count needed).
+        if arr.shape[0] == len(lines) or arr.shape[0] == data_line_count(lines, buf.getvalue()):
             bad = ~np.isfinite(arr).all(axis=1)
             if bad.any():
                 k = int(np.flatnonzero(bad)[0])
