@@ -13,8 +13,8 @@ import numpy as np
 from imucal.calibration.frozen import Calibration, now_utc
 from imucal.config.run import RunConfig
 
-from imucal.data.load import Recording, load_recording, rails
-from imucal.data.stream import RecordingSummary, StaticSamples, StreamedRecording, use_stream
+from imucal.data.load import Recording, load_recording, rails, use_stream
+from imucal.data.recording import RecordingSummary, StaticSamples
 from imucal.errors import ImucalError
 from imucal.solve.fit import FitData, FitResult, fit, jacobian_rows
 from imucal.solve.initial import InitialGuess, ellipsoid_guess
@@ -28,8 +28,9 @@ from imucal.solve.stats import chi2_sf
 from imucal.model.effects_registry import effects_from_specs
 from imucal.model.effects import prepare_parameters
 
-if TYPE_CHECKING:  # imported only when used: the gyroscope's modules, the noise-model reader (fit.noise)
-    from imucal.analysis.noise_model import NoiseModel
+if TYPE_CHECKING:  # imported only when used: the gyroscope's modules, the noise-model reader (fit.noise),
+    from imucal.analysis.noise_model import NoiseModel  # the chunked reader (a file above STREAM_BYTES)
+    from imucal.data.stream import StreamedRecording
     from imucal.gyro.result import GyroResult
 
 
@@ -230,6 +231,8 @@ def read_intervals(config: RunConfig, recording: Recording | None = None
     declared = rails(config.data.saturation) if config.data.saturation is not None else None
     streamed: StreamedRecording | None = None
     if recording is None and use_stream(config.data, config.base_dir):  # bounded memory (imucal.data.stream)
+        from imucal.data.stream import StreamedRecording  # measured start-up (docs/architecture.md)
+
         streamed = StreamedRecording(config.data, config.static, config.base_dir, declared,
                                      keep_samples=config.fit.mode == "samples")
         rec, iv = streamed.recording, streamed.intervals

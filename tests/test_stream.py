@@ -13,6 +13,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import imucal.data.static as static_mod
+import imucal.data.load as load_mod
 import imucal.data.stream as stream_mod
 from conftest import real_file
 from imucal.data.load import DataSpec, load_recording
@@ -231,7 +232,7 @@ def test_auto_reads_large_files_in_chunks(tmp_path, monkeypatch):
     p = tmp_path / "r.txt"
     _long_file(p, 2000)
     assert not use_stream(DataSpec(path=str(p)))
-    monkeypatch.setattr(stream_mod, "STREAM_BYTES", 1000)
+    monkeypatch.setattr(load_mod, "STREAM_BYTES", 1000)
     assert use_stream(DataSpec(path=str(p)))
     assert not use_stream(DataSpec(path=str(p), stream="never"))
     assert not use_stream(DataSpec(path=str(p), gyro_path="g.txt"))

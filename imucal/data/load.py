@@ -617,3 +617,34 @@ def check_rate(n: int, span: float, unit: str, path: Path) -> None:
         raise ImucalError(f"time in {unit} gives {rate:.4g} Hz, not an IMU sample rate "
                           f"({MIN_RATE_HZ:g} Hz to {MAX_RATE_HZ:g} Hz)", file=str(path),
                           field="data.time_unit", fix=fix)
+
+
+#: Recordings above this size are read in chunks (imucal.data.stream) when data.stream is "auto" [bytes].
+STREAM_BYTES = 64 * 1024**2
+
+
+def use_stream(spec: DataSpec, base_dir: str | os.PathLike | None = None) -> bool:
+    """Whether ``spec`` is read in chunks: data.stream always, or auto and a file above STREAM_BYTES
+    without gyroscope data (columns or a second file)."""
+    if is_bag(resolve_path(spec, base_dir)):
+        return False  # a ROS bag is read message by message (imucal.data.rosbag)
+    if spec.stream != "auto":
+        return spec.stream == "always"
+    if spec.gyro_path is not None:
+        return False
+    try:
+        if os.stat(resolve_path(spec, base_dir)).st_size <= STREAM_BYTES:
+            return False
+    except OSError:
+        return False  # the loader names the problem
+    return not has_gyro(spec, base_dir)  # the gyroscope fit needs every sample
+
+
+def has_gyro(spec: DataSpec, base_dir: str | os.PathLike | None = None) -> bool:
+    """Whether a recording comes with gyroscope data: a second file, or gx gy gz columns (read from
+    its head by the chunked reader's layout)."""
+    if spec.gyro_path is not None:
+        return True
+    from imucal.data.stream import head_layout  # measured start-up: only for a file read in chunks
+
+    return head_layout(spec, resolve_path(spec, base_dir)).has_gyro

@@ -55,3 +55,39 @@ class Recording:
     @property
     def duration(self) -> float:
         return float(self.t[-1] - self.t[0]) if self.n else 0.0
+
+
+@dataclass(frozen=True)
+class StaticSamples:
+    """The samples inside static intervals, in order: what samples mode and the residuals read."""
+
+    raw: np.ndarray  #: (m, 3)
+    t: np.ndarray  #: (m,) [s]
+    temp: np.ndarray | None
+
+
+@dataclass(frozen=True)
+class RecordingSummary:
+    """What a run reports of a recording read in chunks (Recording's fields, without samples)."""
+
+    n: int
+    t_last: float  #: [s] from the first sample
+    unit: str
+    source: str
+    sha256: str
+    time_unit: str
+    time_note: str
+    time_column: str
+    raw: None = None
+    t: None = None
+    temp: None = None
+    gyro: None = None
+    t_source: None = None
+
+    @property
+    def sample_rate(self) -> float:
+        return float((self.n - 1) / self.t_last) if self.n > 1 else float("nan")
+
+    @property
+    def duration(self) -> float:
+        return float(self.t_last)

@@ -30,16 +30,15 @@ from imucal.data.load import (BINARY_PROBE, MAX_ABS_VALUE, TIME_HEAD_ROWS, DataS
                               binary_file, check_lines, check_rate, corrupt_value, layout, lineno, no_rows, not_increasing,
                               not_utf8, parse_block, resolve_path, unparsed, stamp_unit, time_base_without_stamps,
                               time_unit_from_step, _MAX_SCAN_LINES)
+from imucal.data.load import has_gyro, use_stream  # noqa: F401 (re-exported: the choice of reader)
 from imucal.data.static import (QUANTUM_ROWS, Intervals, MovingVariance, Segment, StaticSettings, VarianceSeries,
                                 auto_threshold, candidate_runs, intervals_from, quantum, segment, window_samples)
-from imucal.data.rosbag import is_bag
+from imucal.data.recording import RecordingSummary, StaticSamples
 from imucal.errors import ImucalError
 from imucal.solve.stats import median
 from imucal.files.inputs import open_regular
 from imucal.report.progress import progress
 
-#: Recordings above this size are read in chunks when data.stream is "auto" [bytes].
-STREAM_BYTES = 64 * 1024**2
 #: Largest recording read in chunks [bytes].
 MAX_STREAM_BYTES = 1024**4
 #: Bytes parsed at a time (whole lines).
@@ -50,65 +49,6 @@ CACHE_BYTES = 256 * 1024**2
 #: Largest head searched for the header and the first data line [bytes].
 MAX_HEAD_BYTES = 64 * 1024**2
 _EXOTIC = (b"\x0b", b"\x0c", b"\x1c", b"\x1d", b"\x1e")  # line breaks for str.splitlines, not for pandas
-
-
-@dataclass(frozen=True)
-class StaticSamples:
-    """The samples inside static intervals, in order: what samples mode and the residuals read."""
-
-    raw: np.ndarray  #: (m, 3)
-    t: np.ndarray  #: (m,) [s]
-    temp: np.ndarray | None
-
-
-@dataclass(frozen=True)
-class RecordingSummary:
-    """What a run reports of a recording read in chunks (Recording's fields, without samples)."""
-
-    n: int
-    t_last: float  #: [s] from the first sample
-    unit: str
-    source: str
-    sha256: str
-    time_unit: str
-    time_note: str
-    time_column: str
-    raw: None = None
-    t: None = None
-    temp: None = None
-    gyro: None = None
-    t_source: None = None
-
-    @property
-    def sample_rate(self) -> float:
-        return float((self.n - 1) / self.t_last) if self.n > 1 else float("nan")
-
-    @property
-    def duration(self) -> float:
-        return float(self.t_last)
-
-
-def use_stream(spec: DataSpec, base_dir: str | os.PathLike | None = None) -> bool:
-    """Whether ``spec`` is read in chunks: data.stream always, or auto and a file above STREAM_BYTES
-    without gyroscope data (columns or a second file)."""
-    if is_bag(resolve_path(spec, base_dir)):
-        return False  # a ROS bag is read message by message (imucal.data.rosbag)
-    if spec.stream != "auto":
-        return spec.stream == "always"
-    if spec.gyro_path is not None:
-        return False
-    try:
-        if os.stat(resolve_path(spec, base_dir)).st_size <= STREAM_BYTES:
-            return False
-    except OSError:
-        return False  # the loader names the problem
-    return not has_gyro(spec, base_dir)  # the gyroscope fit needs every sample
-
-
-def has_gyro(spec: DataSpec, base_dir: str | os.PathLike | None = None) -> bool:
-    """Whether a recording comes with gyroscope data: a second file, or gx gy gz columns (read from
-    its head)."""
-    return spec.gyro_path is not None or _File(spec, resolve_path(spec, base_dir)).lay.has_gyro
 
 
 class _File:
@@ -268,6 +208,11 @@ class _File:
     def line_of(self, block: bytes, offset: int, k: int) -> int:
         """File line of data row ``k`` of the block at ``offset``."""
         return lineno(block.decode("utf-8").splitlines(), k, self.line_at(offset))
+
+
+def head_layout(spec: DataSpec, path: Path) -> Layout:
+    """The layout of a recording's head, as the chunked reader sees it (imucal.data.load.has_gyro)."""
+    return _File(spec, path).lay
 
 
 class _Steps:

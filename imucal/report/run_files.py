@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from imucal.config.run import RunConfig
-from imucal.data.stream import has_gyro, use_stream
+from imucal.data.load import has_gyro, use_stream
 from imucal.errors import ImucalError
 from imucal.files.output import OutputSet
 from imucal.pipeline import CalibrationRun, calibrate_imu
