@@ -18,7 +18,8 @@ import imucal.data.stream as stream_mod
 from conftest import real_file
 from imucal.data.load import DataSpec, load_recording
 from imucal.data.static import MovingVariance, detect_static, moving_variance
-from imucal.data.stream import StreamedRecording, has_gyro, use_stream
+from imucal.data.load import has_gyro, use_stream
+from imucal.data.stream import StreamedRecording
 from imucal.errors import ImucalError
 from imucal.pipeline import calibrate, static_samples
 from test_trust_data import ACC, OTHER, ids

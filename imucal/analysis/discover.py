@@ -502,16 +502,11 @@ def _round(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int,
     fits: dict[int, FitResult] = {}
     for i in pick:
         c = screened[i]
-        try:
-            res = prob.fit(_canonical({**cur_effects, c.name: c.axes}), {**current.values(), **dict(c.start)})
-        except ImucalError as exc:
-            notes.append(f"{c.label}: {exc.message}")
+        res, why = _fit_candidate(prob, current, cur_effects, c)
+        if res is None:
+            notes.append(why)
             continue
         shapes = make_effect(c.name, c.axes).shape_names
-        shape_bound = [n for n in shapes if n in res.at_bound]
-        if shape_bound:  # a warm-up with tau on its bound is a step or a straight line: not this term
-            notes.append(f"{c.label}: {shape_bound[0]} at its {res.at_bound[shape_bound[0]]} bound, not counted")
-            continue
         loose = [n for n in (*make_effect(c.name, c.new_axes).coefficient_names, *shapes)
                  if not res.std.get(n, 0.0) <= res.params[n].scale]
         if loose and shapes:  # the final calibration would refuse it as undetermined
@@ -617,15 +612,26 @@ def _other_firsts(prob: _Problem, current: FitResult, cur_effects: dict[str, tup
             continue
         names.add(c.name)
         if i not in fits:
-            try:
-                res = prob.fit(_canonical({**cur_effects, c.name: c.axes}), {**current.values(), **dict(c.start)})
-            except ImucalError:
+            res, _ = _fit_candidate(prob, current, cur_effects, c)
+            if res is None:
                 continue
-            if any(n in res.at_bound for n in make_effect(c.name, c.axes).shape_names):
-                continue  # a warm-up with tau on its bound: not this term (as in _round)
             fits[i] = res
         out.append(i)
     return out
+
+
+def _fit_candidate(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]], c: Candidate
+                   ) -> tuple[FitResult | None, str]:
+    """The full fit of candidate ``c`` from ``current``, or (None, why it is not counted): a fit the
+    model refuses, or a warm-up whose tau ends on its bound (a step or a straight line, not this term)."""
+    try:
+        res = prob.fit(_canonical({**cur_effects, c.name: c.axes}), {**current.values(), **dict(c.start)})
+    except ImucalError as exc:
+        return None, f"{c.label}: {exc.message}"
+    bound = [n for n in make_effect(c.name, c.axes).shape_names if n in res.at_bound]
+    if bound:
+        return None, f"{c.label}: {bound[0]} at its {res.at_bound[bound[0]]} bound, not counted"
+    return res, ""
 
 
 def _prune(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]], found_names: set[str],

@@ -30,7 +30,6 @@ from imucal.data.load import (BINARY_PROBE, MAX_ABS_VALUE, TIME_HEAD_ROWS, DataS
                               binary_file, check_lines, check_rate, corrupt_value, layout, lineno, no_rows, not_increasing,
                               not_utf8, parse_block, resolve_path, unparsed, stamp_unit, time_base_without_stamps,
                               time_unit_from_step, _MAX_SCAN_LINES)
-from imucal.data.load import has_gyro, use_stream  # noqa: F401 (re-exported: the choice of reader)
 from imucal.data.static import (QUANTUM_ROWS, Intervals, MovingVariance, Segment, StaticSettings, VarianceSeries,
                                 auto_threshold, candidate_runs, intervals_from, quantum, segment, window_samples)
 from imucal.data.recording import RecordingSummary, StaticSamples
