@@ -52,6 +52,21 @@ def test_calibrate_imports_only_what_it_uses(tmp_path: Path) -> None:
     rc, mods = json.loads(p.stdout.strip().splitlines()[-1])
     assert rc == 0, p.stderr
     unused = {"numpy.ma", "imucal.gyro.fit", "imucal.gyro.run", "imucal.gyro.result", "imucal.calibration.gyro",
-              "imucal.analysis.noise_model", "imucal.data.stream", "imucal.analysis.discover", "matplotlib", "pandas", "pyarrow", "tqdm"}
+              "imucal.analysis.noise_model", "imucal.data.stream", "imucal.analysis.discover", "matplotlib", "pandas", "pyarrow", "tqdm",
+              "imucal.cli.commands.discover", "imucal.cli.commands.batch"}  # only the command named is set up
     assert unused.isdisjoint(mods), unused & set(mods)
     assert (tmp_path / "calibration.yaml").exists()
+
+
+def test_help_and_an_unknown_command_still_list_every_command(capsys) -> None:
+    from imucal.cli.main import COMMANDS, main
+
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    out = capsys.readouterr().out
+    assert all(name in out for name in COMMANDS)
+    with pytest.raises(SystemExit) as exc:
+        main(["--debug", "frobnicate"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "invalid choice: 'frobnicate'" in err and all(repr(name) in err for name in COMMANDS)

@@ -47,13 +47,25 @@ class _Parser(argparse.ArgumentParser):
         raise SystemExit(2)
 
 
-def build_parser() -> argparse.ArgumentParser:
+def _named(argv: list[str]) -> list[str]:
+    """The subcommands to register: only the one the command line names (each costs its module's
+    import and its arguments' set-up, some 10 ms for all), every one for help or an unknown name."""
+    for arg in argv:
+        if arg == "--debug":
+            continue
+        return [arg] if arg in COMMANDS else list(COMMANDS)
+    return list(COMMANDS)
+
+
+def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
+    """The parser for ``argv`` (every subcommand when ``argv`` names none)."""
     parser = _Parser(prog="imucal", description="Calibrate MEMS accelerometers (Nakov & Ivanov model).")
     parser.add_argument("--version", action="version", version=f"imucal {__version__}")
     parser.add_argument("--debug", action="store_true",
                         help="on an internal error, print the traceback instead of one line")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
-    for name, modname in COMMANDS.items():
+    for name in _named(argv) if argv is not None else COMMANDS:
+        modname = COMMANDS[name]
         try:
             mod = importlib.import_module(modname)
         except ModuleNotFoundError as exc:
@@ -92,7 +104,8 @@ def _interrupted(exc: BaseException) -> bool:
 
 def main(argv: list[str] | None = None) -> int:
     """Run one command. Exit statuses: imucal.errors.EXIT_* (README, "Exit status")."""
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(argv)
     args = parser.parse_args(argv)
     if not getattr(args, "run", None):
         parser.print_help()
