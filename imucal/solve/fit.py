@@ -217,10 +217,7 @@ def _iterate(fns, rows, data: FitData, params: Parameters, pfix: np.ndarray, gra
             R = lsq.weighted_r_factor(fns, rows, sigma if white is None else white, p_now, pfix, gravity)
             d = _step_scale(R, scale)  # p = p0 + d * x
             problem = lsq.Problem(fns, rows, W, pfix, gravity, p_now, d, exact=hessian == "exact", step=step)
-            # A refresh starts at the last optimum (ipopt.WARM); not in samples mode, whose sum over every
-            # sample has a rounding floor the small barrier lands on (Xsens: 12 iterations, not 7).
-            x, stats = lsq.solve(problem, (lo - p_now) / d, (hi - p_now) / d,
-                                 warm=passes > 0 and data.mode == "means")
+            x, stats = lsq.solve(problem, (lo - p_now) / d, (hi - p_now) / d)
             iters += int(stats.get("iter_count", 0))
             p_now = np.clip(p_now + d * x, lo, hi)
             passes += 1

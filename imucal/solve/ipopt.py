@@ -16,13 +16,13 @@ OPTIONS = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
            "ipopt.tol": 1e-8, "ipopt.acceptable_tol": 1e-6, "ipopt.acceptable_iter": 3,
            "ipopt.max_iter": 300}
 
-#: Added for a pass that starts at the optimum of the same rows under slightly different weights
-#: (imucal.solve.fit's weight refresh): the barrier starts near zero instead of at 0.1, so IPOPT does
-#: not spend its first iterations walking away from the optimum and back while mu decreases.
-#: The angle bounds usually lie thousands of standard errors away in the scaled unknowns; a start on a
-#: bound is pushed inside by bound_push as before. Measured on the real recordings of configs/: 2-3
-#: iterations per refresh, not 7-9; the results agree to 4e-7 standard errors (tests/test_fit_paths.py).
-WARM = {"ipopt.mu_init": 1e-10}
+#: The least-squares NLPs (imucal.solve.least_squares) start a few standard errors from their optimum
+#: at most (initial guess, or the last optimum when the weights are refreshed), in unknowns scaled to
+#: standard errors, with the angle bounds usually thousands of standard errors away: the barrier starts
+#: near zero. IPOPT's default mu_init 0.1 walks away from such a start and back while mu decreases.
+#: Measured on the real recordings of configs/ (means, uniform and samples fits): 2-5 iterations per
+#: solve instead of 7-17, the same optima to 4e-7 standard errors (tests/test_fit_paths.py).
+LEAST_SQUARES = OPTIONS | {"ipopt.mu_init": 1e-10}
 
 #: IPOPT's return_status in words an engineer reads right.
 STATUS_WORDS = {

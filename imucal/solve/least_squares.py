@@ -288,24 +288,22 @@ class _Hessian(ca.Callback):
 
 
 @lru_cache(maxsize=32)
-def _solver(nf: int, warm: bool = False) -> tuple[ca.Function, _Slot, _Objective]:
-    """IPOPT over nf scaled unknowns with simple bounds, built once per nf (and start: ipopt.WARM)."""
+def _solver(nf: int) -> tuple[ca.Function, _Slot, _Objective]:
+    """IPOPT over nf scaled unknowns with simple bounds, built once per nf."""
     slot = _Slot()
     obj = _Objective(slot, nf)
     x = ca.MX.sym("x", nf)
-    opts = ipopt.OPTIONS | (ipopt.WARM if warm else {})
-    return ca.nlpsol("imucal_lsq", "ipopt", {"x": x, "f": obj(x)}, opts), slot, obj
+    return ca.nlpsol("imucal_lsq", "ipopt", {"x": x, "f": obj(x)}, ipopt.LEAST_SQUARES), slot, obj
 
 
-def solve(problem: Problem, lb: np.ndarray, ub: np.ndarray, warm: bool = False) -> tuple[np.ndarray, dict]:
-    """Minimise the problem from x = 0 within [lb, ub]; returns (x, IPOPT's stats). ``warm``: x = 0
-    is the optimum of a nearby problem (ipopt.WARM).
+def solve(problem: Problem, lb: np.ndarray, ub: np.ndarray) -> tuple[np.ndarray, dict]:
+    """Minimise the problem from x = 0 within [lb, ub]; returns (x, IPOPT's stats).
 
     ``problem`` has ``n_free``, ``value(x)`` and ``derivatives(x)`` -> (f, gradient, Hessian), as
     ``Problem`` (the gyroscope's segment fit, imucal.gyro.fit, is another).
     """
     nf = problem.n_free
-    solver, slot, _ = _solver(nf, warm)
+    solver, slot, _ = _solver(nf)
     slot.problem, slot.interrupt = problem, None
     try:
         sol, stats = ipopt.run(solver, x0=np.zeros(nf), lbx=lb, ubx=ub)

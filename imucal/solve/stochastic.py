@@ -20,8 +20,8 @@ estimated by restricted (residual) maximum likelihood (Patterson & Thompson 1971
     l(theta) = -1/2 [log det V + log det(X^T V^-1 X) + r^T P r],  P = V^-1 - V^-1 X (X^T V^-1 X)^-1 X^T V^-1,
 
 X the Jacobian of the residuals w.r.t. the free parameters (the fit absorbs that much of any
-covariance). l is maximised on a log grid and refined by Fisher scoring; standard errors come
-from the inverse expected information, F_ij = 1/2 tr(P K_i P K_j).
+covariance). l is maximised on a log grid and refined by average-information (AI-REML) steps;
+standard errors come from the inverse expected information, F_ij = 1/2 tr(P K_i P K_j).
 
 Which components are present is decided by likelihood ratios against the nested models, each
 variance at its boundary 0 (p = 1/2 P(chi2(1) > LR), Self & Liang 1987), each at level alpha / 2
@@ -123,9 +123,13 @@ def reml_grid(c: Components, theta: np.ndarray, ml: bool = False) -> np.ndarray:
         rows = np.flatnonzero(theta[:, 0] == tau2)
         d = c.sigma**2 + tau2 * kI
         h = 1.0 / np.sqrt(d)
-        lam, U = np.linalg.eigh(c.K[1] * np.outer(h, h))
-        lam = np.clip(lam, 0.0, None)  # K_W is positive semi-definite: rounding only
-        Xt, rt = U.T @ (c.X * h[:, None]), U.T @ (c.r * h)
+        Xt, rt = c.X * h[:, None], c.r * h
+        if theta[rows, 1].any():  # (with q^2 = 0 throughout, V = D: no basis change needed)
+            lam, U = np.linalg.eigh(c.K[1] * np.outer(h, h))
+            lam = np.clip(lam, 0.0, None)  # K_W is positive semi-definite: rounding only
+            Xt, rt = U.T @ Xt, U.T @ rt
+        else:
+            lam = np.zeros(len(d))
         w = 1.0 / (1.0 + theta[rows, 1, None] * lam)  # (q, n): the eigenvalues of V^-1 in this basis
         A = np.einsum("ki,qk,kj->qij", Xt, w, Xt)  # X^T V^-1 X
         b = (w * rt) @ Xt  # X^T V^-1 r
@@ -148,7 +152,7 @@ class ModelFit:
 
 def fit_model(c: Components, name: str, ml: bool = False) -> ModelFit:
     """Maximise the REML (or, ``ml``, the full) likelihood over the model's free components (>= 0):
-    log grid, then Fisher scoring."""
+    log grid, then average-information steps."""
     free = np.array(_FREE[name])
     s2 = median(c.sigma**2)
     scale = np.array([s2, s2 / max(float(np.max(c.t)), 1e-9)])
@@ -159,18 +163,21 @@ def fit_model(c: Components, name: str, ml: bool = False) -> ModelFit:
     lls = reml_grid(c, grid, ml=ml)
     k = int(np.argmax(lls))  # the first of equal maxima, as max() over the same order
     theta, ll = grid[k].copy(), float(lls[k])
-    for _ in range(50):  # Fisher scoring with step halving, projected on theta >= 0
-        P, T = _projectors(c, theta, ml)
-        PK = [T @ K for K in c.K]
+    P, T = _projectors(c, theta, ml)
+    for _ in range(50):  # average-information steps with step halving, projected on theta >= 0
         Pr = P @ c.r
-        score = np.array([-0.5 * np.trace(A) + 0.5 * float(Pr @ K @ Pr) for A, K in zip(PK, c.K)])
-        F = np.array([[0.5 * np.sum(A * B.T) for B in PK] for A in PK])
+        u = [K @ Pr for K in c.K]
+        score = np.array([-0.5 * np.sum(T * K) + 0.5 * float(Pr @ ui) for K, ui in zip(c.K, u)])
+        # AI_ij = 1/2 r^T P K_i P K_j P r, the mean of the observed and expected information (Gilmour,
+        # Thompson & Cullis 1995): Newton-like near the maximum, where expected-information scoring
+        # alternates around it when the two components are correlated (Xsens: 21 steps, now 8).
+        AI = np.array([[0.5 * float(ui @ P @ uj) for uj in u] for ui in u])
         idx = np.flatnonzero(free)
         step = np.zeros(2)
-        step[idx] = np.linalg.lstsq(F[np.ix_(idx, idx)], score[idx], rcond=None)[0]
-        for _ in range(30):
+        step[idx] = np.linalg.lstsq(AI[np.ix_(idx, idx)], score[idx], rcond=None)[0]
+        for _ in range(30):  # each trial with its projectors: the accepted one starts the next step
             new = np.maximum(theta + step, 0.0)
-            ll_new = reml(c, *new, ml=ml)[0]
+            ll_new, proj = reml(c, *new, projector=True, ml=ml)
             if ll_new >= ll - 1e-12:
                 break
             step *= 0.5
@@ -178,9 +185,10 @@ def fit_model(c: Components, name: str, ml: bool = False) -> ModelFit:
             break
         done = np.all(np.abs(new - theta) <= 1e-6 * np.maximum(theta, 1e-3 * scale))
         theta, ll = new, max(ll, ll_new)
+        P, T = proj if ml else (proj, proj)
         if done:
             break
-    PK = [_projectors(c, theta, ml)[1] @ K for K in c.K]
+    PK = [T @ K for K in c.K]
     F = np.array([[0.5 * np.sum(A * B.T) for B in PK] for A in PK])
     idx = np.flatnonzero(free)
     cov = np.zeros((2, 2))
