@@ -2,9 +2,11 @@
 from __future__ import annotations
 
 import hashlib
+import io
 import math
 import os
 import re
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -156,23 +158,64 @@ def rails(spec: object, where: str = "data.saturation") -> dict[str, np.ndarray 
     return out
 
 
-def _read_text(path: Path) -> tuple[str, str]:
-    """Text and SHA-256 of a recording: a regular file, within the size limit, not binary."""
+def _read_bytes(path: Path) -> tuple[bytes, str]:
+    """Bytes and SHA-256 of a recording: a regular file, within the size limit, not binary."""
     fd, _ = open_regular(path, field="data.path", max_bytes=max_data_bytes(),
                          fix="check the path (relative paths are relative to the YAML file)")
     try:
         with os.fdopen(fd, "rb") as f:
-            head = f.read(BINARY_PROBE)  # a sparse or binary file is refused before it is read whole
-            if b"\x00" in head:
+            if b"\x00" in f.read(BINARY_PROBE):  # a sparse or binary file is refused before it is read whole
                 raise binary_file(path)
-            blob = head + f.read()
+            f.seek(0)
+            blob = f.read()
     except OSError as exc:
         raise ImucalError(f"cannot read: {exc.strerror or exc}", file=str(path), field="data.path") from None
+    return blob, hashlib.sha256(blob).hexdigest()
+
+
+def _decode(blob: bytes, path: Path) -> str:
     try:
-        text = blob.decode("utf-8-sig")
+        return blob.decode("utf-8-sig")
     except UnicodeDecodeError:
         raise not_utf8(path) from None
-    return text, hashlib.sha256(blob).hexdigest()
+
+
+#: ASCII bytes that end a line for str.splitlines but not for numpy's reader (or not alone: "\r").
+_OTHER_BREAKS = (b"\x0b", b"\x0c", b"\x1c", b"\x1d", b"\x1e")
+
+
+def _fast_table(blob: bytes, spec: DataSpec, path: Path) -> tuple[Layout, np.ndarray] | None:
+    """The common recording read without a Python string per line: ASCII, lines ended by "\n" or
+    "\r\n", every line after the header a finite row. None for anything else, which the line by line
+    reader (parse_block) reads and, when it is wrong, names the line at fault. Same numbers: the same
+    numpy parser reads the same bytes."""
+    if not blob.isascii() or blob.count(b"\r") != blob.count(b"\r\n") or any(b in blob for b in _OTHER_BREAKS):
+        return None
+    n_lines = blob.count(b"\n") + (len(blob) > 0 and not blob.endswith(b"\n"))
+    end = -1  # the head: the lines the layout looks at (its first data line and _MAX_SCAN_LINES more)
+    for _ in range(spec.skip_rows + 2 * _MAX_SCAN_LINES):
+        end = blob.find(b"\n", end + 1)
+        if end < 0:
+            end = len(blob)
+            break
+    head = blob[:end].decode("ascii").splitlines()[spec.skip_rows:]
+    try:
+        lay = layout(head, spec, path)
+    except ImucalError:
+        return None
+    first = spec.skip_rows + lay.body  # 0-based line of the first row
+    if (lay.body + _MAX_SCAN_LINES >= len(head) and end < len(blob)) or n_lines <= first:
+        return None  # the layout may depend on lines past the head; or no row at all
+    try:
+        with warnings.catch_warnings():  # "input contained no data": blank lines only, read below
+            warnings.simplefilter("ignore")
+            arr = np.loadtxt(io.BytesIO(blob), delimiter=lay.delimiter, usecols=lay.usecols, ndmin=2,
+                             dtype=float, comments="#", skiprows=first)
+    except (ValueError, IndexError):
+        return None
+    if arr.shape[0] != n_lines - first or not np.isfinite(arr).all():
+        return None  # a blank or comment line, or a bad value: the line by line reader decides
+    return lay, arr
 
 
 #: Leading bytes searched for NUL (a binary file).
@@ -562,21 +605,31 @@ def load_recording(spec: DataSpec | str | os.PathLike, base_dir: str | os.PathLi
         if getattr(spec, name) is not None:
             raise ImucalError(f"{name} applies to ROS bags only", file=str(path), field=f"data.{name}",
                               fix="give a .bag file or a ROS 2 bag folder, or drop the topic")
-    text, sha = _read_text(path)
-    lines = text.splitlines()[spec.skip_rows:]
-    lay = layout(lines, spec, path)
-    body, body_first = lines[lay.body:], lay.body_first
-    arr = parse_block(body, body_first, lay.delimiter, lay.usecols, path)
+    blob, sha = _read_bytes(path)
+    fast = _fast_table(blob, spec, path)
+    if fast is not None:  # every line after the header is a row
+        (lay, arr), body = fast, None
+    else:
+        lines = _decode(blob, path).splitlines()[spec.skip_rows:]
+        lay = layout(lines, spec, path)
+        body = lines[lay.body:]
+        arr = parse_block(body, lay.body_first, lay.delimiter, lay.usecols, path)
+    del blob
+    body_first = lay.body_first
+
+    def line_of(k: int) -> int:  # the file's line number of row k
+        return body_first + k if body is None else lineno(body, k, body_first)
+
     big = np.abs(arr) > MAX_ABS_VALUE
     if big.any():
-        raise corrupt_value(lineno(body, int(np.flatnonzero(big.any(axis=1))[0]), body_first), path)
+        raise corrupt_value(line_of(int(np.flatnonzero(big.any(axis=1))[0])), path)
     data = {r: arr[:, i] for i, r in enumerate(lay.roles)}
     n = arr.shape[0]
     stamps = data.get("t")
     if stamps is not None and n > 1:
         d = np.diff(stamps)
         if not (d > 0).all():
-            raise not_increasing(lineno(body, int(np.flatnonzero(~(d > 0))[0]) + 1, body_first), path)
+            raise not_increasing(line_of(int(np.flatnonzero(~(d > 0))[0]) + 1), path)
     if stamps is None:
         unit, note = time_base_without_stamps(spec)
         t = np.arange(n) / float(spec.sample_rate)
