@@ -189,7 +189,8 @@ def _fast_table(blob: bytes, spec: DataSpec, path: Path) -> tuple[Layout, np.nda
     "\r\n", every line after the header a finite row. None for anything else, which the line by line
     reader (parse_block) reads and, when it is wrong, names the line at fault. Same numbers: the same
     numpy parser reads the same bytes."""
-    if not blob.isascii() or blob.count(b"\r") != blob.count(b"\r\n") or any(b in blob for b in _OTHER_BREAKS):
+    if not blob.isascii() or any(b in blob for b in _OTHER_BREAKS) or (
+            b"\r" in blob and blob.count(b"\r") != blob.count(b"\r\n")):
         return None
     n_lines = blob.count(b"\n") + (len(blob) > 0 and not blob.endswith(b"\n"))
     end = -1  # the head: the lines the layout looks at (its first data line and _MAX_SCAN_LINES more)

@@ -139,11 +139,16 @@ def _window_variance(seg: np.ndarray, w: int) -> np.ndarray:
     c2 = np.empty((m + w, k))
     c1[0] = c2[0] = 0.0
     np.cumsum(xc, axis=0, out=c1[1:])
-    np.cumsum(xc * xc, axis=0, out=c2[1:])
-    s1 = c1[w:] - c1[:m]
-    s2 = c2[w:] - c2[:m]
-    var = np.maximum(s2 / w - (s1 / w) ** 2, 0.0) * w / (w - 1)
-    return var.sum(axis=1)
+    np.cumsum(np.square(xc, out=xc), axis=0, out=c2[1:])
+    # var = max(s2 / w - (s1 / w)^2, 0) * w / (w - 1), in place: each temporary is a block of memory
+    # the process touches for the first time (page faults cost more than the arithmetic here).
+    s1, s2 = c1[w:] - c1[:m], xc[:m]
+    np.subtract(c2[w:], c2[:m], out=s2)
+    np.divide(s2, w, out=s2)
+    np.square(np.divide(s1, w, out=s1), out=s1)
+    np.maximum(np.subtract(s2, s1, out=s2), 0.0, out=s2)
+    np.divide(np.multiply(s2, w, out=s2), w - 1, out=s2)
+    return s2.sum(axis=1)
 
 
 _F32_MAX = float(np.finfo(np.float32).max)
