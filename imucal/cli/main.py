@@ -11,7 +11,6 @@ import importlib
 import os
 import signal
 import sys
-import traceback
 
 # One BLAS thread unless the user chose otherwise, set before numpy loads: imucal's matrices have a
 # few columns, where the thread pool costs more wall time than it saves (OpenBLAS's pool alone adds
@@ -76,6 +75,12 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+def _print_traceback() -> None:
+    import traceback  # here: only --debug on an internal error prints one (2 ms of every start)
+
+    traceback.print_exc()
+
+
 _SIGNALLED = SIGNALS  #: signals received by this run (imucal.errors.SIGNALS)
 
 
@@ -129,7 +134,7 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_INTERRUPTED
     except MemoryError:
         if args.debug:
-            traceback.print_exc()
+            _print_traceback()
         sys.stderr.write("imucal: error: out of memory (the input is too large for this machine; "
                          "rerun with --debug for the traceback)\n")
         return EXIT_INTERNAL
@@ -145,7 +150,7 @@ def main(argv: list[str] | None = None) -> int:
                              "path, without a symbolic-link loop)\n")
             return EXIT_BAD_INPUT
         if args.debug:
-            traceback.print_exc()
+            _print_traceback()
         sys.stderr.write(f"imucal: internal error: {type(exc).__name__}: {short(str(exc), 200)} "
                          "(rerun with --debug for the traceback)\n")
         return EXIT_INTERNAL
