@@ -316,7 +316,9 @@ def markdown(r: dict, args) -> str:
               ["imu_tk not timed here: give its test program with --imutk (scripts/build_imutk.sh builds it).", ""])
         L += ["Start-up: the modules a run without a gyroscope, figures or chunked reading does not use are not "
               "imported (matplotlib, pandas, numpy.ma, the gyroscope fit and calibration section, the noise-model "
-              "reader, discovery; asserted by tests/test_startup.py). The command runs BLAS on one thread unless "
+              "reader, discovery, the other commands' modules, traceback; asserted by tests/test_startup.py). The "
+              "fits start IPOPT's barrier near zero (2-5 iterations a solve) and the REML test takes "
+              "average-information steps (imucal.solve.ipopt, imucal.solve.stochastic). The command runs BLAS on one thread unless "
               "OPENBLAS_NUM_THREADS (or MKL_NUM_THREADS) is set: its matrices have a few columns, and OpenBLAS's "
               "thread pool alone costs some 30 ms of wall time per start on this machine (the floor above is "
               "measured with the pool, as `python -c` starts).", "",
