@@ -79,9 +79,9 @@ def test_student_t_quantile_in_report(dof, t):
 
 
 def test_a_small_initial_barrier_reaches_the_default_optimum_in_fewer_iterations(monkeypatch):
-    """ipopt.LEAST_SQUARES starts IPOPT's barrier near zero: on the auto-weighted Xsens fit (an
-    initial pass, a refresh and two with a between-interval excess) every pass lands where IPOPT's
-    default start (mu_init 0.1) does, in fewer iterations."""
+    """ipopt.LEAST_SQUARES starts IPOPT's barrier near zero: on the auto-weighted Xsens fit (a first
+    pass, then two with the noise weights refreshed and a between-interval excess) every pass lands
+    where IPOPT's default start (mu_init 0.1) does, in fewer iterations."""
     import imucal
     from conftest import real_file
     from imucal.solve import ipopt

@@ -221,16 +221,20 @@ def _iterate(fns, rows, data: FitData, params: Parameters, pfix: np.ndarray, gra
             iters += int(stats.get("iter_count", 0))
             p_now = np.clip(p_now + d * x, lo, hi)
             passes += 1
-            if passes < 2:
-                continue
-            if weights != "auto" or data.mode != "means" or dof < 1 or passes >= MAX_PASSES:
+            if weights != "auto" or data.mode != "means" or dof < 1:
+                if passes < 2:
+                    continue  # once more, with the weights at the solution
                 break
+            if passes >= MAX_PASSES:
+                break
+            # The excess at this solution; the next pass refreshes the noise weights and the excess together.
             r0 = lsq.residuals(fns, rows, p_now, pfix, gravity)
             s0 = lsq.noise_sigma(fns, rows, data.raw_var, p_now, pfix, gravity, weights)
             new, new_q2, sto = _excess(fns, rows, data, params, p_now, pfix, gravity, r0, s0, dof, walk_test)
             walk_test = sto is not None  # the REML test rejected a walk once: later passes only re-estimate tau^2
-            if (abs(new - excess) <= 1e-4 * max(new, excess) and abs(new_q2 - q2) <= 1e-4 * max(new_q2, q2)) or (
-                    new == 0.0 and excess == 0.0 and new_q2 == 0.0 and q2 == 0.0):
+            settled = (abs(new - excess) <= 1e-4 * max(new, excess) and abs(new_q2 - q2) <= 1e-4 * max(new_q2, q2)
+                       ) or (new == 0.0 and excess == 0.0 and new_q2 == 0.0 and q2 == 0.0)
+            if settled and passes >= 2:  # (no excess after the first pass: one refresh of the noise weights)
                 break
             excess, q2 = new, new_q2
     return _Iterated(p_now, sigma0, sigma, white, excess, q2, sto, iters, stats)
