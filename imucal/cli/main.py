@@ -63,7 +63,7 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     parser.add_argument("--debug", action="store_true",
                         help="on an internal error, print the traceback instead of one line")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
-    for name in _named(argv) if argv is not None else COMMANDS:
+    for name in _named(argv or []):
         modname = COMMANDS[name]
         try:
             mod = importlib.import_module(modname)
