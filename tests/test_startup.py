@@ -84,6 +84,8 @@ _FILES = {
     "BOM and non-ASCII header": "\ufefft,ax,ay,az,t_c\n0.01,1,2,3,20\n0.02,4,5,6,21\n0.03,7,8,9,22\n",
     "long comment preamble": "# x\n" * 300 + "t ax ay az\n0.01 1 2 3\n0.02 4 5 6\n0.03 7 8 9\n",
     "NaN": "t ax ay az\n0.01 1 2 3\n0.02 nan 5 6\n0.03 7 8 9\n",
+    "overflow": "t ax ay az\n0.01 1 2 3\n0.02 1e999 5 6\n0.03 7 8 9\n",
+    "beyond the value limit": "t ax ay az\n0.01 1 2 3\n0.02 1e300 5 6\n0.03 7 8 9\n",
     "short row": "t ax ay az\n0.01 1 2 3\n0.02 4 5\n0.03 7 8 9\n",
     "header only, blank lines": "t ax ay az\n\n\n",
     "decreasing time": "t ax ay az\n0.01 1 2 3\n0.03 4 5 6\n0.02 7 8 9\n",
