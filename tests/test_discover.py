@@ -257,6 +257,22 @@ def test_two_comparable_effects_are_both_named(tmp_path):
     assert "given" in d.report()
 
 
+def test_a_pair_hidden_behind_a_relative_is_found_by_the_pair_screen(tmp_path):
+    """scale_drift[x] + bias_drift[y]: alone each removes about a third of the chi-square, less than
+    a relative on two axes (scale_nonlinearity[xy]) or a warm-up on three, so no search that starts
+    from the best single candidates meets the pair; together they bring 811 to 14. The screen of
+    every pair finds it and both are named."""
+    from imucal.analysis.simulate import draw_pair_case, pair_config
+
+    c1, c2 = draw_pair_case(51381, snr=40.0, noise_mg=0.3)
+    assert {c1.label, c2.label} == {"scale_drift[x]", "bias_drift[y]"}
+    d = _discover_sim(pair_config(c1, c2).run(), c1.config.sensor.unit, tmp_path, "hidden-pair")
+    assert sorted(e.label for e in d.effects) == ["bias_drift[y]", "scale_drift[x]"]
+    first = d.steps[0]  # no single candidate was significant: the pair made the first one so
+    assert {first.chosen.label, first.jointly_with} == {"scale_drift[x]", "bias_drift[y]"}
+    assert d.consistent_after
+
+
 def test_the_backward_step_drops_an_axis_the_data_do_not_need(tmp_path):
     """An effect fitted on an axis that carries nothing (as a greedy forward search can pick up) is
     dropped by the backward step, with its note; the true axis stays."""

@@ -49,6 +49,7 @@ from imucal.model.effects import (AXIS_NAMES, EFFECTS, MIN_DOF, MIN_TEMPERATURE_
 from imucal.analysis.f_test import f_sf
 from imucal.analysis import stochastic as stoch
 from imucal.analysis.min_p import MinPNull, min_p_null
+from imucal.analysis.pair_screen import pair_chi2
 from imucal.solve.stats import between_excess, chi2_sf
 from imucal.errors import ImucalError
 from imucal.solve.fit import FitData, FitResult, fit, jacobian_rows
@@ -145,7 +146,7 @@ class Step:
     chosen: Candidate | None
     ambiguous_with: tuple[Candidate, ...] = ()
     scale: float = 1.0  #: the misfit scale used to compare candidates
-    jointly_with: str | None = None  #: the second effect that made the chosen one significant (lookahead)
+    jointly_with: str | None = None  #: the other member when the chosen one came with a pair (lookahead)
     p_scan: float = math.nan  #: family-wise p of the best screened candidate (min-p over the round)
 
 
@@ -291,8 +292,8 @@ class Discovery:
                     L.append(f"    {c.label:<28s} chi2 ~ {c.chi2_screen:8.5g} (screened out)")
             if s.chosen is not None:
                 L.append(f"    -> added {s.chosen.label}"
-                         + (f" (significant given {s.jointly_with}: no single effect explains enough, the pair "
-                            "does)" if s.jointly_with else "")
+                         + (f" (significant given {s.jointly_with}: the pair explains the data better than any "
+                            "single term, and each is significant given the other)" if s.jointly_with else "")
                          + (f"; cannot be told apart from {', '.join(c.label for c in s.ambiguous_with)}"
                             if s.ambiguous_with else ""))
             else:
@@ -463,6 +464,10 @@ class _Scan:
     screened: list[Candidate]
     null: MinPNull
     p: float  #: family-wise p of the best screened candidate (linearised, unscaled)
+    screens: list[np.ndarray]  #: whitened Jacobians, one per screened shape value (``_screen``)
+    rw: np.ndarray  #: whitened residual of the current fit
+    col: dict[str, int]  #: column of each parameter in ``screens``
+    base_cols: list[int]  #: columns of the current model's free parameters
 
 
 def _scan(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]], names: Sequence[str],
@@ -479,7 +484,7 @@ def _scan(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, 
         family.append(([col[x] for x in make_effect(n, new).coefficient_names], c.k, c.extra > 0))
     null = min_p_null([Jw for Jw, _ in screens], base_cols, family)
     p_best = min((chi2_sf(max(0.0, current.chi2 - c.chi2_screen), c.k) for c in screened), default=1.0)
-    return _Scan(screened, null, null.adjust(p_best))
+    return _Scan(screened, null, null.adjust(p_best), [Jw for Jw, _ in screens], rw, col, base_cols)
 
 
 def _round(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]], names: Sequence[str],
@@ -530,94 +535,91 @@ def _round(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int,
         screened[i] = dataclasses.replace(screened[i], score=screened[i].chi2 / common + settings.penalty * screened[i].k)
     if not sig:
         step = Step(index, current.chi2, current.dof, tuple(screened), None, scale=common, p_scan=scan.p)
-        return _lookahead(prob, current, cur_effects, names, step, fits, settings, notes)
+        return _lookahead(prob, current, cur_effects, scan, step, fits, settings, notes, level)
     best = min(sig, key=lambda i: screened[i].score)
     chosen = screened[best]
     amb = tuple(screened[i] for i in sig if i != best and not _nested(screened[i], chosen)
                 and screened[i].score - chosen.score < settings.ambiguity)
-    return Step(index, current.chi2, current.dof, tuple(screened), chosen, amb, common, p_scan=scan.p), {best: fits[best]}
+    step = Step(index, current.chi2, current.dof, tuple(screened), chosen, amb, common, p_scan=scan.p)
+    # Two terms may still describe the data better than the best one (a drift and a temperature term
+    # on one axis, which a warm-up on 18-26 poses mimics with as many parameters). When the single
+    # leaves a residual that disagrees with the noise, a pair with a lower penalised score wins; when
+    # it is at noise level, only by more than the ambiguity margin (with ~5000 pairs to choose from,
+    # a smaller gain is what chance offers a true single).
+    margin = settings.ambiguity if _p_noise(fits[best]) >= settings.alpha_noise else 0.0
+    paired, pfit = _lookahead(prob, current, cur_effects, scan, dataclasses.replace(step, chosen=None, ambiguous_with=()),
+                              fits, settings, notes, level, beat=chosen.score - margin, scale=common)
+    if paired.chosen is not None:
+        return paired, pfit
+    return step, {best: fits[best]}
 
 
-def _lookahead(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]], names: Sequence[str],
-               step: Step, fits: dict[int, FitResult], settings: DiscoverSettings, notes: list[str]
-               ) -> tuple[Step, dict[int, FitResult]]:
-    """Two comparable effects: neither alone leaves a residual at noise level, so each one's LR,
-    scaled by the misfit it leaves, is small. Try pairs (c, then the best d after c): when the
-    pair's misfit scale makes *both* members significant (each tested given the other, Bonferroni
-    over all pairs), add c now; the next round finds d with the ordinary test."""
+def _lookahead(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]], scan: _Scan,
+               step: Step, fits: dict[int, FitResult], settings: DiscoverSettings, notes: list[str], level: float,
+               beat: float = math.inf, scale: float = 1.0) -> tuple[Step, dict[int, FitResult]]:
+    """Two terms at once. Two comparable effects: neither alone leaves a residual at noise level, so
+    each one's LR, scaled by the misfit it leaves, is small; or a relative on more axes, or a term
+    with a shape, describes part of both better than either. Every pair of the round's candidates
+    (two different terms) is screened by its linearised chi-square (``imucal.analysis.pair_screen``);
+    the best ``settings.lookahead`` whose screened score could beat ``beat`` (the chosen single's
+    score, when one is significant) are fitted in full. A pair passes when its misfit scale makes
+    *both* members significant, each tested given the other, Bonferroni over all pairs screened, and
+    its score chi2 / max(scale, chi2/dof) + penalty * k is below ``beat``. The member more significant
+    given the other is added now; the next round tests the other one alone."""
     fits = dict(fits)
-    firsts = sorted(fits, key=lambda i: step.candidates[i].score)[: settings.lookahead]
-    firsts += _other_firsts(prob, current, cur_effects, step, firsts, fits, settings)
-    n_distinct = prob.run.observability.n_distinct
-    M1 = len(step.candidates)
+    cands = step.candidates
+    n_free, n_distinct = len(current.free_names), prob.run.observability.n_distinct
+    pairs = [(i, j) for i, j in itertools.combinations(range(len(cands)), 2)
+             if cands[i].name != cands[j].name and n_free + cands[i].k + cands[j].k <= min(
+                 n_distinct, prob.iv.n - MIN_DOF)]
+    if not pairs:
+        return step, {}
+    members = [([scan.col[x] for x in make_effect(c.name, c.new_axes).coefficient_names], c.extra > 0) for c in cands]
+    chi2 = pair_chi2(scan.screens, scan.rw, scan.base_cols, members, pairs)
+    score = chi2 / scale + settings.penalty * np.array([cands[i].k + cands[j].k for i, j in pairs])
+    M2 = len(pairs)
     passing: list[tuple[float, int, float, float, str]] = []
-    for i in firsts:
-        c, res_c = step.candidates[i], fits[i]
-        eff_c = {**cur_effects, c.name: c.axes}
-        cands2 = _candidates(names, eff_c, len(res_c.free_names), prob.iv.n, n_distinct)
-        if not cands2:
-            continue
-        screens, rw, col, cur_free = _screen(prob, res_c, eff_c, names)
-        base_cols = [col[n] for n in cur_free]
-        pre = {(n, new): _screen_candidate(screens, rw, base_cols, col, n, new) for n, _, new in cands2}
-
-        def score(n: str, new: tuple[int, ...]) -> float:
-            return pre[(n, new)][0] + settings.penalty * (len(new) + _extra(n, eff_c))
-
-        n2, ax2, new2 = min(cands2, key=lambda t: score(t[0], t[2]))
-        start2 = dict(pre[(n2, new2)][1])
-        k2 = len(new2) + _extra(n2, eff_c)
-        try:
-            res_cd = prob.fit(_canonical({**eff_c, n2: ax2}), {**res_c.values(), **start2})
-            d_alone = tuple(sorted(set(cur_effects.get(n2, ())) | set(new2)))
-            res_d = prob.fit(_canonical({**cur_effects, n2: d_alone}), {**current.values(), **start2})
-        except ImucalError as exc:
-            notes.append(f"lookahead {c.label} + {_label(n2, ax2)}: {exc.message}")
-            continue
-        s2 = max(1.0, res_cd.redchi)
-        M2 = M1 * len(cands2)
-        lr_c = max(0.0, (res_d.chi2 - res_cd.chi2) / s2)
-        lr_d = max(0.0, (res_c.chi2 - res_cd.chi2) / s2)
-        p_c = _p_lr(lr_c, c.k, res_cd, settings.alpha_noise) * M2
-        p_d = _p_lr(lr_d, k2, res_cd, settings.alpha_noise) * M2
-        if p_c < settings.alpha_effect and p_d < settings.alpha_effect:
-            total = res_cd.chi2 / s2 + settings.penalty * (c.k + k2)
-            passing.append((total, i, lr_c, min(1.0, p_c), _label(n2, ax2)))
+    order = [q for q in np.argsort(score, kind="stable") if score[q] < beat + _SCREEN_SLACK]
+    for q in order[: settings.lookahead]:
+        i, j = pairs[q]
+        single = []
+        for m in (i, j):
+            if m not in fits:
+                res, why = _fit_candidate(prob, current, cur_effects, cands[m])
+                if res is None:
+                    notes.append(f"lookahead: {why}")
+                    break
+                fits[m] = res
+            single.append(fits[m])
+        else:
+            c, d = cands[i], cands[j]
+            try:
+                res_cd = prob.fit(_canonical({**cur_effects, c.name: c.axes, d.name: d.axes}),
+                                  {**current.values(), **dict(c.start), **dict(d.start)})
+            except ImucalError as exc:
+                notes.append(f"lookahead {c.label} + {d.label}: {exc.message}")
+                continue
+            bound = [n for e in (c, d) for n in make_effect(e.name, e.axes).shape_names if n in res_cd.at_bound]
+            if bound:
+                notes.append(f"lookahead {c.label} + {d.label}: {bound[0]} at its {res_cd.at_bound[bound[0]]} bound")
+                continue
+            s2 = max(1.0, res_cd.redchi)
+            lr = [max(0.0, (single[1 - m].chi2 - res_cd.chi2) / s2) for m in (0, 1)]  # each given the other
+            p = [min(1.0, _p_lr(lr[m], e.k, res_cd, settings.alpha_noise) * M2) for m, e in enumerate((c, d))]
+            total = res_cd.chi2 / max(scale, s2) + settings.penalty * (c.k + d.k)
+            if max(p) < level and total < beat:
+                first = int(p[1] < p[0])
+                passing.append((total, (i, j)[first], lr[first], p[first], (d, c)[first].label))
     if not passing:
         return step, {}
     total, i, lr_c, p_c, second = min(passing)
     # Another pair (not the same two terms) within the ambiguity margin: the data cannot tell them apart.
-    rivals = tuple(step.candidates[j] for t, j, _, _, d in passing if t - total < settings.ambiguity
-                   and {step.candidates[j].label, d} != {step.candidates[i].label, second})
-    cands = list(step.candidates)
-    cands[i] = dataclasses.replace(cands[i], lr=lr_c, p_adjusted=p_c, significant=True)
-    return (dataclasses.replace(step, candidates=tuple(cands), chosen=cands[i], jointly_with=second,
+    rivals = tuple(cands[j] for t, j, _, _, d in passing if t - total < settings.ambiguity
+                   and {cands[j].label, d} != {cands[i].label, second})
+    out = list(cands)
+    out[i] = dataclasses.replace(out[i], lr=lr_c, p_adjusted=p_c, significant=True)
+    return (dataclasses.replace(step, candidates=tuple(out), chosen=out[i], jointly_with=second,
                                 ambiguous_with=rivals), {i: fits[i]})
-
-
-def _other_firsts(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]], step: Step,
-                  firsts: list[int], fits: dict[int, FitResult], settings: DiscoverSettings) -> list[int]:
-    """More first members for the lookahead: the best-screened candidate of each effect not among
-    ``firsts`` (up to ``settings.lookahead``), fitted here into ``fits``. With two effects the best
-    single fits are often a relative on two axes that absorbs part of each (scale_temperature[yz] for
-    scale_nonlinearity[z] + scale_drift[y]); the true first member is then screened out of them."""
-    names = {step.candidates[i].name for i in firsts}
-    out: list[int] = []
-    for i in sorted(range(len(step.candidates)),
-                    key=lambda j: step.candidates[j].chi2_screen + settings.penalty * step.candidates[j].k):
-        c = step.candidates[i]
-        if len(out) >= settings.lookahead:
-            break
-        if c.name in names:
-            continue
-        names.add(c.name)
-        if i not in fits:
-            res, _ = _fit_candidate(prob, current, cur_effects, c)
-            if res is None:
-                continue
-            fits[i] = res
-        out.append(i)
-    return out
 
 
 def _fit_candidate(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]], c: Candidate

@@ -45,7 +45,7 @@ class MinPNull:
         return (1 + hits) / (1 + self.min_p.size)
 
 
-def _basis(A: np.ndarray, scale: float | None = None) -> np.ndarray:
+def column_basis(A: np.ndarray, scale: float | None = None) -> np.ndarray:
     """Orthonormal basis of the column space of A (SVD; directions with a singular value below
     _RANK_TOL x ``scale``, default the largest one, are dependent and dropped)."""
     if A.shape[1] == 0:
@@ -65,12 +65,12 @@ def min_p_null(screens: Sequence[np.ndarray], base_cols: Sequence[int],
     screens) each, as the round scores them.
     """
     J0 = screens[0]
-    B = _basis(J0[:, list(base_cols)])
+    B = column_basis(J0[:, list(base_cols)])
     blocks, ks = [], []
     for cols, k, profiled in candidates:
         for Jw in (screens if profiled else screens[:1]):
             A = Jw[:, list(cols)]
-            Q = _basis(A - B @ (B.T @ A), scale=float(np.linalg.norm(A)))  # what the base model leaves
+            Q = column_basis(A - B @ (B.T @ A), scale=float(np.linalg.norm(A)))  # what the base model leaves
             if Q.shape[1]:
                 blocks.append(Q)
                 ks.append(k)
