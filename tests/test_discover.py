@@ -273,6 +273,33 @@ def test_a_pair_hidden_behind_a_relative_is_found_by_the_pair_screen(tmp_path):
     assert d.consistent_after
 
 
+def test_an_axis_the_poses_barely_see_is_reported_not_ruled_out(tmp_path):
+    """scale_drift[y]: a drift of the x scale as large as the y one would add about 4 chi-square on
+    these poses (few of them along x when the drift is large), so its absence is no finding and the
+    report says so; z is seen (about 25) and is ruled out. The linearised lambda agrees with the
+    standard error of a full fit with the axis added."""
+    from imucal.analysis.discover import _canonical, _Problem
+
+    case = draw_effect_case(301, effect="scale_drift", axes=(1,), snr=20.0, noise_mg=0.3)
+    d = _discover_sim(case.config.run(), case.config.sensor.unit, tmp_path, "blind")
+    (e,) = d.effects
+    assert e.label == "scale_drift[y]" and e.unresolved_axes == (0,)
+    (note,) = [n for n in d.notes if "not ruled out" in n]
+    assert note.startswith("scale_drift[y]: axis x not ruled out")
+    lam = float(note.split("would add only ")[1].split()[0])
+    assert d.to_json()["effects"][0]["unresolved_axes"] == ["x"] and "not ruled out on x" in d.report()
+    cfg = config_from_dict({"data": {"path": str(tmp_path / "blind.csv"), "unit": case.config.sensor.unit},
+                            "fit": {"weights": "noise"}})
+    prob = _Problem(cfg, d.base)
+    for axes, name in (((0, 1), "scale_drift_x"), ((1, 2), "scale_drift_z")):
+        r = prob.fit(_canonical({"scale_drift": axes}), d.final.result.values())
+        direct = (e.coefficients["scale_drift_y"] / r.std[name]) ** 2
+        if name.endswith("x"):
+            assert abs(direct - lam) < 0.25 * lam, (direct, lam)
+        else:  # z: seen well, ruled out
+            assert direct > 20
+
+
 def test_the_backward_step_drops_an_axis_the_data_do_not_need(tmp_path):
     """An effect fitted on an axis that carries nothing (as a greedy forward search can pick up) is
     dropped by the backward step, with its note; the true axis stays."""

@@ -50,7 +50,7 @@ from imucal.analysis.f_test import f_sf
 from imucal.analysis import stochastic as stoch
 from imucal.analysis.min_p import MinPNull, min_p_null
 from imucal.analysis.pair_screen import pair_chi2
-from imucal.solve.stats import between_excess, chi2_sf
+from imucal.solve.stats import between_excess, chi2_sf, power_chi2_1
 from imucal.errors import ImucalError
 from imucal.solve.fit import FitData, FitResult, fit, jacobian_rows
 
@@ -67,6 +67,9 @@ CHI2_1_P1E2 = 6.635
 #: Extra room [chi-square] when choosing which screened candidates to fit in full for the
 #: ambiguity check (the Gauss-Newton screen matches full fits to ~0.1 on simulated data).
 _SCREEN_SLACK = 5.0
+#: An axis a found term lacks counts as ruled out when a coefficient there as large as the term's
+#: largest would be kept (removes more than ``penalty``) at least this often (``_unresolved``).
+RESOLVED_POWER = 0.9
 #: Warm-up time constants screened, as fractions of the recording's last interval time: the
 #: screen is linear in the amplitudes only, so tau is profiled on this grid and the full fit
 #: starts from the best one.
@@ -163,6 +166,8 @@ class FoundEffect:
     lr: float  #: the likelihood-ratio statistic when it was added
     p_value: float  #: Bonferroni-adjusted p when it was added
     ambiguous_with: tuple[str, ...] = ()
+    #: axes the term lacks that these poses cannot rule out (``_unresolved``): it may be there too
+    unresolved_axes: tuple[int, ...] = ()
 
     @property
     def label(self) -> str:
@@ -224,7 +229,8 @@ class Discovery:
             "effects": [{"name": e.name, "axes": [AXIS_NAMES[a] for a in e.axes],
                          "coefficients": e.coefficients, "std": {k: num(v) for k, v in e.std.items()},
                          "units": e.units, "reference": e.reference, "lr": num(e.lr),
-                         "p_value": num(e.p_value), "ambiguous_with": list(e.ambiguous_with)}
+                         "p_value": num(e.p_value), "ambiguous_with": list(e.ambiguous_with),
+                         "unresolved_axes": [AXIS_NAMES[a] for a in e.unresolved_axes]}
                         for e in self.effects],
             "rms_before": self.rms_before, "rms_after": self.rms_after, "rms_noise": self.rms_noise,
             "rms_unit": "m/s^2",
@@ -270,6 +276,9 @@ class Discovery:
         for e in self.effects:
             amb = f"  (ambiguous with {', '.join(e.ambiguous_with)})" if e.ambiguous_with else ""
             L.append(f"    {e.label}: LR = {e.lr:.4g}, p (adjusted) = {e.p_value:.3g}{amb}")
+            if e.unresolved_axes:
+                L.append(f"        not ruled out on {', '.join(AXIS_NAMES[a] for a in e.unresolved_axes)}: "
+                         "these poses barely see the term there (see the notes)")
             for n, v in e.coefficients.items():
                 L.append(f"        {n} = {v:.6g} +/- {e.std[n]:.3g} {e.units[n]}")
             for n, v in e.reference.items():
@@ -422,14 +431,14 @@ def _nested(a: Candidate, b: Candidate) -> bool:
 
 
 def _found(name: str, axes: tuple[int, ...], res: FitResult, lr: float, p: float,
-           ambiguous: tuple[str, ...]) -> FoundEffect:
+           ambiguous: tuple[str, ...], unresolved: tuple[int, ...] = ()) -> FoundEffect:
     e = make_effect(name, axes)
     coef = {n: float(res.params[n].value) for n in (*e.coefficient_names, *e.shape_names)}
     ref = {n: float(res.params[n].value) for n in e.reference_names}
     return FoundEffect(name=name, axes=tuple(axes), coefficients=coef,
                        std={n: float(res.std.get(n, math.nan)) for n in coef},
                        units={n: res.params[n].unit for n in (*coef, *ref)}, reference=ref, lr=lr, p_value=p,
-                       ambiguous_with=ambiguous)
+                       ambiguous_with=ambiguous, unresolved_axes=unresolved)
 
 
 def _extra(name: str, cur_effects: dict[str, tuple[int, ...]]) -> int:
@@ -785,7 +794,8 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings(),
         verdict = f"partly explained by {_added(found, cur_effects)}; the remaining " + verdict.split("; the remaining ", 1)[1]
     _axis_notes(cur_effects, found, final, notes)
     last = {n: (lr, p, amb) for n, lr, p, amb in found}
-    effects = tuple(_found(n, ax, final.result, *last[n]) for n, ax in
+    unresolved = {n: _unresolved(prob, final.result, cur_effects, n, settings.penalty, notes) for n in last}
+    effects = tuple(_found(n, ax, final.result, *last[n], tuple(unresolved[n])) for n, ax in
                     sorted(cur_effects.items(), key=lambda kv: _EFFECT_ORDER[kv[0]]) if n in last)
     p_after = _p_noise(final.result)
     sto = stoch.assess(final, settings.alpha_noise) if p_after < settings.alpha_noise else None
@@ -900,6 +910,42 @@ def _axis_notes(cur_effects: dict, found: list, final: CalibrationRun, notes: li
             notes.append(f"{n}: static poses determine only the sum of its coefficients over the axes "
                          f"({v:.4g} {final.result.params[e.coefficient_names[0]].unit}; |a|^2 changes by 2 (q_x + q_y "
                          f"+ q_z) m_x m_y m_z), not which axis carries it: axis {_label(n, ax)[-2]} is a convention")
+
+
+def _unresolved(prob: _Problem, res: FitResult, cur_effects: dict[str, tuple[int, ...]], name: str,
+                penalty: float, notes: list[str]) -> dict[int, float]:
+    """Axes a found term lacks that these poses cannot rule out: {axis: lambda}.
+
+    lambda = the (misfit-scaled) chi-square a coefficient on that axis as large as the term's largest
+    found one would add, linearised at the final fit (the other missing axes left out): its squared
+    size over its standard error. The backward step keeps such a coefficient only when it removes
+    more than ``penalty``, i.e. with probability P(chi2_1(lambda) > penalty); below
+    ``RESOLVED_POWER`` the absence of the axis is not a finding. (A warm-up shows only in the
+    first intervals, so their orientations decide which of its axes the data can see.)"""
+    have = cur_effects[name]
+    if not EFFECTS[name].axes_observable or len(have) == 3:
+        return {}
+    missing = {a: make_effect(name, (a,)).coefficient_names[0] for a in range(3) if a not in have}
+    model, params = prob.parameters(_canonical({**cur_effects, name: (0, 1, 2)}), res.values(), check=False)
+    params = params.with_values({c: 0.0 for c in missing.values()})
+    J = jacobian_rows(prob.data(model), params, model, prob.gravity) / res.sigma[:, None]
+    col = {n: i for i, n in enumerate(params.free_names)}
+    base = [col[n] for n in res.free_names]
+    found = make_effect(name, have).coefficient_names
+    ref = max(found, key=lambda c: abs(res.params[c].value))
+    out: dict[int, float] = {}
+    for a, c in missing.items():
+        A = J[:, base + [col[c]]]
+        var = float(np.linalg.pinv(A.T @ A)[-1, -1]) * max(1.0, res.redchi)  # scaled units
+        lam = (res.params[ref].value / params[c].scale) ** 2 / var if var > 0 else 0.0
+        power = power_chi2_1(lam, penalty)
+        if power < RESOLVED_POWER:
+            out[a] = lam
+            notes.append(f"{_label(name, have)}: axis {AXIS_NAMES[a]} not ruled out: a coefficient there as large as "
+                         f"{ref} ({abs(res.params[ref].value):.3g} {res.params[ref].unit}) would add only {lam:.3g} "
+                         f"chi-square and be kept in {power:.0%} of such recordings; these poses barely see "
+                         f"{name} on {AXIS_NAMES[a]}")
+    return out
 
 
 def _beaten(config: RunConfig, base: CalibrationRun, final: CalibrationRun, found: list, cur_effects: dict,

@@ -46,6 +46,12 @@ def chi2_sf(x: float, k: int) -> float:
     return min(1.0, head)
 
 
+def power_chi2_1(lam: float, crit: float) -> float:
+    """P(chi-square(1, non-centrality lam) > crit): the power of a 1-dof test whose statistic the
+    effect shifts by lam (a coefficient lam standard errors squared from zero)."""
+    s, m = math.sqrt(crit), math.sqrt(max(lam, 0.0))
+    return 0.5 * math.erfc((s - m) / math.sqrt(2)) + 0.5 * math.erfc((s + m) / math.sqrt(2))
+
 
 _ERFC = np.frompyfunc(math.erfc, 1, 1)
 
