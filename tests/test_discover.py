@@ -286,6 +286,7 @@ def test_an_axis_the_poses_barely_see_is_reported_not_ruled_out(tmp_path):
     assert e.label == "scale_drift[y]" and e.unresolved_axes == (0,)
     (note,) = [n for n in d.notes if "not ruled out" in n]
     assert note.startswith("scale_drift[y]: axis x not ruled out")
+    assert note.endswith("to test it, hold the x axis up and down at the start and at the end of the recording")
     lam = float(note.split("would add only ")[1].split()[0])
     assert d.to_json()["effects"][0]["unresolved_axes"] == ["x"] and "not ruled out on x" in d.report()
     cfg = config_from_dict({"data": {"path": str(tmp_path / "blind.csv"), "unit": case.config.sensor.unit},

@@ -944,8 +944,19 @@ def _unresolved(prob: _Problem, res: FitResult, cur_effects: dict[str, tuple[int
             notes.append(f"{_label(name, have)}: axis {AXIS_NAMES[a]} not ruled out: a coefficient there as large as "
                          f"{ref} ({abs(res.params[ref].value):.3g} {res.params[ref].unit}) would add only {lam:.3g} "
                          f"chi-square and be kept in {power:.0%} of such recordings; these poses barely see "
-                         f"{name} on {AXIS_NAMES[a]}")
+                         f"{name} on {AXIS_NAMES[a]}: to test it, {_where_to_look(name, a, res)}")
     return out
+
+
+def _where_to_look(name: str, axis: int, res: FitResult) -> str:
+    """Which holds show a term on an axis: that axis along gravity (a bias or scale change on axis i
+    moves |a| by m_i times it, m_i^2 for a scale), where the term's basis changes most."""
+    e = make_effect(name, (axis,))
+    basis = e.basis if isinstance(e, Term) else None
+    when = ("" if basis is None else " at the coldest and the warmest times" if basis.covariate == "temp"
+            else f" within the first {2 * res.params[e.shape_names[0]].value:.3g} s (twice the fitted tau)"
+            if e.shape_names else " at the start and at the end of the recording")
+    return f"hold the {AXIS_NAMES[axis]} axis up and down{when}"
 
 
 def _beaten(config: RunConfig, base: CalibrationRun, final: CalibrationRun, found: list, cur_effects: dict,
