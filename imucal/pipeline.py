@@ -26,7 +26,7 @@ from imucal.model.parameters import ANGLE_NAMES, BASE_NAMES, Parameters, base_pa
 from imucal.data.static import Intervals, detect_static
 from imucal.solve.stats import chi2_sf
 from imucal.model.effects_registry import effects_from_specs
-from imucal.model.effects import prepare_parameters
+from imucal.model.effects import EFFECTS, prepare_parameters
 
 if TYPE_CHECKING:  # imported only when used: the gyroscope's modules, the noise-model reader (fit.noise),
     from imucal.analysis.noise_model import NoiseModel  # the chunked reader (a file above STREAM_BYTES)
@@ -286,7 +286,9 @@ def _problem(config: RunConfig, rec: Recording | RecordingSummary, iv: Intervals
         # Observability on interval means (one row per interval), at the initial guess.
         mdata = fit_data(model, iv, None, "means", rec.source, noise) if data.mode != "means" else data
         J, Jw = jacobian_rows(mdata, params, model, gravity, weighted=True)
-        obs = analyse(dirs, J, params.free_names, Jw, thresholds(params.free_names, config.fit.angle_tolerance))
+        varying = [n for e in model.effects if EFFECTS[e.name].covariates for n in (*e.coefficient_names, *e.shape_names)]
+        obs = analyse(dirs, J, params.free_names, Jw, thresholds(params.free_names, config.fit.angle_tolerance),
+                      varying)
         require_observable(obs, params.free_names, rec.source)
     return _Problem(model, guess, params, data, mdata, samples, obs)
 

@@ -106,7 +106,7 @@ def visible_chi2(case, path: str, rel: bool = True) -> tuple[float, float]:
 
 def run_case(args: tuple) -> dict:
     """Simulate one case, run discover, classify the outcome."""
-    seed, effect, snr, noise_mg, pool, visible = args
+    seed, effect, snr, noise_mg, pool, visible, revisit = args
     from imucal.config.run import config_from_dict
     from imucal.analysis.discover import discover
     from imucal.analysis.simulate import draw_effect_case
@@ -114,13 +114,13 @@ def run_case(args: tuple) -> dict:
     if effect == "pair":
         return run_pair(seed, snr, noise_mg, pool)
     with tempfile.TemporaryDirectory() as d:
-        phys = visible_snr(seed, effect, snr, noise_mg, os.path.join(d, "ref.csv")) if visible and effect else snr
+        phys = visible_snr(seed, effect, snr, noise_mg, os.path.join(d, "ref.csv"), revisit) if visible and effect else snr
     if not math.isfinite(phys):  # the base model absorbs this draw entirely: no size makes it visible
         return {"seed": seed, "effect": effect, "snr": snr, "noise_mg": noise_mg, "outcome": "invisible",
                 "found": [], "truth": effect, "ambiguous": False, "size_mg": math.nan, "sigma_mean_mg": math.nan,
                 "redchi_after": math.nan, "gap_after": math.nan, "gap_before": math.nan, "counts": False,
                 "seconds": 0.0, "lam": 0.0, "lam_rel": 0.0, "oracle": 0.0, "snr_size": math.nan}
-    case = draw_effect_case(seed, effect=effect, snr=phys, noise_mg=noise_mg)
+    case = draw_effect_case(seed, effect=effect, snr=phys, noise_mg=noise_mg, revisit=revisit)
     sim = case.config.run()
     with tempfile.TemporaryDirectory() as d:
         path = os.path.join(d, "case.csv")
@@ -161,7 +161,7 @@ def run_case(args: tuple) -> dict:
 _REFERENCE_SNR = 10.0
 
 
-def visible_snr(seed: int, effect: str, snr: float, noise_mg: float, path: str) -> float:
+def visible_snr(seed: int, effect: str, snr: float, noise_mg: float, path: str, revisit: bool = False) -> float:
     """The physical SNR (size / sigma_mean) at which this seed's effect has sqrt(lambda) = ``snr``.
 
     The case is drawn at a reference size; every random draw (sensor, plan, axes, signs, warm-up tau,
@@ -169,8 +169,8 @@ def visible_snr(seed: int, effect: str, snr: float, noise_mg: float, path: str) 
     with the square of the size: one reference lambda fixes the size. Infinite when lambda is 0."""
     from imucal.analysis.simulate import draw_effect_case
 
-    lam0 = visible_chi2(draw_effect_case(seed, effect=effect, snr=_REFERENCE_SNR, noise_mg=noise_mg), path,
-                        rel=False)[0]
+    lam0 = visible_chi2(draw_effect_case(seed, effect=effect, snr=_REFERENCE_SNR, noise_mg=noise_mg, revisit=revisit),
+                        path, rel=False)[0]
     return _REFERENCE_SNR * snr / math.sqrt(lam0) if lam0 > 1e-9 else math.inf
 
 
@@ -219,12 +219,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--visible", action="store_true", help="SNR = sqrt(lambda), what the data can see of the "
                     "effect (its coefficient in standard errors beside the base model), instead of size / sigma_mean; "
                     "SNR 5 10 20, no pairs; writes docs/discover_visible_study.md")
+    ap.add_argument("--revisit", action="store_true", help="every pose held twice, the second pass in reverse order "
+                    "(36-52 holds; imucal.analysis.simulate.draw_effect_case); no pairs")
     ap.add_argument("--out", help="markdown file to write (default docs/discover_grammar_study.md)")
     a = ap.parse_args(argv)
     size = (dict(noise=[0.1, 0.3, 1.0], snr=[10, 15, 20, 30, 40, 60], cases=20, clean=40, pairs=30, pair_snr=[20, 40])
             if a.classic else dict(noise=[0.3], snr=[5, 10, 20, 40], cases=8, clean=200, pairs=10, pair_snr=[10, 20, 40]))
     if a.visible:
         size.update(snr=[5, 10, 20], pairs=0, pair_snr=[])
+    if a.revisit:
+        size.update(pairs=0, pair_snr=[])
     if a.quick:
         size.update(noise=[0.3], snr=[10, 40], cases=2, clean=4, pairs=2, pair_snr=[40])
     for k, v in size.items():
@@ -238,16 +242,16 @@ def main(argv: list[str] | None = None) -> int:
     seed = a.seed
     for noise in a.noise:
         for _ in range(a.clean):
-            jobs.append((seed, None, 0.0, noise, a.terms, a.visible))
+            jobs.append((seed, None, 0.0, noise, a.terms, a.visible, a.revisit))
             seed += 1
         for eff in a.terms:
             for snr in a.snr:
                 for _ in range(a.cases):
-                    jobs.append((seed, eff, snr, noise, a.terms, a.visible))
+                    jobs.append((seed, eff, snr, noise, a.terms, a.visible, a.revisit))
                     seed += 1
         for snr in a.pair_snr:
             for _ in range(a.pairs):
-                jobs.append((seed, "pair", snr, noise, a.terms, a.visible))
+                jobs.append((seed, "pair", snr, noise, a.terms, a.visible, a.revisit))
                 seed += 1
     t0 = time.perf_counter()
     rows = []
@@ -333,12 +337,14 @@ def summary_block(rows: list[dict], a: argparse.Namespace) -> list[str]:
 
 def report(rows: list[dict], a: argparse.Namespace, wall: float) -> str:
     L = ["# Discover: detection rate, smallest detectable effect, false positives", "",
-         f"Measured by `python scripts/discover_study.py{' --quick' if a.quick else ''}{' --classic' if a.classic else ''}{' --visible' if a.visible else ''}` ({len(rows)} seeded cases, {wall / 60:.1f} min "
+         f"Measured by `python scripts/discover_study.py{' --quick' if a.quick else ''}{' --classic' if a.classic else ''}{' --visible' if a.visible else ''}{' --revisit' if a.revisit else ''}` ({len(rows)} seeded cases, {wall / 60:.1f} min "
          f"wall time on {a.jobs} processes, first seed {a.seed}; terms: {', '.join(a.terms)}; noise "
          f"{', '.join(f'{n:g}' for n in a.noise)} mg; SNR {', '.join(f'{s:g}' for s in a.snr)}; {a.cases} cases per cell, "
          f"{a.clean} clean cases and {a.pairs} pairs per SNR {', '.join(f'{s:g}' for s in a.pair_snr)} per noise level). "
          "Each case: a random sensor (raw counts with "
-         "quantisation, or factory-scaled m/s^2), 18-26 poses of 3 s at 100 Hz, warm-up plus non-monotonic "
+         "quantisation, or factory-scaled m/s^2), "
+         + ("18-26 poses of 3 s at 100 Hz, each held twice (the second pass in reverse order: 36-52 holds), "
+            if a.revisit else "18-26 poses of 3 s at 100 Hz, ") + "warm-up plus non-monotonic "
          "temperature swing, one effect on a random axis subset with a random sign, or none. "
          "Discover is told nothing.", "",
          "*Size* = largest change of a reading at 1 g over the recording [mg]. *sigma_mean* = noise of one "

@@ -443,7 +443,7 @@ def _axis_subsets() -> list[tuple[int, ...]]:
 def draw_effect_case(seed: int, effect: str | None = "random", axes: tuple[int, ...] | None = None,
                      snr: float | tuple[float, float] = (15.0, 60.0), noise_mg: float | None = None,
                      counts: bool | None = None, with_temperature: bool = True,
-                     candidates: tuple[str, ...] | None = None) -> EffectCase:
+                     candidates: tuple[str, ...] | None = None, revisit: bool = False) -> EffectCase:
     """Draw sensor, pose plan, temperature profile and (unless ``effect`` is None) one effect.
 
     ``effect``: "random" (drawn from ``candidates``, default the five classic effects), a name from
@@ -454,6 +454,8 @@ def draw_effect_case(seed: int, effect: str | None = "random", axes: tuple[int, 
     range). ``noise_mg``: white noise per sample [mg]; default drawn in 0.1 .. 1 mg.
     ``counts``: raw counts with quantisation (True) or factory-scaled m/s^2 (False); default random.
     18 to 26 poses of 3 s at 100 Hz, so a case simulates in milliseconds and fits in well under a second.
+    ``revisit``: every pose held twice, the second pass in reverse order (36 to 52 holds; the other
+    draws unchanged): a plan that sees time and temperature terms on every axis early and late.
     """
 
     rng = np.random.default_rng([seed, 20240611])
@@ -472,6 +474,8 @@ def draw_effect_case(seed: int, effect: str | None = "random", axes: tuple[int, 
     if n_extra:
         dirs = np.vstack([dirs, random_directions(n_extra, rng)])
     dirs = dirs[rng.permutation(len(dirs))]
+    if revisit:
+        dirs = np.vstack([dirs, dirs[::-1]])
     plan = PosePlan(dirs, hold=3.0, transition=float(rng.uniform(1.5, 2.5)), initial_hold=0.0,
                     vibration=float(rng.uniform(0.5, 1.5)), rate=100.0)
     temperature = None

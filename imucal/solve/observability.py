@@ -7,6 +7,7 @@ that load on the Jacobian's (near) null space are named as undetermined.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
 
@@ -73,15 +74,26 @@ def distinct_directions(directions: np.ndarray, min_angle_deg: float = DISTINCT_
 
 
 def analyse(directions: np.ndarray, jac_rows: np.ndarray, free_names: tuple[str, ...],
-            weighted_rows: np.ndarray | None = None, limits: np.ndarray | None = None) -> Observability:
+            weighted_rows: np.ndarray | None = None, limits: np.ndarray | None = None,
+            varying: Sequence[str] = ()) -> Observability:
     """Distinct poses, Jacobian rank and predicted standard errors.
 
     ``jac_rows`` is (n_intervals, n_free) with columns times each parameter's scale;
-    ``weighted_rows`` the same divided by each row's noise (Fisher information J^T J).
+    ``weighted_rows`` the same divided by each row's noise (Fisher information J^T J);
+    ``varying``: parameters of effects in time or temperature, whose columns differ between visits
+    of one pose.
     """
     n_distinct, labels = distinct_directions(directions)
-    # One row per distinct direction: repeats of a pose add no information about the model.
+    # One row per distinct direction: repeats of a pose add no information about the static model
+    # (two holds within DISTINCT_ANGLE_DEG count as one pose).
     J = np.vstack([jac_rows[labels == k].mean(axis=0) for k in range(n_distinct)])
+    cols = [j for j, n in enumerate(free_names) if n in set(varying)]
+    if cols:  # ... but they do about an effect in time or temperature: a revisit at another time or
+        # temperature is what determines it (a drift on a plan that visits every pose twice, forward
+        # then in reverse, has cluster means of its column near zero)
+        dev = np.zeros_like(jac_rows)
+        dev[:, cols] = jac_rows[:, cols] - J[labels][:, cols]
+        J = np.vstack([J, dev])
     # Columns are already multiplied by each parameter's typical scale (dimensionless), so a
     # column that the poses barely excite stays small and shows up in the null space.
     U, sv, Vt = np.linalg.svd(J, full_matrices=True)
