@@ -17,6 +17,9 @@ at the 1e-3 level discovery uses. No method can name a term more often than its 
     python scripts/discover_study.py --quick         # a reduced run (2 cases per cell, SNR 10 and 40)
     python scripts/discover_study.py --classic       # the five effects before the grammar (docs/discover_study.md)
     python scripts/discover_study.py --visible       # SNR = sqrt(lambda) (docs/discover_visible_study.md)
+    python scripts/discover_study.py --visible --revisit --snr 10 20 --cases 16
+                                                     # every pose held twice (docs/discover_revisit_visible_study.md)
+    python scripts/discover_study.py --revisit       # the same plan, SNR as size (docs/discover_revisit_grammar_study.md)
 For the cross-axis term only the sum of its coefficients over the axes reaches |a| (see
 imucal.model.effects), so "correct" there means the term on one axis.
 Writes docs/discover_grammar_study.md (docs/discover_study.md with --classic) and prints it.
@@ -236,7 +239,8 @@ def main(argv: list[str] | None = None) -> int:
             setattr(a, k, v)
     if a.out is None:
         a.out = str(ROOT / "docs" / ("discover_study.md" if a.classic else
-                                     "discover_visible_study.md" if a.visible else "discover_grammar_study.md"))
+                                     ("discover_revisit_" if a.revisit else "discover_") +
+                                     ("visible_study.md" if a.visible else "grammar_study.md")))
     a.terms = tuple(a.effects or (CLASSIC if a.classic else EFFECTS))
     jobs = []
     seed = a.seed
