@@ -173,6 +173,10 @@ def main(argv: list[str] | None = None) -> int:
               [o for o in c24.others if o.label == "wedge-24"] + [o for o in d_planned[18][1].others
                                                                  if o.label == "faces+edges"]
     L += std_table(designs) + [""]
+    L += ["For `imucal discover`, `--revisit` adds the hold order that holds every pose twice, the second pass "
+          "in reverse (`[[Hold order]]` and `hold_order` in the JSON): effects in time and temperature are seen "
+          "only by poses that come back at another time or temperature (docs/discover.md, \"Plan the holds for "
+          "discovery\").", ""]
     L += ["## Planned 12 poses (D)", "", "    $ imucal plan-poses --n 12 --json plan.json", "",
           "| # | g_x | g_y | g_z |", "|---|---|---|---|"]
     for k, u in enumerate(p12.directions):

@@ -182,9 +182,20 @@ def test_cli_plans_writes_json_and_scores_it_back(run_cli, tmp_path) -> None:
     assert P.shape == (12, 3)
     np.testing.assert_allclose(np.linalg.norm(P, axis=1), 1.0, atol=1e-12)
     assert set(obj["predicted_std"]) == set(BASE_NAMES)
+    assert obj["hold_order"] == list(range(1, 13)) and "[[Hold order]]" not in r.out
     r2 = run_cli(["plan-poses", "--evaluate", out, "--no-compare"])
     assert r2.code == 0, r2.err
     assert f"{obj['criterion_value']:.6g}" in r2.out
+
+
+def test_cli_revisit_prints_and_writes_the_hold_order_for_discovery(run_cli, tmp_path) -> None:
+    out = tmp_path / "plan.json"
+    r = run_cli(["plan-poses", "--scheme", "faces+edges", "--no-compare", "--revisit", "--json", out])
+    assert r.code == 0, r.err
+    order = json.loads(out.read_text())["hold_order"]
+    assert order == list(range(1, 19)) + list(range(18, 0, -1))
+    assert "[[Hold order]] every pose twice, the second pass in reverse (36 holds; for discover): 1 2 3" in r.out
+    assert r.out.rstrip().splitlines()[-2].endswith(" 3 2 1")
 
 
 def test_cli_refuses_the_flat_24_positions(run_cli, tmp_path) -> None:

@@ -31,6 +31,7 @@ class PlanFile:
     poses: tuple[tuple[float, float, float], ...] = field(metadata=rule(
         min_len=1, max_len=MAX_SIM_POSES, msg="poses must be a non-empty list of [gx, gy, gz] numbers", fix=_POSES_FIX))
     instructions: Any = None
+    hold_order: Any = None  #: the order to hold the poses in (plan-poses --revisit: each twice)
     criterion: Any = None
     n: Any = None
     n_distinct: Any = None

@@ -29,7 +29,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", metavar="OUT", help="write the plan (poses, instructions, predicted std, comparison) "
                                                  "as JSON")
     p.add_argument("--plot", metavar="PNG", help="draw the board in every pose (with its instruction) into this PNG")
+    p.add_argument("--revisit", action="store_true",
+                   help="for `imucal discover`: hold every pose twice, the second pass in reverse order "
+                        "(the hold order is printed and written to the JSON as hold_order)")
     p.set_defaults(run=run)
+
+
+def hold_order(n: int, revisit: bool) -> list[int]:
+    """Pose numbers (1-based) in the order to hold them: each once, or with ``revisit`` the plan and
+    then the plan reversed. A term in time or temperature is seen only by poses that come back at
+    another time or temperature (docs/discover.md, "Plan the holds for discovery")."""
+    once = list(range(1, n + 1))
+    return once + once[::-1] if revisit else once
 
 
 def _units(name: str) -> tuple[float, str]:
@@ -102,11 +113,16 @@ def run(args: argparse.Namespace) -> int:
             design = optimal_design(args.n, args.criterion, noise, free=free, seed=args.seed, progress=step)
     comp = None if args.no_compare else compare(design, seed=args.seed)
     print(format_design(design, comp))
+    order = hold_order(design.n, args.revisit)
+    if args.revisit:
+        print(f"[[Hold order]] every pose twice, the second pass in reverse ({len(order)} holds; for discover): "
+              + " ".join(map(str, order)))
     insts = instructions(design.directions)
     with OutputSet([args.evaluate]) as o:
         if args.json:
             obj = design.to_json()
             obj["instructions"] = [inst.numbered(k + 1) for k, inst in enumerate(insts)]
+            obj["hold_order"] = order
             if comp is not None:
                 obj["comparison"] = [{"label": other.label, "criterion_value": other.value,
                                       "log_det_fisher": other.log_det_fisher, "predicted_std": other.std}
