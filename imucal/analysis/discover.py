@@ -557,7 +557,7 @@ def _round(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int,
     # a smaller gain is what chance offers a true single).
     margin = settings.ambiguity if _p_noise(fits[best]) >= settings.alpha_noise else 0.0
     paired, pfit = _lookahead(prob, current, cur_effects, scan, dataclasses.replace(step, chosen=None, ambiguous_with=()),
-                              fits, settings, notes, level, beat=chosen.score - margin, scale=common)
+                              fits, settings, notes, level, beat=chosen.score - margin, scale=common, single=chosen)
     if paired.chosen is not None:
         return paired, pfit
     return step, {best: fits[best]}
@@ -565,7 +565,8 @@ def _round(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int,
 
 def _lookahead(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]], scan: _Scan,
                step: Step, fits: dict[int, FitResult], settings: DiscoverSettings, notes: list[str], level: float,
-               beat: float = math.inf, scale: float = 1.0) -> tuple[Step, dict[int, FitResult]]:
+               beat: float = math.inf, scale: float = 1.0, single: Candidate | None = None
+               ) -> tuple[Step, dict[int, FitResult]]:
     """Two terms at once. Two comparable effects: neither alone leaves a residual at noise level, so
     each one's LR, scaled by the misfit it leaves, is small; or a relative on more axes, or a term
     with a shape, describes part of both better than either. Every pair of the round's candidates
@@ -574,7 +575,8 @@ def _lookahead(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[
     score, when one is significant) are fitted in full. A pair passes when its misfit scale makes
     *both* members significant, each tested given the other, Bonferroni over all pairs screened, and
     its score chi2 / max(scale, chi2/dof) + penalty * k is below ``beat``. The member more significant
-    given the other is added now; the next round tests the other one alone."""
+    given the other is added now; the next round tests the other one alone. ``single`` (the term the
+    pair must beat) is reported as ambiguous with the pair when within the ambiguity margin."""
     fits = dict(fits)
     cands = step.candidates
     n_free, n_distinct = len(current.free_names), prob.run.observability.n_distinct
@@ -591,7 +593,7 @@ def _lookahead(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[
     order = [q for q in np.argsort(score, kind="stable") if score[q] < beat + _SCREEN_SLACK]
     for q in order[: settings.lookahead]:
         i, j = pairs[q]
-        single = []
+        alone = []
         for m in (i, j):
             if m not in fits:
                 res, why = _fit_candidate(prob, current, cur_effects, cands[m])
@@ -599,7 +601,7 @@ def _lookahead(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[
                     notes.append(f"lookahead: {why}")
                     break
                 fits[m] = res
-            single.append(fits[m])
+            alone.append(fits[m])
         else:
             c, d = cands[i], cands[j]
             try:
@@ -613,7 +615,7 @@ def _lookahead(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[
                 notes.append(f"lookahead {c.label} + {d.label}: {bound[0]} at its {res_cd.at_bound[bound[0]]} bound")
                 continue
             s2 = max(1.0, res_cd.redchi)
-            lr = [max(0.0, (single[1 - m].chi2 - res_cd.chi2) / s2) for m in (0, 1)]  # each given the other
+            lr = [max(0.0, (alone[1 - m].chi2 - res_cd.chi2) / s2) for m in (0, 1)]  # each given the other
             p = [min(1.0, _p_lr(lr[m], e.k, res_cd, settings.alpha_noise) * M2) for m, e in enumerate((c, d))]
             total = res_cd.chi2 / max(scale, s2) + settings.penalty * (c.k + d.k)
             if max(p) < level and total < beat:
@@ -625,6 +627,8 @@ def _lookahead(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[
     # Another pair (not the same two terms) within the ambiguity margin: the data cannot tell them apart.
     rivals = tuple(cands[j] for t, j, _, _, d in passing if t - total < settings.ambiguity
                    and {cands[j].label, d} != {cands[i].label, second})
+    if single is not None and single.score - total < settings.ambiguity and single.label not in (cands[i].label, second):
+        rivals += (single,)
     out = list(cands)
     out[i] = dataclasses.replace(out[i], lr=lr_c, p_adjusted=p_c, significant=True)
     return (dataclasses.replace(step, candidates=tuple(out), chosen=out[i], jointly_with=second,
