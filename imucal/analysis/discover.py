@@ -956,11 +956,14 @@ def _where_to_look(name: str, axis: int, res: FitResult) -> str:
     """Which holds show a term on an axis: that axis along gravity (a bias or scale change on axis i
     moves |a| by m_i times it, m_i^2 for a scale), where the term's basis changes most."""
     e = make_effect(name, (axis,))
-    basis = e.basis if isinstance(e, Term) else None
-    when = ("" if basis is None else " at the coldest and the warmest times" if basis.covariate == "temp"
-            else f" within the first {2 * res.params[e.shape_names[0]].value:.3g} s (twice the fitted tau)"
-            if e.shape_names else " at the start and at the end of the recording")
-    return f"hold the {AXIS_NAMES[axis]} axis up and down{when}"
+    hold = f"hold the {AXIS_NAMES[axis]} axis up and down"
+    if not isinstance(e, Term):  # a term in the specific force: any time
+        return hold
+    if e.basis.covariate == "temp":
+        return hold + " at the coldest and the warmest times"
+    if e.shape_names:  # a warm-up
+        return hold + f" within the first {2 * res.params[e.shape_names[0]].value:.3g} s (twice the fitted tau)"
+    return hold + " at the start and at the end of the recording"
 
 
 def _beaten(config: RunConfig, base: CalibrationRun, final: CalibrationRun, found: list, cur_effects: dict,

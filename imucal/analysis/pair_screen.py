@@ -42,23 +42,25 @@ def pair_chi2(screens: Sequence[np.ndarray], rw: np.ndarray, base_cols: Sequence
     cols = sorted({c for m, _ in members for c in m})
     pos = {c: i for i, c in enumerate(cols)}
     profiled = np.array([bool(members[i][1] or members[j][1]) for i, j in pairs])
+    # Pairs grouped by how many columns they add (a batch of k x k problems each), once for all screens.
+    grouped: dict[int, tuple[list[int], list[list[int]]]] = defaultdict(lambda: ([], []))
+    for q, (i, j) in enumerate(pairs):
+        S = [pos[c] for c in (*members[i][0], *members[j][0])]
+        grouped[len(S)][0].append(q)
+        grouped[len(S)][1].append(S)
+    groups = [(np.array(qs), np.array(S)) for qs, S in grouped.values()]
     for s, Jw in enumerate(screens):
-        use = np.flatnonzero(profiled) if s else np.arange(len(pairs))
-        if not use.size:
-            break
+        if s and not profiled.any():
+            break  # the other screens differ only in profiled members' columns
         C = Jw[:, cols]
         Cp = C - B @ (B.T @ C)
         G, b = Cp.T @ Cp, Cp.T @ rp
         size = np.sum(C * C, axis=0)  # a column the base model absorbs has |C_p|^2 << |C|^2
-        by_size: dict[int, list[int]] = defaultdict(list)
-        idx: dict[int, list[list[int]]] = defaultdict(list)
-        for q in use:
-            i, j = pairs[q]
-            S = [pos[c] for c in (*members[i][0], *members[j][0])]
-            by_size[len(S)].append(q)
-            idx[len(S)].append(S)
-        for k, qs in by_size.items():
-            S = np.array(idx[k])
+        for qs, S in groups:
+            if s:
+                qs, S = qs[profiled[qs]], S[profiled[qs]]
+                if not qs.size:
+                    continue
             w, V = np.linalg.eigh(G[S[:, :, None], S[:, None, :]])
             keep = w > _RCOND * size[S].max(axis=1, keepdims=True)
             c = np.einsum("nij,ni->nj", V, b[S])  # b_S in the eigenbasis of G_S

@@ -87,7 +87,8 @@ def analyse(directions: np.ndarray, jac_rows: np.ndarray, free_names: tuple[str,
     # One row per distinct direction: repeats of a pose add no information about the static model
     # (two holds within DISTINCT_ANGLE_DEG count as one pose).
     J = np.vstack([jac_rows[labels == k].mean(axis=0) for k in range(n_distinct)])
-    cols = [j for j, n in enumerate(free_names) if n in set(varying)]
+    vary = set(varying)
+    cols = [j for j, n in enumerate(free_names) if n in vary]
     if cols:  # ... but they do about an effect in time or temperature: a revisit at another time or
         # temperature is what determines it (a drift on a plan that visits every pose twice, forward
         # then in reverse, has cluster means of its column near zero)
