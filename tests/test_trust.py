@@ -22,6 +22,7 @@ import yaml
 from conftest import RATE, calibrate_file, real_file, write_simulation
 from imucal.solve.ipopt import CONVERGED
 from imucal.data.load import load_recording, parse_columns
+from imucal.cli.main import main
 from imucal.errors import EXIT_INTERNAL, ImucalError
 from imucal.analysis.simulate import SensorSpec, cube_directions
 from imucal.data.static import detect_static
@@ -581,6 +582,22 @@ def test_a_device_node_is_never_replaced(run_cli, work):
     assert r.code == 2
     one_line_error(r.err, str(node), "output", "is a device: only regular files are replaced")
     assert st.S_ISCHR(node.stat().st_mode)
+
+
+def test_the_finished_program_ignores_sigterm_until_it_exits(monkeypatch, tmp_path):
+    """As the program (argv None), main leaves SIGTERM ignored: the interpreter's shutdown after a
+    complete run took ~0.1 s with the default action back, and a signal then exited -15 (CI)."""
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "argv", ["imucal", "calibrate", "--data", "missing.csv", "--out", "o"])
+    before = signal.getsignal(signal.SIGTERM)
+    try:
+        assert main() == 2  # a refused run ends by the same path as a complete one
+        assert signal.getsignal(signal.SIGTERM) is signal.SIG_IGN
+        signal.signal(signal.SIGTERM, before)
+        assert main(["calibrate", "--data", "missing.csv", "--out", "o"]) == 2  # from code: handler given back
+        assert signal.getsignal(signal.SIGTERM) is before
+    finally:
+        signal.signal(signal.SIGTERM, before)
 
 
 @pytest.mark.parametrize("delay", [0.3, 0.5, 0.7])

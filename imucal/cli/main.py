@@ -109,6 +109,7 @@ def _interrupted(exc: BaseException) -> bool:
 
 def main(argv: list[str] | None = None) -> int:
     """Run one command. Exit statuses: imucal.errors.EXIT_* (README, "Exit status")."""
+    as_program = argv is None  # the console script or python -m imucal, not a caller's code
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(argv)
     args = parser.parse_args(argv)
@@ -159,7 +160,7 @@ def main(argv: list[str] | None = None) -> int:
         # (argv None: the console script, python -m imucal) the run is over and its outputs are
         # complete: a signal in the last milliseconds of the exit is ignored, not allowed to kill
         # the finished run (exit -15) by the default action restored here.
-        done = signal.SIG_IGN if argv is None else None
+        done = signal.SIG_IGN if as_program else None
         if previous is not None:
             signal.signal(signal.SIGTERM, done or previous)
         if previous_int is not None:
