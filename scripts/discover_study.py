@@ -58,15 +58,59 @@ def oracle_power(lam: float) -> float:
     return power_chi2_1(lam, ORACLE_CRIT)
 
 
-def visible_chi2(case, path: str, rel: bool = True) -> tuple[float, float]:
-    """(lambda, lambda_rel) of the hidden effect, linearised at the base fit of the clean twin (same
-    seed, same noise, no effect) written to ``path``. lambda: the chi-square the noise-free effect adds
-    to the base fit. lambda_rel: what is left of it when its closest relative is fitted instead (any
-    other candidate of discovery's first round that does not contain the truth, a warm-up at any
-    screened tau): the evidence that tells the term and axes from the nearest wrong answer."""
+#: Noise draws of the selection oracle per case.
+GENIE_DRAWS = 400
+
+
+def _orth(A: np.ndarray) -> np.ndarray:
+    """Orthonormal basis of the columns of A (rank-revealing SVD)."""
+    if A.shape[1] == 0:
+        return A
+    u, s, _ = np.linalg.svd(A, full_matrices=False)
+    return u[:, s > s[0] * 1e-10] if s.size and s[0] > 0 else u[:, :0]
+
+
+#: Penalties per parameter the selection oracle is also evaluated at (chi-square(1) at p = 0.16,
+#: 0.05, 1e-2, 1e-3; discover's own, DiscoverSettings.penalty, is 1e-2).
+GENIE_PENALTIES = (2.0, 3.84, 10.83)
+
+
+def selection_oracle(signal: np.ndarray, base: np.ndarray, options: list, truth: tuple,
+                     penalties: tuple[float, ...], seed: int, draws: int = GENIE_DRAWS) -> dict[float, float]:
+    """Share of noise draws in which the penalised linear selection names exactly ``truth``, by penalty.
+
+    The data are the whitened noise-free effect plus unit noise; every candidate (name, axes, k,
+    column blocks, one per screened shape value) is scored by the chi-square its columns remove
+    beyond the base model, profiled over the blocks, minus ``penalty`` * k, and the best score
+    wins. A search that is exact (every candidate tried, linear, no local minima) with discovery's
+    own ranking: what the selection rule can do with this much information. Misses of discover
+    beyond it are the search's; misses inside it are the data's."""
+    rng = np.random.default_rng([seed, 7])
+    Qb = _orth(base)
+    Y = signal[:, None] + rng.standard_normal((signal.size, draws))
+    Y -= Qb @ (Qb.T @ Y)
+    gains = np.zeros((len(options), draws))
+    for i, (_, _, _, blocks) in enumerate(options):
+        for C in blocks:
+            Q = _orth(C - Qb @ (Qb.T @ C))
+            gains[i] = np.maximum(gains[i], np.sum((Q.T @ Y) ** 2, axis=0))
+    k = np.array([o[2] for o in options], float)[:, None]
+    hits = [i for i, (n, ax, _, _) in enumerate(options) if (n, ax) == truth]
+    return {p: float(np.mean(np.isin(np.argmax(gains - p * k, axis=0), hits))) for p in penalties}
+
+
+def visible_chi2(case, path: str, rel: bool = True, genie: bool = False) -> tuple[float, float, dict]:
+    """(lambda, lambda_rel, selection oracle) of the hidden effect, linearised at the base fit of the
+    clean twin (same seed, same noise, no effect) written to ``path``. lambda: the chi-square the
+    noise-free effect adds to the base fit. lambda_rel: what is left of it when its closest relative
+    is fitted instead (any other candidate of discovery's first round that does not contain the truth,
+    a warm-up at any screened tau): the evidence that tells the term and axes from the nearest wrong
+    answer. Selection oracle (``genie``): ``selection_oracle`` over the same candidates, the truth's
+    own tau added to its term's screened values."""
     import dataclasses
 
-    from imucal.analysis.discover import _candidates, _canonical, _Problem, _screen, _testable
+    from imucal.analysis.discover import (DiscoverSettings, _candidates, _canonical, _extra, _Problem, _screen,
+                                          _testable)
     from imucal.config.run import config_from_dict
     from imucal.model.effects import make_effect
     from imucal.pipeline import calibrate
@@ -82,8 +126,9 @@ def visible_chi2(case, path: str, rel: bool = True) -> tuple[float, float]:
     e = make_effect(case.effect, case.axes)
     truth = sensor.effects[case.effect]
     start = {**base.result.values(), **{n: v for n, v in truth.items() if n in e.shape_names}}
-    model, params = prob.parameters(_canonical({case.effect: case.axes}), start, check=False)
-    params = params.with_values({n: 0.0 for n in e.coefficient_names})
+    every = (0, 1, 2) if EFFECTS[case.effect].axes_observable else case.axes  # the truth's term on any axes
+    model, params = prob.parameters(_canonical({case.effect: every}), start, check=False)
+    params = params.with_values({n: 0.0 for n in make_effect(case.effect, every).coefficient_names})
     J = jacobian_rows(prob.data(model), params, model, prob.gravity) / base.result.sigma[:, None]
     col = {n: i for i, n in enumerate(params.free_names)}
     signal = sum(J[:, col[n]] * truth[n] / params[n].scale for n in e.coefficient_names)
@@ -94,24 +139,36 @@ def visible_chi2(case, path: str, rel: bool = True) -> tuple[float, float]:
 
     lam = left(J[:, [col[n] for n in base.result.free_names]])
     if not rel:
-        return lam, math.nan
+        return lam, math.nan, {}
     names = _testable(list(EFFECTS), base.intervals, path, [])
     screens, _, col2, free = _screen(prob, base.result, {}, names)
     base_cols = [col2[n] for n in free]
-    rel = math.inf
+    rel, options = math.inf, []
     for n, ax, new in _candidates(names, {}, len(free), base.intervals.n, base.observability.n_distinct):
+        coef = make_effect(n, new).coefficient_names
+        shaped = bool(make_effect(n, new).shape_names)
+        blocks = [Jw[:, [col2[c] for c in coef]] for Jw, _ in (screens if shaped else screens[:1])]
+        if n == case.effect and all(c in col for c in coef):
+            blocks.append(J[:, [col[c] for c in coef]])  # the truth's own shape value
+        options.append((n, ax, len(new) + _extra(n, {}), blocks))
         if n == case.effect and (set(case.axes) <= set(ax) or not EFFECTS[n].axes_observable):
             continue  # the truth itself, or a model containing it
-        cols = base_cols + [col2[c] for c in make_effect(n, new).coefficient_names]
-        rel = min(rel, *(left(Jw[:, cols]) for Jw, _ in screens))
-    return lam, rel
+        rel = min(rel, *(left(Jw[:, base_cols + [col2[c] for c in coef]]) for Jw, _ in screens))
+    if not genie:
+        return lam, rel, {}
+    truth = (case.effect, tuple(case.axes))
+    if not EFFECTS[case.effect].axes_observable:
+        options = [(n, (ax if n != case.effect else truth[1]), k, b) for n, ax, k, b in options]
+    base_J = screens[0][0][:, base_cols]
+    pens = tuple(sorted({*GENIE_PENALTIES, DiscoverSettings().penalty}))
+    return lam, rel, selection_oracle(signal, base_J, options, truth, pens, case.seed)
 
 
 def run_case(args: tuple) -> dict:
     """Simulate one case, run discover, classify the outcome."""
     seed, effect, snr, noise_mg, pool, visible, revisit = args
     from imucal.config.run import config_from_dict
-    from imucal.analysis.discover import discover
+    from imucal.analysis.discover import DiscoverSettings, discover
     from imucal.analysis.simulate import draw_effect_case
 
     if effect == "pair":
@@ -122,7 +179,8 @@ def run_case(args: tuple) -> dict:
         return {"seed": seed, "effect": effect, "snr": snr, "noise_mg": noise_mg, "outcome": "invisible",
                 "found": [], "truth": effect, "ambiguous": False, "size_mg": math.nan, "sigma_mean_mg": math.nan,
                 "redchi_after": math.nan, "gap_after": math.nan, "gap_before": math.nan, "counts": False,
-                "seconds": 0.0, "lam": 0.0, "lam_rel": 0.0, "oracle": 0.0, "snr_size": math.nan}
+                "seconds": 0.0, "lam": 0.0, "lam_rel": 0.0, "oracle": 0.0, "genie": 0.0, "genie_by_penalty": {},
+                "snr_size": math.nan}
     case = draw_effect_case(seed, effect=effect, snr=phys, noise_mg=noise_mg, revisit=revisit)
     sim = case.config.run()
     with tempfile.TemporaryDirectory() as d:
@@ -132,7 +190,8 @@ def run_case(args: tuple) -> dict:
         t0 = time.perf_counter()
         res = discover(config_from_dict({"data": {"path": path, "unit": case.config.sensor.unit}}))
         dt = time.perf_counter() - t0
-        lam, rel = visible_chi2(case, os.path.join(d, "clean.csv")) if case.effect is not None else (0.0, 0.0)
+        lam, rel, genie = (visible_chi2(case, os.path.join(d, "clean.csv"), genie=True) if case.effect is not None
+                           else (0.0, 0.0, {}))
     got = [(e.name, tuple(e.axes)) for e in res.effects]
     # a subset of the true axes named, every missing one reported as not ruled out (FoundEffect.unresolved_axes)
     subset = (len(res.effects) == 1 and res.effects[0].name == case.effect and EFFECTS[case.effect].axes_observable
@@ -157,7 +216,7 @@ def run_case(args: tuple) -> dict:
             "sigma_mean_mg": case.sigma_mean / STANDARD_GRAVITY * 1e3, "redchi_after": res.final.result.redchi,
             "gap_after": res.rms_after / res.rms_noise, "gap_before": res.rms_before / res.rms_noise,
             "counts": case.config.sensor.unit == "raw", "seconds": dt, "lam": lam, "lam_rel": rel, "oracle": oracle_power(lam),
-            "snr_size": phys, "subset_flagged": subset}
+            "genie": genie.get(DiscoverSettings().penalty, math.nan), "genie_by_penalty": genie, "snr_size": phys, "subset_flagged": subset}
 
 
 #: The physical SNR at which --visible cases are first drawn (lambda is then scaled to the target).
@@ -226,6 +285,12 @@ def main(argv: list[str] | None = None) -> int:
                     "(36-52 holds; imucal.analysis.simulate.draw_effect_case); no pairs")
     ap.add_argument("--out", help="markdown file to write (default docs/discover_grammar_study.md)")
     a = ap.parse_args(argv)
+    given = list(sys.argv[1:] if argv is None else argv)  # the command as run, less what does not change results
+    for opt in ("--out", "--jobs"):
+        while opt in given:
+            i = given.index(opt)
+            del given[i:i + 2]
+    a.command = "".join(f" {x}" for x in given)
     size = (dict(noise=[0.1, 0.3, 1.0], snr=[10, 15, 20, 30, 40, 60], cases=20, clean=40, pairs=30, pair_snr=[20, 40])
             if a.classic else dict(noise=[0.3], snr=[5, 10, 20, 40], cases=8, clean=200, pairs=10, pair_snr=[10, 20, 40]))
     if a.visible:
@@ -277,6 +342,12 @@ def main(argv: list[str] | None = None) -> int:
 LAMBDA_BINS = (0, 10, 20, 30, 40, 60, 100, math.inf)
 
 
+def _mean(rows: list[dict], key: str) -> float:
+    """Mean of ``key`` over rows that have it (rows of older runs lack the selection oracle)."""
+    v = [r[key] for r in rows if key in r and math.isfinite(r[key])]
+    return float(np.mean(v)) if v else math.nan
+
+
 def visibility(rows: list[dict], cells: dict, a: argparse.Namespace) -> list[str]:
     """What the data can see at each SNR (median lambda and lambda_rel, mean oracle power), and the
     share named correctly pooled over the terms by lambda and by lambda_rel."""
@@ -286,16 +357,20 @@ def visibility(rows: list[dict], cells: dict, a: argparse.Namespace) -> list[str
          "the evidence that separates the right name from the nearest wrong one. Medians over the cell; "
          "oracle = mean power of a single test at 1e-3 that knows term, axes and signs, "
          "P(chi2_1(lambda) > 10.83). No method detects a term more often than its oracle, nor tells it from "
-         "a relative when lambda_rel is a few units.", "",
-         "| effect | " + " | ".join(f"SNR {s:g}: lambda / lambda_rel / oracle{' / size SNR' if a.visible else ''}"
-                                    for s in a.snr) + " |",
+         "a relative when lambda_rel is a few units. *selection* = mean share of noise draws in which discovery's "
+         "own ranking (chi-square removed minus the penalty per parameter), applied to every candidate of the "
+         f"first round by an exact linear search, names exactly the truth ({GENIE_DRAWS} draws per case, "
+         "`selection_oracle`): the same information without the search's losses. Where correct is near "
+         "selection, the misses are the data's, not the search's.", "",
+         "| effect | " + " | ".join(f"SNR {s:g}: lambda / lambda_rel / oracle / selection"
+                                    f"{' / size SNR' if a.visible else ''}" for s in a.snr) + " |",
          "|---|" + "---|" * len(a.snr)]
     for eff in a.terms:
         vals = []
         for s in a.snr:
             cs = [r for n in a.noise for r in cells[(eff, n, s)]]
             vals.append(f"{np.median([r['lam'] for r in cs]):.3g} / {np.median([r['lam_rel'] for r in cs]):.3g} / "
-                        f"{np.mean([r['oracle'] for r in cs]):.0%}"
+                        f"{np.mean([r['oracle'] for r in cs]):.0%} / {_mean(cs, 'genie'):.0%}"
                         + (f" / {np.median([r['snr_size'] for r in cs]):.3g}" if a.visible else "") if cs else "-")
         L.append(f"| {eff} | " + " | ".join(vals) + " |")
     single = [r for r in rows if r["effect"] not in (None, "pair")]
@@ -310,6 +385,21 @@ def visibility(rows: list[dict], cells: dict, a: argparse.Namespace) -> list[str
                 L.append(f"| {lo:g}-{hi:g} | {n} | {count('correct') / n:.0%} | "
                          f"{np.mean([r['oracle'] for r in cs]):.0%} | {count('missed') / n:.0%} | "
                          f"{count('wrong-effect') / n:.0%} | {count('wrong-axes', 'correct+extra') / n:.0%} |")
+    pens = sorted({p for r in single for p in r.get("genie_by_penalty", {})})
+    if pens:
+        L += ["", "The selection oracle by the penalty per parameter (mean share named exactly; in brackets the "
+              "terms at >= 90 %): whether another penalty would let the same ranking name more.", "",
+              "| SNR | " + " | ".join(f"penalty {p:g}" for p in pens) + " |", "|---|" + "---|" * len(pens)]
+        for s in a.snr:
+            cs = [r for r in single if r["snr"] == s and r.get("genie_by_penalty")]
+            vals = []
+            for p in pens:
+                by = defaultdict(list)
+                for r in cs:
+                    by[r["effect"]].append(r["genie_by_penalty"][p])
+                vals.append(f"{np.mean([r['genie_by_penalty'][p] for r in cs]):.0%} "
+                            f"({sum(np.mean(v) >= RELIABLE for v in by.values())} of {len(by)})")
+            L.append(f"| {s:g} | " + " | ".join(vals) + " |")
     return L + [""]
 
 
@@ -319,16 +409,19 @@ def summary_block(rows: list[dict], a: argparse.Namespace) -> list[str]:
     clean = [r for r in rows if r["effect"] is None]
     L = ["<!-- begin:summary -->",
          f"Clean recordings: {sum(r['outcome'] == 'false-positive' for r in clean)} of {len(clean)} named an effect.",
-         "", "| SNR | single terms: correct (exact term and axes) | oracle (mean) | terms at >= 90 % | "
-         "pairs: both named |", "|---|---|---|---|---|"]
+         "", "| SNR | single terms: correct (exact term and axes) | oracle (mean) | selection oracle (mean) | "
+         "terms at >= 90 % | terms whose selection oracle is >= 90 % | pairs: both named |",
+         "|---|---|---|---|---|---|---|"]
     for snr in sorted(set(a.snr) | set(a.pair_snr)):
         cs = [r for r in single if r["snr"] == snr]
         ps = [r for r in rows if r["effect"] == "pair" and r["snr"] == snr]
         good = [t for t in a.terms if (ts := [r for r in cs if r["effect"] == t])
                 and np.mean([r["outcome"] == "correct" for r in ts]) >= RELIABLE]
+        able = [t for t in a.terms if (ts := [r for r in cs if r["effect"] == t]) and _mean(ts, "genie") >= RELIABLE]
         ok = sum(r["outcome"] == "correct" for r in cs)
         L.append(f"| {snr:g} | " + (f"{ok}/{len(cs)} ({ok / len(cs):.0%}) | {np.mean([r['oracle'] for r in cs]):.0%} | "
-                                    f"{len(good)} of {len(a.terms)} |" if cs else "- | - | - |")
+                                    f"{_mean(cs, 'genie'):.0%} | {len(good)} of {len(a.terms)} | "
+                                    f"{len(able)} of {len(a.terms)} |" if cs else "- | - | - | - | - |")
                  + (f" {sum(r['outcome'] == 'pair-correct' for r in ps)}/{len(ps)} |" if ps else " - |"))
     wrong = [r for r in single if r["outcome"] == "wrong-effect"]
     axes = [r for r in single if r["outcome"] == "wrong-axes"]
@@ -341,7 +434,7 @@ def summary_block(rows: list[dict], a: argparse.Namespace) -> list[str]:
 
 def report(rows: list[dict], a: argparse.Namespace, wall: float) -> str:
     L = ["# Discover: detection rate, smallest detectable effect, false positives", "",
-         f"Measured by `python scripts/discover_study.py{' --quick' if a.quick else ''}{' --classic' if a.classic else ''}{' --visible' if a.visible else ''}{' --revisit' if a.revisit else ''}` ({len(rows)} seeded cases, {wall / 60:.1f} min "
+         f"Measured by `python scripts/discover_study.py{a.command}` ({len(rows)} seeded cases, {wall / 60:.1f} min "
          f"wall time on {a.jobs} processes, first seed {a.seed}; terms: {', '.join(a.terms)}; noise "
          f"{', '.join(f'{n:g}' for n in a.noise)} mg; SNR {', '.join(f'{s:g}' for s in a.snr)}; {a.cases} cases per cell, "
          f"{a.clean} clean cases and {a.pairs} pairs per SNR {', '.join(f'{s:g}' for s in a.pair_snr)} per noise level). "
@@ -448,11 +541,14 @@ def report(rows: list[dict], a: argparse.Namespace, wall: float) -> str:
     if wrong:
         L += ["## Misidentified cases", "", "*Missing axes flagged*: a subset of the true axes was named and the report "
               "says every missing axis is not ruled out.", "",
-              "| seed | truth | SNR | noise [mg] | found | ambiguity flagged | missing axes flagged |",
-              "|---|---|---|---|---|---|---|"]
+              "*Selection* = the selection oracle of the case (above).", "",
+              "| seed | truth | SNR | noise [mg] | found | ambiguity flagged | missing axes flagged | lambda_rel | "
+              "selection |", "|---|---|---|---|---|---|---|---|---|"]
         for r in wrong:
+            g, lr = r.get("genie", math.nan), r.get("lam_rel", math.nan)  # (pairs have neither)
             L.append(f"| {r['seed']} | {r['truth']} | {r['snr']:g} | {r['noise_mg']:g} | {', '.join(r['found'])} | "
-                     f"{'yes' if r['ambiguous'] else 'no'} | {'yes' if r.get('subset_flagged') else '-'} |")
+                     f"{'yes' if r['ambiguous'] else 'no'} | {'yes' if r.get('subset_flagged') else '-'} | "
+                     f"{'-' if not math.isfinite(lr) else f'{lr:.3g}'} | {'-' if not math.isfinite(g) else f'{g:.0%}'} |")
         L.append("")
     secs = [r["seconds"] for r in rows]
     L += [f"Discover took {np.median(secs):.2f} s per case (median), {np.max(secs):.1f} s at most.", ""]

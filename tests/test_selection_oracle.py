@@ -1,0 +1,61 @@
+"""The selection oracle of scripts/discover_study.py (issue 12): the reference that tells the
+search's misses from the data's. Checked against least squares draw by draw."""
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+
+_spec = importlib.util.spec_from_file_location(
+    "discover_study", Path(__file__).resolve().parents[1] / "scripts" / "discover_study.py")
+study = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(study)
+
+
+def _brute(signal, base, options, truth, penalty, seed, draws):
+    """The same selection with one least-squares fit per candidate, block and draw."""
+    rng = np.random.default_rng([seed, 7])
+    Y = signal[:, None] + rng.standard_normal((signal.size, draws))
+    hits = 0
+    for d in range(draws):
+        y = Y[:, d]
+        rss0 = np.sum((y - base @ np.linalg.lstsq(base, y, rcond=None)[0]) ** 2)
+        scores = []
+        for _, _, k, blocks in options:
+            gain = 0.0
+            for C in blocks:
+                A = np.hstack([base, C])
+                gain = max(gain, rss0 - np.sum((y - A @ np.linalg.lstsq(A, y, rcond=None)[0]) ** 2))
+            scores.append(gain - penalty * k)
+        n, ax, _, _ = options[int(np.argmax(scores))]
+        hits += (n, ax) == truth
+    return hits / draws
+
+
+def _problem(rng, strength):
+    n = 60
+    base = rng.standard_normal((n, 4))
+    cols = rng.standard_normal((n, 5))
+    shape = [cols[:, [3]], cols[:, [3]] + 0.6 * cols[:, [4]]]  # a term with a shape: one block per value
+    options = [("a", (0,), 1, [cols[:, [0]]]), ("a", (0, 1), 2, [cols[:, [0, 1]]]),
+               ("b", (0,), 1, [cols[:, [0]] + 0.5 * cols[:, [2]]]), ("w", (0,), 2, shape)]
+    signal = strength * (cols[:, 0] + 0.3 * cols[:, 1]) / np.sqrt(n)
+    return signal, base, options
+
+
+def test_the_selection_oracle_is_least_squares_selection_draw_by_draw():
+    rng = np.random.default_rng(3)
+    for strength in (3.0, 6.0):
+        signal, base, options = _problem(rng, strength)
+        got = study.selection_oracle(signal, base, options, ("a", (0, 1)), (0.0, 2.0, 6.63), seed=11, draws=300)
+        for p, share in got.items():
+            assert share == _brute(signal, base, options, ("a", (0, 1)), p, 11, 300)
+        assert got[0.0] > got[6.63]  # the second column is weak: a price per parameter drops it more often
+
+
+def test_a_strong_term_without_close_relatives_is_always_selected():
+    rng = np.random.default_rng(4)
+    signal, base, options = _problem(rng, 60.0)
+    assert study.selection_oracle(signal, base, options, ("a", (0, 1)), (2.0, 6.63), seed=1, draws=200) == {
+        2.0: 1.0, 6.63: 1.0}
