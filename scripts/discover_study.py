@@ -19,7 +19,8 @@ at the 1e-3 level discovery uses. No method can name a term more often than its 
     python scripts/discover_study.py --visible       # SNR = sqrt(lambda) (docs/discover_visible_study.md)
     python scripts/discover_study.py --visible --revisit --snr 10 20 --cases 16
                                                      # every pose held twice (docs/discover_revisit_visible_study.md)
-    python scripts/discover_study.py --revisit       # the same plan, SNR as size (docs/discover_revisit_grammar_study.md)
+    python scripts/discover_study.py --revisit --snr 10 20 40
+                                                     # the same plan, SNR as size (docs/discover_revisit_grammar_study.md)
 For the cross-axis term only the sum of its coefficients over the axes reaches |a| (see
 imucal.model.effects), so "correct" there means the term on one axis.
 Writes docs/discover_grammar_study.md (docs/discover_study.md with --classic) and prints it.
