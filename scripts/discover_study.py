@@ -63,14 +63,6 @@ def oracle_power(lam: float) -> float:
 GENIE_DRAWS = 400
 
 
-def _orth(A: np.ndarray) -> np.ndarray:
-    """Orthonormal basis of the columns of A (rank-revealing SVD)."""
-    if A.shape[1] == 0:
-        return A
-    u, s, _ = np.linalg.svd(A, full_matrices=False)
-    return u[:, s > s[0] * 1e-10] if s.size and s[0] > 0 else u[:, :0]
-
-
 #: Penalties per parameter the selection oracle is also evaluated at (chi-square(1) at p = 0.16,
 #: 0.05, 1e-2, 1e-3; discover's own, DiscoverSettings.penalty, is 1e-2).
 GENIE_PENALTIES = (2.0, 3.84, 10.83)
@@ -86,14 +78,15 @@ def selection_oracle(signal: np.ndarray, base: np.ndarray, options: list, truth:
     wins. A search that is exact (every candidate tried, linear, no local minima) with discovery's
     own ranking: what the selection rule can do with this much information. Misses of discover
     beyond it are the search's; misses inside it are the data's."""
+    from imucal.analysis.min_p import column_basis
+
     rng = np.random.default_rng([seed, 7])
-    Qb = _orth(base)
-    Y = signal[:, None] + rng.standard_normal((signal.size, draws))
-    Y -= Qb @ (Qb.T @ Y)
+    Qb = column_basis(base)
+    Y = signal[:, None] + rng.standard_normal((signal.size, draws))  # Q below is orthogonal to the base
     gains = np.zeros((len(options), draws))
     for i, (_, _, _, blocks) in enumerate(options):
         for C in blocks:
-            Q = _orth(C - Qb @ (Qb.T @ C))
+            Q = column_basis(C - Qb @ (Qb.T @ C))
             gains[i] = np.maximum(gains[i], np.sum((Q.T @ Y) ** 2, axis=0))
     k = np.array([o[2] for o in options], float)[:, None]
     hits = [i for i, (n, ax, _, _) in enumerate(options) if (n, ax) == truth]
@@ -146,9 +139,9 @@ def visible_chi2(case, path: str, rel: bool = True, genie: bool = False) -> tupl
     base_cols = [col2[n] for n in free]
     rel, options = math.inf, []
     for n, ax, new in _candidates(names, {}, len(free), base.intervals.n, base.observability.n_distinct):
-        coef = make_effect(n, new).coefficient_names
-        shaped = bool(make_effect(n, new).shape_names)
-        blocks = [Jw[:, [col2[c] for c in coef]] for Jw, _ in (screens if shaped else screens[:1])]
+        eff = make_effect(n, new)
+        coef = eff.coefficient_names
+        blocks = [Jw[:, [col2[c] for c in coef]] for Jw, _ in (screens if eff.shape_names else screens[:1])]
         if n == case.effect and all(c in col for c in coef):
             blocks.append(J[:, [col[c] for c in coef]])  # the truth's own shape value
         options.append((n, ax, len(new) + _extra(n, {}), blocks))
@@ -343,12 +336,6 @@ def main(argv: list[str] | None = None) -> int:
 LAMBDA_BINS = (0, 10, 20, 30, 40, 60, 100, math.inf)
 
 
-def _mean(rows: list[dict], key: str) -> float:
-    """Mean of ``key`` over rows that have it (rows of older runs lack the selection oracle)."""
-    v = [r[key] for r in rows if key in r and math.isfinite(r[key])]
-    return float(np.mean(v)) if v else math.nan
-
-
 def visibility(rows: list[dict], cells: dict, a: argparse.Namespace) -> list[str]:
     """What the data can see at each SNR (median lambda and lambda_rel, mean oracle power), and the
     share named correctly pooled over the terms by lambda and by lambda_rel."""
@@ -371,7 +358,7 @@ def visibility(rows: list[dict], cells: dict, a: argparse.Namespace) -> list[str
         for s in a.snr:
             cs = [r for n in a.noise for r in cells[(eff, n, s)]]
             vals.append(f"{np.median([r['lam'] for r in cs]):.3g} / {np.median([r['lam_rel'] for r in cs]):.3g} / "
-                        f"{np.mean([r['oracle'] for r in cs]):.0%} / {_mean(cs, 'genie'):.0%}"
+                        f"{np.mean([r['oracle'] for r in cs]):.0%} / {np.mean([r['genie'] for r in cs]):.0%}"
                         + (f" / {np.median([r['snr_size'] for r in cs]):.3g}" if a.visible else "") if cs else "-")
         L.append(f"| {eff} | " + " | ".join(vals) + " |")
     single = [r for r in rows if r["effect"] not in (None, "pair")]
@@ -418,10 +405,10 @@ def summary_block(rows: list[dict], a: argparse.Namespace) -> list[str]:
         ps = [r for r in rows if r["effect"] == "pair" and r["snr"] == snr]
         good = [t for t in a.terms if (ts := [r for r in cs if r["effect"] == t])
                 and np.mean([r["outcome"] == "correct" for r in ts]) >= RELIABLE]
-        able = [t for t in a.terms if (ts := [r for r in cs if r["effect"] == t]) and _mean(ts, "genie") >= RELIABLE]
+        able = [t for t in a.terms if (ts := [r for r in cs if r["effect"] == t]) and np.mean([r["genie"] for r in ts]) >= RELIABLE]
         ok = sum(r["outcome"] == "correct" for r in cs)
         L.append(f"| {snr:g} | " + (f"{ok}/{len(cs)} ({ok / len(cs):.0%}) | {np.mean([r['oracle'] for r in cs]):.0%} | "
-                                    f"{_mean(cs, 'genie'):.0%} | {len(good)} of {len(a.terms)} | "
+                                    f"{np.mean([r['genie'] for r in cs]):.0%} | {len(good)} of {len(a.terms)} | "
                                     f"{len(able)} of {len(a.terms)} |" if cs else "- | - | - | - | - |")
                  + (f" {sum(r['outcome'] == 'pair-correct' for r in ps)}/{len(ps)} |" if ps else " - |"))
     wrong = [r for r in single if r["outcome"] == "wrong-effect"]
