@@ -21,6 +21,10 @@ at the 1e-3 level discovery uses. No method can name a term more often than its 
                                                      # every pose held twice (docs/discover_revisit_visible_study.md)
     python scripts/discover_study.py --revisit --snr 10 20 40
                                                      # the same plan, SNR as size (docs/discover_revisit_grammar_study.md)
+    python scripts/discover_study.py --visible --coefficient --snr 10 20 --cases 16
+                                                     # SNR = the weakest coefficient in standard errors
+                                                     # (docs/discover_coefficient_study.md; with --revisit:
+                                                     # docs/discover_revisit_coefficient_study.md)
 For the cross-axis term only the sum of its coefficients over the axes reaches |a| (see
 imucal.model.effects), so "correct" there means the term on one axis.
 Writes docs/discover_grammar_study.md (docs/discover_study.md with --classic) and prints it.
@@ -93,10 +97,23 @@ def selection_oracle(signal: np.ndarray, base: np.ndarray, options: list, truth:
     return {p: float(np.mean(np.isin(np.argmax(gains - p * k, axis=0), hits))) for p in penalties}
 
 
-def visible_chi2(case, path: str, rel: bool = True, genie: bool = False) -> tuple[float, float, dict]:
+def coefficient_chi2(base: np.ndarray, parts: list[np.ndarray]) -> list[float]:
+    """The chi-square of each part of a whitened signal (one coefficient's column times its value)
+    beside the ``base`` columns and the other parts: that coefficient in standard errors, squared."""
+    out = []
+    for i, y in enumerate(parts):
+        A = np.column_stack([base, *parts[:i], *parts[i + 1:]])
+        x, *_ = np.linalg.lstsq(A, y, rcond=None)
+        out.append(float(np.sum((y - A @ x) ** 2)))
+    return out
+
+
+def visible_chi2(case, path: str, rel: bool = True, genie: bool = False,
+                 weakest: bool = False) -> tuple[float, float, dict]:
     """(lambda, lambda_rel, selection oracle) of the hidden effect, linearised at the base fit of the
     clean twin (same seed, same noise, no effect) written to ``path``. lambda: the chi-square the
-    noise-free effect adds to the base fit. lambda_rel: what is left of it when its closest relative
+    noise-free effect adds to the base fit; with ``weakest``, that of its weakest coefficient beside the
+    base model and the term's other coefficients (its coefficient in standard errors, squared). lambda_rel: what is left of it when its closest relative
     is fitted instead (any other candidate of discovery's first round that does not contain the truth,
     a warm-up at any screened tau): the evidence that tells the term and axes from the nearest wrong
     answer. Selection oracle (``genie``): ``selection_oracle`` over the same candidates, the truth's
@@ -127,11 +144,14 @@ def visible_chi2(case, path: str, rel: bool = True, genie: bool = False) -> tupl
     col = {n: i for i, n in enumerate(params.free_names)}
     signal = sum(J[:, col[n]] * truth[n] / params[n].scale for n in e.coefficient_names)
 
-    def left(A: np.ndarray) -> float:
-        x, *_ = np.linalg.lstsq(A, signal, rcond=None)
-        return float(np.sum((signal - A @ x) ** 2))
+    def left(A: np.ndarray, y: np.ndarray = signal) -> float:
+        x, *_ = np.linalg.lstsq(A, y, rcond=None)
+        return float(np.sum((y - A @ x) ** 2))
 
-    lam = left(J[:, [col[n] for n in base.result.free_names]])
+    B = J[:, [col[n] for n in base.result.free_names]]
+    lam = left(B)
+    if weakest:
+        lam = min(coefficient_chi2(B, [J[:, col[n]] * truth[n] / params[n].scale for n in e.coefficient_names]))
     if not rel:
         return lam, math.nan, {}
     names = _testable(list(EFFECTS), base.intervals, path, [])
@@ -168,7 +188,8 @@ def run_case(args: tuple) -> dict:
     if effect == "pair":
         return run_pair(seed, snr, noise_mg, pool)
     with tempfile.TemporaryDirectory() as d:
-        phys = visible_snr(seed, effect, snr, noise_mg, os.path.join(d, "ref.csv"), revisit) if visible and effect else snr
+        phys = (visible_snr(seed, effect, snr, noise_mg, os.path.join(d, "ref.csv"), revisit,
+                            weakest=visible == "coefficient") if visible and effect else snr)
     if not math.isfinite(phys):  # the base model absorbs this draw entirely: no size makes it visible
         return {"seed": seed, "effect": effect, "snr": snr, "noise_mg": noise_mg, "outcome": "invisible",
                 "found": [], "truth": effect, "ambiguous": False, "size_mg": math.nan, "sigma_mean_mg": math.nan,
@@ -217,8 +238,10 @@ def run_case(args: tuple) -> dict:
 _REFERENCE_SNR = 10.0
 
 
-def visible_snr(seed: int, effect: str, snr: float, noise_mg: float, path: str, revisit: bool = False) -> float:
-    """The physical SNR (size / sigma_mean) at which this seed's effect has sqrt(lambda) = ``snr``.
+def visible_snr(seed: int, effect: str, snr: float, noise_mg: float, path: str, revisit: bool = False,
+                weakest: bool = False) -> float:
+    """The physical SNR (size / sigma_mean) at which this seed's effect has sqrt(lambda) = ``snr``
+    (with ``weakest``: its weakest coefficient is ``snr`` standard errors; see visible_chi2).
 
     The case is drawn at a reference size; every random draw (sensor, plan, axes, signs, warm-up tau,
     noise) is independent of the size and the effect is linear in its coefficients, so lambda grows
@@ -226,7 +249,7 @@ def visible_snr(seed: int, effect: str, snr: float, noise_mg: float, path: str, 
     from imucal.analysis.simulate import draw_effect_case
 
     lam0 = visible_chi2(draw_effect_case(seed, effect=effect, snr=_REFERENCE_SNR, noise_mg=noise_mg, revisit=revisit),
-                        path, rel=False)[0]
+                        path, rel=False, weakest=weakest)[0]
     return _REFERENCE_SNR * snr / math.sqrt(lam0) if lam0 > 1e-9 else math.inf
 
 
@@ -275,6 +298,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--visible", action="store_true", help="SNR = sqrt(lambda), what the data can see of the "
                     "effect (its coefficient in standard errors beside the base model), instead of size / sigma_mean; "
                     "SNR 5 10 20, no pairs; writes docs/discover_visible_study.md")
+    ap.add_argument("--coefficient", action="store_true", help="with --visible: SNR = the term's weakest "
+                    "coefficient in standard errors (beside the base model and its other coefficients), so every "
+                    "true axis is SNR-visible; writes docs/discover_[revisit_]coefficient_study.md")
     ap.add_argument("--revisit", action="store_true", help="every pose held twice, the second pass in reverse order "
                     "(36-52 holds; imucal.analysis.simulate.draw_effect_case); no pairs")
     ap.add_argument("--out", help="markdown file to write (default docs/discover_grammar_study.md)")
@@ -299,22 +325,26 @@ def main(argv: list[str] | None = None) -> int:
     if a.out is None:
         a.out = str(ROOT / "docs" / ("discover_study.md" if a.classic else
                                      ("discover_revisit_" if a.revisit else "discover_") +
-                                     ("visible_study.md" if a.visible else "grammar_study.md")))
+                                     ("coefficient_study.md" if a.visible and a.coefficient else
+                                      "visible_study.md" if a.visible else "grammar_study.md")))
     a.terms = tuple(a.effects or (CLASSIC if a.classic else EFFECTS))
+    if a.coefficient and not a.visible:
+        ap.error("--coefficient is a definition of the visible SNR: use it with --visible")
+    mode = "coefficient" if a.coefficient else a.visible
     jobs = []
     seed = a.seed
     for noise in a.noise:
         for _ in range(a.clean):
-            jobs.append((seed, None, 0.0, noise, a.terms, a.visible, a.revisit))
+            jobs.append((seed, None, 0.0, noise, a.terms, mode, a.revisit))
             seed += 1
         for eff in a.terms:
             for snr in a.snr:
                 for _ in range(a.cases):
-                    jobs.append((seed, eff, snr, noise, a.terms, a.visible, a.revisit))
+                    jobs.append((seed, eff, snr, noise, a.terms, mode, a.revisit))
                     seed += 1
         for snr in a.pair_snr:
             for _ in range(a.pairs):
-                jobs.append((seed, "pair", snr, noise, a.terms, a.visible, a.revisit))
+                jobs.append((seed, "pair", snr, noise, a.terms, mode, a.revisit))
                 seed += 1
     t0 = time.perf_counter()
     rows = []
@@ -434,9 +464,15 @@ def report(rows: list[dict], a: argparse.Namespace, wall: float) -> str:
          "Discover is told nothing.", "",
          "*Size* = largest change of a reading at 1 g over the recording [mg]. *sigma_mean* = noise of one "
          "interval mean = noise per sample / sqrt(samples per interval) [mg]. "
-         + ("*SNR* = sqrt(lambda), lambda as below: the effect's coefficient in standard errors when it is fitted "
+         + ("*SNR* = the term's weakest coefficient in standard errors when the term is fitted beside the base "
+            "model: sqrt of the chi-square that coefficient's part of the effect adds with the base model and the "
+            "term's other coefficients fitted (for a term on one axis, sqrt(lambda)), so every true axis is at "
+            "least SNR standard errors visible. Each case's size is scaled to give it "
+            if a.visible and a.coefficient else
+            "*SNR* = sqrt(lambda), lambda as below: the effect's coefficient in standard errors when it is fitted "
             "beside the base model (the deflection of detection theory). Each case's size is scaled to give it "
-            "(the random draws do not depend on the size); *size SNR* = size / sigma_mean, the physical "
+            if a.visible else "")
+         + ("(the random draws do not depend on the size); *size SNR* = size / sigma_mean, the physical "
             "definition of docs/discover_grammar_study.md, is reported beside it. "
             if a.visible else "*SNR* = size / sigma_mean. ")
          + "*Correct* = exactly the hidden effect on exactly its axes, nothing else. *lambda* = the chi-square the "

@@ -43,3 +43,15 @@ def test_a_round_runs_when_one_candidate_stands_out_though_the_omnibus_test_pass
     assert step.chosen.p_adjusted < d.settings.alpha_scan
     assert d.verdict.startswith("explained"), d.verdict
     assert d.to_json()["steps"][0]["p_scan"] == step.p_scan
+
+
+def test_a_warm_up_is_judged_determined_by_its_noise_not_by_the_misfit_it_leaves(tmp_path):
+    """scale_warmup on x, y and z (tau 11.5 s on a 21-hold plan, the weakest coefficient 10 standard
+    errors: docs/discover_warmup_coefficient_study.md, seed 60081). Its fit leaves chi2/dof 2.25 on
+    8 degrees of freedom; the undetermined check scaled the standard error of x by that misfit
+    (1.5 x) past the coefficient's scale (1e-3), so the term was not counted and scale_warmup[y]
+    was named. The calibration's own observability check uses the noise-only errors, as it now does."""
+    case = draw_effect_case(60081, effect="scale_warmup", snr=216.4, noise_mg=0.3)
+    d = _discover(case, tmp_path)
+    assert [(e.name, e.axes) for e in d.effects] == [("scale_warmup", (0, 1, 2))], (d.verdict, d.notes)
+    assert not any("undetermined" in n for n in d.notes if n.startswith("scale_warmup[xyz]"))

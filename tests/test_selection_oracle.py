@@ -59,3 +59,17 @@ def test_a_strong_term_without_close_relatives_is_always_selected():
     signal, base, options = _problem(rng, 60.0)
     assert study.selection_oracle(signal, base, options, ("a", (0, 1)), (2.0, 6.63), seed=1, draws=200) == {
         2.0: 1.0, 6.63: 1.0}
+
+
+def test_each_coefficients_chi2_is_its_value_over_its_standard_error_squared():
+    """--coefficient scales a case so the weakest coefficient is SNR standard errors: z_a^2 = c_a^2 / cov_aa."""
+    rng = np.random.default_rng(5)
+    base, cols = rng.standard_normal((50, 4)), rng.standard_normal((50, 3))
+    cols[:, 1] += 0.9 * cols[:, 0]  # two correlated coefficients: each sees less than the sum
+    c = np.array([0.8, -0.5, 0.3])
+    A = np.hstack([base, cols])
+    cov = np.linalg.inv(A.T @ A)[4:, 4:]
+    got = study.coefficient_chi2(base, [cols[:, i] * c[i] for i in range(3)])
+    np.testing.assert_allclose(got, c ** 2 / np.diag(cov), rtol=1e-9)
+    total = cols @ c - base @ np.linalg.lstsq(base, cols @ c, rcond=None)[0]
+    assert max(got) < np.sum(total ** 2)  # the term's lambda is more than any one coefficient's part
