@@ -70,10 +70,15 @@ GENIE_DRAWS = 400
 #: Penalties per parameter the selection oracle is also evaluated at (chi-square(1) at p = 0.16,
 #: 0.05, 1e-2, 1e-3; discover's own, DiscoverSettings.penalty, is 1e-2).
 GENIE_PENALTIES = (2.0, 3.84, 10.83)
+#: Prices of a shape parameter (a warm-up's tau) the selection oracle is also evaluated at, the
+#: coefficients at discover's own penalty: whether tau should cost less or more than a coefficient.
+GENIE_TAU_PRICES = (0.0, 2.0, 3.84, 10.83)
 
 
 def selection_oracle(signal: np.ndarray, base: np.ndarray, options: list, truth: tuple,
-                     penalties: tuple[float, ...], seed: int, draws: int = GENIE_DRAWS) -> dict[float, float]:
+                     penalties: tuple[float, ...], seed: int, draws: int = GENIE_DRAWS,
+                     shapes: tuple[int, ...] = (), tau_prices: tuple[float, ...] = ()
+                     ) -> dict[float, float]:
     """Share of noise draws in which the penalised linear selection names exactly ``truth``, by penalty.
 
     The data are the whitened noise-free effect plus unit noise; every candidate (name, axes, k,
@@ -81,7 +86,9 @@ def selection_oracle(signal: np.ndarray, base: np.ndarray, options: list, truth:
     beyond the base model, profiled over the blocks, minus ``penalty`` * k, and the best score
     wins. A search that is exact (every candidate tried, linear, no local minima) with discovery's
     own ranking: what the selection rule can do with this much information. Misses of discover
-    beyond it are the search's; misses inside it are the data's."""
+    beyond it are the search's; misses inside it are the data's. With ``shapes`` (the shape
+    parameters among each option's k) and ``tau_prices``, also keyed ``(penalty, price)``: the
+    coefficients at the first penalty, each shape parameter at ``price``."""
     from imucal.analysis.min_p import column_basis
 
     rng = np.random.default_rng([seed, 7])
@@ -94,7 +101,12 @@ def selection_oracle(signal: np.ndarray, base: np.ndarray, options: list, truth:
             gains[i] = np.maximum(gains[i], np.sum((Q.T @ Y) ** 2, axis=0))
     k = np.array([o[2] for o in options], float)[:, None]
     hits = [i for i, (n, ax, _, _) in enumerate(options) if (n, ax) == truth]
-    return {p: float(np.mean(np.isin(np.argmax(gains - p * k, axis=0), hits))) for p in penalties}
+    share = lambda price: float(np.mean(np.isin(np.argmax(gains - price, axis=0), hits)))  # noqa: E731
+    out: dict = {p: share(p * k) for p in penalties}
+    if tau_prices:
+        m = np.array(shapes, float)[:, None]
+        out.update({(penalties[0], t): share(penalties[0] * (k - m) + t * m) for t in tau_prices})
+    return out
 
 
 def coefficient_chi2(base: np.ndarray, parts: list[np.ndarray]) -> list[float]:
@@ -174,8 +186,11 @@ def visible_chi2(case, path: str, rel: bool = True, genie: bool = False,
     if not EFFECTS[case.effect].axes_observable:
         options = [(n, (ax if n != case.effect else truth[1]), k, b) for n, ax, k, b in options]
     base_J = screens[0][0][:, base_cols]
-    pens = tuple(sorted({*GENIE_PENALTIES, DiscoverSettings().penalty}))
-    return lam, rel, selection_oracle(signal, base_J, options, truth, pens, case.seed)
+    own = DiscoverSettings().penalty
+    pens = (own, *sorted(set(GENIE_PENALTIES) - {own}))
+    shapes = tuple(_extra(n, {}) for n, *_ in options)
+    return lam, rel, selection_oracle(signal, base_J, options, truth, pens, case.seed, shapes=shapes,
+                                      tau_prices=GENIE_TAU_PRICES)
 
 
 def run_case(args: tuple) -> dict:
@@ -231,7 +246,9 @@ def run_case(args: tuple) -> dict:
             "sigma_mean_mg": case.sigma_mean / STANDARD_GRAVITY * 1e3, "redchi_after": res.final.result.redchi,
             "gap_after": res.rms_after / res.rms_noise, "gap_before": res.rms_before / res.rms_noise,
             "counts": case.config.sensor.unit == "raw", "seconds": dt, "lam": lam, "lam_rel": rel, "oracle": oracle_power(lam),
-            "genie": genie.get(DiscoverSettings().penalty, math.nan), "genie_by_penalty": genie, "snr_size": phys, "subset_flagged": subset}
+            "genie": genie.get(DiscoverSettings().penalty, math.nan), "snr_size": phys, "subset_flagged": subset,
+            "genie_by_penalty": {p: v for p, v in genie.items() if not isinstance(p, tuple)},
+            "genie_by_tau": {p[1]: v for p, v in genie.items() if isinstance(p, tuple)}}
 
 
 #: The physical SNR at which --visible cases are first drawn (lambda is then scaled to the target).
@@ -418,6 +435,27 @@ def visibility(rows: list[dict], cells: dict, a: argparse.Namespace) -> list[str
                 vals.append(f"{np.mean([r['genie_by_penalty'][p] for r in cs]):.0%} "
                             f"({sum(np.mean(v) >= RELIABLE for v in by.values())} of {len(by)})")
             L.append(f"| {s:g} | " + " | ".join(vals) + " |")
+    taus = sorted({t for r in single for t in r.get("genie_by_tau", {})})
+    timed = sorted({r["effect"] for r in single if r.get("genie_by_tau")}
+                   & {n for n in EFFECTS if "time" in EFFECTS[n].covariates or "temp" in EFFECTS[n].covariates},
+                   key=list(EFFECTS).index)
+    if taus and timed:
+        from imucal.analysis.discover import DiscoverSettings
+
+        own = DiscoverSettings().penalty
+        L += ["", f"The selection oracle by the price of a warm-up's tau (coefficients at {own:.4g}; mean share "
+              "named exactly per term in time or temperature, and over all terms): whether tau should cost "
+              "less or more than a coefficient.", "",
+              "| SNR | term | " + " | ".join(f"tau {t:g}" for t in taus) + f" | tau {own:.4g} (as now) |",
+              "|---|---|" + "---|" * (len(taus) + 1)]
+        for s in a.snr:
+            cs = [r for r in single if r["snr"] == s and r.get("genie_by_tau")]
+            for eff in [*timed, None]:
+                es = [r for r in cs if eff is None or r["effect"] == eff]
+                if es:
+                    L.append(f"| {s:g} | {eff or 'all terms'} | "
+                             + " | ".join(f"{np.mean([r['genie_by_tau'][t] for r in es]):.0%}" for t in taus)
+                             + f" | {np.mean([r['genie'] for r in es]):.0%} |")
     return L + [""]
 
 

@@ -73,3 +73,19 @@ def test_each_coefficients_chi2_is_its_value_over_its_standard_error_squared():
     np.testing.assert_allclose(got, c ** 2 / np.diag(cov), rtol=1e-9)
     total = cols @ c - base @ np.linalg.lstsq(base, cols @ c, rcond=None)[0]
     assert max(got) < np.sum(total ** 2)  # the term's lambda is more than any one coefficient's part
+
+
+def test_a_separate_price_for_tau_prices_only_the_shape_parameters():
+    """(penalty, price): coefficients at the penalty, each shape parameter at the price; at price ==
+    penalty it is the uniform selection, at 0 the least-squares selection with tau free of charge."""
+    rng = np.random.default_rng(6)
+    signal, base, options = _problem(rng, 5.0)
+    shapes = (0, 0, 0, 1)  # "w" has a shape parameter among its k = 2
+    truth = ("w", (0,))
+    signal = signal + 5.0 * (options[3][3][1][:, 0] - options[3][3][1][:, 0].mean()) / np.sqrt(60)
+    got = study.selection_oracle(signal, base, options, truth, (6.63,), seed=2, draws=300, shapes=shapes,
+                                 tau_prices=(0.0, 6.63))
+    assert got[(6.63, 6.63)] == got[6.63]
+    free = [(n, ax, k - s, b) for (n, ax, k, b), s in zip(options, shapes)]
+    assert got[(6.63, 0.0)] == _brute(signal, base, free, truth, 6.63, 2, 300)
+    assert got[(6.63, 0.0)] >= got[6.63]  # a cheaper tau can only help the term that has one
