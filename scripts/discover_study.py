@@ -124,9 +124,9 @@ def visible_chi2(case, path: str, rel: bool = True, genie: bool = False,
                  weakest: bool = False) -> tuple[float, float, dict]:
     """(lambda, lambda_rel, selection oracle) of the hidden effect, linearised at the base fit of the
     clean twin (same seed, same noise, no effect) written to ``path``. lambda: the chi-square the
-    noise-free effect adds to the base fit; with ``weakest``, that of its weakest coefficient beside the
-    base model and the term's other coefficients (its coefficient in standard errors, squared). lambda_rel: what is left of it when its closest relative
-    is fitted instead (any other candidate of discovery's first round that does not contain the truth,
+    noise-free effect adds to the base fit; with ``weakest``, that of its weakest coefficient beside
+    the base model and the term's other coefficients (its coefficient in standard errors, squared).
+    lambda_rel: what is left of it when its closest relative is fitted instead (any other candidate of discovery's first round that does not contain the truth,
     a warm-up at any screened tau): the evidence that tells the term and axes from the nearest wrong
     answer. Selection oracle (``genie``): ``selection_oracle`` over the same candidates, the truth's
     own tau added to its term's screened values."""
