@@ -354,3 +354,23 @@ def test_random_directions_recover_truth(sim_csv):
     rec = sim_csv("random", mems_counts_sensor(rng), random_directions(20, rng), seed=31)
     z = zscores(calibrate_file(rec.path), rec.truth)
     assert max(abs(v) for v in z.values()) < 3, z
+
+
+def test_noise_std_is_what_the_weights_alone_predict_whatever_the_misfit(tmp_path):
+    """An unmodelled warm-up leaves chi2/dof >> 1: ``std`` grows with it (lmfit's scale_covar),
+    ``noise_std`` stays what the observability check predicts from the noise of each row."""
+    from imucal.analysis.simulate import draw_effect_case
+    from imucal.config.run import config_from_dict
+    from imucal.pipeline import calibrate
+
+    case = draw_effect_case(60081, effect="scale_warmup", snr=216.4, noise_mg=0.3)
+    path = tmp_path / "warm.csv"
+    path.write_text(case.config.run().to_csv_text())
+    run = calibrate(config_from_dict({"data": {"path": str(path), "unit": case.config.sensor.unit},
+                                      "fit": {"weights": "noise"}}))
+    res = run.result
+    assert res.redchi > 20
+    for n in res.free_names:
+        predicted = run.observability.predicted_z[n] * res.params[n].scale
+        assert res.noise_std[n] == pytest.approx(predicted, rel=1e-3)
+        assert res.std[n] == pytest.approx(predicted * math.sqrt(res.redchi), rel=1e-3)

@@ -524,9 +524,9 @@ def _round(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int,
         # Judged on the noise-only standard errors, as the calibration's observability check judges
         # the poses: the misfit a candidate leaves is the LR test's to weigh (scaled below), and
         # scaling by it here refused a correct warm-up whenever another term was still missing.
-        unscale = 1.0 / math.sqrt(res.redchi) if res.dof > 0 and res.redchi > 0 else 1.0
+        noise_std = res.noise_std
         loose = [n for n in (*make_effect(c.name, c.new_axes).coefficient_names, *shapes)
-                 if not res.std.get(n, 0.0) * unscale <= res.params[n].scale]
+                 if not noise_std.get(n, 0.0) <= res.params[n].scale]
         if loose and shapes:  # the final calibration would refuse it as undetermined
             notes.append(f"{c.label}: {loose[0]} undetermined (standard error above {res.params[loose[0]].scale:.3g} "
                          f"{res.params[loose[0]].unit}), not counted")

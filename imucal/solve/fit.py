@@ -85,6 +85,13 @@ class FitResult:
         return self.chi2_noise / self.dof if self.dof > 0 else float("nan")
 
     @property
+    def noise_std(self) -> dict[str, float]:
+        """``std`` before the scaling by chi2/dof (what the weights alone predict; ``fit`` scales
+        the covariance by it when degrees of freedom are left)."""
+        k = 1.0 / np.sqrt(self.redchi) if self.dof > 0 and self.redchi > 0 else 1.0
+        return {n: v * k for n, v in self.std.items()}
+
+    @property
     def rms_residual(self) -> float:
         return float(np.sqrt(np.mean(self.residuals**2)))
 
