@@ -24,7 +24,8 @@ at the 1e-3 level discovery uses. No method can name a term more often than its 
     python scripts/discover_study.py --visible --coefficient --snr 10 20 --cases 16
                                                      # SNR = the weakest coefficient in standard errors
                                                      # (docs/discover_coefficient_study.md; with --revisit:
-                                                     # docs/discover_revisit_coefficient_study.md)
+                                                     # docs/discover_revisit_coefficient_study.md; with
+                                                     # --tau-known, a warm-up's tau held at its truth)
 For the cross-axis term only the sum of its coefficients over the axes reaches |a| (see
 imucal.model.effects), so "correct" there means the term on one axis.
 Writes docs/discover_grammar_study.md (docs/discover_study.md with --classic) and prints it.
@@ -121,11 +122,13 @@ def coefficient_chi2(base: np.ndarray, parts: list[np.ndarray]) -> list[float]:
 
 
 def visible_chi2(case, path: str, rel: bool = True, genie: bool = False,
-                 weakest: bool = False) -> tuple[float, float, dict]:
+                 weakest: bool = False, tau_known: bool = False) -> tuple[float, float, dict]:
     """(lambda, lambda_rel, selection oracle) of the hidden effect, linearised at the base fit of the
     clean twin (same seed, same noise, no effect) written to ``path``. lambda: the chi-square the
     noise-free effect adds to the base fit; with ``weakest``, that of its weakest coefficient beside
-    the base model and the term's other coefficients (its coefficient in standard errors, squared).
+    the base model and the term's other parameters (its coefficient in standard errors, squared): a
+    warm-up's tau is fitted beside them as discover and calibrate fit it, linearised at the true term,
+    unless ``tau_known`` holds it at its true value (no fit knows it: smaller errors, smaller cases).
     lambda_rel: what is left of it when its closest relative is fitted instead (any other candidate of discovery's first round that does not contain the truth,
     a warm-up at any screened tau): the evidence that tells the term and axes from the nearest wrong
     answer. Selection oracle (``genie``): ``selection_oracle`` over the same candidates, the truth's
@@ -163,7 +166,13 @@ def visible_chi2(case, path: str, rel: bool = True, genie: bool = False,
     B = J[:, [col[n] for n in base.result.free_names]]
     lam = left(B)
     if weakest:
-        lam = min(coefficient_chi2(B, [J[:, col[n]] * truth[n] / params[n].scale for n in e.coefficient_names]))
+        shape = []  # a warm-up's tau, fitted beside its coefficients: its direction at the true term
+        if e.shape_names and not tau_known:
+            Jt = jacobian_rows(prob.data(model), params.with_values({n: truth[n] for n in e.coefficient_names}),
+                               model, prob.gravity) / base.result.sigma[:, None]
+            shape = [Jt[:, col[n]] for n in e.shape_names]
+        lam = min(coefficient_chi2(np.column_stack([B, *shape]),
+                                   [J[:, col[n]] * truth[n] / params[n].scale for n in e.coefficient_names]))
     if not rel:
         return lam, math.nan, {}
     names = _testable(list(EFFECTS), base.intervals, path, [])
@@ -204,7 +213,8 @@ def run_case(args: tuple) -> dict:
         return run_pair(seed, snr, noise_mg, pool)
     with tempfile.TemporaryDirectory() as d:
         phys = (visible_snr(seed, effect, snr, noise_mg, os.path.join(d, "ref.csv"), revisit,
-                            weakest=visible == "coefficient") if visible and effect else snr)
+                            weakest=str(visible).startswith("coefficient"), tau_known=visible == "coefficient-tau-known")
+            if visible and effect else snr)
     if not math.isfinite(phys):  # the base model absorbs this draw entirely: no size makes it visible
         return {"seed": seed, "effect": effect, "snr": snr, "noise_mg": noise_mg, "outcome": "invisible",
                 "found": [], "truth": effect, "ambiguous": False, "size_mg": math.nan, "sigma_mean_mg": math.nan,
@@ -256,9 +266,9 @@ _REFERENCE_SNR = 10.0
 
 
 def visible_snr(seed: int, effect: str, snr: float, noise_mg: float, path: str, revisit: bool = False,
-                weakest: bool = False) -> float:
+                weakest: bool = False, tau_known: bool = False) -> float:
     """The physical SNR (size / sigma_mean) at which this seed's effect has sqrt(lambda) = ``snr``
-    (with ``weakest``: its weakest coefficient is ``snr`` standard errors; see visible_chi2).
+    (with ``weakest``: its weakest coefficient is ``snr`` standard errors; ``tau_known``: see visible_chi2).
 
     The case is drawn at a reference size; every random draw (sensor, plan, axes, signs, warm-up tau,
     noise) is independent of the size and the effect is linear in its coefficients, so lambda grows
@@ -266,7 +276,7 @@ def visible_snr(seed: int, effect: str, snr: float, noise_mg: float, path: str, 
     from imucal.analysis.simulate import draw_effect_case
 
     lam0 = visible_chi2(draw_effect_case(seed, effect=effect, snr=_REFERENCE_SNR, noise_mg=noise_mg, revisit=revisit),
-                        path, rel=False, weakest=weakest)[0]
+                        path, rel=False, weakest=weakest, tau_known=tau_known)[0]
     return _REFERENCE_SNR * snr / math.sqrt(lam0) if lam0 > 1e-9 else math.inf
 
 
@@ -317,7 +327,10 @@ def main(argv: list[str] | None = None) -> int:
                     "SNR 5 10 20, no pairs; writes docs/discover_visible_study.md")
     ap.add_argument("--coefficient", action="store_true", help="with --visible: SNR = the term's weakest "
                     "coefficient in standard errors (beside the base model and its other coefficients), so every "
-                    "true axis is SNR-visible; writes docs/discover_[revisit_]coefficient_study.md")
+                    "true axis is SNR-visible (a warm-up's tau fitted beside them); writes "
+                    "docs/discover_[revisit_]coefficient_study.md")
+    ap.add_argument("--tau-known", action="store_true", help="with --coefficient: a warm-up's standard errors with "
+                    "its tau held at the true value, which no fit knows (smaller errors, so smaller warm-ups)")
     ap.add_argument("--revisit", action="store_true", help="every pose held twice, the second pass in reverse order "
                     "(36-52 holds; imucal.analysis.simulate.draw_effect_case); no pairs")
     ap.add_argument("--out", help="markdown file to write (default docs/discover_grammar_study.md)")
@@ -342,12 +355,15 @@ def main(argv: list[str] | None = None) -> int:
     if a.out is None:
         a.out = str(ROOT / "docs" / ("discover_study.md" if a.classic else
                                      ("discover_revisit_" if a.revisit else "discover_") +
-                                     ("coefficient_study.md" if a.visible and a.coefficient else
+                                     ("coefficient_tau_known_study.md" if a.visible and a.tau_known else
+                                      "coefficient_study.md" if a.visible and a.coefficient else
                                       "visible_study.md" if a.visible else "grammar_study.md")))
     a.terms = tuple(a.effects or (CLASSIC if a.classic else EFFECTS))
     if a.coefficient and not a.visible:
         ap.error("--coefficient is a definition of the visible SNR: use it with --visible")
-    mode = "coefficient" if a.coefficient else a.visible
+    if a.tau_known and not a.coefficient:
+        ap.error("--tau-known is a variant of --coefficient: use it with --visible --coefficient")
+    mode = ("coefficient-tau-known" if a.tau_known else "coefficient") if a.coefficient else a.visible
     jobs = []
     seed = a.seed
     for noise in a.noise:
@@ -505,7 +521,11 @@ def report(rows: list[dict], a: argparse.Namespace, wall: float) -> str:
          + ("*SNR* = the term's weakest coefficient in standard errors when the term is fitted beside the base "
             "model: sqrt of the chi-square that coefficient's part of the effect adds with the base model and the "
             "term's other coefficients fitted (for a term on one axis, sqrt(lambda)), so every true axis is at "
-            "least SNR standard errors visible. Each case's size is scaled to give it "
+            "least SNR standard errors visible. "
+            + ("A warm-up's tau is held at its true value, which no fit knows. " if a.tau_known else
+               "A warm-up's tau is fitted beside its coefficients, as discover and calibrate fit it (linearised at "
+               "the true term). ")
+            + "Each case's size is scaled to give it "
             if a.visible and a.coefficient else
             "*SNR* = sqrt(lambda), lambda as below: the effect's coefficient in standard errors when it is fitted "
             "beside the base model (the deflection of detection theory). Each case's size is scaled to give it "

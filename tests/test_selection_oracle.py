@@ -89,3 +89,21 @@ def test_a_separate_price_for_tau_prices_only_the_shape_parameters():
     free = [(n, ax, k - s, b) for (n, ax, k, b), s in zip(options, shapes)]
     assert got[(6.63, 0.0)] == _brute(signal, base, free, truth, 6.63, 2, 300)
     assert got[(6.63, 0.0)] >= got[6.63]  # a cheaper tau can only help the term that has one
+
+
+def test_a_warm_ups_coefficient_is_counted_in_standard_errors_with_its_tau_fitted(tmp_path):
+    """--coefficient: a warm-up's tau is fitted beside its coefficients (as discover fits it), so its
+    coefficients see less than with tau known; a term without a shape is unchanged; lambda stays
+    quadratic in the size, so one reference case fixes the size."""
+    from imucal.analysis.simulate import draw_effect_case
+
+    path = str(tmp_path / "clean.csv")
+
+    def lam(effect, seed, snr, known):
+        case = draw_effect_case(seed, effect=effect, snr=snr, noise_mg=0.3)
+        return study.visible_chi2(case, path, rel=False, weakest=True, tau_known=known)[0]
+
+    fitted, known = lam("bias_warmup", 60001, 10.0, False), lam("bias_warmup", 60001, 10.0, True)
+    assert fitted < 0.9 * known
+    np.testing.assert_allclose(lam("bias_warmup", 60001, 20.0, False), 4 * fitted, rtol=1e-3)
+    assert lam("bias_drift", 60001, 10.0, False) == lam("bias_drift", 60001, 10.0, True)
