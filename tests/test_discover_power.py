@@ -55,3 +55,63 @@ def test_a_warm_up_is_judged_determined_by_its_noise_not_by_the_misfit_it_leaves
     d = _discover(case, tmp_path)
     assert [(e.name, e.axes) for e in d.effects] == [("scale_warmup", (0, 1, 2))], (d.verdict, d.notes)
     assert not any("undetermined" in n for n in d.notes if n.startswith("scale_warmup[xyz]"))
+
+
+@pytest.mark.parametrize("seed,term,snr", [(60001, "bias_warmup", 53.03), (60014, "bias_warmup", 22.94),
+                                          (60064, "scale_warmup", 30.99)])
+def test_the_simulated_warm_up_is_the_model_discover_fits(seed, term, snr, tmp_path):
+    """Three warm-ups on two axes that discover names on three at SNR 10 by the weakest coefficient
+    (docs/discover_warmup_coefficient_study.md; the sizes it draws). With the noise at a tenth, the
+    true term on its true axes fits to the noise: a misfit worth one unit of chi-square at the
+    study's noise would be worth 25 or more here, so the third axis found there is a noise
+    excursion, not a difference between the simulator and the model."""
+    import dataclasses
+
+    import numpy as np
+
+    from imucal.pipeline import calibrate
+
+    case = draw_effect_case(seed, effect=term, snr=snr, noise_mg=0.3)
+    assert len(case.axes) == 2
+    sensor = case.config.sensor
+    quiet = dataclasses.replace(case.config, sensor=dataclasses.replace(
+        sensor, noise=tuple(0.1 * np.asarray(sensor.noise))))
+    path = tmp_path / "quiet.csv"
+    path.write_text(quiet.run().to_csv_text())
+    run = calibrate(config_from_dict({"data": {"path": str(path), "unit": sensor.unit}, "fit": {
+        "effects": [{"name": term, "axes": ["xyz"[a] for a in case.axes]}]}}))
+    assert run.result.redchi < 2.0, run.result.redchi
+    truth = sensor.effects[term]
+    np.testing.assert_allclose(run.result.values()[f"{term}_tau"], truth[f"{term}_tau"], rtol=0.05)
+
+
+def test_the_third_warm_up_axis_gains_what_its_linear_score_predicts(tmp_path):
+    """Seed 60001 (bias_warmup on x and z, named on x, y and z): at the two-axis fit, the score of
+    y (the chi-square its column removes from the residual, linearised) is what the full three-axis
+    fit gains, so the gain is the noise along that column, which the selection oracle's linear
+    model describes, not a nonlinear effect of the fit."""
+    import numpy as np
+
+    from imucal.analysis.discover import _canonical, _Problem
+    from imucal.pipeline import calibrate
+    from imucal.solve.fit import jacobian_rows
+
+    case = draw_effect_case(60001, effect="bias_warmup", snr=53.03, noise_mg=0.3)
+    assert case.axes == (0, 2)
+    path = tmp_path / "case.csv"
+    path.write_text(case.config.run().to_csv_text())
+    cfg = config_from_dict({"data": {"path": str(path), "unit": case.config.sensor.unit}})
+    prob = _Problem(cfg, calibrate(cfg))
+    start = {**prob.run.result.values(), "bias_warmup_tau": 11.5}
+    two = prob.fit(_canonical({"bias_warmup": (0, 2)}), start)
+    three = prob.fit(_canonical({"bias_warmup": (0, 1, 2)}), start)
+    model, params = prob.parameters(_canonical({"bias_warmup": (0, 1, 2)}), two.values(), check=False)
+    params = params.with_values({**{n: v for n, v in two.values().items() if n in params.names}, "bias_warmup_y": 0.0})
+    J = jacobian_rows(prob.data(model), params, model, prob.gravity) / two.sigma[:, None]
+    r = jacobian_rows(prob.data(model), params, model, prob.gravity, residuals=True) / two.sigma
+    np.testing.assert_allclose(r @ r, two.chi2, rtol=1e-6)
+    iy = params.free_names.index("bias_warmup_y")
+    rest = np.delete(J, iy, axis=1)
+    jy = J[:, iy] - rest @ np.linalg.lstsq(rest, J[:, iy], rcond=None)[0]
+    score = (jy @ r) ** 2 / (jy @ jy)
+    np.testing.assert_allclose(score, two.chi2 - three.chi2, rtol=0.05)
