@@ -49,7 +49,7 @@ import math  # noqa: E402
 import numpy as np  # noqa: E402
 
 from imucal.constants import STANDARD_GRAVITY  # noqa: E402
-from imucal.model.effects import CLASSIC, EFFECTS  # noqa: E402
+from imucal.model.effects import CLASSIC, EFFECTS, make_effect  # noqa: E402
 from imucal.report.progress import progress  # noqa: E402
 from imucal.solve.stats import power_chi2_1  # noqa: E402
 
@@ -74,6 +74,10 @@ GENIE_PENALTIES = (2.0, 3.84, 10.83)
 #: Prices of a shape parameter (a warm-up's tau) the selection oracle is also evaluated at, the
 #: coefficients at discover's own penalty: whether tau should cost less or more than a coefficient.
 GENIE_TAU_PRICES = (0.0, 2.0, 3.84, 10.83)
+#: The tau grid of the profiled selection oracle (fractions of the recording, over the fit's tau
+#: range imucal.model.effects.WARMUP_TAU_FIT, 15 % apart): every warm-up candidate, the truth's
+#: included, is profiled over it, so none is given the true tau.
+PROFILE_TAU_GRID = tuple(np.geomspace(0.02, 1.0, 30))
 
 
 def selection_oracle(signal: np.ndarray, base: np.ndarray, options: list, truth: tuple,
@@ -132,7 +136,9 @@ def visible_chi2(case, path: str, rel: bool = True, genie: bool = False,
     lambda_rel: what is left of it when its closest relative is fitted instead (any other candidate of discovery's first round that does not contain the truth,
     a warm-up at any screened tau): the evidence that tells the term and axes from the nearest wrong
     answer. Selection oracle (``genie``): ``selection_oracle`` over the same candidates, the truth's
-    own tau added to its term's screened values."""
+    own tau added to its term's screened values; and under the key "profiled", the same with every
+    warm-up candidate, the truth's included, profiled over ``PROFILE_TAU_GRID`` instead: the
+    counterpart of discover's search, which fits tau for every warm-up it tries."""
     import dataclasses
 
     from imucal.analysis.discover import (DiscoverSettings, _candidates, _canonical, _extra, _Problem, _screen,
@@ -178,7 +184,8 @@ def visible_chi2(case, path: str, rel: bool = True, genie: bool = False,
     names = _testable(list(EFFECTS), base.intervals, path, [])
     screens, _, col2, free = _screen(prob, base.result, {}, names)
     base_cols = [col2[n] for n in free]
-    rel, options = math.inf, []
+    fine = _screen(prob, base.result, {}, names, tau_grid=PROFILE_TAU_GRID)[0] if genie else []
+    rel, options, profiled = math.inf, [], []
     for n, ax, new in _candidates(names, {}, len(free), base.intervals.n, base.observability.n_distinct):
         eff = make_effect(n, new)
         coef = eff.coefficient_names
@@ -186,6 +193,8 @@ def visible_chi2(case, path: str, rel: bool = True, genie: bool = False,
         if n == case.effect and all(c in col for c in coef):
             blocks.append(J[:, [col[c] for c in coef]])  # the truth's own shape value
         options.append((n, ax, len(new) + _extra(n, {}), blocks))
+        profiled.append((n, ax, len(new) + _extra(n, {}),
+                         [Jw[:, [col2[c] for c in coef]] for Jw, _ in (fine if eff.shape_names else fine[:1])]))
         if n == case.effect and (set(case.axes) <= set(ax) or not EFFECTS[n].axes_observable):
             continue  # the truth itself, or a model containing it
         rel = min(rel, *(left(Jw[:, base_cols + [col2[c] for c in coef]]) for Jw, _ in screens))
@@ -193,13 +202,15 @@ def visible_chi2(case, path: str, rel: bool = True, genie: bool = False,
         return lam, rel, {}
     truth = (case.effect, tuple(case.axes))
     if not EFFECTS[case.effect].axes_observable:
-        options = [(n, (ax if n != case.effect else truth[1]), k, b) for n, ax, k, b in options]
+        options, profiled = ([(n, (ax if n != case.effect else truth[1]), k, b) for n, ax, k, b in o]
+                             for o in (options, profiled))
     base_J = screens[0][0][:, base_cols]
     own = DiscoverSettings().penalty
     pens = (own, *sorted(set(GENIE_PENALTIES) - {own}))
     shapes = tuple(_extra(n, {}) for n, *_ in options)
-    return lam, rel, selection_oracle(signal, base_J, options, truth, pens, case.seed, shapes=shapes,
-                                      tau_prices=GENIE_TAU_PRICES)
+    out = selection_oracle(signal, base_J, options, truth, pens, case.seed, shapes=shapes, tau_prices=GENIE_TAU_PRICES)
+    out["profiled"] = selection_oracle(signal, base_J, profiled, truth, (own,), case.seed)[own]
+    return lam, rel, out
 
 
 def run_case(args: tuple) -> dict:
@@ -257,7 +268,8 @@ def run_case(args: tuple) -> dict:
             "gap_after": res.rms_after / res.rms_noise, "gap_before": res.rms_before / res.rms_noise,
             "counts": case.config.sensor.unit == "raw", "seconds": dt, "lam": lam, "lam_rel": rel, "oracle": oracle_power(lam),
             "genie": genie.get(DiscoverSettings().penalty, math.nan), "snr_size": phys, "subset_flagged": subset,
-            "genie_by_penalty": {p: v for p, v in genie.items() if not isinstance(p, tuple)},
+            "genie_by_penalty": {p: v for p, v in genie.items() if not isinstance(p, (tuple, str))},
+            "genie_profiled": genie.get("profiled", math.nan),
             "genie_by_tau": {p[1]: v for p, v in genie.items() if isinstance(p, tuple)}}
 
 
@@ -472,6 +484,20 @@ def visibility(rows: list[dict], cells: dict, a: argparse.Namespace) -> list[str
                     L.append(f"| {s:g} | {eff or 'all terms'} | "
                              + " | ".join(f"{np.mean([r['genie_by_tau'][t] for r in es]):.0%}" for t in taus)
                              + f" | {np.mean([r['genie'] for r in es]):.0%} |")
+    shaped = [n for n in dict.fromkeys(r["effect"] for r in single) if make_effect(n, (0,)).shape_names]
+    if shaped and any(math.isfinite(r.get("genie_profiled", math.nan)) for r in single):
+        L += ["", "The selection oracle gives the truth's term its exact tau and every other warm-up candidate only "
+              "discover's screening grid. *Profiled*: every warm-up candidate, the truth's included, profiled over "
+              f"{len(PROFILE_TAU_GRID)} values of tau 15 % apart (PROFILE_TAU_GRID), as discover fits tau for every "
+              "warm-up it tries: an exact search with no candidate told the true tau.", "",
+              "| SNR | term | discover | selection oracle | profiled |", "|---|---|---|---|---|"]
+        for s in a.snr:
+            cs = [r for r in single if r["snr"] == s and math.isfinite(r.get("genie_profiled", math.nan))]
+            for eff in [*shaped, None]:
+                es = [r for r in cs if eff is None or r["effect"] == eff]
+                if es:
+                    L.append(f"| {s:g} | {eff or 'all terms'} | {np.mean([r['outcome'] == 'correct' for r in es]):.0%} | "
+                             f"{np.mean([r['genie'] for r in es]):.0%} | {np.mean([r['genie_profiled'] for r in es]):.0%} |")
     return L + [""]
 
 

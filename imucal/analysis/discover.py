@@ -379,12 +379,13 @@ class _Problem:
 
 
 def _screen(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]],
-            names: Sequence[str]) -> tuple[list[tuple[np.ndarray, dict[str, float]]], np.ndarray, dict[str, int],
-                                           list[str]]:
+            names: Sequence[str], tau_grid: Sequence[float] = TAU_GRID
+            ) -> tuple[list[tuple[np.ndarray, dict[str, float]]], np.ndarray, dict[str, int], list[str]]:
     """Column-scaled Jacobians of the residuals w.r.t. base + every candidate coefficient, at the fit.
 
     Candidates not in the model enter with coefficient 0 (the current fit). A new warm-up's tau
-    does not enter at amplitude 0, so the Jacobian is taken once per tau of ``TAU_GRID``.
+    does not enter at amplitude 0, so the Jacobian is taken once per tau of ``tau_grid`` (fractions
+    of the last interval's time).
     Returns ([(J / sigma, shape values)], r / sigma, column index by parameter name, current free names).
     """
     every = {n: (0, 1, 2) for n in names}
@@ -395,7 +396,7 @@ def _screen(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int
     params = params.with_values({n: 0.0 for e in model.effects for n in e.coefficient_names if n not in have})
     shapes = [n for e in model.effects for n in e.shape_names if n not in have]
     t_end = float(np.max(prob.iv.t_mid)) if prob.iv.n else 1.0
-    grid = [{n: f * t_end for n in shapes} for f in TAU_GRID] if shapes else [{}]
+    grid = [{n: f * t_end for n in shapes} for f in tau_grid] if shapes else [{}]
     w = 1.0 / current.sigma
     data = prob.data(model)
     screens = [(jacobian_rows(data, params.with_values(g), model, prob.gravity) * w[:, None], g) for g in grid]
