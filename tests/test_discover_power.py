@@ -61,7 +61,7 @@ def test_a_warm_up_is_judged_determined_by_its_noise_not_by_the_misfit_it_leaves
                                           (60064, "scale_warmup", 30.99)])
 def test_the_simulated_warm_up_is_the_model_discover_fits(seed, term, snr, tmp_path):
     """Three warm-ups on two axes that discover names on three at SNR 10 by the weakest coefficient
-    (docs/discover_warmup_coefficient_study.md; the sizes it draws). With the noise at a tenth, the
+    (a 48-case replicate of docs/discover_warmup_coefficient_study.md; the sizes it drew). With the noise at a tenth, the
     true term on its true axes fits to the noise: a misfit worth one unit of chi-square at the
     study's noise would be worth 25 or more here, so the third axis found there is a noise
     excursion, not a difference between the simulator and the model."""
