@@ -189,15 +189,14 @@ def visible_chi2(case, path: str, rel: bool = True, genie: bool = False,
     for n, ax, new in _candidates(names, {}, len(free), base.intervals.n, base.observability.n_distinct):
         eff = make_effect(n, new)
         coef = eff.coefficient_names
-        blocks = [Jw[:, [col2[c] for c in coef]] for Jw, _ in (screens if eff.shape_names else screens[:1])]
-        if n == case.effect and all(c in col for c in coef):
-            blocks.append(J[:, [col[c] for c in coef]])  # the truth's own shape value
-        options.append((n, ax, len(new) + _extra(n, {}), blocks))
-        profiled.append((n, ax, len(new) + _extra(n, {}),
-                         [Jw[:, [col2[c] for c in coef]] for Jw, _ in (fine if eff.shape_names else fine[:1])]))
+        cols, k = [col2[c] for c in coef], len(new) + _extra(n, {})
+        blocks = lambda grid: [Jw[:, cols] for Jw, _ in (grid if eff.shape_names else grid[:1])]  # noqa: E731
+        own_tau = [J[:, [col[c] for c in coef]]] if n == case.effect and all(c in col for c in coef) else []
+        options.append((n, ax, k, blocks(screens) + own_tau))  # the truth's term also at its own tau
+        profiled.append((n, ax, k, blocks(fine)))
         if n == case.effect and (set(case.axes) <= set(ax) or not EFFECTS[n].axes_observable):
             continue  # the truth itself, or a model containing it
-        rel = min(rel, *(left(Jw[:, base_cols + [col2[c] for c in coef]]) for Jw, _ in screens))
+        rel = min(rel, *(left(Jw[:, base_cols + cols]) for Jw, _ in screens))
     if not genie:
         return lam, rel, {}
     truth = (case.effect, tuple(case.axes))
