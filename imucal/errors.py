@@ -32,6 +32,7 @@ EXIT_NOT_CONVERGED = 1  #: the solver did not converge (outputs written, status 
 EXIT_BAD_INPUT = 2  #: bad input, a refused run or a usage error: one line naming file, field, fix
 EXIT_INTERNAL = 3  #: an unexpected internal error (a bug): one line; rerun with --debug for the traceback
 EXIT_INTERRUPTED = 130  #: SIGINT (Ctrl-C) or SIGTERM: staged outputs removed, nothing published
+EXIT_BROKEN_PIPE = 141  #: 128 + SIGPIPE: the reader of stdout left (`| head`); files already written stay
 
 
 class Terminated(KeyboardInterrupt):

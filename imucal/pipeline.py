@@ -285,12 +285,22 @@ def _problem(config: RunConfig, rec: Recording | RecordingSummary, iv: Intervals
         data = fit_data(model, iv, samples, config.fit.mode, rec.source, noise)
         # Observability on interval means (one row per interval), at the initial guess.
         mdata = fit_data(model, iv, None, "means", rec.source, noise) if data.mode != "means" else data
-        J, Jw = jacobian_rows(mdata, params, model, gravity, weighted=True)
-        varying = [n for e in model.effects if EFFECTS[e.name].covariates for n in (*e.coefficient_names, *e.shape_names)]
-        obs = analyse(dirs, J, params.free_names, Jw, thresholds(params.free_names, config.fit.angle_tolerance),
-                      varying)
+        obs = observability(model, params, mdata, dirs, gravity, config.fit.angle_tolerance)
         require_observable(obs, params.free_names, rec.source)
     return _Problem(model, guess, params, data, mdata, samples, obs)
+
+
+def observability(model: SensorModel, params: Parameters, means: FitData, directions: np.ndarray, gravity: float,
+                  angle_tolerance: float) -> Observability:
+    """What the poses determine of ``params`` at their values, on interval means (one row per
+    interval; ``directions`` as initial_guess gives them): imucal.solve.observability.analyse,
+    an effect coefficient judged against the larger of its usual magnitude and its value."""
+    J, Jw = jacobian_rows(means, params, model, gravity, weighted=True)
+    varying = [n for e in model.effects if EFFECTS[e.name].covariates for n in (*e.coefficient_names, *e.shape_names)]
+    sizes = {n: params[n].value / params[n].scale for e in model.effects for n in e.coefficient_names
+             if n in params.free_names}
+    return analyse(directions, J, params.free_names, Jw, thresholds(params.free_names, angle_tolerance, sizes),
+                   varying)
 
 
 def _refuse_absurd(res: FitResult, params: Parameters, source: str) -> None:

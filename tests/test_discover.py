@@ -128,6 +128,12 @@ def test_per_pose_offsets_are_named_a_stochastic_bias_not_a_term(tmp_path):
     assert d.effects == ()
     assert d.verdict.startswith("explained by a stochastic bias: bias_instability"), d.verdict
     assert "no deterministic term helps" in d.verdict
+    # ... and the calibration it keeps (--out) is the default fit the verdict names, the excess in its
+    # weights and standard errors, not the noise-weighted fit the tests ran on
+    kept, tested = d.calibration_run.calibration.fit, d.final.calibration.fit
+    assert (kept["weights"], tested["weights"]) == ("auto", "noise")
+    assert kept["bias_instability"] > 0 == tested["bias_instability"]
+    assert d.calibration_run.result.std["s1"] > 2 * d.final.result.noise_std["s1"]
 
 
 def test_real_xsens_recording_gets_no_invented_effect():

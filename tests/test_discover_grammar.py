@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from imucal.analysis.discover import DiscoverSettings, discover
-from imucal.analysis.f_test import f_sf
+from imucal.solve.f_test import f_sf
 from imucal.analysis.simulate import draw_effect_case
 from imucal.config.run import config_from_dict
 from imucal.model.effects import CLASSIC, EFFECTS, make_effect, recurrence

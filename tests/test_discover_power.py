@@ -57,6 +57,24 @@ def test_a_warm_up_is_judged_determined_by_its_noise_not_by_the_misfit_it_leaves
     assert not any("undetermined" in n for n in d.notes if n.startswith("scale_warmup[xyz]"))
 
 
+@pytest.mark.parametrize("seed,term,snr,axes", [(60223, "scale_warmup", 1447.45, (0,)),
+                                               (60114, "bias_warmup", 51.69, (0, 1))])
+def test_a_warm_up_is_judged_determined_as_the_calibration_judges_it(seed, term, snr, axes, tmp_path):
+    """The weakest coefficient 10 standard errors (docs/discover_warmup_coefficient_study.md).
+    60223: scale_warmup_x = 0.028 with tau 5.2 s, 28 x the term's usual size (1e-3): its standard
+    error (~0.003) was judged against that usual size, so it was refused as undetermined and the
+    verdict was "a stochastic bias". A coefficient larger than its usual size is now judged against
+    its own size / 3.29 (imucal.solve.observability.thresholds). 60114: with that rule alone, a
+    degenerate bias_warmup[xz] (tau short, its amplitude traded against s1 and s3) passed discover's
+    own per-coefficient check and the final calibration then refused it; discover now asks the
+    calibration's observability check itself, at the values it found."""
+    case = draw_effect_case(seed, effect=term, snr=snr, noise_mg=0.3)
+    assert case.axes == axes
+    d = _discover(case, tmp_path)
+    assert [(e.name, e.axes) for e in d.effects] == [(term, axes)], (d.verdict, d.notes)
+    assert d.consistent_after and not any("was refused" in n for n in d.notes), d.notes
+
+
 @pytest.mark.parametrize("seed,term,snr", [(60001, "bias_warmup", 53.03), (60014, "bias_warmup", 22.94),
                                           (60064, "scale_warmup", 30.99)])
 def test_the_simulated_warm_up_is_the_model_discover_fits(seed, term, snr, tmp_path):

@@ -419,6 +419,17 @@ def _imucal(args, cwd, **kw):
                             env={**os.environ, "PYTHONPATH": str(ROOT)}, **kw)
 
 
+def test_a_reader_that_leaves_ends_the_run_quietly_with_its_files(work):
+    """`imucal ... | head -1`: stdout's reader is gone before the report is printed. The run ends as a
+    pipe tool killed by SIGPIPE (141), with no internal error and the files already written."""
+    p = _imucal(["calibrate", "--data", "rec.csv", "--out", "piped", "--no-figures"], work)
+    p.stdout.close()  # the reader leaves before anything is printed
+    err = p.stderr.read()
+    assert p.wait(timeout=120) == 141, err
+    assert "internal error" not in err and "Traceback" not in err and "Exception ignored" not in err, err
+    assert (work / "piped" / "calibration.yaml").is_file()
+
+
 def test_sigterm_removes_staged_outputs(work):
     """SIGTERM while the figures are staged: exit 130, nothing published, no staging left."""
     p = _imucal(["calibrate", "--data", "rec.csv", "--out", "sig"], work)

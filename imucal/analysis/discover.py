@@ -46,7 +46,7 @@ import numpy as np
 from imucal.config.run import EffectSpec, RunConfig
 from imucal.model.effects import (AXIS_NAMES, EFFECTS, MIN_DOF, MIN_TEMPERATURE_SPREAD, AxisEffect, Term, make_effect,
                                   fit_to_data, prepare_parameters, temperature_spread)
-from imucal.analysis.f_test import f_sf
+from imucal.solve.f_test import f_sf
 from imucal.analysis import stochastic as stoch
 from imucal.analysis.min_p import MinPNull, min_p_null
 from imucal.analysis.pair_screen import pair_chi2
@@ -55,7 +55,7 @@ from imucal.errors import ImucalError
 from imucal.solve.fit import FitData, FitResult, fit, jacobian_rows
 
 from imucal.model.sensor import build_model
-from imucal.pipeline import CalibrationRun, calibrate, fit_data, make_parameters
+from imucal.pipeline import CalibrationRun, calibrate, fit_data, make_parameters, observability
 
 #: chi-square(1) upper quantiles at p = 1e-3 and 1e-2.
 CHI2_1_P1E3 = 10.828
@@ -192,6 +192,13 @@ class Discovery:
     settings: DiscoverSettings = field(default_factory=DiscoverSettings)
     stochastic: "stoch.StochasticFit | None" = None  #: the REML test of the stochastic biases (final fit)
     allan: "stoch.AllanView | None" = None  #: Allan view of the longest still interval, when long enough
+    #: the calibration to keep (``--out``): ``final`` refitted with the weights asked for when they are
+    #: "auto" and the residual exceeds the noise (the excess then in its weights and standard errors)
+    kept: CalibrationRun | None = None
+
+    @property
+    def calibration_run(self) -> CalibrationRun:
+        return self.kept if self.kept is not None else self.final
 
     # the gap, on interval means
     @property
@@ -371,6 +378,16 @@ class _Problem:
     def data(self, model) -> FitData:
         return fit_data(model, self.iv, self.rec, "means", self.rec.source)
 
+    def undetermined(self, effects: list[AxisEffect], res: FitResult) -> tuple[str, ...]:
+        """What the calibration's observability check (imucal.pipeline.observability) would call
+        undetermined in the model ``effects`` at the values of ``res``."""
+        model = build_model(effects)
+        g = self.run.guess  # the interval directions of imucal.pipeline.initial_guess
+        dirs = (self.iv.mean - g.s) / g.b
+        dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+        return observability(model, res.params, self.data(model), dirs, self.gravity,
+                             self.config.fit.angle_tolerance).undetermined
+
     def fit(self, effects: list[AxisEffect], start: dict[str, float]) -> FitResult:
         model, params = self.parameters(effects, start)
         res = fit(self.data(model), params, model, self.gravity, source=self.rec.source)
@@ -522,15 +539,12 @@ def _round(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int,
             notes.append(why)
             continue
         shapes = make_effect(c.name, c.axes).shape_names
-        # Judged on the noise-only standard errors, as the calibration's observability check judges
-        # the poses: the misfit a candidate leaves is the LR test's to weigh (scaled below), and
-        # scaling by it here refused a correct warm-up whenever another term was still missing.
-        noise_std = res.noise_std
-        loose = [n for n in (*make_effect(c.name, c.new_axes).coefficient_names, *shapes)
-                 if not noise_std.get(n, 0.0) <= res.params[n].scale]
-        if loose and shapes:  # the final calibration would refuse it as undetermined
-            notes.append(f"{c.label}: {loose[0]} undetermined (standard error above {res.params[loose[0]].scale:.3g} "
-                         f"{res.params[loose[0]].unit}), not counted")
+        # Judged by the calibration's own observability check at the fitted values (noise only: the
+        # misfit a candidate leaves is the LR test's to weigh, and scaling by it here refused a
+        # correct warm-up whenever another term was still missing).
+        loose = prob.undetermined(_canonical({**cur_effects, c.name: c.axes}), res) if shapes else ()
+        if loose:  # the final calibration would refuse it
+            notes.append(f"{c.label}: the poses leave {', '.join(loose)} undetermined, not counted")
             continue
         fits[i] = res
         # LR scaled by the misfit the candidate leaves: an underestimated noise cannot pass for an effect.
@@ -690,6 +704,8 @@ def _prune(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int,
 SHAPE_BINS = 6
 #: What the verdict says when the shape check drops a term.
 SHAPE_FAILED = "a piecewise-constant shape fits significantly better"
+#: The time covariate's name (imucal.model.effects), as the verdict names it.
+TIME = "time"
 
 
 def _shape_check(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]],
@@ -763,6 +779,7 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings(),
 
     ``progress`` is called after every candidate fit (imucal.report.progress)."""
     notes: list[str] = []
+    asked = config
     if config.fit.weights == "auto":  # discovery tests the residual against the noise alone
         config = dataclasses.replace(config, fit=dataclasses.replace(config.fit, weights="noise"))
     if config.fit.mode != "means":
@@ -808,8 +825,22 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings(),
                     sorted(cur_effects.items(), key=lambda kv: _EFFECT_ORDER[kv[0]]) if n in last)
     p_after = _p_noise(final.result)
     sto = stoch.assess(final, settings.alpha_noise) if p_after < settings.alpha_noise else None
+    # A term in time that the shape check dropped leaves structure in time: a random walk has such
+    # structure, and a step (which it does not explain) is tested by stochastic.select itself. Structure
+    # in temperature no stochastic bias of time explains.
+    if sto is not None and sto.named and SHAPE_FAILED in verdict and f"follows {TIME} but" not in verdict:
+        sto = dataclasses.replace(sto, named=(), withheld=sto.named, chosen=sto.fits["none"], ambiguous=False,
+                                  notes=sto.notes + (f"{' and '.join(sto.named)} not named: the shape check found "
+                                                     "structure in temperature",))
     verdict = _stochastic_verdict(verdict, sto)
-    return Discovery(base=base, final=final, steps=tuple(st.steps), effects=effects, verdict=verdict,
+    kept = None
+    if asked.fit.weights == "auto" and p_after < settings.alpha_noise:  # the excess into the weights kept
+        try:
+            kept = calibrate(_final_config(asked, cur_effects, current) if found else asked)
+        except ImucalError as exc:
+            notes.append(f"the calibration with weights auto was refused ({exc.message}); the one kept has "
+                         "weights noise")
+    return Discovery(base=base, final=final, steps=tuple(st.steps), effects=effects, verdict=verdict, kept=kept,
                      consistent_before=p_before >= settings.alpha_noise,
                      consistent_after=p_after >= settings.alpha_noise, p_before=p_before, p_after=p_after,
                      disagreement=tuple(st.disagreement), notes=tuple(notes) + (sto.notes if sto else ()),
@@ -996,14 +1027,18 @@ def _stochastic_verdict(verdict: str, sto: "stoch.StochasticFit | None") -> str:
         return verdict
     verdict = verdict.split("; the scatter between intervals fits", 1)[0]
     if not sto.named:
-        return verdict
+        if not sto.withheld:
+            return verdict
+        vals = ", ".join(f"{n} {v:.3g} +/- {s:.2g} {u}" for n, (v, s, u) in sto.values(sto.withheld).items())
+        why = (f"a single step of the bias at t = {sto.step_at:.4g} s fits better (a step is no term of the grammar)"
+               if math.isfinite(sto.step_at) else "the residual follows temperature" if SHAPE_FAILED in verdict
+               else "one jump between intervals is larger than a Gaussian stochastic bias allows")
+        return (f"{verdict}; a stochastic bias fits the scatter too ({vals}) but is not claimed: {why}; the default "
+                "fit (weights: auto) still counts the excess in its weights and standard errors")
     vals = ", ".join(f"{n} {v:.3g} +/- {s:.2g} {u}" for n, (v, s, u) in sto.values().items())
     amb = (" (the data cannot tell bias_instability from bias_random_walk)" if sto.ambiguous else "")
     fit = "which the default fit (weights: auto) includes in its weights and standard errors"
     head, unexplained, rest = verdict.partition("disagreement not explained by any candidate: ")
-    if SHAPE_FAILED in verdict:  # a step, say: a walk fits it too, but a step is not a Gaussian walk
-        return (f"{verdict}; a stochastic bias fits the scatter too ({vals}{amb}) but is not claimed: the shape "
-                f"check found structure in time, {fit}")
     if unexplained and not head:  # no deterministic term helps; a stochastic one of the grammar does
         return f"explained by a stochastic bias: {vals}{amb}, {fit}; no deterministic term helps ({rest})"
     if unexplained:  # "partly explained by X; the remaining ..."
@@ -1054,16 +1089,22 @@ def _final_run(config: RunConfig, base: CalibrationRun, found: list, cur_effects
     """The whole pipeline once more with the effects found: the calibration file to keep."""
     if not found:
         return base
-    specs = tuple(EffectSpec(n, tuple(AXIS_NAMES[a] for a in ax)) for n, ax in
-                  sorted(cur_effects.items(), key=lambda kv: _EFFECT_ORDER[kv[0]]))
-    start = {n: v for e in _canonical(cur_effects) for n in (*e.coefficient_names, *e.shape_names)
-             for v in [current.params[n].value] if n not in config.fit.initial}
-    final = calibrate(dataclasses.replace(config, fit=dataclasses.replace(
-        config.fit, effects=specs, initial={**config.fit.initial, **start})))
+    final = calibrate(_final_config(config, cur_effects, current))
     if final.result.chi2 > current.chi2 * (1 + 1e-6) + 1e-9:
         notes.append(f"the final calibration's chi2 {final.result.chi2:.6g} is above the discovery fit's "
                      f"{current.chi2:.6g} (a different local optimum)")
     return final
+
+
+def _final_config(config: RunConfig, cur_effects: dict[str, tuple[int, ...]], current: FitResult) -> RunConfig:
+    """``config`` with the effects found, every free parameter starting where discovery left it (so the
+    calibration's observability check judges the model at the values discovery judged it,
+    imucal.pipeline.observability)."""
+    specs = tuple(EffectSpec(n, tuple(AXIS_NAMES[a] for a in ax)) for n, ax in
+                  sorted(cur_effects.items(), key=lambda kv: _EFFECT_ORDER[kv[0]]))
+    start = {n: current.params[n].value for n in current.free_names if n not in config.fit.initial}
+    return dataclasses.replace(config, fit=dataclasses.replace(config.fit, effects=specs,
+                                                               initial={**config.fit.initial, **start}))
 
 
 def _label(name: str, axes: tuple[int, ...]) -> str:

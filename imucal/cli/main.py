@@ -19,7 +19,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 from imucal import __version__
-from imucal.errors import (EXIT_BAD_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, SIGNALS, ImucalError, Terminated,
+from imucal.errors import (EXIT_BAD_INPUT, EXIT_BROKEN_PIPE, EXIT_INTERNAL, EXIT_INTERRUPTED, SIGNALS, ImucalError, Terminated,
                            short)
 
 #: Subcommand name -> module. Modules import their heavy dependencies inside run().
@@ -125,7 +125,9 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError:  # not the main thread (e.g. a test runner's worker): leave it alone
         pass
     try:
-        return int(args.run(args) or 0)
+        code = int(args.run(args) or 0)
+        sys.stdout.flush()  # a reader gone shows here, not in the interpreter's last flush
+        return code
     except ImucalError as exc:
         sys.stderr.write(f"imucal: error: {exc}\n")
         return EXIT_BAD_INPUT
@@ -133,6 +135,12 @@ def main(argv: list[str] | None = None) -> int:
         sys.stderr.write("imucal: terminated; nothing was written\n" if isinstance(exc, Terminated)
                          else "imucal: interrupted; nothing was written\n")
         return EXIT_INTERRUPTED
+    except BrokenPipeError:  # the reader of stdout left (e.g. `| head`): as a pipe tool, end quietly
+        try:
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit's flush
+        except (OSError, ValueError):
+            pass
+        return EXIT_BROKEN_PIPE
     except MemoryError:
         if args.debug:
             _print_traceback()

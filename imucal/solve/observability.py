@@ -7,7 +7,7 @@ that load on the Jacobian's (near) null space are named as undetermined.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 
@@ -24,12 +24,22 @@ RANK_TOL = 1e-6
 #: 1 % of the sensitivity, 1 % of g of bias; for an angle, the half-width of its bound box
 #: (the angle tolerance), since the bounds alone already pin it that well.
 UNDETERMINED_Z = {"s": 0.01, "b": 0.01}
+#: A coefficient larger than its generous magnitude is determined when it is at least this many
+#: (noise-only) standard errors from zero: the detection level, chi-square(1) at p = 1e-3.
+LARGE_EFFECT_Z = 3.29
 #: Reported as poorly determined above this fraction of the threshold.
 POOR_FRACTION = 0.1
 
 
-def thresholds(free_names: tuple[str, ...], angle_tol: float) -> np.ndarray:
-    """Per-parameter undetermined thresholds in scaled units (effect parameters: 1)."""
+def thresholds(free_names: tuple[str, ...], angle_tol: float,
+               sizes: Mapping[str, float] | None = None) -> np.ndarray:
+    """Per-parameter undetermined thresholds in scaled units.
+
+    An effect parameter's is 1 (its generous magnitude), or its own size over LARGE_EFFECT_Z when a
+    start puts it larger (``sizes``: |value| / scale, e.g. a term discover found): a coefficient ten
+    times the usual size and ten standard errors from zero is determined, though its error is not
+    small against the usual size."""
+    sizes = sizes or {}
     out = []
     for n in free_names:
         if n in ANGLE_NAMES:
@@ -37,7 +47,7 @@ def thresholds(free_names: tuple[str, ...], angle_tol: float) -> np.ndarray:
         elif n[:1] in UNDETERMINED_Z and n[1:] in ("1", "2", "3"):
             out.append(UNDETERMINED_Z[n[:1]])
         else:
-            out.append(1.0)
+            out.append(max(1.0, abs(float(sizes.get(n, 0.0))) / LARGE_EFFECT_Z))
     return np.array(out)
 
 

@@ -76,8 +76,8 @@ def run(args: argparse.Namespace) -> int:
             from imucal.report.text import fit_report
 
             out = Path(args.out)
-            o.call(out / "calibration.yaml", result.final.calibration.save)
-            o.text(out / "report.txt", fit_report(result.final) + "\n" + text)
+            o.call(out / "calibration.yaml", result.calibration_run.calibration.save)
+            o.text(out / "report.txt", fit_report(result.calibration_run) + "\n" + text)
             written.append(f"{out / 'calibration.yaml'}, {out / 'report.txt'}")
         if page_path is not None:
             o.text(page_path, discovery_html(result, pngs))
