@@ -280,3 +280,40 @@ def test_edited_matrix_is_refused_through_the_cli(saved, tmp_path, run_cli, unch
     assert code == 2
     assert err.strip().count("\n") == 0
     assert "apply.offset: disagrees with the parameters" in err and "do not edit apply.matrix" in err
+
+
+@pytest.fixture(scope="module")
+def warm_saved(tmp_path_factory):
+    """A calibration with a bias warm-up (tau fitted) and a scale drift, from a simulated recording."""
+    from conftest import calibrate_file
+    from imucal.analysis.simulate import draw_effect_case
+
+    case = draw_effect_case(50010, effect="bias_warmup", axes=(0, 1, 2), snr=40.0, noise_mg=0.3)
+    d = tmp_path_factory.mktemp("warm")
+    (d / "rec.csv").write_text(case.config.run().to_csv_text())
+    run = calibrate_file(d / "rec.csv", data={"unit": case.config.sensor.unit},
+                         fit={"effects": ["bias_warmup", "scale_drift"]})
+    run.calibration.save(d / "calibration.yaml")
+    return d / "calibration.yaml"
+
+
+@pytest.mark.parametrize("name,value,bounds,whose", [
+    ("bias_warmup_tau", 0.0, True, "file's"), ("bias_warmup_tau", -5.0, True, "file's"),
+    ("bias_warmup_tau", 1e-300, False, "model's"), ("bias_warmup_tau", -5.0, False, "model's"),
+    ("bias_warmup_tau", 1e308, False, "model's"), ("scale_drift_x", -1.0, True, "file's"),
+    ("scale_drift_x", -1.0, False, "model's")])
+def test_an_effect_value_never_fitted_is_refused(warm_saved, tmp_path, run_cli, name, value, bounds, whose):
+    """A warm-up's tau at 0 or below made `apply` write NaN rows and the generated C return NaN or inf;
+    a value outside the file's own bounds, or (bounds removed) the model's, was never fitted."""
+    d = yaml.safe_load(warm_saved.read_text())
+    load_calibration(warm_saved)  # the fitted file loads
+    d["parameters"][name]["value"] = value
+    if not bounds:
+        d["parameters"][name].update(lower=None, upper=None)
+    p = tmp_path / "edited.yaml"
+    p.write_text(yaml.safe_dump(d, sort_keys=False))
+    with pytest.raises(ImucalError, match=f"outside the {whose} bounds") as ei:
+        load_calibration(p)
+    assert ei.value.field == f"parameters.{name}.value"
+    r = run_cli(["codegen", str(p), "--out", str(tmp_path / "c")])
+    assert r.code == 2 and f"parameters.{name}.value" in r.err and not (tmp_path / "c").exists()

@@ -430,6 +430,34 @@ def test_a_reader_that_leaves_ends_the_run_quietly_with_its_files(work):
     assert (work / "piped" / "calibration.yaml").is_file()
 
 
+@pytest.mark.parametrize("nth", [1, 2, 3])
+def test_a_signal_while_the_set_is_placed_leaves_the_old_set(work, monkeypatch, nth):
+    """SIGTERM right after the nth file of the set is moved into place (of the calibration, its
+    report and the JSON): the run says nothing was written, and the old files are all there, none
+    replaced and none lost (an interrupt there deleted old files with the staging folder)."""
+    import imucal.files.output as output
+
+    out = work / "pub"
+    out.mkdir()
+    old = {out / "calibration.yaml": "old cal", out / "report.txt": "old report", work / "pub.json": "old json"}
+    for f, text in old.items():
+        f.write_text(text)
+    real, moved = os.replace, []
+
+    def replace(a, b):
+        real(a, b)
+        moved.append(b)
+        if len(moved) == 2 * nth:  # each file: the old one to its backup, then the new one in place
+            os.kill(os.getpid(), signal.SIGTERM)
+
+    monkeypatch.setattr(output.os, "replace", replace)
+    monkeypatch.chdir(work)
+    assert main(["calibrate", "--data", "rec.csv", "--out", "pub", "--json", "pub.json", "--no-figures",
+                 "--quiet"]) == 130, moved
+    assert {f: f.read_text() for f in old} == old, moved
+    assert not list(work.glob("**/.imucal-*")) and not list(work.glob("**/.previous-*"))
+
+
 def test_sigterm_removes_staged_outputs(work):
     """SIGTERM while the figures are staged: exit 130, nothing published, no staging left."""
     p = _imucal(["calibrate", "--data", "rec.csv", "--out", "sig"], work)

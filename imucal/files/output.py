@@ -195,22 +195,43 @@ def _write_error(dest: Path, exc: OSError) -> ImucalError:
 
 
 @contextlib.contextmanager
-def _signals_deferred():
-    """Hold SIGINT and SIGTERM until the block ends (the handler then runs, raising as usual).
+def _signals_deferred() -> Iterator[Callable[[], bool]]:
+    """Hold SIGINT and SIGTERM until the block ends, then act on the first as its handler would
+    (raising as usual); yields "has one arrived meanwhile?".
 
-    A signal between mkdtemp's mkdir and the registration of the new folder would leave a
-    staging folder that no cleanup knows about.
+    The Python handlers are swapped for a note, not the signals masked: a process-directed signal goes
+    to any thread that does not block it (BLAS, a test runner), and Python runs its handler in the main
+    thread all the same. A signal between mkdtemp's mkdir and the registration of the new folder would
+    leave a staging folder that no cleanup knows about; one while a set is placed, half a set.
     """
-    sigs = {signal.SIGINT, signal.SIGTERM}
+    got: list[int] = []
+    sigs = (signal.SIGINT, signal.SIGTERM)
     try:
-        old = signal.pthread_sigmask(signal.SIG_BLOCK, sigs)
-    except (AttributeError, OSError, ValueError):  # platform without it: best effort
-        yield
+        old = {s: signal.signal(s, lambda signum, frame: got.append(signum)) for s in sigs}
+    except (ValueError, OSError):  # not the main thread: no handler to swap (none runs here either)
+        yield lambda: False
         return
     try:
-        yield
+        yield lambda: bool(got)
     finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+        for s, h in old.items():
+            signal.signal(s, signal.SIG_DFL if h is None else h)
+        if got:
+            h = old[got[0]]
+            if callable(h):
+                h(got[0], None)
+            elif h != signal.SIG_IGN:  # the default action (terminate), as if it came now
+                os.kill(os.getpid(), got[0])
+
+
+def _roll_back(done: list[tuple[Path, Path | None]]) -> None:
+    """Undo a publication: each backup back in place, each new file removed (last placed first)."""
+    for placed, backup in reversed(done):
+        with contextlib.suppress(OSError):
+            if backup is not None:
+                os.replace(backup, placed)
+            elif placed.exists():
+                os.unlink(placed)
 
 
 class OutputSet:
@@ -273,8 +294,9 @@ class OutputSet:
         if tmp.exists():
             os.chmod(tmp, 0o666 & ~_umask())
 
-    def _publish(self) -> None:
-        """Move every staged file into place; on any failure put back what was there before."""
+    def _publish(self) -> list[tuple[Path, Path | None]]:
+        """Move every staged file into place; on any failure put back what was there before.
+        Returns (destination, backup of what it replaced or None) per file placed."""
         done: list[tuple[Path, Path | None]] = []
         try:
             for tmp, dest in self._staged:
@@ -285,28 +307,30 @@ class OutputSet:
                 done.append((dest, backup))
                 os.replace(tmp, dest)
         except OSError as err:
-            failed = dest
-            for placed, backup in reversed(done):
-                with contextlib.suppress(OSError):
-                    if backup is not None:
-                        os.replace(backup, placed)
-                    elif placed.exists():
-                        os.unlink(placed)
-            raise _write_error(failed, err) from None
+            _roll_back(done)
+            raise _write_error(dest, err) from None
+        return done
 
     def __enter__(self) -> "OutputSet":
         return self
 
     def __exit__(self, exc_type, exc, tb) -> None:
         published = False
-        try:
-            if exc_type is None:
-                with _locked(self._tmpdirs):  # whole sets, one run after the other
-                    check_outputs(self._inputs, [d for _, d in self._staged])  # nothing changed meanwhile
-                    self._publish()
-                published = True
-        finally:
-            for d in self._tmpdirs.values():
-                shutil.rmtree(d, ignore_errors=True)
-            if not published:
-                _remove_dirs(self._created)
+        # SIGINT and SIGTERM wait while the set is placed and the staging removed: an interrupt in the
+        # middle left half a set, or deleted the old files with the staging. One that arrived meanwhile
+        # puts the old set back, then interrupts the run, which has then written nothing.
+        with _signals_deferred() as pending:
+            try:
+                if exc_type is None:
+                    with _locked(self._tmpdirs):  # whole sets, one run after the other
+                        check_outputs(self._inputs, [d for _, d in self._staged])  # nothing changed meanwhile
+                        done = self._publish()
+                        if pending():
+                            _roll_back(done)
+                        else:
+                            published = True
+            finally:
+                for d in self._tmpdirs.values():
+                    shutil.rmtree(d, ignore_errors=True)
+                if not published:
+                    _remove_dirs(self._created)
