@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from imucal.calibration.frozen import Calibration, now_utc
+from imucal.calibration.fileformat import BOUND_SLACK
 from imucal.config.run import RunConfig
 
 from imucal.data.load import Recording, load_recording, rails, use_stream
@@ -131,6 +132,21 @@ def effect_initial(params: Parameters, config: RunConfig) -> Parameters:
         raise ImucalError(f"{bad[0]} is not a free parameter of this model", file=config.source,
                           field=f"fit.initial.{bad[0]}", fix="name a base parameter or a coefficient of fit.effects")
     return params.with_values(init)
+
+
+def _check_initial_bounds(params: Parameters, config: RunConfig) -> None:
+    """A given start of an effect parameter must lie within its bounds (a warm-up's tau within the
+    recording): outside them the fit cannot start, and the observability check blamed the poses."""
+    for n, v in config.fit.initial.items():
+        if n in BASE_NAMES or n not in params.names:
+            continue
+        p = params[n]
+        slack = BOUND_SLACK * max(abs(p.lower) if math.isfinite(p.lower) else 0.0,
+                                  abs(p.upper) if math.isfinite(p.upper) else 0.0, p.scale)
+        if not p.lower - slack <= v <= p.upper + slack:  # (discovery's values, a hair outside at most)
+            raise ImucalError(f"{n} = {v:g} {p.unit} is outside its bounds [{p.lower:.6g}, {p.upper:.6g}] here",
+                              file=config.source, field=f"fit.initial.{n}",
+                              fix="give a start within the bounds, or leave it out to start from the data")
 
 
 def fit_data(model: SensorModel, intervals: Intervals, samples: StaticSamples | Recording | None, mode: str,
@@ -278,6 +294,7 @@ def _problem(config: RunConfig, rec: Recording | RecordingSummary, iv: Intervals
             params = prepare_parameters(model.effects, params, {"temp": iv.temp, "time": iv.t_mid}, iv.n,
                                         rec.source)
             params = effect_initial(params, config)  # a given start wins over the data's
+            _check_initial_bounds(params, config)
         samples = None
         if config.fit.mode == "samples":
             samples = streamed.samples if streamed is not None else static_samples(iv, rec)

@@ -179,6 +179,11 @@ def test_the_sensor_list_must_match_the_sections(saved, tmp_path, sensors):
     (lambda d: d.update(effects=[{"name": "bias_drift", "axes": ["x"]}]), "parameters", "do not match the model's"),
     (lambda d: d.update(effects="all"), "effects", "must be a list"),
     (lambda d: d.update(units=5), "units", "must be a mapping"),
+    (lambda d: d["fit"].update(rms_residual="abc"), "fit.rms_residual", "is not an RMS"),
+    (lambda d: d["fit"].update(rms_residual=-1e308), "fit.rms_residual", "is not an RMS"),
+    (lambda d: d["fit"].update(rms_residual=[1, 2]), "fit.rms_residual", "is not an RMS"),
+    (lambda d: d["fit"].update(temperature_range=[40.0, 20.0]), "fit.temperature_range", "min <= max"),
+    (lambda d: d["fit"].update(temperature_range={"a": 1}), "fit.temperature_range", "is not a temperature range"),
 ])
 def test_invalid_contents_are_refused(saved, tmp_path, mutate, field, match):
     d = _dict(saved)
@@ -317,3 +322,15 @@ def test_an_effect_value_never_fitted_is_refused(warm_saved, tmp_path, run_cli, 
     assert ei.value.field == f"parameters.{name}.value"
     r = run_cli(["codegen", str(p), "--out", str(tmp_path / "c")])
     assert r.code == 2 and f"parameters.{name}.value" in r.err and not (tmp_path / "c").exists()
+
+
+def test_a_long_parameter_list_makes_a_short_line(saved, tmp_path):
+    """5,000 parameters that match no model: the message printed every name (390,000 characters)."""
+    d = _dict(saved)
+    d["effects"] = [{"name": "bias_drift", "axes": ["x"]}]
+    d["parameters"].update({f"bias_drift_{i}": {"value": 0.0} for i in range(5000)})
+    p = tmp_path / "many.yaml"
+    p.write_text(yaml.safe_dump(d, sort_keys=False))
+    with pytest.raises(ImucalError, match="do not match the model's") as ei:
+        load_calibration(p)
+    assert len(str(ei.value)) < 700

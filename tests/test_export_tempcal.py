@@ -9,6 +9,7 @@ from __future__ import annotations
 import re
 
 import numpy as np
+import yaml
 import pytest
 
 from imucal.calibration.frozen import Calibration
@@ -151,6 +152,24 @@ def test_bad_temperature_parameters_are_one_line_errors(fmt, name, edit, field, 
     code, out, err = run_cli(["compare", other, p, "--data", tmp_path / "none.csv"])
     assert code == 2 and len(err.strip().splitlines()) == 1
     assert f"{p}: {field}:" in err
+
+
+@pytest.mark.parametrize("fmt", ["ardupilot", "px4"])
+@pytest.mark.parametrize("rng, match", [([30.0, 30.0], "narrower than the 0.5 degC"),
+                                        ([40.0, 20.0], "min <= max"), (["abc", 1], "of finite numbers"),
+                                        ([20.0], "is not a temperature range"), ([-1e308, 1e308], "is not a temperature in degC")])
+def test_an_edited_temperature_range_is_refused_not_exported(fmt, rng, match, tmp_path, run_cli):
+    """fit.temperature_range [30, 30] exported TC_A0_X1_0 = 72.47 for a true 2.47 (the fit needs 0.5 degC
+    of spread); a reversed, non-numeric or short one was an internal error or TMIN > TMAX."""
+    cal = calibration(BIAS, BIAS_COEFFS)
+    p = tmp_path / "cal.yaml"
+    cal.save(p)
+    d = yaml.safe_load(p.read_text())
+    d["fit"]["temperature_range"] = rng
+    p.write_text(yaml.safe_dump(d, sort_keys=False))
+    code, out, err = run_cli(["export", p, "--format", fmt, "--out", tmp_path / "x.param"])
+    assert code == 2 and len(err.strip().splitlines()) == 1 and re.search(match, err), err
+    assert f"{p}: fit.temperature_range:" in err and not (tmp_path / "x.param").exists()
 
 
 def test_no_temperature_terms_no_parameters():

@@ -176,6 +176,7 @@ def test_load_recording_arbitrary_bytes(tmp_path, blob):
            "columns": st.dictionaries(st.sampled_from(["t", "ax", "ay", "az", "temp"]),
                                       st.one_of(st.integers(0, 6), st.sampled_from(["t", "ax", "q", "x"])),
                                       max_size=5)}))
+@example(blob=b"t,ax,ay,az", spec={"format": "auto", "columns": {"t": 4}})  # an index past the header: IndexError
 def test_load_recording_malformed_csv(tmp_path, blob, spec):
     p = _write(tmp_path, "rec.csv", blob)
     try:

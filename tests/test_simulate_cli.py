@@ -155,6 +155,20 @@ def test_simulate_cli_bad_config_exits_2(tmp_path, capsys):
     assert code == 2 and "is not valid YAML" in err
 
 
+@pytest.mark.parametrize("edit", [lambda d: d["sensor"]["effects"]["bias_temperature"].update(bias_temperature_x=1e308),
+                                  lambda d: d["sensor"].update(random_walk=[1e300, 0, 0])])
+def test_a_simulation_beyond_what_imucal_reads_is_refused(edit, tmp_path, capsys):
+    """Sizes no sensor has wrote -inf or 1e300 columns (with numpy warnings) that every command then
+    refused as corrupt: the simulation is refused instead, naming the file, nothing written."""
+    d = _example()
+    edit(d)
+    p = tmp_path / "sim.yaml"
+    p.write_text(yaml.safe_dump(d))
+    code, _, err = _cli(capsys, "simulate", p, "--out", tmp_path / "x.csv", "--truth", tmp_path / "t.json")
+    assert code == 2 and err.startswith(f"imucal: error: {p}: sensor: the simulated readings reach"), err
+    assert len(err.strip().splitlines()) == 1 and not (tmp_path / "x.csv").exists()
+
+
 def test_explicit_directions_and_no_temperature():
     d = {"seed": 3, "sensor": {"preset": "si", "noise": 0.01},
          "plan": {"directions": [[1, 0, 0], [0, 2, 0], [0, 0, -1]], "n_random": 2, "hold": 2.0}}

@@ -142,7 +142,10 @@ def test_library_refuses_payload_in_memory(payload):
 
 def test_fit_values_that_are_text_print_as_na(tmp_path):
     d = _dict()
-    d["fit"]["rms_residual"] = PWN
+    d["fit"]["rms_residual"] = PWN  # a number commands compute with (drift): refused when read
+    with pytest.raises(ImucalError, match="fit.rms_residual: .* is not an RMS"):
+        load_calibration(_write(tmp_path / "c.yaml", d))
+    del d["fit"]["rms_residual"]
     d["fit"]["rms_residual_samples"] = "1e999 */"
     gen = generate_c(load_calibration(_write(tmp_path / "c.yaml", d)))
     _assert_clean(gen.files)

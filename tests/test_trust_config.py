@@ -319,3 +319,20 @@ def test_read_yaml_and_config_from_dict_refuse_the_same_huge_integer(tmp_path):
     with pytest.raises(ImucalError, match="fit.fix.phi: integer is too large for a float"):
         config_from_dict({"data": {"path": "a.csv"}, "fit": {"fix": {"phi": 10**400}}})
     assert read_yaml(ROOT / "configs" / "xsens-mti-imutk.yaml", "config", "")["data"]
+
+
+@pytest.mark.parametrize("fit, field, words", [
+    ({"effects": [{"name": "bias_warmup", "axes": ["x"]}, {"name": "bias_warmup", "axes": ["y"]}]},
+     "fit.effects[1]", "is listed twice"),
+    ({"effects": ["bias_warmup"], "initial": {"bias_warmup_tau": -5.0}}, "fit.initial.bias_warmup_tau",
+     "is outside its bounds"),
+    ({"effects": ["scale_drift2"], "initial": {"scale_drift2_x": -1.0}}, "fit.initial.scale_drift2_x",
+     "is outside its bounds")])
+def test_effect_settings_are_blamed_not_the_poses(si_recording, tmp_path, run_cli, fit, field, words):
+    """An effect listed twice was 'parameters: duplicate parameter' with no file or fix; a start outside
+    its bounds made the observability check blame the orientations."""
+    cfg = tmp_path / "run.yaml"
+    cfg.write_text(yaml.safe_dump({"data": {"path": str(si_recording.path), "unit": "m/s^2"}, "fit": fit}))
+    r = run_cli(["calibrate", str(cfg), "--out", str(tmp_path / "o")])
+    assert r.code == 2 and r.err.startswith(f"imucal: error: {cfg}: {field}: ") and words in r.err, r.err
+    assert len(r.err.strip().splitlines()) == 1 and not (tmp_path / "o").exists()

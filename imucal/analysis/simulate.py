@@ -17,6 +17,7 @@ import numpy as np
 
 from imucal.constants import RIGHT_ANGLE, STANDARD_GRAVITY
 from imucal.errors import ImucalError, short
+from imucal.data.recording import MAX_ABS_VALUE
 from imucal.model.sensor import frame_np, gram_det_np
 from imucal.config.limits import MAX_SIM_POSES, MAX_SIM_SAMPLES, check_seed
 from imucal.files.schema import fill, rule
@@ -253,8 +254,17 @@ class SimulationConfig:
     source: str | None = None  #: the YAML file, for messages
 
     def run(self) -> Simulation:
-        return simulate(self.sensor, self.plan, gravity=self.gravity, seed=self.seed,
-                        temperature=self.temperature)
+        """The recording; refused when its readings leave what imucal reads back (finite, within
+        +-MAX_ABS_VALUE): a simulation file with absurd sizes wrote -inf or 1e300 columns."""
+        with np.errstate(all="ignore"):
+            sim = simulate(self.sensor, self.plan, gravity=self.gravity, seed=self.seed,
+                           temperature=self.temperature)
+        peak = float(np.max(np.abs(sim.raw))) if sim.raw.size else 0.0
+        if not peak <= MAX_ABS_VALUE:  # (NaN fails too)
+            raise ImucalError(f"the simulated readings reach {peak:.3g}, beyond the +-{MAX_ABS_VALUE:g} imucal reads",
+                              file=self.source, field="sensor",
+                              fix="give the sensor sizes a sensor has (effects, random_walk, visit_offset, noise, s, b)")
+        return sim
 
 
 #: Three numbers, or one for all three axes.

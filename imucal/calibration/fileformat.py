@@ -202,6 +202,7 @@ def from_dict(d: Mapping[str, Any], path: str = "<calibration>") -> "frozen.Cali
     check_text_fields(cal, path)
     _check_parameter_names(cal, path)
     _check_bounds(cal, path)
+    _check_fit_numbers(cal.fit, path)
     _check_model_name(f.model, cal, path)
     _check_derived(f.apply, cal, path)
     return cal
@@ -216,8 +217,8 @@ def _check_parameter_names(cal: "frozen.Calibration", path: str) -> None:
         except ImucalError as exc:
             raise ImucalError(exc.message, file=path, field=exc.field or "effects", fix=exc.fix) from None
         if names != model_names:
-            raise ImucalError(f"parameters {list(names)} do not match the model's {list(model_names)}",
-                              file=path, field="parameters", fix=REGEN)
+            raise ImucalError(f"parameters {short(list(names), 200)} do not match the model's "
+                              f"{short(list(model_names), 200)}", file=path, field="parameters", fix=REGEN)
     elif len(names) != len(BASE_NAMES):
         extra = [n for n in names if n not in BASE_NAMES]
         raise ImucalError(f"parameter(s) {short(extra)} belong to no effect of this calibration", file=path,
@@ -335,6 +336,22 @@ def _check_bounds(cal: "frozen.Calibration", path: str) -> None:
             if not lo - slack <= p.value <= hi + slack:
                 raise ImucalError(f"{n} = {p.value:.6g} {p.unit} is outside {whose} bounds [{lo:.6g}, {hi:.6g}]",
                                   file=path, field=f"parameters.{n}.value", fix=REGEN)
+
+
+def _check_fit_numbers(fit: Mapping[str, Any], path: str) -> None:
+    """The numbers of the fit section that commands compute with (``drift`` the RMS residual, the
+    exports the temperature range): finite, the RMS not negative, the range [min, max] in order."""
+    def number(x: Any) -> bool:
+        return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+    if "rms_residual" in fit and not (number(fit["rms_residual"]) and fit["rms_residual"] >= 0):
+        raise ImucalError(f"{short(repr(fit['rms_residual']), 40)} is not an RMS (a finite number >= 0)", file=path,
+                          field="fit.rms_residual", fix=REGEN)
+    if "temperature_range" in fit:
+        r = fit["temperature_range"]
+        if not (isinstance(r, list) and len(r) == 2 and all(number(x) for x in r) and r[0] <= r[1]):
+            raise ImucalError(f"{short(repr(r), 60)} is not a temperature range [min, max] of finite numbers, "
+                              "min <= max", file=path, field="fit.temperature_range", fix=REGEN)
 
 
 def validate_parameters(params: Parameters, path: str = "<calibration>") -> None:

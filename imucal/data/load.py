@@ -555,6 +555,11 @@ def layout(lines: list[str], spec: DataSpec, path: Path) -> Layout:
         delim = spec.delimiter or _sniff_delimiter(lines[header_idx])
         names = [t.strip().strip('"').strip("'") for t in _split(lines[header_idx], delim)]
         cols = _header_columns(names, spec, path)
+        wide = [r for r, c in cols.items() if not 0 <= c < len(names)]
+        if wide:
+            raise ImucalError(f"column {cols[wide[0]]} of {wide[0]} is beyond the header's {len(names)} columns",
+                              file=str(path), field=f"data.columns.{wide[0]}",
+                              fix=f"give a 0-based index below {len(names)}, or the column's name")
         body = header_idx + 1
     else:
         if not all(_is_number(t) for t in _split(lines[k0], spec.delimiter)):

@@ -29,6 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from imucal.calibration.frozen import Calibration
+from imucal.errors import ImucalError
+from imucal.model.effects import MIN_TEMPERATURE_SPREAD
 from imucal.model.parameters import BASE_NAMES, Parameters
 
 BIAS_TERMS = ("bias_temperature", "bias_temperature2", "bias_temperature3")
@@ -89,6 +91,10 @@ def _affine_at(cal: Calibration, temp: float, probe: float) -> tuple[np.ndarray,
     return A, -np.linalg.solve(A, a[0])
 
 
+#: Temperatures the exports accept [degC]: above absolute zero, below where any electronics survives.
+ABSOLUTE_ZERO, MAX_TEMPERATURE = -273.15, 1000.0
+
+
 def polynomial(cal: Calibration) -> TempPolynomial | None:
     """s(T) of the temperature terms, exactly (a cubic through NODES samples; module docstring)."""
     part = temperature_part(cal)
@@ -98,6 +104,15 @@ def polynomial(cal: Calibration) -> TempPolynomial | None:
     rng = cal.fit.get("temperature_range") if isinstance(cal.fit, dict) else None
     if rng:
         tmin, tmax, note = float(rng[0]), float(rng[1]), "the calibration data's temperature range"
+        if not (ABSOLUTE_ZERO <= tmin and tmax <= MAX_TEMPERATURE):  # the peers' parameters are in degC
+            raise ImucalError(f"temperature range {tmin:g}..{tmax:g} degC is not a temperature in degC "
+                              f"({ABSOLUTE_ZERO:g} to {MAX_TEMPERATURE:g})", field="fit.temperature_range",
+                              fix="record the temperature column in degC and recalibrate")
+        if not tmax - tmin >= MIN_TEMPERATURE_SPREAD:  # the fit needs that much: this file was edited
+            raise ImucalError(f"temperature range {tmin:g}..{tmax:g} degC is narrower than the "
+                              f"{MIN_TEMPERATURE_SPREAD:g} degC its temperature terms were fitted over",
+                              field="fit.temperature_range",
+                              fix="regenerate the file with `imucal calibrate`")
     else:
         tmin, tmax = tref - DEFAULT_HALF_RANGE, tref + DEFAULT_HALF_RANGE
         note = f"no temperature range recorded: T_ref +- {DEFAULT_HALF_RANGE:g} degC"

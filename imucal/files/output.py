@@ -102,7 +102,8 @@ def _make_parent(path: Path) -> list[Path]:
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise ImucalError(f"cannot create the directory: {exc.strerror}", file=str(path), field="output") from None
+        raise ImucalError(f"cannot create the directory: {exc.strerror}", file=str(path), field="output",
+                          fix="choose an output folder you can write to") from None
     return missing
 
 

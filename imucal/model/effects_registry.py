@@ -20,5 +20,8 @@ def effects_from_specs(specs: Sequence, source: str | None = None) -> list:
         if bad or not s.axes:
             raise ImucalError(f"axes {short(list(s.axes))} must be a non-empty list of x, y, z", file=source,
                               field=f"fit.effects[{i}].axes")
+        if any(e.name == s.name for e in out):
+            raise ImucalError(f"effect {s.name} is listed twice", file=source, field=f"fit.effects[{i}]",
+                              fix=f"list it once with all its axes, e.g. {{name: {s.name}, axes: [x, y]}}")
         out.append(make_effect(s.name, tuple("xyz".index(a) for a in s.axes)))
     return out

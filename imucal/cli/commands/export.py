@@ -70,7 +70,12 @@ def run(args: argparse.Namespace) -> int:
         rec = load_recording(cfg.data, cfg.base_dir)
         graw = gyro_on_accel_samples(rec, None if gyro_file is None else str(gyro_file))
         noise = still_noise(cal, rec.t, rec.raw, rec.sample_rate, graw)
-    out = export(cal, args.format, ExportOptions(filename=str(args.out), noise=noise, rostopic=args.rostopic))
+    try:
+        out = export(cal, args.format, ExportOptions(filename=str(args.out), noise=noise, rostopic=args.rostopic))
+    except ImucalError as exc:  # about the calibration's contents unless it names another file
+        if exc.file is not None:
+            raise
+        raise ImucalError(exc.message, file=str(args.calibration), field=exc.field, fix=exc.fix) from None
     with OutputSet(inputs) as files:  # both of imu_tk's files appear, or neither
         files.text(args.out, out.text)
         if gyro_out:
