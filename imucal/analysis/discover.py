@@ -1102,7 +1102,8 @@ def _final_config(config: RunConfig, cur_effects: dict[str, tuple[int, ...]], cu
     imucal.pipeline.observability)."""
     specs = tuple(EffectSpec(n, tuple(AXIS_NAMES[a] for a in ax)) for n, ax in
                   sorted(cur_effects.items(), key=lambda kv: _EFFECT_ORDER[kv[0]]))
-    start = {n: current.params[n].value for n in current.free_names if n not in config.fit.initial}
+    start = {n: min(max(p.value, p.lower), p.upper)  # (IPOPT may end a hair outside a bound)
+             for n in current.free_names if n not in config.fit.initial for p in [current.params[n]]}
     return dataclasses.replace(config, fit=dataclasses.replace(config.fit, effects=specs,
                                                                initial={**config.fit.initial, **start}))
 
