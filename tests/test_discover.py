@@ -134,6 +134,7 @@ def test_per_pose_offsets_are_named_a_stochastic_bias_not_a_term(tmp_path):
     assert (kept["weights"], tested["weights"]) == ("auto", "noise")
     assert kept["bias_instability"] > 0 == tested["bias_instability"]
     assert d.calibration_run.result.std["s1"] > 2 * d.final.result.noise_std["s1"]
+    assert d.to_json()["calibration_weights"] == "auto"
 
 
 def test_real_xsens_recording_gets_no_invented_effect():

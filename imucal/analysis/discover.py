@@ -248,6 +248,7 @@ class Discovery:
             "consistent_before": self.consistent_before, "consistent_after": self.consistent_after,
             "n_intervals": int(self.base.intervals.n),
             "model_before": b.model_name, "model_after": f.model_name,
+            "calibration_weights": self.calibration_run.calibration.fit.get("weights"),  # of the one --out writes
             "disagreement": [{"pattern": p, "chi2_removed": num(v)} for p, v in self.disagreement],
             "steps": [{"round": s.index, "chi2_before": s.chi2_before, "dof_before": s.dof_before,
                        "scale": s.scale, "p_scan": num(s.p_scan), "chosen": s.chosen.label if s.chosen else None,
