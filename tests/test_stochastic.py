@@ -210,3 +210,25 @@ def test_the_grid_likelihood_is_the_likelihood(ml):
     alone = grid[:, 1] == 0  # bias_instability's grid: q^2 = 0 throughout, no basis change
     assert np.allclose(stochastic.reml_grid(c, grid[alone], ml=ml), want[alone], rtol=0,
                        atol=1e-9 * np.max(np.abs(want)))
+
+
+def test_a_drift_the_walk_beats_leaves_a_calibration_without_it(tmp_path):
+    """bias_temperature on x and a random walk: the search finds a drift too, which the walk then
+    explains (discover._beaten drops it). The final calibration started from every free parameter of
+    the search, the dropped drift's included, and refused it: `fit.initial.bias_drift_x is not a free
+    parameter` ended the run (seed 4 of an outside review)."""
+    from imucal.analysis.discover import discover
+    from imucal.analysis.simulate import TemperatureProfile
+    from imucal.config.run import config_from_dict
+
+    rng = np.random.default_rng(4)
+    sens = dataclasses.replace(si_sensor(rng, noise=0.003), random_walk=(2e-4,) * 3, effects={
+        "bias_temperature": {"bias_temperature_x": 0.002, "bias_temperature_y": 0.0, "bias_temperature_z": 0.0}})
+    d = cube_directions("faces+edges")
+    dirs = np.vstack([d[rng.permutation(18)], d[rng.permutation(18)]])
+    sim = simulate(sens, PosePlan(dirs, hold=3.0, transition=2.0, initial_hold=110.0), seed=4,
+                   temperature=TemperatureProfile())
+    (tmp_path / "tw.csv").write_text(sim.to_csv_text())
+    disc = discover(config_from_dict({"data": {"path": str(tmp_path / "tw.csv"), "unit": "m/s^2"}}, None))
+    assert [(e.name, e.axes) for e in disc.effects] == [("bias_temperature", (0,))], disc.verdict
+    assert disc.stochastic.named and disc.calibration_run.calibration.fit["weights"] == "auto"

@@ -458,6 +458,45 @@ def test_a_signal_while_the_set_is_placed_leaves_the_old_set(work, monkeypatch, 
     assert not list(work.glob("**/.imucal-*")) and not list(work.glob("**/.previous-*"))
 
 
+@pytest.mark.parametrize("when", ["after", "ignored"])
+def test_a_signal_after_the_set_is_complete_or_ignored_keeps_the_new_set(tmp_path, monkeypatch, when):
+    """A SIGINT while the staging is removed, after the set is in place, is dropped (the run is
+    complete; it said "nothing was written" with the new files in place); an ignored SIGINT (a job
+    started with &) stays ignored (it rolled the set back silently)."""
+    import shutil
+
+    import imucal.files.output as output
+
+    (tmp_path / "a.txt").write_text("old")
+    real_rm, real_replace, fired = shutil.rmtree, os.replace, []
+
+    def rm(*a, **k):
+        if not fired:
+            fired.append(1)
+            os.kill(os.getpid(), signal.SIGINT)
+        return real_rm(*a, **k)
+
+    def replace(a, b):
+        real_replace(a, b)
+        if not fired:
+            fired.append(1)
+            os.kill(os.getpid(), signal.SIGINT)
+
+    before = signal.getsignal(signal.SIGINT)
+    try:
+        if when == "after":
+            monkeypatch.setattr(output.shutil, "rmtree", rm)
+        else:
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+            monkeypatch.setattr(output.os, "replace", replace)
+        with output.OutputSet() as o:
+            o.text(tmp_path / "a.txt", "new")
+    finally:
+        signal.signal(signal.SIGINT, before)
+    assert fired and (tmp_path / "a.txt").read_text() == "new"
+    assert not list(tmp_path.glob(".imucal-*"))
+
+
 def test_sigterm_removes_staged_outputs(work):
     """SIGTERM while the figures are staged: exit 130, nothing published, no staging left."""
     p = _imucal(["calibrate", "--data", "rec.csv", "--out", "sig"], work)

@@ -54,6 +54,7 @@ from imucal.solve.stats import between_excess, chi2_sf, power_chi2_1
 from imucal.errors import ImucalError
 from imucal.solve.fit import FitData, FitResult, fit, jacobian_rows
 
+from imucal.model.parameters import BASE_NAMES
 from imucal.model.sensor import build_model
 from imucal.pipeline import CalibrationRun, calibrate, fit_data, make_parameters, observability
 
@@ -707,6 +708,8 @@ SHAPE_BINS = 6
 SHAPE_FAILED = "a piecewise-constant shape fits significantly better"
 #: The time covariate's name (imucal.model.effects), as the verdict names it.
 TIME = "time"
+#: The note of a stochastic bias withheld because the residual follows temperature.
+_IN_TEMPERATURE = "a stochastic bias is not named: the shape check found structure in temperature"
 
 
 def _shape_check(prob: _Problem, current: FitResult, cur_effects: dict[str, tuple[int, ...]],
@@ -831,13 +834,13 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings(),
     # in temperature no stochastic bias of time explains.
     if sto is not None and sto.named and SHAPE_FAILED in verdict and f"follows {TIME} but" not in verdict:
         sto = dataclasses.replace(sto, named=(), withheld=sto.named, chosen=sto.fits["none"], ambiguous=False,
-                                  notes=sto.notes + (f"{' and '.join(sto.named)} not named: the shape check found "
-                                                     "structure in temperature",))
+                                  notes=sto.notes + (_IN_TEMPERATURE,))
     verdict = _stochastic_verdict(verdict, sto)
     kept = None
     if asked.fit.weights == "auto" and p_after < settings.alpha_noise:  # the excess into the weights kept
         try:
-            kept = calibrate(_final_config(asked, cur_effects, current) if found else asked)
+            auto = dataclasses.replace(config, fit=dataclasses.replace(config.fit, weights="auto"))
+            kept = calibrate(_final_config(auto, cur_effects, current) if found else auto)
         except ImucalError as exc:
             notes.append(f"the calibration with weights auto was refused ({exc.message}); the one kept has "
                          "weights noise")
@@ -1032,7 +1035,7 @@ def _stochastic_verdict(verdict: str, sto: "stoch.StochasticFit | None") -> str:
             return verdict
         vals = ", ".join(f"{n} {v:.3g} +/- {s:.2g} {u}" for n, (v, s, u) in sto.values(sto.withheld).items())
         why = (f"a single step of the bias at t = {sto.step_at:.4g} s fits better (a step is no term of the grammar)"
-               if math.isfinite(sto.step_at) else "the residual follows temperature" if SHAPE_FAILED in verdict
+               if math.isfinite(sto.step_at) else "the residual follows temperature" if _IN_TEMPERATURE in sto.notes
                else "one jump between intervals is larger than a Gaussian stochastic bias allows")
         return (f"{verdict}; a stochastic bias fits the scatter too ({vals}) but is not claimed: {why}; the default "
                 "fit (weights: auto) still counts the excess in its weights and standard errors")
@@ -1103,8 +1106,10 @@ def _final_config(config: RunConfig, cur_effects: dict[str, tuple[int, ...]], cu
     imucal.pipeline.observability)."""
     specs = tuple(EffectSpec(n, tuple(AXIS_NAMES[a] for a in ax)) for n, ax in
                   sorted(cur_effects.items(), key=lambda kv: _EFFECT_ORDER[kv[0]]))
+    names = {n for e in _canonical(cur_effects) for n in (*e.coefficient_names, *e.shape_names)}
     start = {n: min(max(p.value, p.lower), p.upper)  # (IPOPT may end a hair outside a bound)
-             for n in current.free_names if n not in config.fit.initial for p in [current.params[n]]}
+             for n in current.free_names if n not in config.fit.initial and (n in BASE_NAMES or n in names)
+             for p in [current.params[n]]}
     return dataclasses.replace(config, fit=dataclasses.replace(config.fit, effects=specs,
                                                                initial={**config.fit.initial, **start}))
 

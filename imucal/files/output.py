@@ -195,34 +195,51 @@ def _write_error(dest: Path, exc: OSError) -> ImucalError:
                        fix="free space or choose another output folder; nothing was written")
 
 
+class _Deferred:
+    """The signals noted while deferred (``_signals_deferred``)."""
+
+    def __init__(self) -> None:
+        self.got: list[int] = []
+
+    def pending(self) -> bool:
+        return bool(self.got)
+
+    def forget(self) -> None:
+        """Drop what arrived: the work it would have interrupted is complete (the program then ends, or
+        goes on to its next step, within milliseconds; main ignores a signal during its exit alike)."""
+        self.got.clear()
+
+
 @contextlib.contextmanager
-def _signals_deferred() -> Iterator[Callable[[], bool]]:
+def _signals_deferred() -> Iterator[_Deferred]:
     """Hold SIGINT and SIGTERM until the block ends, then act on the first as its handler would
-    (raising as usual); yields "has one arrived meanwhile?".
+    (raising as usual); yields what arrived meanwhile. An ignored signal (SIG_IGN) stays ignored.
 
     The Python handlers are swapped for a note, not the signals masked: a process-directed signal goes
     to any thread that does not block it (BLAS, a test runner), and Python runs its handler in the main
     thread all the same. A signal between mkdtemp's mkdir and the registration of the new folder would
     leave a staging folder that no cleanup knows about; one while a set is placed, half a set.
     """
-    got: list[int] = []
-    sigs = (signal.SIGINT, signal.SIGTERM)
+    d = _Deferred()
     try:
-        old = {s: signal.signal(s, lambda signum, frame: got.append(signum)) for s in sigs}
+        old = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+        old = {s: h for s, h in old.items() if h != signal.SIG_IGN}
+        for s in old:
+            signal.signal(s, lambda signum, frame: d.got.append(signum))
     except (ValueError, OSError):  # not the main thread: no handler to swap (none runs here either)
-        yield lambda: False
+        yield d
         return
     try:
-        yield lambda: bool(got)
+        yield d
     finally:
         for s, h in old.items():
             signal.signal(s, signal.SIG_DFL if h is None else h)
-        if got:
-            h = old[got[0]]
+        if d.got:
+            h = old[d.got[0]]
             if callable(h):
-                h(got[0], None)
-            elif h != signal.SIG_IGN:  # the default action (terminate), as if it came now
-                os.kill(os.getpid(), got[0])
+                h(d.got[0], None)
+            else:  # the default action (terminate), as if it came now
+                os.kill(os.getpid(), d.got[0])
 
 
 def _roll_back(done: list[tuple[Path, Path | None]]) -> None:
@@ -317,21 +334,31 @@ class OutputSet:
 
     def __exit__(self, exc_type, exc, tb) -> None:
         published = False
-        # SIGINT and SIGTERM wait while the set is placed and the staging removed: an interrupt in the
-        # middle left half a set, or deleted the old files with the staging. One that arrived meanwhile
-        # puts the old set back, then interrupts the run, which has then written nothing.
-        with _signals_deferred() as pending:
-            try:
-                if exc_type is None:
-                    with _locked(self._tmpdirs):  # whole sets, one run after the other
-                        check_outputs(self._inputs, [d for _, d in self._staged])  # nothing changed meanwhile
-                        done = self._publish()
-                        if pending():
-                            _roll_back(done)
-                        else:
-                            published = True
-            finally:
-                for d in self._tmpdirs.values():
-                    shutil.rmtree(d, ignore_errors=True)
-                if not published:
-                    _remove_dirs(self._created)
+        try:
+            # Whole sets, one run after the other: a signal while waiting for another run's lock
+            # interrupts as usual. SIGINT and SIGTERM then wait while the set is placed and the staging
+            # removed (an interrupt in the middle left half a set, or deleted the old files with the
+            # staging): one that arrived while the set was placed puts the old set back and interrupts
+            # the run, which has then written nothing; one after the set is complete is dropped.
+            with _locked(self._tmpdirs) if exc_type is None else contextlib.nullcontext():
+                with _signals_deferred() as sig:
+                    try:
+                        if exc_type is None:
+                            check_outputs(self._inputs, [d for _, d in self._staged])  # nothing changed meanwhile
+                            done = self._publish()
+                            if sig.pending():
+                                _roll_back(done)
+                            else:
+                                published = True
+                    finally:
+                        self._clean(published)
+                        if published:
+                            sig.forget()
+        finally:
+            self._clean(published)  # (again, when the wait for the lock was interrupted)
+
+    def _clean(self, published: bool) -> None:
+        for d in self._tmpdirs.values():
+            shutil.rmtree(d, ignore_errors=True)
+        if not published:
+            _remove_dirs(self._created)
