@@ -11,7 +11,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from imucal.calibration.frozen import Calibration, now_utc
-from imucal.calibration.fileformat import BOUND_SLACK
 from imucal.config.run import RunConfig
 
 from imucal.data.load import Recording, load_recording, rails, use_stream
@@ -141,9 +140,7 @@ def _check_initial_bounds(params: Parameters, config: RunConfig) -> None:
         if n in BASE_NAMES or n not in params.names:
             continue
         p = params[n]
-        slack = BOUND_SLACK * max(abs(p.lower) if math.isfinite(p.lower) else 0.0,
-                                  abs(p.upper) if math.isfinite(p.upper) else 0.0, p.scale)
-        if not p.lower - slack <= v <= p.upper + slack:  # (discovery's values, a hair outside at most)
+        if not p.admits(v):  # (discovery's values are a hair outside at most)
             raise ImucalError(f"{n} = {v:g} {p.unit} is outside its bounds [{p.lower:.6g}, {p.upper:.6g}] here",
                               file=config.source, field=f"fit.initial.{n}",
                               fix="give a start within the bounds, or leave it out to start from the data")

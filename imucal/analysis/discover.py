@@ -366,6 +366,9 @@ class _Problem:
         self.rec = base.recording
         self.gravity = base.calibration.gravity
         self.cov = {"temp": self.iv.temp, "time": self.iv.t_mid}
+        g = base.guess  # the interval directions of imucal.pipeline.initial_guess
+        d = (self.iv.mean - g.s) / g.b
+        self.directions = d / np.linalg.norm(d, axis=1, keepdims=True)
 
     def parameters(self, effects: list[AxisEffect], start: dict[str, float], check: bool = True):
         model = build_model(effects)
@@ -384,11 +387,8 @@ class _Problem:
         """What the calibration's observability check (imucal.pipeline.observability) would call
         undetermined in the model ``effects`` at the values of ``res``."""
         model = build_model(effects)
-        g = self.run.guess  # the interval directions of imucal.pipeline.initial_guess
-        dirs = (self.iv.mean - g.s) / g.b
-        dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
-        return observability(model, res.params, self.data(model), dirs, self.gravity,
-                             self.config.fit.angle_tolerance).undetermined
+        return observability(model, res.params, self.data(model), self.directions, self.gravity,
+                              self.config.fit.angle_tolerance).undetermined
 
     def fit(self, effects: list[AxisEffect], start: dict[str, float]) -> FitResult:
         model, params = self.parameters(effects, start)

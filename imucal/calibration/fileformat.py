@@ -316,11 +316,6 @@ def _check_derived(apply: Any, cal: "frozen.Calibration", path: str) -> None:
                               f"{dev / ref if ref else math.inf:.3g})", file=path, field=f"apply.{key}", fix=fix)
 
 
-#: Slack of the bound checks, relative to the bound or the parameter's scale: IPOPT may end a hair
-#: outside a bound (bound_relax_factor 1e-8).
-BOUND_SLACK = 1e-6
-
-
 def _check_bounds(cal: "frozen.Calibration", path: str) -> None:
     """Every value within the file's own bounds, and an effect's within the model's (a warm-up's tau
     in [1, 1e5] s, a scale coefficient that keeps the scale positive): a value outside them was never
@@ -331,9 +326,7 @@ def _check_bounds(cal: "frozen.Calibration", path: str) -> None:
     for n in cal.params.names:
         p = cal.params[n]
         for lo, hi, whose in ((p.lower, p.upper, "the file's"), (*model.get(n, (-math.inf, math.inf)), "the model's")):
-            slack = BOUND_SLACK * max(abs(lo) if math.isfinite(lo) else 0.0, abs(hi) if math.isfinite(hi) else 0.0,
-                                      p.scale)
-            if not lo - slack <= p.value <= hi + slack:
+            if not p.admits(p.value, lo, hi):
                 raise ImucalError(f"{n} = {p.value:.6g} {p.unit} is outside {whose} bounds [{lo:.6g}, {hi:.6g}]",
                                   file=path, field=f"parameters.{n}.value", fix=REGEN)
 

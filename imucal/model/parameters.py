@@ -13,6 +13,10 @@ BASE_NAMES = ("s1", "s2", "s3", "b1", "b2", "b3", "phi", "psi", "theta")
 ANGLE_NAMES = ("phi", "psi", "theta")
 
 
+#: Slack of a bound check, relative to the bound or the parameter's scale (Parameter.admits).
+BOUND_SLACK = 1e-6
+
+
 @dataclass(frozen=True)
 class Parameter:
     """One named parameter.
@@ -41,6 +45,15 @@ class Parameter:
     @property
     def free(self) -> bool:
         return not self.fixed
+
+    def admits(self, value: float, lower: float | None = None, upper: float | None = None) -> bool:
+        """``value`` within [lower, upper] (default: this parameter's bounds), up to BOUND_SLACK of
+        the larger of the finite bounds and the scale: IPOPT may end a hair outside a bound
+        (bound_relax_factor 1e-8). False for NaN."""
+        lo = self.lower if lower is None else lower
+        hi = self.upper if upper is None else upper
+        slack = BOUND_SLACK * max([abs(b) for b in (lo, hi) if math.isfinite(b)] + [self.scale])
+        return lo - slack <= value <= hi + slack
 
     def at_bound(self, rel_tol: float = 1e-6) -> str | None:
         """'lower' or 'upper' when the value sits on a finite bound, else None."""

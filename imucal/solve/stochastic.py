@@ -238,8 +238,8 @@ def step_test(c: Components, tau2: float, q2: float) -> tuple[float, float, int]
     ts = c.t[order]
     Q0 = _left(np.linalg.solve(L, c.X), rw)
     best, tried = (-math.inf, math.nan), 0
-    for m in range(3, n - 2):
-        if ts[m] <= ts[m - 1] or dof < 1:
+    for m in range(3, n - 2) if dof >= 1 else ():
+        if ts[m] <= ts[m - 1]:
             continue
         X = np.hstack([c.X, c.G * (c.t >= ts[m]).astype(float)[:, None]])
         X = X / np.linalg.norm(X, axis=0).clip(1e-300)
@@ -281,8 +281,8 @@ class StochasticFit:
     alpha: float
     ambiguous: bool = False  #: each alone fits, neither adds to the other: the data cannot tell them apart
     notes: tuple[str, ...] = field(default_factory=tuple)
-    #: components that fit but are not named: a step fits better (``step_at``), or the caller's shape
-    #: check found structure in time (imucal.analysis.discover)
+    #: components that fit but are not named: a step fits better (``step_at``), one innovation is an
+    #: outlier, or the caller's shape check found structure in temperature (imucal.analysis.discover)
     withheld: tuple[str, ...] = ()
     step_at: float = math.nan  #: time of the step that beats them [s, as the intervals' times] (nan: none)
 
