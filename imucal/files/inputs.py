@@ -7,6 +7,7 @@ descriptor (no race with a rename), and refused above a size limit before anythi
 """
 from __future__ import annotations
 
+import errno
 import json
 import os
 import stat
@@ -49,6 +50,8 @@ def open_regular(path: str | os.PathLike, *, field: str, fix: str | None = None,
         raise ImucalError("is a directory, not a file", file=p, field=field,
                           fix=fix or "give the path of a file") from None
     except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise symlink_loop(p, field) from None
         raise ImucalError(f"cannot read: {exc.strerror or exc}", file=p, field=field, fix=fix) from None
     try:
         st = os.fstat(fd)
@@ -107,15 +110,39 @@ def read_input_text(path: str | os.PathLike, *, field: str, fix: str | None = No
         raise ImucalError("is not UTF-8 text", file=str(path), field=field, fix=fix or "save it as UTF-8") from None
 
 
+def symlink_loop(path: str | os.PathLike, field: str) -> ImucalError:
+    """A path whose symbolic links lead back to themselves (ELOOP)."""
+    return ImucalError("is a loop of symbolic links, not a file", file=str(path), field=field,
+                       fix="give the path of the file itself (the links lead back to themselves)")
+
+
+def resolve(path: str | os.PathLike, *, field: str) -> Path:
+    """``path`` made absolute with its symbolic links followed; a loop of links is bad input (one
+    line naming ``field``), not the RuntimeError or OSError pathlib raises for it."""
+    try:
+        return Path(os.path.abspath(path)).resolve()
+    except RuntimeError:  # Python < 3.13: "Symlink loop from ..."
+        raise symlink_loop(path, field) from None
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise symlink_loop(path, field) from None
+        raise ImucalError(f"cannot resolve: {exc.strerror or exc}", file=str(path), field=field) from None
+
+
 def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:
-    """True when two paths name the same existing file (device and inode), or resolve equal."""
+    """True when two paths name the same existing file (device and inode), or resolve equal. A
+    path that cannot be resolved (a loop of symbolic links) names no file: False (its reader
+    refuses it, naming its field)."""
     try:
         sa, sb = os.stat(a), os.stat(b)
         if (sa.st_dev, sa.st_ino) == (sb.st_dev, sb.st_ino):
             return True
     except OSError:
         pass
-    return Path(os.path.abspath(a)).resolve() == Path(os.path.abspath(b)).resolve()
+    try:
+        return resolve(a, field="path") == resolve(b, field="path")
+    except ImucalError:
+        return False
 
 
 def read_json(path: str, field_: str) -> Any:

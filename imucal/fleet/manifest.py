@@ -38,7 +38,7 @@ from imucal import __version__
 from imucal.config.limits import MAX_FLEET_UNITS
 from imucal.config.run import RunConfig, config_from_dict
 from imucal.errors import ImucalError, key_text, short
-from imucal.files.inputs import read_input_text
+from imucal.files.inputs import read_input_text, resolve
 from imucal.files.schema import fill, keys, rule
 from imucal.files.yamlio import check_structure, read_yaml
 
@@ -160,7 +160,8 @@ def _unit(uid: str, data: Any, gyro: Any, over: dict, shared: dict, base: Path, 
         if not isinstance(v, str) or "\x00" in v or len(v) > 4000:
             raise ImucalError(f"{short(v)} is not a file name", file=path,
                               field=f"{where}.{'data' if role == 'path' else 'gyro_data'}")
-        files[role] = str((base / v).resolve()) if not Path(v).is_absolute() else v
+        files[role] = (str(resolve(base / v, field=f"{where}.{'data' if role == 'path' else 'gyro_data'}"))
+                       if not Path(v).is_absolute() else v)
     if "path" not in files:
         raise ImucalError("no data file", file=path, field=f"{where}.data", fix="give the unit's recording")
     settings = _merge(shared, over)

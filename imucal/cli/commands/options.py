@@ -128,11 +128,12 @@ def run_config(args: argparse.Namespace, config: str | None = None, data_overrid
     """The RunConfig from a YAML file (optional) and the command's options."""
     from imucal.config.run import config_from_dict, load_config
     from imucal.data.load import parse_columns
+    from imucal.files.inputs import resolve
 
     if config:
         cfg = load_config(config)
         if args.data and data_override:
-            cfg = dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, path=str(Path(args.data).resolve())))
+            cfg = dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, path=str(resolve(args.data, field="--data"))))
     elif args.data:
         cfg = config_from_dict({"data": {"path": args.data}}, None)
     else:
@@ -153,7 +154,7 @@ def run_config(args: argparse.Namespace, config: str | None = None, data_overrid
         fit = dataclasses.replace(fit, fix=tuple(sorted(fix)), mode=mode or fit.mode,
                                   weights=weights or fit.weights)
     if getattr(args, "noise", None):
-        fit = dataclasses.replace(fit, noise=str(Path(args.noise).resolve()))
+        fit = dataclasses.replace(fit, noise=str(resolve(args.noise, field="--noise")))
     grav = _gravity(args, cfg) if hasattr(args, "gravity") else cfg.gravity
     return dataclasses.replace(cfg, data=data, gravity=grav, fit=fit, gyro=_gyro(args, cfg))
 
