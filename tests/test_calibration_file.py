@@ -173,7 +173,7 @@ def test_the_sensor_list_must_match_the_sections(saved, tmp_path, sensors):
     (lambda d: d["data"].update(file=["a"]), "data.file", "is not a file name"),
     (lambda d: d["parameters"]["s1"].update(fixed="yes"), "parameters.s1.fixed", "'yes' is not true or false"),
     (lambda d: d["parameters"].update(q1={"value": 1.0}), "parameters", r"parameter\(s\) \['q1'\] belong to no effect"),
-    (lambda d: d.update(gravity=-9.8), "gravity", "gravity -9.8 must be a positive number"),
+    (lambda d: d.update(gravity=-9.8), "gravity", "gravity -9.8 is not a local gravity on Earth"),
     (lambda d: d.update(effects=[{"name": "warp_drive", "axes": ["x"]}]), "effects", "unknown effect 'warp_drive'"),
     (lambda d: d.update(effects=[{"name": "bias_drift", "axes": ["w"]}]), "effects[0].axes[0]", "axis 'w' is not x, y or z"),
     (lambda d: d.update(effects=[{"name": "bias_drift", "axes": ["x"]}]), "parameters", "do not match the model's"),

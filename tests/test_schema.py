@@ -201,7 +201,7 @@ BAD = {
     "calibration v1": [
         ("wrong type", "parameters.s1.value", "big", "parameters.s1.value", "'big' is not a number"),
         ("unknown key", "parameters.s1.colour", "red", "parameters.s1.colour", "unknown key 'colour'"),
-        ("bool for number", "gravity", True, "gravity", "gravity True must be a positive number"),
+        ("bool for number", "gravity", True, "gravity", "gravity True is not a local gravity on Earth"),
         ("NaN", "parameters.b1.value", float("nan"), "parameters.b1.value", "value is not finite (nan)"),
         ("missing required", "parameters.s1.value", _DELETE, "parameters.s1.value", "missing key 'value'"),
     ],

@@ -16,8 +16,8 @@ from typing import TYPE_CHECKING, Any, Literal, Mapping
 import numpy as np
 
 import imucal.calibration.frozen as frozen
-from imucal.calibration.fields import (ACCELEROMETER, GYROSCOPE, NAME_PATTERN, SHA256_PATTERN, UNIT_PATTERN,
-                                      VERSION_PATTERN)
+from imucal.calibration.fields import (ACCELEROMETER, DATE_PATTERN, GYROSCOPE, NAME_PATTERN, SHA256_PATTERN,
+                                      VERSION_PATTERN, check_unit)
 from imucal.constants import SI_ACCEL_UNIT
 from imucal.errors import ImucalError, short
 from imucal.files.output import write_text_atomic
@@ -39,6 +39,12 @@ READABLE_VERSIONS = (1, 2)
 #: Relative disagreement between apply.matrix/offset and the parameters' map that counts as an
 #: edit rather than round-off (the file stores floats with repr, so a true file agrees exactly).
 DERIVED_RTOL = 1e-9
+#: Local gravity a calibration file may hold [m/s^2]: every g imucal calibrates with, and no other
+#: (588, YAML 1.1's reading of 9:48, is not a gravity). Above: the largest g a run accepts
+#: (imucal.config.run.GravitySpec: 9.7 to 9.9, the range of g on Earth's surface with margin). Below:
+#: WGS84 normal gravity at the equator at the greatest height imucal.model.gravity takes (100 km),
+#: 9.47, with margin. tests/test_trust_export.py checks that both admit what calibrate can write.
+GRAVITY_MIN, GRAVITY_MAX = 9.4, 9.9
 OUTPUT_FRAME = ("orthonormal frame f of the Theorem: f1 along sensor axis x, f2 in the plane of "
                 "axes x and y, f3 = f1 x f2")
 
@@ -83,6 +89,8 @@ def _f(x: float) -> float | None:
 REGEN = "regenerate the file with `imucal calibrate`"
 _NUMBER = rule(msg="{value} is not a number", fix=REGEN)
 _BOUND = rule(msg="{value} is not a number", allow_inf=True, fix=REGEN)
+#: A standard error: not negative (null when undetermined, .inf when unbounded).
+_STD = rule(ge=0, allow_inf=True, msg="{value} is not a standard error (a number >= 0, or null)", fix=REGEN)
 
 
 @dataclass(frozen=True)
@@ -90,7 +98,7 @@ class ParameterEntry:
     """One entry of ``parameters:``; ``scale`` is ``solver_scale``'s name in files before the rename."""
 
     value: float = field(metadata=_NUMBER)
-    std: float | None = field(default=None, metadata=_BOUND)  #: null: not determined
+    std: float | None = field(default=None, metadata=_STD)  #: null: not determined
     unit: str = field(default="", metadata=rule(msg="{value} is not text", fix=REGEN))
     lower: float | None = field(default=None, metadata=_BOUND)
     upper: float | None = field(default=None, metadata=_BOUND)
@@ -141,7 +149,8 @@ class CalibrationFile:
             f"{', '.join(map(str, READABLE_VERSIONS))})", fix="regenerate the file with this imucal or upgrade imucal"))
     parameters: Mapping[str, ParameterEntry] = field(metadata=rule(fix=REGEN))
     effects: tuple[EffectEntry, ...] = field(default=(), metadata=rule(fix=REGEN))
-    gravity: float = field(metadata=rule(gt=0, fix=REGEN))
+    gravity: float = field(metadata=rule(ge=GRAVITY_MIN, le=GRAVITY_MAX, msg="gravity {value} is not a local gravity "
+                                         f"on Earth in m/s^2 ({GRAVITY_MIN:g} to {GRAVITY_MAX:g})", fix=REGEN))
     units: UnitsSection = UnitsSection()
     software: SoftwareSection = SoftwareSection()
     created: str = field(default="", metadata=rule(msg="{value} is not text", fix=REGEN))
@@ -252,18 +261,20 @@ def check_text_fields(cal: "frozen.Calibration", path: str = "<calibration>") ->
     regen = "regenerate the file with `imucal calibrate`"
     if cal.created:
         try:
+            if not (isinstance(cal.created, str) and DATE_PATTERN.match(cal.created)):
+                raise ValueError
             _dt.datetime.fromisoformat(cal.created)
         except (TypeError, ValueError):
             raise bad("created", cal.created, "an ISO 8601 date", "write e.g. 2024-05-01T12:00:00+00:00") from None
     if cal.software_version and not VERSION_PATTERN.match(cal.software_version):
         raise bad("software.version", cal.software_version, "a version number", regen)
-    if not UNIT_PATTERN.match(cal.raw_unit) or "//" in cal.raw_unit:
-        raise bad("units.input", cal.raw_unit, "a unit (letters, digits, ^ . % ( ) / - space; at most 40)", "write e.g. counts")
+    check_unit(cal.raw_unit, "units.input", path)
     for n, p in cal.params.items():
         if not NAME_PATTERN.match(n):
             raise bad("parameters", n, "a parameter name", regen)
-        if not UNIT_PATTERN.match(p.unit) or "//" in p.unit:
-            raise bad(f"parameters.{n}.unit", p.unit, "a unit", regen)
+        check_unit(p.unit, f"parameters.{n}.unit", path, regen)
+    if cal.gyro is not None:
+        check_unit(cal.gyro.unit, "gyroscope.units.input", path, "write e.g. rad/s, deg/s or counts")
     for name, _ in cal.effects:
         if not NAME_PATTERN.match(name):
             raise bad("effects", name, "an effect name", regen)

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from imucal.calibration.fields import check_unit
 from imucal.constants import GYRO_UNIT_CHOICES, TIME_UNIT_CHOICES, TIME_UNITS
 from imucal.errors import ImucalError, check_choice, short
 from imucal.solve.stats import median
@@ -80,6 +81,7 @@ class DataSpec:
         for name in ("format", "time_unit", "unit", "gyro_unit", "stream"):
             if not isinstance(getattr(self, name), str):
                 raise ImucalError(f"{name} {short(getattr(self, name))} must be text", field=f"data.{name}")
+        check_unit(self.unit, "data.unit")  # the calibration file's rule: what calibrate writes reads back
         if self.delimiter is not None and not (isinstance(self.delimiter, str) and len(self.delimiter) == 1
                                                and self.delimiter not in "\r\n"):
             raise ImucalError(f"delimiter {short(self.delimiter)} must be one character", field="data.delimiter",

@@ -4,10 +4,14 @@ Every YAML file imucal reads (run configs, simulations, calibrations) goes throu
 regular file within the size limit (imucal.files.inputs), ``yaml.SafeLoader`` semantics, and three
 refusals that plain ``safe_load`` lacks: duplicate keys (the second value would silently win),
 alias bombs (a few lines that expand to billions of nodes), and integers no float can hold.
+Numbers are read as YAML 1.1 and 1.2 agree on them: YAML 1.1's base-60 numbers (``9:48`` is 588)
+and leading-zero octal integers (``010`` is 8) stay text, so a field that needs a number refuses
+them in one line instead of taking a value nobody wrote (an explicit ``!!int 9:48`` is refused).
 """
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 from typing import Any
 
@@ -30,8 +34,25 @@ _DUMPER = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
 
 
 def dump_yaml(data: Any, **options: Any) -> str:
-    """``yaml.safe_dump(data, **options)`` as text, by the fastest safe emitter available."""
-    return yaml.dump(data, Dumper=_DUMPER, **options)
+    """``yaml.safe_dump(data, **options)`` as text, by the fastest safe emitter available. Text
+    that is not valid Unicode (a file name's undecodable bytes, read as surrogates) goes to the
+    Python emitter, which escapes it (libyaml cannot encode it); both write the same text otherwise."""
+    try:
+        return yaml.dump(data, Dumper=_DUMPER, **options)
+    except UnicodeEncodeError:
+        return yaml.dump(data, Dumper=yaml.SafeDumper, **options)
+
+
+_INT_TAG, _FLOAT_TAG = "tag:yaml.org,2002:int", "tag:yaml.org,2002:float"
+#: SafeLoader's implicit int and float (yaml/resolver.py) without YAML 1.1's base-60 forms
+#: (``1:30``) and leading-zero octal (``010``): those stay text (module docstring).
+_INT = re.compile(r"""^(?:[-+]?0b[0-1_]+
+                    |[-+]?(?:0|[1-9][0-9_]*)
+                    |[-+]?0x[0-9a-fA-F_]+)$""", re.X)
+_FLOAT = re.compile(r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+][0-9]+)?
+                    |\.[0-9_]+(?:[eE][-+][0-9]+)?
+                    |[-+]?\.(?:inf|Inf|INF)
+                    |\.(?:nan|NaN|NAN))$""", re.X)
 
 
 class _Loader(yaml.SafeLoader):
@@ -64,6 +85,36 @@ class _Loader(yaml.SafeLoader):
             if dup:
                 raise _Refused(f"duplicate key {short(key)} at line {key_node.start_mark.line + 1}")
         return super().construct_mapping(node, deep=deep)
+
+    def construct_number(self, node):  # type: ignore[no-untyped-def]
+        """An explicitly tagged !!int or !!float: refused in base 60 (``!!int 9:48``) or leading-zero octal."""
+        value = self.construct_scalar(node)
+        octal = node.tag == _INT_TAG and re.fullmatch(r"[-+]?0[0-7_]+", value) is not None
+        if ":" in value or octal:
+            raise _Refused(f"{short(value)} at line {node.start_mark.line + 1} is a YAML 1.1 "
+                           f"{'octal' if octal else 'base-60'} number", "write the number in decimal")
+        return (self.construct_yaml_int if node.tag == _INT_TAG else self.construct_yaml_float)(node)
+
+
+_Loader.yaml_implicit_resolvers = {
+    ch: [(tag, rx) for tag, rx in rs if tag not in (_INT_TAG, _FLOAT_TAG)]
+    for ch, rs in yaml.SafeLoader.yaml_implicit_resolvers.items()}
+_Loader.add_implicit_resolver(_INT_TAG, _INT, list("-+0123456789"))
+_Loader.add_implicit_resolver(_FLOAT_TAG, _FLOAT, list("-+0123456789."))
+_Loader.add_constructor(_INT_TAG, _Loader.construct_number)
+_Loader.add_constructor(_FLOAT_TAG, _Loader.construct_number)
+
+
+def parse_scalar(text: str) -> Any:
+    """One YAML value given as text (a cell of a CSV manifest), read as ``read_yaml`` reads files
+    (so ``9:48`` stays text). Raises yaml.YAMLError when it is not YAML."""
+    loader = _Loader(text)
+    try:
+        return loader.get_single_data()
+    except _Refused as exc:
+        raise yaml.YAMLError(str(exc)) from None
+    finally:
+        loader.dispose()
 
 
 class _TooLarge(Exception):
