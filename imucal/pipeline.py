@@ -25,6 +25,8 @@ from imucal.constants import RIGHT_ANGLE
 from imucal.model.parameters import ANGLE_NAMES, BASE_NAMES, Parameters, base_parameters
 from imucal.data.static import Intervals, detect_static
 from imucal.solve.stats import chi2_sf
+from imucal.solve.misfit import POOR_FIT_P, POOR_FIT_REDCHI, excess_residuals  # one rule for every sensor's fit
+from imucal.report.misfit import excess_words
 from imucal.model.effects_registry import effects_from_specs
 from imucal.model.effects import EFFECTS, prepare_parameters
 
@@ -178,9 +180,6 @@ def measured_noise(config: RunConfig, guess: InitialGuess, rate: float) -> tuple
 
 #: Reduced chi-square above which a fit is refused, not reported: no sensor model is that wrong.
 ABSURD_REDCHI = 1.0e4
-#: A fit whose chi-square p-value is below POOR_FIT_P and reduced chi-square above POOR_FIT_REDCHI
-#: is flagged: the residuals exceed the noise (an effect the model misses, or excess noise).
-POOR_FIT_P, POOR_FIT_REDCHI = 1.0e-3, 2.0
 
 
 def _axes(dropped: list[dict]) -> str:
@@ -220,15 +219,13 @@ def fit_warnings(res: FitResult, config: RunConfig, rec: Recording, dropped: lis
     if res.dof <= 0 and res.mode == "means":
         out.append("0 degrees of freedom: the standard errors cannot be estimated from the residuals "
                    "(reported as n/a); fit samples (--mode samples) or hold more orientations")
-    elif res.dof > 0 and res.redchi_noise > POOR_FIT_REDCHI and chi2_sf(res.chi2_noise, res.dof) < POOR_FIT_P:
+    elif (misfit := excess_residuals(res.chi2_noise, res.dof)) is not None:
         held = (f"; the weights and standard errors include it as a random bias per visit of a pose "
                 f"(bias_instability, {math.sqrt(res.excess):.3g} m/s^2 rms)" if res.excess > 0 else "")
         if res.random_walk > 0:
             held = (f"; the weights (full covariance) and standard errors include it as a bias random walk "
                     f"(bias_random_walk, {math.sqrt(res.random_walk):.3g} m/s^2/sqrt(s))")
-        out.append(f"reduced chi-square {res.redchi_noise:.3g} against the noise ({res.dof} dof, p < {POOR_FIT_P:g}): "
-                   "the residuals exceed the noise, so the model misses an effect or the noise is underestimated"
-                   f"{held}; investigate with: {discover_command(config, rec)}")
+        out.append(f"{excess_words(misfit)}{held}; investigate with: {discover_command(config, rec)}")
     return out
 
 
@@ -389,8 +386,11 @@ def calibrate_imu(config: RunConfig, recording: Recording | None = None,
     from imucal.calibration.gyro import GyroCalibration  # here: 10 modules a run without a gyroscope skips
     from imucal.gyro.fit import GyroOptions
     from imucal.gyro.run import calibrate_gyro
+    from imucal.report.gyro import gyro_warnings
 
     res = calibrate_gyro(run, gyro_file, GyroOptions(**asdict(config.gyro)))
     if res is None:
         return run
-    return replace(run, gyro=res, calibration=replace(run.calibration, gyro=GyroCalibration.from_result(res)))
+    cal_fit = {**run.calibration.fit, "warnings": [*run.calibration.fit.get("warnings", []), *gyro_warnings(res)]}
+    return replace(run, gyro=res, calibration=replace(run.calibration, gyro=GyroCalibration.from_result(res),
+                                                      fit=cal_fit))

@@ -22,6 +22,7 @@ from imucal.gyro.lead_in import lead_in_for
 from imucal.gyro.model import AXES, MIS_NAMES, apply_rate, misalignment_matrix
 from imucal.gyro.result import GyroResult
 from imucal.gyro.segments import GyroData, Segments, motion_segments
+from imucal.gyro.still import judge
 
 #: raw units with a known nominal scale [unit per rad/s]
 NOMINAL_SCALE = {"rad/s": 1.0, "deg/s": 180.0 / np.pi}
@@ -40,11 +41,17 @@ class GyroOptions:
     #: integrate from this far inside the still poses [s] (segments.motion_segments); "auto": by the
     #: data (imucal.gyro.lead_in: when the poses' edges turn and the g-sensitivity found is modelled)
     lead_in_s: float | str = "auto"
+    #: which static intervals are still poses: "auto" those the gyro shows still too (imucal.gyro.still),
+    #: "off" every interval the accelerometer found
+    still: str = "auto"
 
     def __post_init__(self) -> None:
         if self.gsens not in ("auto", "on", "off"):
             raise ImucalError(f"gsens {self.gsens!r} is not one of auto, on, off", field="gyro.gsens",
                               fix="use auto (test the data), on or off")
+        if self.still not in ("auto", "off"):
+            raise ImucalError(f"still {self.still!r} is not auto or off", field="gyro.still",
+                              fix="use auto (judge stillness on the gyro too) or off")
         if self.lead_in_s != "auto" and not (isinstance(self.lead_in_s, (int, float))
                                              and not isinstance(self.lead_in_s, bool) and 0 <= self.lead_in_s <= 10):
             raise ImucalError(f"lead_in_s {self.lead_in_s!r} is not auto or between 0 and 10 s", field="gyro.lead_in_s",
@@ -163,8 +170,14 @@ def _require_observable(J: np.ndarray, names: tuple[str, ...], min_deg: float, s
 
 
 def fit_gyro(data: GyroData, options: GyroOptions = GyroOptions(), segments: np.ndarray | None = None) -> GyroResult:
-    """Calibrate the gyro from ``data``; ``segments`` (numbers) restricts the fit to some motions."""
+    """Calibrate the gyro from ``data``; ``segments`` (numbers) restricts the fit to some motions.
+
+    With ``options.still == "auto"`` the intervals the gyro shows turning are no still poses
+    (imucal.gyro.still): ``segments`` then numbers the motions between the intervals kept."""
     tic = time.perf_counter()
+    still = judge(data, options.gsens) if options.still == "auto" else None
+    if still is not None and still.rejected:
+        data = data.without(still.keep)
     gm, _, am, _ = data.static_means()
     st = fit_static(gm, am, options.gsens)
     lead_in = lead_in_for(data, options.gsens, options.lead_in_s, st)
@@ -193,7 +206,7 @@ def fit_gyro(data: GyroData, options: GyroOptions = GyroOptions(), segments: np.
     sd = np.sqrt(np.diag(cov))
     res = _result(data, options, st, seg, x, sd, cov, scale0, corrected, stats, chi2, dof, redchi, names,
                   time.perf_counter() - tic)
-    return replace(res, lead_in_s=lead_in)
+    return replace(res, lead_in_s=lead_in, still=None if still is None else still.with_scale(res.scale))
 
 
 def _segment_sigma(data: GyroData, seg: Segments, scale0: np.ndarray) -> np.ndarray:
@@ -229,7 +242,11 @@ def _result(data, options, st: StaticFit, seg, x, sd, cov, scale0, corrected, st
 
 
 def cross_validate(data: GyroData, options: GyroOptions = GyroOptions(), folds: int = 5) -> np.ndarray:
-    """Held-out direction error [deg] of every motion segment: fit on the other folds (segment k in fold k % folds)."""
+    """Held-out direction error [deg] of every motion segment: fit on the other folds (segment k in fold k % folds).
+
+    The motions are those between the still poses (``options.still``), judged once for all folds."""
+    if options.still == "auto":
+        data, options = data.without(judge(data, options.gsens).keep), replace(options, still="off")
     options = replace(options, lead_in_s=lead_in_for(data, options.gsens, options.lead_in_s))  # one for all folds
     seg = motion_segments(data, options.lead_in_s)
     out = np.full(seg.n, np.nan)

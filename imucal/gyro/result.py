@@ -6,6 +6,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from imucal.gyro.model import apply_rate, misalignment_entries
+from imucal.gyro.still import NotStill, Stillness
+from imucal.solve.misfit import ExcessResiduals, excess_residuals
 from imucal.solve.ipopt import CONVERGED
 
 
@@ -36,6 +38,8 @@ class GyroResult:
     redchi: float
     seconds: float  #: wall time of the fit
     lead_in_s: float = 0.0  #: [s] the segments started and ended this far inside the still poses
+    #: which static intervals the gyro showed still (imucal.gyro.still); None when not judged
+    still: Stillness | None = None
 
     @property
     def success(self) -> bool:
@@ -55,6 +59,11 @@ class GyroResult:
         w = apply_rate(np.atleast_2d(raw), self.bias, self.scale, misalignment_entries(self.misalignment),
                        self.gsens if self.uses_gsens else None, None if acc is None else np.atleast_2d(acc))
         return w[0] if one else w
+
+    @property
+    def excess(self) -> ExcessResiduals | None:
+        """The residuals exceed the noise (the rule of every sensor's fit, imucal.solve.misfit), or None."""
+        return excess_residuals(self.chi2, self.dof)
 
     @property
     def rms_direction_error_deg(self) -> dict[str, float]:
@@ -80,36 +89,21 @@ class GyroResult:
             "rms_direction_error_deg": self.rms_direction_error_deg,
             "fit": {"status": self.status, "iterations": self.iterations, "chi2": self.chi2, "dof": self.dof,
                     "redchi": self.redchi, "n_segments": int(self.segments.size)},
+            "not_still": [] if self.still is None else [not_still_dict(r) for r in self.still.rejected],
         }
 
     def report(self) -> str:
-        """Parameters with standard errors, lmfit style, and the direction errors."""
-        ax = "xyz"
-        L = [f"gyro calibration (raw unit {self.unit}; omega = M_g^-1 (B_g^-1 (raw - s_g) - G_s a))"]
-        for j in range(3):
-            L.append(f"  s_{ax[j]} = {self.bias[j]:.6g} +/- {self.bias_std[j]:.2g} [{self.unit}]   "
-                     f"b_{ax[j]} = {self.scale[j]:.6g} +/- {self.scale_std[j]:.2g} [{self.unit} per rad/s]")
-        for i in range(3):
-            for j in range(3):
-                if i != j:
-                    L.append(f"  m_{ax[i]}{ax[j]} = {self.misalignment[i, j]:+.5f} +/- {self.misalignment_std[i, j]:.2g}")
-        for i in range(3):
-            if self.gsens_selected[i]:
-                row = ", ".join(f"{v:+.3g} +/- {s:.2g}" for v, s in zip(self.gsens[i], self.gsens_std[i]))
-                L.append(f"  G_s row {ax[i]} [(rad/s)/(m/s^2)]: {row}  (p = {self.gsens_p_value[i]:.2g})")
-            else:
-                L.append(f"  G_s row {ax[i]}: not selected (p = {self.gsens_p_value[i]:.2g})")
-        r = self.rms_direction_error_deg
-        inside = f" (each from {self.lead_in_s:g} s inside its still poses)" if self.lead_in_s > 0 else ""
-        L.append(f"  gravity-direction error over {self.segments.size} motions{inside}: "
-                 f"rms {r['before']:.3f} deg before, "
-                 f"{r['after']:.3f} deg after;  IPOPT {self.status}, {self.iterations} iterations, "
-                 f"redchi {self.redchi:.3g}")
-        for a, b, c in self.correlations():
-            L.append(f"  correlation({a}, {b}) = {c:+.3f}")
-        return "\n".join(L)
+        """Parameters with standard errors, lmfit style, the direction errors and the poses not still
+        for the gyro (written by imucal.report.gyro)."""
+        from imucal.report.gyro import gyro_report  # report/ writes the words; it imports this module
+
+        return gyro_report(self)
 
 
+def not_still_dict(r: NotStill) -> dict:
+    """A rejected interval as plain numbers and text (JSON, the calibration file)."""
+    return {"interval": r.interval, "t_start": r.t_start, "t_end": r.t_end, "rate_deg_s": list(r.rate_deg_s or ()),
+            "drift_deg_s": list(r.drift_deg_s or ()), "test": r.test.value, "p_value": r.p_value}
 
 
 def _rms(x: np.ndarray) -> float:

@@ -1,7 +1,7 @@
 """The data of a gyro fit: one time base, static intervals, and the motion segments between them."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -48,6 +48,11 @@ class GyroData:
             a.append(self.acc[i0:i1].mean(0))
             as_.append(self.acc[i0:i1].std(0, ddof=1) / np.sqrt(n))
         return np.array(g), np.array(gs), np.array(a), np.array(as_)
+
+    def without(self, keep: np.ndarray) -> "GyroData":
+        """The same samples with only the static intervals ``keep`` (bool per interval) as still poses."""
+        keep = np.asarray(keep, bool)
+        return replace(self, start=self.start[keep], end=self.end[keep])
 
     def static_rate_noise(self) -> np.ndarray:
         """Within-interval standard deviation of the gyro readings, pooled over intervals [``unit``]."""

@@ -78,8 +78,12 @@ def _steps(m: "Motion", n: int) -> np.ndarray:
 
 
 def record(truth: GyroTruth, motions: list[Motion], stills: list[float], fs: float = 100.0, gravity: float = 9.81,
-           seed: int = 0, acc_noise: float = 0.0, unit: str = "raw", R0: np.ndarray | None = None) -> GyroData:
-    """Still ``stills[0]`` s, motion 0, still ``stills[1]`` s, ...; ``len(stills) == len(motions) + 1``."""
+           seed: int = 0, acc_noise: float = 0.0, unit: str = "raw", R0: np.ndarray | None = None,
+           still_turns: dict[int, float] | None = None) -> GyroData:
+    """Still ``stills[0]`` s, motion 0, still ``stills[1]`` s, ...; ``len(stills) == len(motions) + 1``.
+
+    ``still_turns`` {pose: rate [rad/s]}: during those still poses the sensor turns slowly about the
+    vertical (a turntable, or a hand): the specific force stays the same, the gyro sees the rate."""
     rng = np.random.default_rng(seed)
     g_world = np.array([0, 0, gravity])  # specific force at rest points up
     R = np.eye(3) if R0 is None else np.asarray(R0, float)
@@ -88,8 +92,10 @@ def record(truth: GyroTruth, motions: list[Motion], stills: list[float], fs: flo
     for step, still in enumerate(stills):
         n = max(int(round(still * fs)), 2)
         start.append(k)
-        ws += [np.zeros(3)] * n
+        w = (still_turns or {}).get(step, 0.0) * (R.T @ [0.0, 0.0, 1.0])  # about the vertical: constant in the body
+        ws += [w] * n
         accs += [R.T @ g_world] * n
+        R = R @ _exp((w * n / fs)[None])[0]  # the pose's n sample steps of the constant rate
         k += n
         end.append(k)
         if step == len(motions):
@@ -113,7 +119,7 @@ def record(truth: GyroTruth, motions: list[Motion], stills: list[float], fs: flo
 
 def simulate(truth: GyroTruth, turns: list[tuple[int | np.ndarray, float]], fs: float = 100.0, still: float = 2.0,
              move: float = 1.0, gravity: float = 9.81, seed: int = 0, acc_noise: float = 0.0,
-             unit: str = "raw") -> GyroData:
+             unit: str = "raw", still_turns: dict[int, float] | None = None) -> GyroData:
     """Still ``still`` s, then each (axis, angle [rad]) turn over ``move`` s, still again.
 
     An axis is a body axis number (0, 1, 2) or a vector."""
@@ -121,12 +127,14 @@ def simulate(truth: GyroTruth, turns: list[tuple[int | np.ndarray, float]], fs: 
     for axis, angle in turns:
         v = np.eye(3)[axis] if np.ndim(axis) == 0 else np.asarray(axis, float) / np.linalg.norm(axis)
         motions.append(Motion(v, float(angle), move))
-    return record(truth, motions, [still] * (len(turns) + 1), fs, gravity, seed, acc_noise, unit)
+    return record(truth, motions, [still] * (len(turns) + 1), fs, gravity, seed, acc_noise, unit,
+                  still_turns=still_turns)
 
 
 def hand_held(truth: GyroTruth, n_poses: int = 24, seed: int = 0, fs: float = 100.0, gravity: float = 9.81,
               acc_noise: float = 0.02, unit: str = "raw", tremor: float = 0.15, push: float = 1.0,
-              durations: tuple[float, float] | None = (1.0, 2.0), still: tuple[float, float] = (1.5, 3.0)) -> GyroData:
+              durations: tuple[float, float] | None = (1.0, 2.0), still: tuple[float, float] = (1.5, 3.0),
+              still_turns: dict[int, float] | None = None) -> GyroData:
     """A hand-held session of ``n_poses`` still poses: turns of 60-180 deg about random axes.
 
     Each turn carries a tremor of three sinusoids (0.5 to 3 Hz, ``tremor`` [rad/s] rms amplitude
@@ -146,4 +154,4 @@ def hand_held(truth: GyroTruth, n_poses: int = 24, seed: int = 0, fs: float = 10
     q = rng.normal(size=4)
     q /= np.linalg.norm(q)
     R0 = _exp((2 * np.arccos(np.clip(q[0], -1, 1)) * q[1:] / max(np.linalg.norm(q[1:]), 1e-12))[None])[0]
-    return record(truth, motions, stills, fs, gravity, int(rng.integers(2**31)), acc_noise, unit, R0)
+    return record(truth, motions, stills, fs, gravity, int(rng.integers(2**31)), acc_noise, unit, R0, still_turns)

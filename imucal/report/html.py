@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Iterable, Mapping
 import numpy as np
 
 from imucal.pipeline import POOR_FIT_P, POOR_FIT_REDCHI, CalibrationRun
+from imucal.solve.misfit import excess_residuals
 from imucal.report.text import interval_residuals, t_quantile_975
 from imucal.solve.stats import chi2_sf
 from imucal import __version__
@@ -79,8 +80,7 @@ def chi2_consistent(chi2: float, dof: int) -> tuple[bool | None, float]:
     poor when reduced chi-square > POOR_FIT_REDCHI and p < POOR_FIT_P), and its p-value."""
     if dof <= 0 or not math.isfinite(chi2):
         return None, math.nan
-    p = chi2_sf(chi2, dof)
-    return not (chi2 / dof > POOR_FIT_REDCHI and p < POOR_FIT_P), p
+    return excess_residuals(chi2, dof) is None, chi2_sf(chi2, dof)
 
 
 def verdict(run: CalibrationRun) -> Verdict:
