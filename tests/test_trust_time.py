@@ -98,3 +98,80 @@ def test_symlink_loop_in_a_batch_manifest_names_the_unit(tmp_path, run_cli, unch
     assert r.code == 2
     one_line_error(r.err, f"{loop}: units[0].data: is a loop of symbolic links",
                    "(fix: give the path of the file itself")
+
+
+# --- the reader: a duplicated column, a line without end, a sparse file ----------------------------
+STREAM_HOW = ["never", "always"]  # the whole-file reader and the chunked one
+
+
+def rows_text(n: int, rate: float = 100.0) -> str:
+    """n rows of a still sensor (t, ax, ay, az), 100 Hz."""
+    return "".join(f"{k / rate:.2f},12,-7,16384\n" for k in range(n))
+
+
+@pytest.mark.parametrize("how", STREAM_HOW)
+@pytest.mark.parametrize("header, name, cols", [
+    ("t,ax,ay,az,ax", "'ax' (read as ax)", "columns 2 and 5"),
+    ("t,AX,ay,az,ax", "'ax' (read as ax)", "columns 2 and 5"),  # default names are matched in any case
+    ("t,acc_x,ay,az,acc_x", "'acc_x' (read as ax)", "columns 2 and 5"),
+])
+def test_duplicated_header_column_is_refused_naming_both_positions(tmp_path, run_cli, unchanged, how, header,
+                                                                     name, cols):
+    src = tmp_path / "dup.csv"
+    src.write_text(header + "\n" + "".join(f"{k / 100:.2f},1,2,3,4\n" for k in range(50)))
+    with unchanged():
+        r = run_cli(["calibrate", "--data", src, "--out", tmp_path / "o", "--stream", how])
+    assert r.code == 2
+    one_line_error(r.err, f"dup.csv: data.columns.ax: the header names column {name} twice: {cols}",
+                   "(fix: rename one of them, or map ax to a 0-based column index (e.g. --columns ax=1))")
+
+
+def test_mapped_duplicated_column_is_refused_and_an_index_reads_it(tmp_path):
+    src = tmp_path / "dup.csv"
+    src.write_text("t,x,y,z,x\n" + rows_text(20).replace("\n", ",5\n"))
+    with pytest.raises(ImucalError, match=r"data.columns.ax: the header names column 'x' \(read as ax\) twice: "
+                                          r"columns 2 and 5"):
+        load_recording(DataSpec(path=str(src), columns={"ax": "x", "ay": "y", "az": "z"}))
+    rec = load_recording(DataSpec(path=str(src), columns={"ax": 4, "ay": "y", "az": "z"}))  # the fix given
+    assert rec.raw[0].tolist() == [5.0, -7.0, 16384.0]
+
+
+@pytest.mark.parametrize("how", STREAM_HOW)
+def test_line_without_end_is_refused_naming_its_line(tmp_path, run_cli, unchanged, how):
+    """A file whose text stops in one enormous line (here just past MAX_LINE_BYTES; the same rule
+    holds a 20 GB one back) is refused at that line, not read on to its end."""
+    from imucal.data.load import MAX_LINE_BYTES
+
+    src = tmp_path / "long.csv"
+    src.write_text("t,ax,ay,az\n" + rows_text(300) + "1" * (MAX_LINE_BYTES + 1))
+    with unchanged():
+        r = run_cli(["calibrate", "--data", src, "--out", tmp_path / "o", "--stream", how])
+    assert r.code == 2
+    one_line_error(r.err, f"long.csv: data: line 302 is longer than {MAX_LINE_BYTES} bytes (no line end)",
+                   "(fix: check that the file is a text recording")
+    src.write_text("t,ax,ay,az\n" + rows_text(300) + "1" * MAX_LINE_BYTES)  # at the limit: only its value is bad
+    r = run_cli(["calibrate", "--data", src, "--out", tmp_path / "o", "--stream", how])
+    assert r.code == 2 and "line 302" in r.err and "longer than" not in r.err
+
+
+@pytest.mark.parametrize("how, size", [("auto", 20 * 1024**3), ("always", 20 * 1024**3), ("never", 3 * 1024**3)])
+def test_sparse_file_whose_text_stops_is_refused_at_the_text_end(tmp_path, run_cli, how, size):
+    """600 KB of text, then holes to 20 GB (3 GB for the whole-file reader, under its 4 GB limit):
+    refused as binary from the line where the NUL bytes start, without reading the holes (the
+    file system's SEEK_HOLE for the whole-file reader, the first block's NUL for the chunked one)."""
+    src = tmp_path / "w" / "sparse.csv"
+    src.parent.mkdir()
+    text = ("t,ax,ay,az\n" + rows_text(40000)).encode()[:600_000]
+    with open(src, "wb") as f:
+        f.write(text)
+        f.truncate(size)  # costs no disk
+    line = text.count(b"\n") + 1
+    out = tmp_path / "o"
+    r = run_cli(["calibrate", "--data", src, "--out", out, "--stream", how])
+    assert r.code == 2
+    one_line_error(r.err, f"sparse.csv: data.path: is a binary file (NUL bytes) from line {line} on (a sparse or "
+                          "corrupt file), not a text recording")
+    # nothing left behind, the input untouched (not hashed whole: that would read the holes)
+    assert sorted(os.listdir(tmp_path)) == ["w"] and os.listdir(src.parent) == ["sparse.csv"]
+    with open(src, "rb") as f:
+        assert f.read(len(text) + 1) == text + b"\0" and os.fstat(f.fileno()).st_size == size

@@ -18,7 +18,7 @@ from imucal.constants import GYRO_UNIT_CHOICES, TIME_UNIT_CHOICES, TIME_UNITS
 from imucal.errors import ImucalError, check_choice, short
 from imucal.solve.stats import median
 from imucal.data.rosbag import is_bag, read_bag
-from imucal.files.inputs import max_data_bytes, open_regular
+from imucal.files.inputs import first_hole, max_data_bytes, open_regular
 from imucal.data.recording import MAX_ABS_VALUE, MAX_RATE_HZ, MIN_RATE_HZ, Recording  # noqa: F401 (re-exported)
 from imucal.files.schema import rule
 
@@ -161,17 +161,25 @@ def rails(spec: object, where: str = "data.saturation") -> dict[str, np.ndarray 
 
 
 def _read_bytes(path: Path) -> tuple[bytes, str]:
-    """Bytes and SHA-256 of a recording: a regular file, within the size limit, not binary."""
-    fd, _ = open_regular(path, field="data.path", max_bytes=max_data_bytes(),
-                         fix="check the path (relative paths are relative to the YAML file)")
+    """Bytes and SHA-256 of a recording: a regular file, within the size limit, text (no NUL byte,
+    no line longer than MAX_LINE_BYTES). A sparse file is read only up to its first hole."""
+    fd, size = open_regular(path, field="data.path", max_bytes=max_data_bytes(),
+                            fix="check the path (relative paths are relative to the YAML file)")
+    hole = first_hole(fd, size)  # a sparse file's NUL tail is never read
     try:
         with os.fdopen(fd, "rb") as f:
-            if b"\x00" in f.read(BINARY_PROBE):  # a sparse or binary file is refused before it is read whole
+            if b"\x00" in f.read(BINARY_PROBE):  # a binary file is refused before it is read whole
                 raise binary_file(path)
             f.seek(0)
-            blob = f.read()
+            blob = f.read(hole)
     except OSError as exc:
         raise ImucalError(f"cannot read: {exc.strerror or exc}", file=str(path), field="data.path") from None
+    nul = blob.find(b"\x00")
+    if nul >= 0 or hole < size:
+        raise binary_file(path, blob.count(b"\n", 0, nul if nul >= 0 else len(blob)) + 1)
+    start = long_line(blob)
+    if start is not None:
+        raise line_too_long(path, blob.count(b"\n", 0, start) + 1)
     return blob, hashlib.sha256(blob).hexdigest()
 
 
@@ -223,11 +231,40 @@ def _fast_table(blob: bytes, spec: DataSpec, path: Path) -> tuple[Layout, np.nda
 
 #: Leading bytes searched for NUL (a binary file).
 BINARY_PROBE = 1 << 16
+#: Longest line a recording may hold [bytes]. A row is a time stamp and a few channels, a few
+#: hundred bytes; a line of a mebibyte is no row but a corrupt or binary file, and reading on to
+#: its end could take all the memory a huge file claims. Both readers refuse it, naming the line.
+MAX_LINE_BYTES = 1 << 20
+#: Line ends long_line looks for (str.splitlines' other breaks are rare enough to be refused as
+#: one long line when a file uses nothing else).
+_LINE_ENDS = (b"\n", b"\r")
 
 
-def binary_file(path: Path) -> ImucalError:
-    return ImucalError("is a binary file (NUL bytes), not a text recording", file=str(path), field="data.path",
-                       fix="export the recording as CSV or whitespace-separated text")
+def long_line(buf: bytes | bytearray) -> int | None:
+    """Offset of the first line of ``buf`` (which starts a line) longer than MAX_LINE_BYTES, or
+    None; an unfinished last line counts once it is too long. About len(buf) / MAX_LINE_BYTES
+    searches, not one per line."""
+    start, n = 0, len(buf)
+    while n - start > MAX_LINE_BYTES:
+        end = start + MAX_LINE_BYTES + 1
+        brk = max(buf.rfind(c, start, end) for c in _LINE_ENDS)
+        if brk < 0:
+            return start
+        start = brk + 1
+    return None
+
+
+def line_too_long(path: Path, line: int) -> ImucalError:
+    return ImucalError(f"line {line} is longer than {MAX_LINE_BYTES} bytes (no line end): not a recording's row",
+                       file=str(path), field="data",
+                       fix="check that the file is a text recording (one row per line) and not cut or corrupt")
+
+
+def binary_file(path: Path, line: int | None = None) -> ImucalError:
+    """NUL bytes: at the head of the file, or (``line``) after text (a sparse or corrupt file)."""
+    where = "" if line is None or line <= 1 else f" from line {line} on (a sparse or corrupt file)"
+    return ImucalError(f"is a binary file (NUL bytes){where}, not a text recording", file=str(path),
+                       field="data.path", fix="export the recording as CSV or whitespace-separated text")
 
 
 def not_utf8(path: Path) -> ImucalError:
@@ -516,16 +553,28 @@ def _header_columns(names: list[str], spec: DataSpec, path: Path) -> dict[str, i
             if isinstance(want, int):
                 cols[role] = want
             elif want in names:
-                cols[role] = names.index(want)
+                cols[role] = _only_column(names, want, role, path)
             else:
                 raise ImucalError(f"column {short(want)} (for {role}) not in header {short(names, 200)}",
                                   file=str(path), field=f"data.columns.{role}",
                                   fix="map the role to one of the header's names")
         else:
-            hit = next((lower.index(c) for c in _DEFAULT_NAMES[role] if c in lower), None)
-            if hit is not None:
-                cols[role] = hit
+            name = next((c for c in _DEFAULT_NAMES[role] if c in lower), None)
+            if name is not None:
+                cols[role] = _only_column(lower, name, role, path)
     return cols
+
+
+def _only_column(names: list[str], name: str, role: str, path: Path) -> int:
+    """The index of the one header column called ``name`` (read as ``role``); a name the header
+    gives twice is refused, naming both positions (1-based), not the first taken silently."""
+    at = [i for i, n in enumerate(names) if n == name]
+    if len(at) > 1:
+        raise ImucalError(f"the header names column {short(name)} (read as {role}) twice: columns "
+                          f"{at[0] + 1} and {at[1] + 1}", file=str(path), field=f"data.columns.{role}",
+                          fix=f"rename one of them, or map {role} to a 0-based column index "
+                              f"(e.g. --columns {role}={at[0]})")
+    return at[0]
 
 
 def _check_roles(cols: dict[str, int], spec: DataSpec, path: Path) -> None:

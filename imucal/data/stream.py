@@ -19,7 +19,7 @@ import csv
 import hashlib
 import io
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -27,11 +27,13 @@ import numpy as np
 
 from imucal.constants import TIME_UNITS
 from imucal.data.load import (BINARY_PROBE, MAX_ABS_VALUE, TIME_HEAD_ROWS, DataSpec, Layout, as_spec,
-                              binary_file, check_lines, check_rate, corrupt_value, layout, lineno, no_rows, not_increasing,
+                              binary_file, check_lines, check_rate, corrupt_value, layout, line_too_long, lineno,
+                              long_line, no_rows, not_increasing,
                               not_utf8, parse_block, resolve_path, unparsed, stamp_unit, time_base_without_stamps,
                               time_unit_from_step, _MAX_SCAN_LINES)
 from imucal.data.static import (QUANTUM_ROWS, Intervals, MovingVariance, Segment, StaticSettings, VarianceSeries,
-                                auto_threshold, candidate_runs, intervals_from, quantum, segment, window_samples)
+                                auto_threshold, candidate_runs, edge_samples, intervals_from, quantum, still_segment,
+                                window_samples)
 from imucal.data.recording import RecordingSummary, StaticSamples
 from imucal.errors import ImucalError
 from imucal.solve.stats import median
@@ -87,6 +89,7 @@ class _File:
             size = 1 << 20
             while True:
                 head += f.read(size - len(head))
+                self._check_text(head, lambda: 1)
                 eof = len(head) < size
                 cut = len(head) if eof else head.rfind(b"\n") + 1
                 try:
@@ -107,6 +110,17 @@ class _File:
         kept = text.splitlines(keepends=True)  # the same lines with their line breaks
         offset = bom + sum(len(ln.encode("utf-8")) for ln in kept[:skip + lay.body])
         return lay, offset
+
+    def _check_text(self, buf: bytes, first_line: Callable[[], int]) -> None:
+        """The whole-file reader's refusals for ``buf`` (which starts a line): a NUL byte (a sparse or
+        binary file) and a line longer than MAX_LINE_BYTES. ``first_line``: buf's first line
+        number, counted only for a message."""
+        nul = buf.find(b"\x00")
+        if nul >= 0:
+            raise binary_file(self.path, first_line() + buf.count(b"\n", 0, nul))
+        start = long_line(buf)
+        if start is not None:
+            raise line_too_long(self.path, first_line() + buf.count(b"\n", 0, start))
 
     def line_at(self, offset: int) -> int:
         """Line number of the line starting at byte ``offset`` of the body (counted when a message
@@ -147,6 +161,7 @@ class _File:
                         yield at, carry
                     break
                 buf = carry + data
+                self._check_text(buf, lambda: self.line_at(at))  # a sparse tail or a line without end stops here
                 cut = buf.rfind(b"\n") + 1
                 if cut == 0:
                     carry = buf
@@ -437,11 +452,15 @@ class StreamedRecording:
         has_temp = "temp" in self._it
         segs: list[Segment] = []
         kept: dict[int, tuple] = {}
+        m = edge_samples(scan.dt)
         for start, raw, t, temp in self._pieces(a, b, scan):
-            if t[-1] - t[0] >= st.min_duration:
-                segs.append(segment(start, raw, t, temp, scan.lows, scan.highs, self.rails))
+            g = (still_segment(start, raw, t, temp, scan.lows, scan.highs, self.rails, st, m, scan.q)
+                 if t[-1] - t[0] >= st.min_duration else None)  # its edges cut to what is still
+            if g is not None:
+                segs.append(g)
                 if keep_samples:
-                    kept[start] = (raw, t, temp)
+                    lo, hi = g.start - start, g.end - start
+                    kept[g.start] = (raw[lo:hi], t[lo:hi], None if temp is None else temp[lo:hi])
         iv = intervals_from(segs, thr, scan.q, st, scan.lows, scan.highs, self.rails, has_temp)
         self._scan_result = scan
         if not keep_samples:

@@ -73,6 +73,18 @@ def open_regular(path: str | os.PathLike, *, field: str, fix: str | None = None,
         raise
 
 
+def first_hole(fd: int, size: int) -> int:
+    """Offset of the first hole of a sparse file (bytes never written, which read as NUL), or
+    ``size`` for a file without one. Asked of the file system (SEEK_HOLE), not read; ``size`` where
+    the system cannot tell. The descriptor's offset is left at 0."""
+    try:
+        return min(os.lseek(fd, 0, os.SEEK_HOLE), size)
+    except (AttributeError, OSError):  # no SEEK_HOLE on this system or file system
+        return size
+    finally:
+        os.lseek(fd, 0, os.SEEK_SET)
+
+
 def _clear_nonblock(fd: int) -> None:
     try:
         import fcntl
