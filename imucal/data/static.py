@@ -30,6 +30,26 @@ SATURATION_STD_RATIO = 0.75
 SATURATION_TRIM = 0.02
 #: Rows whose values decide whether the readings are integer counts (quantisation step 1).
 QUANTUM_ROWS = 20000
+#: Edge test. The moving variance stays low for up to a second after a slow, smooth motion starts,
+#: so a run can end inside the motion. The rows from each point out to the run's edge are compared
+#: with the straight line of the run's central half (a slow drift is not motion); their noise is
+#: the larger of the white noise's and the central half's own scatter over running means of
+#: EDGE_WINDOW seconds (at least EDGE_MIN_SAMPLES rows), 2, 4, 8 ... times as long while the
+#: central half holds EDGE_CORE_WINDOWS of them (slow noise) ...
+EDGE_WINDOW = 0.1
+EDGE_MIN_SAMPLES = 3
+EDGE_CORE_WINDOWS = 8
+#: ... rows whose mean lies more than EDGE_Z standard errors off the line are motion (5 sigma: a
+#: still edge is cut about once in 10^6 tests) ...
+EDGE_Z = 5.0
+#: ... and the run ends where the running mean over EDGE_WINDOW last came within EDGE_BACK
+#: standard errors of the line, walking back from the most significant such point (the motion
+#: began before it showed).
+EDGE_BACK = 1.0
+#: A slope of the central half this many standard errors from zero is a drift, followed to the edges.
+EDGE_SLOPE_Z = 3.0
+#: Most cuts per run: one edge a round (the stronger), the line refitted on what is kept.
+EDGE_ROUNDS = 6
 
 
 @dataclass(frozen=True)
@@ -299,6 +319,115 @@ def candidate_runs(var: VarianceSeries, threshold: float, trim: int) -> tuple[np
     return a[ok], b[ok]
 
 
+def edge_samples(dt: float) -> int:
+    """Rows of the edge test's shortest running mean for a sample step ``dt`` [s]."""
+    return max(EDGE_MIN_SAMPLES, int(round(EDGE_WINDOW / dt)))
+
+
+@dataclass(frozen=True)
+class _Line:
+    """A run's rows less the line of its central half, with what that line is worth: its mean, and
+    on an axis whose slope there is EDGE_SLOPE_Z standard errors from zero (a drift), its slope."""
+
+    res: np.ndarray  #: (n, k) rows minus the line
+    r: np.ndarray  #: (n,) row positions from the run's centre
+    white: np.ndarray  #: (k,) white noise of one row (first differences of the central half)
+    floor: np.ndarray  #: (k,) least noise of one row (quantisation, round-off)
+    lever: np.ndarray  #: (k,) sum of r^2 over the central half where the slope is kept, else inf
+    nc: int  #: rows in the central half
+
+    @staticmethod
+    def of(x: np.ndarray, q: float) -> "_Line":
+        n = x.shape[0]
+        r = np.arange(n) - (n - 1) / 2
+        c = slice(n // 4, n - n // 4)
+        core, rc = x[c], r[c]
+        lever = float(rc @ rc)
+        mu = core.mean(axis=0)
+        beta = (rc @ (core - mu)) / lever
+        white = np.diff(core, axis=0).std(axis=0, ddof=1) / np.sqrt(2)
+        floor = np.maximum(q / np.sqrt(12), 64 * np.finfo(float).eps * (np.abs(mu) + 1))
+        drift = np.abs(beta) * np.sqrt(lever) > EDGE_SLOPE_Z * np.maximum(white, floor)
+        beta = np.where(drift, beta, 0.0)
+        res = x - mu - r[:, None] * beta
+        return _Line(res, r, white, floor, np.where(drift, lever, np.inf), core.shape[0])
+
+    def sigma(self, row: np.ndarray, at: np.ndarray, size: np.ndarray) -> np.ndarray:
+        """Standard error of a mean over ``size`` rows centred at ``at``, for a row noise ``row``:
+        the mean's own and the line's (its level and slope, there)."""
+        return row * np.sqrt(1 / size[:, None] + 1 / self.nc + at[:, None] ** 2 / self.lever)
+
+
+def _running(cs: np.ndarray, w: int) -> np.ndarray:
+    """Means of every ``w`` consecutive rows, from the cumulative sums ``cs`` (with a leading 0)."""
+    return (cs[w:] - cs[:-w]) / w
+
+
+def _edge_cut(line: _Line, m: int) -> tuple[int, int] | None:
+    """The rows [lo, hi) kept after cutting the run's edge whose rows depart most from the line,
+    or None when neither departs by EDGE_Z standard errors."""
+    res, r = line.res, line.r
+    n = res.shape[0]
+    c0, c1 = n // 4, n - n // 4
+    cs = np.zeros((n + 1, res.shape[1]))
+    np.cumsum(res, axis=0, out=cs[1:])
+    scales, rows, w = [], [], m
+    while w * EDGE_CORE_WINDOWS <= line.nc or not scales:  # one row's noise at each scale
+        rows.append(np.maximum(_running(cs[c0:c1 + 1], w).std(axis=0) * np.sqrt(w),
+                               np.maximum(line.white, line.floor) if not rows else rows[-1]))
+        scales.append(w)
+        w *= 2
+    ws, rows_w = np.array(scales), np.array(rows)
+
+    def z(size: np.ndarray, at: np.ndarray, mean: np.ndarray) -> np.ndarray:
+        row = rows_w[np.maximum(np.searchsorted(ws, size, side="right") - 1, 0)]
+        return (np.abs(mean) / line.sigma(row, at, size.astype(float))).max(axis=1)
+
+    i = np.arange(c1, n)  # rows i..n-1 ...
+    z_end = z(n - i, (r[i] + r[-1]) / 2, (cs[n] - cs[i]) / (n - i)[:, None])
+    j = np.arange(1, c0 + 1)  # ... and rows 0..j-1
+    z_start = z(j, (r[0] + r[j - 1]) / 2, cs[j] / j[:, None])
+    top_end, top_start = z_end.max(initial=0.0), z_start.max(initial=0.0)
+    if max(top_end, top_start) <= EDGE_Z:
+        return None
+    dev = _running(cs, m)  # dev[k]: mean of rows k..k+m-1 less the line
+    near = (np.abs(dev) <= EDGE_BACK * line.sigma(rows_w[0], r[:n - m + 1] + (m - 1) / 2,
+                                                  np.full(n - m + 1, float(m)))).all(axis=1)
+    if top_end >= top_start:
+        k = int(i[np.argmax(z_end)])  # walk back to the last window near the line
+        back = np.flatnonzero(near[:max(k - m + 1, 0)])
+        return 0, (int(back[-1]) + m if back.size else k)
+    k = int(j[np.argmax(z_start)])
+    ahead = np.flatnonzero(near[k:])
+    return (k + int(ahead[0]) if ahead.size else k), n
+
+
+def still_span(seg: np.ndarray, m: int, q: float = 0.0) -> tuple[int, int]:
+    """Rows [lo, hi) of a still run ``seg`` whose edges agree with its own central half (the EDGE_
+    constants): a slow start of motion is cut off. ``m``: rows of the shortest running mean
+    (edge_samples); ``q``: the quantisation step (0: none)."""
+    lo, hi = 0, seg.shape[0]
+    for _ in range(EDGE_ROUNDS):
+        if hi - lo < 4 * m:  # too short to tell a central half from its edges
+            break
+        cut = _edge_cut(_Line.of(seg[lo:hi], q), m)
+        if cut is None:
+            break
+        lo, hi = lo + cut[0], lo + cut[1]
+    return lo, hi
+
+
+def still_segment(start: int, seg: np.ndarray, t: np.ndarray, temp: np.ndarray | None, lows: np.ndarray,
+                  highs: np.ndarray, declared: dict | None, settings: StaticSettings, m: int,
+                  q: float) -> Segment | None:
+    """The Segment of a candidate run (rows start..start+len) after its edges are cut to what is
+    still (still_span), or None when less than the minimum duration is left."""
+    lo, hi = still_span(seg, m, q)
+    if hi - lo < 3 or t[hi - 1] - t[lo] < settings.min_duration:
+        return None
+    return segment(start + lo, seg[lo:hi], t[lo:hi], None if temp is None else temp[lo:hi], lows, highs, declared)
+
+
 def quantum(x: np.ndarray) -> float:
     """Quantisation step when the readings (their first 20000 rows) are integer counts, else 0."""
     sample = x[: min(x.shape[0], QUANTUM_ROWS)]
@@ -484,6 +613,8 @@ def detect_static(t: np.ndarray, raw: np.ndarray, settings: StaticSettings = Sta
     a, b = candidate_runs(var, thr, int(round(settings.trim / dt)))
     del var
     lows, highs = raw.min(axis=0), raw.max(axis=0)
-    segs = [segment(int(i), raw[i:j], t[i:j], None if temp is None else temp[i:j], lows, highs, rails)
-            for i, j in zip(a, b) if t[j - 1] - t[i] >= settings.min_duration]
+    m = edge_samples(dt)
+    segs = [g for i, j in zip(a, b) if t[j - 1] - t[i] >= settings.min_duration
+            and (g := still_segment(int(i), raw[i:j], t[i:j], None if temp is None else temp[i:j], lows, highs,
+                                    rails, settings, m, q)) is not None]
     return intervals_from(segs, thr, q, settings, lows, highs, rails, temp is not None)

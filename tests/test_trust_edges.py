@@ -1,0 +1,90 @@
+"""Issue 25, trust at the edges: still intervals that end where a slow motion starts, `apply` of a
+calibration to data in another unit, internal errors on bad input to `noise` and `fit.fix`, and a
+noise file in the wrong unit.
+
+Each case generates its data here; error paths check the one-line message (file, field, fix), the
+exit status 2 and that nothing was left behind.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from imucal.analysis.simulate import (PosePlan, cube_directions, frame_matrix, mems_counts_sensor, si_sensor,
+                                      simulate)
+from imucal.data.static import detect_static, still_span
+
+#: A slow, smooth change of pose: 10 s from one hold to the next, no vibration (the moving variance
+#: of its first second stays below the threshold).
+SLOW = dict(hold=3.0, transition=10.0, rate=100.0, vibration=0.0)
+
+
+def one_line_error(err: str, *parts: str) -> None:
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("imucal: error: "), err
+    for p in parts:
+        assert p in lines[0], (p, lines[0])
+
+
+def _slow_recording(kind: str, seed: int):
+    sensor = si_sensor(np.random.default_rng(seed)) if kind == "si" else mems_counts_sensor(np.random.default_rng(seed))
+    return sensor, simulate(sensor, PosePlan(cube_directions(), **SLOW), seed=seed)
+
+
+# --- 1. still intervals end before a slow motion starts -----------------------------------------
+@pytest.mark.parametrize("kind", ["si", "counts"])
+def test_intervals_stop_where_a_slow_motion_starts(kind):
+    """Every hold gives one interval; none reaches more than 0.4 s beyond its hold (before the fix:
+    1.2 s), and no sample in it is more than 3 noise sigmas from the hold's noise-free reading
+    (before: 20 sigma)."""
+    sensor, sim = _slow_recording(kind, seed=1)
+    iv = detect_static(sim.t, sim.raw)
+    assert iv.n == len(sim.hold_bounds)
+    clean = sim.accel @ frame_matrix(np.array(sensor.angles)) * np.array(sensor.b)  # raw less shift
+    for k, (a, b) in enumerate(zip(iv.start, iv.end)):
+        ha, hb = sim.hold_bounds[k]
+        assert ha - 40 <= a < b <= hb + 40, (k, a, b, ha, hb)
+        off = np.abs(clean[a:b] - clean[ha]) / np.array(sensor.noise)
+        assert off.max() < 3.0, (k, off.max())
+
+
+def test_a_still_run_keeps_its_edges():
+    """White noise, a linear drift (settling) and a single spike are not the start of a motion."""
+    rng = np.random.default_rng(7)
+    n = 600
+    x = rng.normal(0, 1.0, (n, 3)) + 1000.0
+    assert still_span(x, 10) == (0, n)
+    drift = x + np.linspace(0, 3.0, n)[:, None]  # 3 sigma over the run
+    assert still_span(drift, 10) == (0, n)
+    spike = x.copy()
+    spike[n - 40] += 8.0
+    assert still_span(spike, 10) == (0, n)
+
+
+def test_a_slow_start_is_cut_where_it_began():
+    """A quadratic departure from the last 150 rows on: the cut lies within 40 rows of its start."""
+    rng = np.random.default_rng(3)
+    n, onset = 600, 450
+    x = rng.normal(0, 1.0, (n, 3))
+    u = np.maximum(np.arange(n) - onset, 0)
+    x[:, 1] += 40.0 * (u / (n - onset)) ** 2  # 40 sigma at the end of the run
+    lo, hi = still_span(x, 10)
+    assert lo == 0 and onset - 40 <= hi <= onset + 40
+    lo_r, hi_r = still_span(x[::-1], 10)  # the same motion ending a run's start
+    assert (lo_r, hi_r) == (n - hi, n)
+
+
+def test_streamed_slow_recording_gives_the_same_intervals(tmp_path, monkeypatch):
+    import imucal.data.stream as stream_mod
+    from imucal.data.load import DataSpec
+    from imucal.data.stream import StreamedRecording
+
+    monkeypatch.setattr(stream_mod, "CHUNK_BYTES", 50_000)
+    _, sim = _slow_recording("counts", seed=2)
+    path = tmp_path / "slow.csv"
+    path.write_text(sim.to_csv_text())
+    iv = detect_static(sim.t, sim.raw)
+    s = StreamedRecording(DataSpec(path=str(path)), keep_samples=True)
+    np.testing.assert_array_equal(s.intervals.start, iv.start)
+    np.testing.assert_array_equal(s.intervals.end, iv.end)
+    np.testing.assert_array_equal(s.samples.raw, sim.raw[iv.sample_mask(sim.t.size)])
