@@ -16,7 +16,7 @@ from imucal.config.run import RunConfig
 from imucal.data.load import Recording, load_recording, rails, use_stream
 from imucal.data.recording import RecordingSummary, StaticSamples
 from imucal.errors import ImucalError
-from imucal.solve.fit import FitData, FitResult, fit, jacobian_rows
+from imucal.solve.fit import SCATTER_NOTABLE_Z, FitData, FitResult, fit, jacobian_rows
 from imucal.solve.initial import InitialGuess, ellipsoid_guess
 from imucal.model.sensor import SensorModel, build_model
 from imucal.model.channels import covariate_matrix, covariate_values
@@ -222,10 +222,16 @@ def fit_warnings(res: FitResult, config: RunConfig, rec: Recording, dropped: lis
     elif (misfit := excess_residuals(res.chi2_noise, res.dof)) is not None:
         held = (f"; the weights and standard errors include it as a random bias per visit of a pose "
                 f"(bias_instability, {math.sqrt(res.excess):.3g} m/s^2 rms)" if res.excess > 0 else "")
-        if res.random_walk > 0:
-            held = (f"; the weights (full covariance) and standard errors include it as a bias random walk "
-                    f"(bias_random_walk, {math.sqrt(res.random_walk):.3g} m/s^2/sqrt(s))")
+        if res.random_walk > 0 and res.bias_drift is not None:  # (the report's words: imucal.report.text)
+            held = (f"; the bias moved during the recording (bias_random_walk, {math.sqrt(res.random_walk):.3g} "
+                    f"m/s^2/sqrt(s), up to {max(res.bias_drift.in_mg(res.bias_drift.peak_to_peak)):.3g} mg between "
+                    "intervals): the offsets are its mean over the still intervals, and the standard errors include "
+                    "the walk")
         out.append(f"{excess_words(misfit)}{held}; investigate with: {discover_command(config, rec)}")
+    if (z := res.scatter_z) is not None and z[1] > SCATTER_NOTABLE_Z:
+        out.append(f"samples mode: the samples' scatter about their interval means (|a| of a sample exceeds |a| of "
+                   f"its mean by up to {float(np.max(res.scatter_term)):.3g} m/s^2) would have moved {z[0]} by "
+                   f"{z[1]:.3g} standard errors; corrected to second order (fit.mode: means does not need it)")
     return out
 
 
@@ -353,8 +359,10 @@ def calibrate(config: RunConfig, recording: Recording | None = None) -> Calibrat
         "status": res.status, "iterations": res.iterations,
         "rms_residual": float(np.sqrt(np.mean(rm**2))), "chi2": res.chi2, "dof": res.dof,
         "redchi": res.redchi, "redchi_noise": res.redchi_noise,
-        "bias_instability": math.sqrt(res.excess),  # between-interval excess in the weights [m/s^2]
-        "bias_random_walk": math.sqrt(res.random_walk),  # its density in the GLS weights [m/s^2/sqrt(s)]
+        "bias_instability": res.bias_instability,  # per-visit bias offsets [m/s^2 rms] (in the weights)
+        "bias_random_walk": math.sqrt(res.random_walk),  # its density in the standard errors [m/s^2/sqrt(s)]
+        # how far a walking bias moved, and the offsets' epoch: its mean over the still intervals
+        **({"bias_drift": res.bias_drift.to_json(config.data.unit)} if res.bias_drift is not None else {}),
         "n_intervals": iv.n, "n_distinct_orientations": pb.obs.n_distinct,
         "gravity_source": gsource,
         "warnings": fit_warnings(res, config, rec, dropped),

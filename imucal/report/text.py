@@ -9,6 +9,7 @@ from imucal.calibration.frozen import Calibration
 from imucal.model.sensor import build_model
 from imucal.pipeline import CalibrationRun, fit_data
 from imucal.solve.fit import FitResult, jacobian_rows
+from imucal.solve.stochastic import BiasDrift
 
 #: Correlations above this are listed.
 CORREL_MIN = 0.3
@@ -79,13 +80,21 @@ def _statistics_lines(run: CalibrationRun) -> list[str]:
     if res.excess > 0 or res.random_walk > 0:
         L.append(f"    noise alone        = reduced chi-square {res.redchi_noise:.6g}: the intervals scatter more "
                  "than their own noise")
-        L.append(f"    bias_instability   = {math.sqrt(res.excess):.4g} m/s^2 rms per visit of a pose (random "
-                 "offset between intervals, Paule-Mandel), added to every interval's sigma: weights and "
-                 "standard errors include it")
+        if res.random_walk > 0:
+            L.append(f"    excess in weights  = {math.sqrt(res.excess):.4g} m/s^2 rms added to every interval's sigma "
+                     "(Paule-Mandel): the walk's scatter below, so that no quiet pose is over-trusted")
+        else:
+            L.append(f"    bias_instability   = {math.sqrt(res.excess):.4g} m/s^2 rms per visit of a pose (random "
+                     "offset between intervals, Paule-Mandel), added to every interval's sigma: weights and "
+                     "standard errors include it")
     if res.random_walk > 0:
         L.append(f"    bias_random_walk   = {math.sqrt(res.random_walk):.4g} +/- {res.stochastic.q_std:.2g} m/s^2/sqrt(s) "
-                 "(REML): the intervals are correlated in time; the fit is generalised least squares with "
-                 "their full covariance, and the standard errors include it")
+                 "(REML): the bias moved during the recording; the standard errors include the walk (its full "
+                 "covariance between the intervals, about its mean)")
+    if res.bias_drift is not None:
+        L += _drift_lines(res.bias_drift, cal.raw_unit)
+    if res.scatter_term is not None:
+        L += _scatter_lines(res, iv)
     L.append(f"    degrees of freedom = {res.dof}  (95 % intervals: value +/- {t_quantile_975(res.dof):.3g} x std, "
              "Student-t, since std is scaled by the reduced chi-square)")
     L.append(f"    RMS |a|-g, means   = {cal.fit['rms_residual']:.6g} m/s^2")
@@ -103,6 +112,31 @@ def _statistics_lines(run: CalibrationRun) -> list[str]:
     for wtext in cal.fit.get("warnings", []):
         L.append(f"    WARNING            = {wtext}")
     return L
+
+
+def _drift_lines(d: BiasDrift, unit: str) -> list[str]:
+    """How far a walking bias moved (its smoothed estimate) and the epoch of the offsets."""
+    moved, sd, ptp = d.moved, d.moved_std, d.peak_to_peak
+    L = [f"    bias moved         = per sensor axis, last minus first interval (t = {d.t[0]:.1f} to {d.t[-1]:.1f} s, "
+         "smoothed) +/- std; largest minus smallest over the intervals:"]
+    for i in range(3):
+        L.append(f"        {'xyz'[i]}: {d.in_raw(moved)[i]:+.4g} +/- {d.in_raw(sd)[i]:.2g} {unit} "
+                 f"({d.in_mg(moved)[i]:+.3g} +/- {d.in_mg(sd)[i]:.2g} mg); peak to peak {d.in_raw(ptp)[i]:.4g} {unit} "
+                 f"({d.in_mg(ptp)[i]:.3g} mg)")
+    L.append(f"    offsets s1..s3     = the bias averaged over the {d.t.size} still intervals (each once, "
+             f"t = {d.t[0]:.1f} to {d.t[-1]:.1f} s): the constant that fits them; at another time it differs by "
+             "the walk")
+    return L
+
+
+def _scatter_lines(res: FitResult, iv) -> list[str]:
+    """Samples mode: the correction for the samples' own scatter and how much it moved the values."""
+    spread = float(np.max(np.sqrt(np.sum(iv.std**2, axis=1)))) if iv.n else float("nan")
+    z = res.scatter_z
+    moved = f"; without it {z[0]} would move by {z[1]:.3g} standard errors" if z is not None else ""
+    return [f"    scatter correction = |a| of a sample exceeds |a| of its interval's mean by up to "
+            f"{float(np.max(res.scatter_term)):.3g} m/s^2 (scatter up to {spread:.3g} raw rms): corrected to "
+            f"second order{moved}"]
 
 
 def _variable_lines(res: FitResult) -> list[str]:
@@ -206,8 +240,12 @@ def summary(run: CalibrationRun) -> dict:
         "rms_residual": cal.fit["rms_residual"],
         "rms_residual_samples": cal.fit["rms_residual_samples"],
         "chi2": res.chi2, "dof": res.dof, "redchi": nz(res.redchi), "redchi_noise": nz(res.redchi_noise),
-        "bias_instability": math.sqrt(res.excess),
+        "bias_instability": res.bias_instability,
         "bias_random_walk": math.sqrt(res.random_walk),
+        **({"bias_drift": res.bias_drift.to_json(cal.raw_unit)} if res.bias_drift is not None else {}),
+        **({"scatter_correction": {"max_m_s2": float(np.max(res.scatter_term)), "shift": dict(res.scatter_shift),
+                                   "largest_shift_in_std": None if res.scatter_z is None else list(res.scatter_z)}}
+           if res.scatter_shift is not None else {}),
         "n_intervals": run.intervals.n,
         "n_distinct_orientations": run.observability.n_distinct,
         "gravity": cal.gravity,

@@ -86,25 +86,31 @@ class Rows:
             yield slice(s, s + BLOCK), self.raw[s:s + BLOCK].T, self.cov[s:s + BLOCK].T
 
 
-def residuals(fns: RowFunctions, rows: Rows, pfree, pfix, g: float) -> np.ndarray:
-    """r = |a| - g for every row."""
+def row_g(g: float | np.ndarray, sl: slice) -> list[float] | np.ndarray:
+    """The gravity argument of one block: one value for every row, or each row's own (an (N,) array:
+    what |a| of a noisy sample averages to, imucal.solve.fit)."""
+    return [g] if np.ndim(g) == 0 else np.asarray(g, float)[sl][None, :]
+
+
+def residuals(fns: RowFunctions, rows: Rows, pfree, pfix, g: float | np.ndarray) -> np.ndarray:
+    """r = |a| - g for every row (g one value, or one per row)."""
     out = np.empty(rows.n)
     for sl, raw, cov in rows.blocks():
-        out[sl] = fns.value(raw, cov, pfree, pfix, [g])[0][0]
+        out[sl] = fns.value(raw, cov, pfree, pfix, row_g(g, sl))[0][0]
     return out
 
 
-def jacobians(fns: RowFunctions, rows: Rows, pfree, pfix, g: float
+def jacobians(fns: RowFunctions, rows: Rows, pfree, pfix, g: float | np.ndarray
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """r (N,), dr/dpfree (N, nf) and dr/draw (N, 3): whole arrays, for small N (interval means)."""
     r, J, Jraw = np.empty(rows.n), np.empty((rows.n, fns.n_free)), np.empty((rows.n, 3))
     for sl, raw, cov in rows.blocks():
-        rb, Jb, Jrb = fns.derivatives(raw, cov, pfree, pfix, [g])
+        rb, Jb, Jrb = fns.derivatives(raw, cov, pfree, pfix, row_g(g, sl))
         r[sl], J[sl], Jraw[sl] = rb[0], Jb.T, Jrb.T
     return r, J, Jraw
 
 
-def noise_sigma(fns: RowFunctions, rows: Rows, raw_var: np.ndarray, pfree, pfix, g: float,
+def noise_sigma(fns: RowFunctions, rows: Rows, raw_var: np.ndarray, pfree, pfix, g: float | np.ndarray,
                 weights: str = "noise") -> np.ndarray:
     """Noise of each residual, propagated to first order from the raw readings' variance.
 
@@ -112,7 +118,7 @@ def noise_sigma(fns: RowFunctions, rows: Rows, raw_var: np.ndarray, pfree, pfix,
     """
     s = np.empty(rows.n)
     for sl, raw, cov in rows.blocks():
-        Jraw = fns.derivatives(raw, cov, pfree, pfix, [g])[2]
+        Jraw = fns.derivatives(raw, cov, pfree, pfix, row_g(g, sl))[2]
         s[sl] = np.sqrt(np.sum(Jraw**2 * raw_var[sl].T, axis=0))
     floor = max(median(s) * 1e-3, 1e-12)
     if weights == "uniform":
@@ -120,7 +126,7 @@ def noise_sigma(fns: RowFunctions, rows: Rows, raw_var: np.ndarray, pfree, pfix,
     return np.maximum(s, floor)
 
 
-def weighted_r_factor(fns: RowFunctions, rows: Rows, sigma: np.ndarray, pfree, pfix, g: float
+def weighted_r_factor(fns: RowFunctions, rows: Rows, sigma: np.ndarray, pfree, pfix, g: float | np.ndarray
                       ) -> np.ndarray:
     """R (nf x nf) with R^T R = J^T W J, by a QR of the weighted Jacobian taken block by block.
 
@@ -132,12 +138,12 @@ def weighted_r_factor(fns: RowFunctions, rows: Rows, sigma: np.ndarray, pfree, p
         return np.linalg.qr(sigma @ jacobians(fns, rows, pfree, pfix, g)[1], mode="r")
     R = np.zeros((0, fns.n_free))
     for sl, raw, cov in rows.blocks():
-        Jb = fns.derivatives(raw, cov, pfree, pfix, [g])[1].T / sigma[sl, None]
+        Jb = fns.derivatives(raw, cov, pfree, pfix, row_g(g, sl))[1].T / sigma[sl, None]
         R = np.linalg.qr(np.vstack([R, Jb]), mode="r")
     return R
 
 
-def normal_equations(fns: RowFunctions, rows: Rows, w: np.ndarray, pfree, pfix, g: float,
+def normal_equations(fns: RowFunctions, rows: Rows, w: np.ndarray, pfree, pfix, g: float | np.ndarray,
                      exact: bool = False) -> tuple[float, np.ndarray, np.ndarray]:
     """f, grad and Hessian (Gauss-Newton, or exact) of 1/2 sum w r^2, accumulated by blocks.
 
@@ -151,24 +157,24 @@ def normal_equations(fns: RowFunctions, rows: Rows, w: np.ndarray, pfree, pfix, 
         H = J.T @ w @ J
         if exact:
             for sl, raw, cov in rows.blocks():
-                H += (fns.curvature(raw, cov, pfree, pfix, [g])[0] @ wr_all[sl]).reshape(nf, nf)
+                H += (fns.curvature(raw, cov, pfree, pfix, row_g(g, sl))[0] @ wr_all[sl]).reshape(nf, nf)
         return 0.5 * float(r @ wr_all), J.T @ wr_all, H
     f, grad, H = 0.0, np.zeros(nf), np.zeros((nf, nf))
     for sl, raw, cov in rows.blocks():
-        rb, Jb, _ = fns.derivatives(raw, cov, pfree, pfix, [g])
+        rb, Jb, _ = fns.derivatives(raw, cov, pfree, pfix, row_g(g, sl))
         wr = w[sl] * rb[0]
         f += 0.5 * float(np.dot(wr, rb[0]))
         grad += Jb @ wr
         H += (Jb * w[sl]) @ Jb.T
         if exact:
-            H += (fns.curvature(raw, cov, pfree, pfix, [g])[0] @ wr).reshape(nf, nf)
+            H += (fns.curvature(raw, cov, pfree, pfix, row_g(g, sl))[0] @ wr).reshape(nf, nf)
     return f, grad, H
 
 
 class Problem:
     """One weighted least-squares problem in scaled unknowns x: pfree = off + scale * x."""
 
-    def __init__(self, fns: RowFunctions, rows: Rows, w: np.ndarray, pfix: np.ndarray, gravity: float,
+    def __init__(self, fns: RowFunctions, rows: Rows, w: np.ndarray, pfix: np.ndarray, gravity: float | np.ndarray,
                  off: np.ndarray, scale: np.ndarray, exact: bool = False,
                  step: Callable[[], None] | None = None) -> None:
         self.fns, self.rows, self.w, self.pfix, self.g = fns, rows, w, pfix, gravity

@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from imucal.constants import STANDARD_GRAVITY
 from imucal.solve import least_squares as lsq
 from imucal.solve.f_test import f_sf
 from imucal.solve.stats import chi2_sf, median
@@ -75,6 +76,22 @@ class Components:
 
     def covariance(self, tau2: float, q2: float) -> np.ndarray:
         return np.diag(self.sigma**2) + tau2 * self.K[0] + q2 * self.K[1]
+
+    def about_mean(self, tau2: float, q2: float) -> np.ndarray:
+        """V with the walk taken about its mean over the intervals, beta(t) - mean_k beta(t_k): the
+        covariance of the rows around a calibration whose offsets are the bias averaged over the
+        intervals (imucal.solve.fit). Its REML likelihood is ``covariance``'s (the difference is
+        X B + B^T X^T when the offsets are free), its fixed effects' meaning is not."""
+        GG = self.G @ self.G.T
+        return np.diag(self.sigma**2) + tau2 * self.K[0] + q2 * GG * walk_about_mean(self.t)
+
+
+def walk_about_mean(t: np.ndarray) -> np.ndarray:
+    """Cov(W(t_j) - Wbar, W(t_k) - Wbar) for a unit Wiener process W, Wbar its mean over the times t
+    (each counted once): min(t_j, t_k) - m_j - m_k + mean(m), m_j the mean over l of min(t_j, t_l)."""
+    T = np.minimum.outer(np.asarray(t, float), np.asarray(t, float))
+    m = T.mean(axis=1)
+    return T - m[:, None] - m[None, :] + m.mean()
 
 
 def components(r: np.ndarray, sigma: np.ndarray, X: np.ndarray, G: np.ndarray, t: np.ndarray) -> Components:
@@ -371,3 +388,71 @@ def select(c: Components, alpha: float = 1e-3) -> StochasticFit:
             withheld, step_at, named, model, ambiguous = named, at, (), "none", False
     return StochasticFit(named=named, chosen=fits[model], fits=fits, p=p, p_alone=alone, p_outlier=p_out,
                          alpha=alpha, ambiguous=ambiguous, notes=tuple(notes), withheld=withheld, step_at=step_at)
+
+
+@dataclass(frozen=True)
+class BiasDrift:
+    """How far the bias moved during a recording: the walk's smoothed estimate at each interval (the
+    best linear unbiased predictor given the residuals and the REML variances), per sensor axis, about
+    its mean over the intervals, which is what the calibration's offsets are (imucal.solve.fit)."""
+
+    t: np.ndarray  #: (n,) interval times in time order [s, as the recording's]
+    walk: np.ndarray  #: (n, 3) smoothed bias minus its mean over the intervals [m/s^2 along each sensor axis]
+    walk_std: np.ndarray  #: (n, 3) prediction standard error of ``walk`` [m/s^2]
+    moved: np.ndarray  #: (3,) smoothed bias at the last interval minus at the first [m/s^2]
+    moved_std: np.ndarray  #: (3,) prediction standard error of ``moved`` [m/s^2]
+    b: np.ndarray  #: (3,) the scales [raw per m/s^2]: a bias of x m/s^2 along axis i reads b_i x
+
+    @property
+    def peak_to_peak(self) -> np.ndarray:
+        """(3,) largest minus smallest smoothed bias over the intervals [m/s^2]."""
+        return np.ptp(self.walk, axis=0)
+
+    def in_raw(self, x: np.ndarray) -> np.ndarray:
+        """Per-axis values [m/s^2] in the sensor's units (raw)."""
+        return np.asarray(x, float) * self.b
+
+    @staticmethod
+    def in_mg(x: np.ndarray) -> np.ndarray:
+        """Per-axis values [m/s^2] in mg (thousandths of standard gravity)."""
+        return np.asarray(x, float) / STANDARD_GRAVITY * 1e3
+
+    def to_json(self, raw_unit: str) -> dict:
+        """Plain numbers, per axis x, y, z: in m/s^2, in the sensor's unit and in mg."""
+        def axes(v: np.ndarray) -> list[float]:
+            return [float(x) for x in v]
+
+        return {"offsets_epoch": "mean over the still intervals", "t_first_s": float(self.t[0]),
+                "t_last_s": float(self.t[-1]), "n_intervals": int(self.t.size), "raw_unit": raw_unit,
+                "moved_m_s2": axes(self.moved), "moved_std_m_s2": axes(self.moved_std),
+                "moved_raw": axes(self.in_raw(self.moved)), "moved_mg": axes(self.in_mg(self.moved)),
+                "peak_to_peak_m_s2": axes(self.peak_to_peak), "peak_to_peak_raw": axes(self.in_raw(self.peak_to_peak)),
+                "peak_to_peak_mg": axes(self.in_mg(self.peak_to_peak))}
+
+
+def bias_drift(c: Components, tau2: float, q2: float, b: np.ndarray) -> BiasDrift:
+    """The walk's smoothed estimate about its mean over the intervals (BiasDrift), with V about that
+    mean (``Components.about_mean``): beta_i = C_i P r, its error covariance q^2 K - C_i P C_i^T
+    (Henderson's prediction error), C_i = Cov(beta_i, r) = q^2 K diag(G_i), K = walk_about_mean(t),
+    P the REML projector (the fitted parameters' share of r taken out)."""
+    order = np.argsort(c.t, kind="stable")
+    K = walk_about_mean(c.t)
+    L = np.linalg.cholesky(c.about_mean(tau2, q2))
+    Xw = np.linalg.solve(L, c.X)
+    Q, _ = np.linalg.qr(Xw)
+    Li = np.linalg.solve(L, np.eye(len(c.r)))
+    M = Li - Q @ (Q.T @ Li)
+    P = M.T @ M  # V^-1 - V^-1 X (X^T V^-1 X)^-1 X^T V^-1
+    Pr = P @ c.r
+    walk, std = np.empty((len(c.r), 3)), np.empty((len(c.r), 3))
+    moved, moved_std = np.empty(3), np.empty(3)
+    first, last = order[0], order[-1]
+    for i in range(3):
+        C = q2 * K * c.G[:, i][None, :]
+        walk[:, i] = C @ Pr
+        E = q2 * K - C @ P @ C.T
+        std[:, i] = np.sqrt(np.clip(np.diag(E), 0.0, None))
+        moved[i] = walk[last, i] - walk[first, i]
+        moved_std[i] = math.sqrt(max(E[last, last] + E[first, first] - 2.0 * E[last, first], 0.0))
+    return BiasDrift(t=c.t0 + c.t[order], walk=walk[order], walk_std=std[order], moved=moved, moved_std=moved_std,
+                     b=np.asarray(b, float))
