@@ -24,8 +24,7 @@ from imucal.solve.observability import Observability, analyse, distinct_directio
 from imucal.constants import RIGHT_ANGLE
 from imucal.model.parameters import ANGLE_NAMES, BASE_NAMES, Parameters, base_parameters
 from imucal.data.static import Intervals, detect_static
-from imucal.solve.stats import chi2_sf
-from imucal.solve.misfit import POOR_FIT_P, POOR_FIT_REDCHI, excess_residuals  # one rule for every sensor's fit
+from imucal.solve.misfit import excess_residuals  # one rule for every sensor's fit
 from imucal.report.misfit import excess_words
 from imucal.model.effects_registry import effects_from_specs
 from imucal.model.effects import EFFECTS, prepare_parameters

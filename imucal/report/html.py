@@ -16,8 +16,8 @@ from typing import TYPE_CHECKING, Iterable, Mapping
 
 import numpy as np
 
-from imucal.pipeline import POOR_FIT_P, POOR_FIT_REDCHI, CalibrationRun
-from imucal.solve.misfit import excess_residuals
+from imucal.pipeline import CalibrationRun
+from imucal.solve.misfit import POOR_FIT_P, POOR_FIT_REDCHI, excess_residuals
 from imucal.report.text import interval_residuals, t_quantile_975
 from imucal.solve.stats import chi2_sf
 from imucal import __version__
