@@ -6,15 +6,15 @@ turns: its gyro mean is then a turn rate, not the bias, and an unweighted mean o
 means pulls the bias by that rate over the number of intervals. Each interval is therefore also
 judged on the gyro, with two tests of one shape:
 
-- ``MEAN``: its mean rate against the static model fitted to the other still intervals
+- ``MEAN``: its mean rate against the static model fitted to the intervals still kept
   (bias, plus the g-sensitivity rows its test keeps: imucal.gyro.gsens);
 - ``DRIFT``: the mean of its second half minus that of its first half (a turn that starts,
   stops or speeds up within it).
 
 Each statistic is measured against its own allowed scatter per axis: the interval's standard
 error from its own samples plus the spread between intervals (bias instability, correlated noise),
-estimated robustly from the intervals themselves (median absolute value, which one turning
-interval in two cannot move). The squared standardised values summed over the three axes are
+estimated robustly from the intervals themselves (a median absolute value: turning intervals
+barely move it while they are fewer than half). The squared standardised values summed over the three axes are
 chi-square(3) for a still interval. The worst interval below ``ALPHA / (2 n)`` (Bonferroni over
 both tests and every interval) is rejected, the model refitted without it, and so on.
 
@@ -118,7 +118,7 @@ def _chi2(x: np.ndarray, se: np.ndarray, keep: np.ndarray, floor: np.ndarray) ->
     """Per interval, sum over axes of x^2 / (spread^2 + se^2): chi-square(3) for a still interval.
 
     ``spread`` (per axis): what the kept intervals scatter beyond their own standard errors,
-    from the median of |x| (robust: one interval in two may turn); ``floor`` bounds the
+    from the median of |x| (robust while fewer than half turn); ``floor`` bounds the
     variance below (an interval is never judged more precisely than the whole recording's mean).
     """
     total = (np.array([median(np.abs(x[keep, j])) for j in range(3)]) / MAD_NORMAL) ** 2
