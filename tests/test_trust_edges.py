@@ -88,3 +88,66 @@ def test_streamed_slow_recording_gives_the_same_intervals(tmp_path, monkeypatch)
     np.testing.assert_array_equal(s.intervals.start, iv.start)
     np.testing.assert_array_equal(s.intervals.end, iv.end)
     np.testing.assert_array_equal(s.samples.raw, sim.raw[iv.sample_mask(sim.t.size)])
+
+
+# --- 3. bad input to `noise` and `fit.fix`: one line, exit 2, not an internal error --------------
+def _still_log(path, scale: float = 1.0, const_axis: int | None = None, n: int = 3000):
+    rng = np.random.default_rng(11)
+    y = rng.normal(0.0, 1.0, (n, 3)) * scale
+    if const_axis is not None:
+        y[:, const_axis] = 9.81
+    t = np.arange(n) / 100.0
+    np.savetxt(path, np.column_stack([t, y]), delimiter=",", header="t,ax,ay,az", comments="", fmt="%.17g")
+    return path
+
+
+def test_noise_on_an_axis_that_never_changes_is_refused(run_cli, tmp_path, unchanged):
+    src = _still_log(tmp_path / "stuck.csv", const_axis=2)
+    with unchanged():
+        r = run_cli(["noise", "--data", src, "--json", tmp_path / "n.json"])
+    assert r.code == 2
+    one_line_error(r.err, "stuck.csv: data: axis z reads 9.81 in all 3000 still samples: it never changes",
+                   "(fix: check axis z of the sensor, or record it at its full resolution)")
+
+
+@pytest.mark.parametrize("scale", [1e-200, 1e-30, 1e25])
+def test_noise_of_tiny_or_huge_readings_is_that_of_the_same_readings_scaled(run_cli, tmp_path, scale):
+    """Readings of 1e-200 gave 'SVD did not converge' (exit 3): each axis's curve and fit are now
+    computed in units of its own size, so the estimates scale with the readings."""
+    import json
+
+    ref, big = tmp_path / "ref.json", tmp_path / "scaled.json"
+    assert run_cli(["noise", "--data", _still_log(tmp_path / "one.csv"), "--json", ref]).code == 0
+    r = run_cli(["noise", "--data", _still_log(tmp_path / "s.csv", scale=scale), "--json", big])
+    assert r.code == 0, r.err
+    a, b = json.loads(ref.read_text())["axes"], json.loads(big.read_text())["axes"]
+    for axis in "xyz":
+        assert b[axis]["white_density"] == pytest.approx(a[axis]["white_density"] * scale, rel=1e-6)
+        assert b[axis]["bias_instability"] == pytest.approx(a[axis]["bias_instability"] * scale, rel=1e-6)
+
+
+def test_fit_fix_with_every_parameter_is_refused(run_cli, tmp_path, unchanged):
+    from conftest import write_simulation
+
+    write_simulation(tmp_path / "si.csv", si_sensor(np.random.default_rng(1)), cube_directions(), seed=1)
+    cfg = tmp_path / "all_fixed.yaml"
+    cfg.write_text("data: {path: si.csv, unit: m/s^2}\nfit:\n  fix: [s1, s2, s3, b1, b2, b3, phi, psi, theta]\n")
+    with unchanged():
+        r = run_cli(["calibrate", cfg, "--out", tmp_path / "out", "--no-figures"])
+    assert r.code == 2
+    one_line_error(r.err, "all_fixed.yaml: fit.fix: all 9 parameters are fixed, so nothing is left to fit",
+                   "(fix: drop at least one from fit.fix")
+    # ... the angles by flag and the rest in the file: the same refusal
+    cfg.write_text("data: {path: si.csv, unit: m/s^2}\nfit:\n  fix: [s1, s2, s3, b1, b2, b3]\n")
+    with unchanged():
+        r = run_cli(["calibrate", cfg, "--fix-angles", "--out", tmp_path / "out", "--no-figures"])
+    assert r.code == 2 and "fit.fix: all 9 parameters are fixed" in r.err
+
+
+def test_fit_fix_with_every_base_parameter_beside_an_effect_is_a_fit():
+    from imucal.config.run import config_from_dict
+
+    cfg = config_from_dict({"data": {"path": "x.csv"},
+                            "fit": {"fix": ["s1", "s2", "s3", "b1", "b2", "b3", "phi", "psi", "theta"],
+                                    "effects": ["bias_drift"]}})
+    assert len(cfg.fit.fix) == 9

@@ -47,24 +47,37 @@ class NoiseEstimate:
     tau_min: float  #: [s] where the curve is lowest
 
 
-def allan_deviation(y: np.ndarray, rate: float, points_per_decade: int = 10) -> AllanCurve:
-    """Overlapping Allan deviation of each column of ``y`` (N, axes) sampled at ``rate`` Hz."""
+def allan_deviation(y: np.ndarray, rate: float, points_per_decade: int = 10, source: str | None = None,
+                    axes: str = "xyz") -> AllanCurve:
+    """Overlapping Allan deviation of each column of ``y`` (N, axes) sampled at ``rate`` Hz.
+
+    Each column is computed in units of its own range and scaled back, so the curve of readings of
+    any size (1e-200 or 1e200) is that of the same readings scaled to one. A column that never
+    changes has no noise to measure: refused, naming ``source`` and the axis (``axes``: their names).
+    """
     y = np.asarray(y, float)
     if y.ndim == 1:
         y = y[:, None]
     n = y.shape[0]
     if n < 100:
-        raise ImucalError(f"only {n} still samples; the Allan deviation needs at least 100", field="data",
-                          fix="record a longer still log (minutes to hours)")
+        raise ImucalError(f"only {n} still samples; the Allan deviation needs at least 100", file=source,
+                          field="data", fix="record a longer still log (minutes to hours)")
+    span = np.ptp(y, axis=0)
+    for j in np.flatnonzero(~(span > 0)):
+        name = axes[j] if j < len(axes) else str(j)
+        raise ImucalError(f"axis {name} reads {y[0, j]:.6g} in all {n} still samples: it never changes, so it "
+                          "has no noise to measure (a stuck or clipped axis, or readings rounded coarser than "
+                          "the noise)", file=source, field="data",
+                          fix=f"check axis {name} of the sensor, or record it at its full resolution")
     tau0 = 1.0 / rate
-    x = np.vstack([np.zeros((1, y.shape[1])), np.cumsum(y - y.mean(axis=0), axis=0) * tau0])
+    x = np.vstack([np.zeros((1, y.shape[1])), np.cumsum((y - y.mean(axis=0)) / span, axis=0) * tau0])
     ms = np.unique(np.round(np.logspace(0, math.log10((n - 1) // 3), points_per_decade
                                         * max(1, int(math.log10(n)))).astype(int)))
     out = np.empty((ms.size, y.shape[1]))
     for i, m in enumerate(ms):
         d = x[2 * m:] - 2 * x[m:-m] + x[:-2 * m]
         out[i] = np.sqrt(np.mean(d * d, axis=0) / (2 * (m * tau0) ** 2))
-    return AllanCurve(tau=ms * tau0, adev=out, clusters=n / ms)
+    return AllanCurve(tau=ms * tau0, adev=out * span, clusters=n / ms)
 
 
 def _rel_err(clusters: float) -> float:
@@ -107,12 +120,16 @@ def estimate(curve: AllanCurve, axis: int = 0) -> NoiseEstimate:
         keep = t >= LOWPASS_MARGIN * t[k0]
         if np.count_nonzero(keep) >= 4:
             t, s, c = t[keep], s[keep], c[keep]
-    q, sd = _fit_terms(t, s, c)
+    unit = float(s.max())  # fitted in units of the curve's largest value: no under- or overflow of s^2
+    if not (np.isfinite(unit) and unit > 0):
+        raise ImucalError(f"axis {axis}: the Allan deviation is {unit:g} at every tau: no noise to measure",
+                          field="data", fix="give a still log whose readings change")
+    q, sd = _fit_terms(t, s / unit, c)
 
     def term(j: int) -> tuple[float, float]:  # value = sqrt(q_j); relative error = sd / (2 q)
         if not q[j] > 0:
             return float("nan"), float("nan")
-        return math.sqrt(q[j]), float(sd[j] / (2 * q[j]))
+        return math.sqrt(q[j]) * unit, float(sd[j] / (2 * q[j]))
 
     white, we = term(0)
     rw, re = term(2)

@@ -142,6 +142,10 @@ class FitSettings:
         for n in self.fix:
             if n not in BASE_NAMES:
                 raise ImucalError(f"cannot fix {short(n)}", field="fit.fix", fix=f"choose from {', '.join(BASE_NAMES)}")
+        if set(BASE_NAMES) <= set(self.fix) and not self.effects:  # no unknown left for the fit
+            raise ImucalError(f"all {len(BASE_NAMES)} parameters are fixed, so nothing is left to fit",
+                              field="fit.fix", fix="drop at least one from fit.fix (e.g. fix: [phi, psi, theta]), "
+                                                   "or fit an effect beside them (fit.effects)")
         for n, v in self.initial.items():
             if n not in BASE_NAMES and not (isinstance(n, str) and EFFECT_PARAMETER.match(n)):
                 raise ImucalError(f"unknown parameter {short(n)}", field="fit.initial",

@@ -40,7 +40,7 @@ def run(args: argparse.Namespace) -> int:
     if args.calibration:
         cal = load_calibration(args.calibration)
         y, unit = cal.apply(y), "m/s^2"
-    curve = allan_deviation(y, rec.sample_rate)
+    curve = allan_deviation(y, rec.sample_rate, source=rec.source)
     est = [estimate(curve, j) for j in range(3)]
     print(f"Allan deviation of {what} ({y.shape[0]} samples, {rec.sample_rate:.4g} Hz), unit {unit}")
     print(f"{'axis':<5} {'white density':>16} {'bias instability':>18} {'random walk':>16}")
