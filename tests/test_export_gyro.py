@@ -20,7 +20,7 @@ from imucal.export.formats import ExportOptions
 from imucal.export.peers import read_imutk_calib
 from imucal.export.registry import export, read_peer
 from test_export import imutk_apply
-from test_export_peers import ardupilot_apply, best_rotation, px4_apply, sphere, synthetic
+from test_export_peers import ardupilot_apply, as_si, best_rotation, px4_apply, sphere, synthetic
 
 ACC = ("xsens-mti-imutk", "xsens_acc.mat")
 GYR = ("xsens-mti-imutk", "xsens_gyro.mat")
@@ -88,10 +88,16 @@ def matrix_csv_gyro_apply(text: str, raw: np.ndarray, acc: np.ndarray) -> np.nda
     return raw @ rows[:, :3].T + rows[:, 3] - acc @ rows[:, 4:].T
 
 
+def stated_sensitivity(text: str) -> float:
+    """The driver's sensitivity k the file states (its comments joined: ArduPilot's wrap)."""
+    text = " ".join(ln[2:] for ln in text.splitlines() if ln.startswith("# "))
+    return float(re.search(r"sensitivity k = ([0-9.e+-]+) ", text).group(1))
+
+
 def autopilot_gyro_apply(text: str, raw: np.ndarray, fmt: str) -> np.ndarray:
     """ArduPilot _rotate_and_correct_gyro: gyro -= _gyro_offset; PX4 Gyroscope::Correct(): data - _offset.
     The reading [rad/s] is the driver's raw / k, k as the file states it."""
-    k = float(re.search(r"sensitivity k = ([0-9.e+-]+) ", text).group(1))
+    k = stated_sensitivity(text)
     if fmt == "ardupilot":
         p = dict(ln.split(",") for ln in text.splitlines() if ln and not ln.startswith("#"))
         off = np.array([float(p[f"INS_GYROFFS_{a}"]) for a in "XYZ"])
@@ -104,6 +110,7 @@ def autopilot_gyro_apply(text: str, raw: np.ndarray, fmt: str) -> np.ndarray:
 def stated_gyro(text: str) -> tuple[float, float, float, float]:
     """(rate max, rate RMS, at-rest max, at-rest RMS) [deg/s] as the file states them."""
     num = r"([0-9.e+-]+)"
+    text = " ".join(ln[2:] for ln in text.splitlines() if ln.startswith("# "))  # ArduPilot's comments wrap
     m = re.search(rf"\|omega\| = 1 rad/s over all directions is max {num} deg/s, RMS {num} deg/s, "
                   rf"and at rest with \|a\| = g over all directions max {num} deg/s, RMS {num} deg/s", text)
     assert m, "the file states the gyroscope residual"
@@ -197,7 +204,7 @@ ACC_PEERS = {"ardupilot": ardupilot_apply, "px4": px4_apply}
 @pytest.mark.parametrize("fmt", ["ardupilot", "px4"])
 @pytest.mark.parametrize("which", ["xsens", "rad/s", "deg/s"])
 def test_autopilot_gyro_error_is_the_stated_residual(xsens, fmt, which):
-    cal = xsens[0] if which == "xsens" else with_gyro(gyro_part(which))
+    cal = as_si(xsens[0])[0] if which == "xsens" else with_gyro(gyro_part(which))  # autopilots hold m/s^2
     out = export(cal, fmt)
     rmax, rrms, gmax, grms = stated_gyro(out.text)
     assert any(f"max {rmax:.3g} deg/s, RMS {rrms:.3g} deg/s" in n for n in out.notes)  # the command prints it
@@ -228,7 +235,7 @@ def test_autopilot_gyro_offset_in_rad_per_s(fmt):
 
 
 def test_xsens_gyro_residual_on_the_real_samples_is_bounded_by_the_stated_one(xsens):
-    cal, raw_a, raw_g = xsens
+    (cal, raw_a), raw_g = as_si(*xsens[:2]), xsens[2]  # ArduPilot holds m/s^2
     out = export(cal, "ardupilot")
     rmax, _, gmax, _ = stated_gyro(out.text)
     sa, s_ours = sphere(cal)
@@ -246,6 +253,8 @@ CASES = [(f, n) for f, n in FILES.items()] + [("matrix", "x.csv")]
 @pytest.mark.parametrize("fmt, name", CASES)
 def test_gyro_round_trip(xsens, tmp_path, fmt, name):
     cal, raw_a, raw_g = xsens
+    if fmt in ("ardupilot", "px4"):  # they hold m/s^2
+        cal, raw_a = as_si(cal, raw_a)
     out = export(cal, fmt, ExportOptions(filename=name))
     (tmp_path / name).write_text(out.text)
     if fmt == "imutk":
@@ -256,7 +265,7 @@ def test_gyro_round_trip(xsens, tmp_path, fmt, name):
     acc, omega = cal.apply_imu(raw_a, raw_g)
     got = back.gyro.apply(raw_g, back.apply(raw_a))
     if fmt in ("ardupilot", "px4"):  # the offset s_g / k, exactly; nothing else
-        k = float(re.search(r"sensitivity k = ([0-9.e+-]+) ", out.text).group(1))
+        k = stated_sensitivity(out.text)
         np.testing.assert_allclose(back.gyro.o, cal.gyro.bias / k, rtol=1e-12)
         assert np.all(back.gyro.C == np.eye(3)) and np.all(back.gyro.D == 0)
     elif fmt == "imutk":  # all but G_s

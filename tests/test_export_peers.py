@@ -34,18 +34,44 @@ def xsens():
     return cal, raw
 
 
+#: m/s^2 per count of the synthetic sensor (~1660 counts per m/s^2): its readings are in m/s^2, the unit
+#: ArduPilot and PX4 hold (a calibration of counts is refused there, tests/test_trust_export.py).
+K = 1.0 / 1662.0
+
+
 def synthetic(effects: tuple[tuple[str, tuple[int, ...]], ...] = (), angles=(1.556, 1.585, 1.562)) -> Calibration:
-    """A counts sensor with misaligned axes and, optionally, effects with non-zero coefficients."""
-    params = base_parameters((120.0, -75.0, 40.0), (1660.0, 1675.0, 1648.0), angles, raw_unit="counts")
-    params = params.with_values({"s1": 120.0, "s2": -75.0, "s3": 40.0, "b1": 1660.0, "b2": 1675.0, "b3": 1648.0,
+    """A sensor reading m/s^2 (a counts sensor's numbers times K) with misaligned axes and,
+    optionally, effects with non-zero coefficients."""
+    s, b = [v * K for v in (120.0, -75.0, 40.0)], [v * K for v in (1660.0, 1675.0, 1648.0)]
+    params = base_parameters(s, b, angles, raw_unit="m/s^2")
+    params = params.with_values({**dict(zip(("s1", "s2", "s3", "b1", "b2", "b3"), s + b)),
                                  "phi": angles[0], "psi": angles[1], "theta": angles[2]})
     for name, axes in effects:
         params = params.extended(make_effect(name, axes).parameters(params))
-    values = {n: 0.37 for n in params.names if n.startswith(("bias_", "scale_")) and not n.endswith("_tref")}
+    values = {n: 0.37 * (K if n.startswith("bias_") else 1.0)
+              for n in params.names if n.startswith(("bias_", "scale_")) and not n.endswith("_tref")}
     values.update({n: 23.5 for n in params.names if n.endswith("_tref")})
     params = params.with_values(values)
-    return Calibration(params=params, std={n: 0.0 for n in params.names}, gravity=9.80665, raw_unit="counts",
+    return Calibration(params=params, std={n: 0.0 for n in params.names}, gravity=9.80665, raw_unit="m/s^2",
                        effects=effects, data={"file": "synthetic.csv"}, created="2024-05-01T12:00:00+00:00")
+
+
+def as_si(cal: Calibration, *raws: np.ndarray) -> tuple:
+    """The same sensor with its readings converted to m/s^2 as a driver does, (raw - z) / k, z the
+    shifts' mean (the ADC's zero) and k the mean sensitivity [raw per m/s^2] (the calibrated
+    acceleration is unchanged), and ``raws`` converted alike: ArduPilot and PX4 hold offsets in m/s^2
+    and refuse a calibration of counts such as the Xsens one (tests/test_trust_export.py)."""
+    import dataclasses
+
+    from imucal.model.parameters import Parameters
+
+    z, k = float(np.mean(cal.values[0:3])), float(np.mean(cal.values[3:6]))
+    shift = {"s1": z, "s2": z, "s3": z}
+    params = Parameters(dataclasses.replace(
+        p, value=(p.value - shift.get(n, 0.0)) / k, lower=(p.lower - shift.get(n, 0.0)) / k,
+        upper=(p.upper - shift.get(n, 0.0)) / k, scale=p.scale / k, unit="m/s^2" if n in shift else "1")
+        if n in ("s1", "s2", "s3", "b1", "b2", "b3") else p for n, p in cal.params.items())
+    return (dataclasses.replace(cal, params=params, raw_unit="m/s^2"), *((r - z) / k for r in raws))
 
 
 # --- the peers' formulas, from their sources ---------------------------------------------------
@@ -79,6 +105,7 @@ PEERS = {"kalibr": kalibr_apply, "ardupilot": ardupilot_apply, "px4": px4_apply}
 
 
 def stated_residual(text: str) -> tuple[float, float]:
+    text = " ".join(ln[2:] for ln in text.splitlines() if ln.startswith("# "))  # ArduPilot's comments wrap
     m = re.search(r"is max ([0-9.e+-]+) m/s\^2, RMS ([0-9.e+-]+) m/s\^2", text)
     assert m, "the file states the residual"
     return float(m.group(1)), float(m.group(2))
@@ -121,7 +148,7 @@ def test_autopilot_exact_for_orthogonal_axes(fmt):
 @pytest.mark.parametrize("fmt", ["ardupilot", "px4"])
 @pytest.mark.parametrize("which", ["xsens", "synthetic"])
 def test_autopilot_error_is_the_stated_residual(xsens, fmt, which):
-    cal = xsens[0] if which == "xsens" else synthetic()
+    cal = as_si(xsens[0])[0] if which == "xsens" else synthetic()
     out = export(cal, fmt)
     stated_max, stated_rms = stated_residual(out.text)
     assert any(f"is max {stated_max:.3g} m/s^2" in n for n in out.notes)  # the command prints it too
@@ -134,7 +161,7 @@ def test_autopilot_error_is_the_stated_residual(xsens, fmt, which):
 
 
 def test_xsens_residual_on_the_real_samples_is_bounded_by_the_stated_one(xsens):
-    cal, raw = xsens
+    cal, raw = as_si(*xsens)
     out = export(cal, "px4")
     sraw, s_ours = sphere(cal)
     R = best_rotation(px4_apply(out.text, sraw), s_ours)  # the frames aligned over all directions
@@ -160,8 +187,9 @@ CASES = [(f, n) for f, n in FILES.items()] + [("matrix", "x.csv")]
 @pytest.mark.parametrize("which", ["xsens", "effects"])
 def test_round_trip(xsens, tmp_path, fmt, name, which):
     effects = (("bias_temperature", (0, 1, 2)), ("scale_drift", (2,)))
-    cal = xsens[0] if which == "xsens" else synthetic(effects)
-    raw = xsens[1] if which == "xsens" else sphere(cal, 500)[0]
+    cal, raw = (as_si(*xsens) if fmt in ("ardupilot", "px4") else xsens) if which == "xsens" else (
+        synthetic(effects), None)
+    raw = sphere(cal, 500)[0] if raw is None else raw
     out = export(cal, fmt, ExportOptions(filename=name))
     (tmp_path / name).write_text(out.text)
     back = read_peer(tmp_path / name, fmt)
@@ -221,19 +249,25 @@ def test_cli_export_kalibr_noise_matches_imucal_noise(xsens_file, run_cli, tmp_p
     assert d2["accelerometer_noise_density"] is None and "imucal noise --data STILL_LOG" in r.out
 
 
-def test_cli_export_prints_the_residual(xsens_file, run_cli, tmp_path):
-    r = run_cli(["export", xsens_file, "--format", "ardupilot", "--out", tmp_path / "x.param"])
+@pytest.fixture
+def xsens_si_file(xsens, tmp_path):
+    p = tmp_path / "cal_si.yaml"
+    as_si(xsens[0])[0].save(p)
+    return p
+
+
+def test_cli_export_prints_the_residual(xsens_si_file, run_cli, tmp_path):
+    r = run_cli(["export", xsens_si_file, "--format", "ardupilot", "--out", tmp_path / "x.param"])
     mx, rms = stated_residual((tmp_path / "x.param").read_text())
     assert r.code == 0 and f"is max {mx:.3g} m/s^2, RMS {rms:.3g} m/s^2" in r.out
-    r = run_cli(["export", xsens_file, "--format", "px4", "--out", tmp_path / "y.params", "--data", "x.csv"])
+    r = run_cli(["export", xsens_si_file, "--format", "px4", "--out", tmp_path / "y.params", "--data", "x.csv"])
     assert r.code == 2 and "--data: --data, --gyro-data and --config feed Kalibr's noise fields only" in r.err
 
 
-def test_cli_compare(xsens, xsens_file, run_cli, tmp_path):
+def test_cli_compare(xsens, xsens_file, xsens_si_file, run_cli, tmp_path):
     cal, _ = xsens
     data = real_file(*XSENS)
-    for fmt in ("imutk", "px4"):
-        (tmp_path / FILES[fmt]).write_text(export(cal, fmt).text)
+    (tmp_path / FILES["imutk"]).write_text(export(cal, "imutk").text)
     r = run_cli(["compare", xsens_file, tmp_path / "x.calib", "--data", data, "--json", tmp_path / "c.json"])
     assert r.code == 0, r.err
     c = json.loads((tmp_path / "c.json").read_text())
@@ -246,12 +280,16 @@ def test_cli_compare(xsens, xsens_file, run_cli, tmp_path):
     i0 = c["intervals"][0]
     sel = (raw[:, 0] >= i0["t_start"] - raw[0, 0] - 1e-9) & (raw[:, 0] <= i0["t_end"] - raw[0, 0] + 1e-9)
     assert np.linalg.norm(cal.apply(raw[sel, 1:]).mean(axis=0)) - G_XSENS == pytest.approx(e[0, 0], abs=2e-4)
-    r = run_cli(["compare", xsens_file, tmp_path / "x.params", "--data", data, "--json", tmp_path / "p.json"])
+    # PX4 holds m/s^2: the same recording and calibration with the readings in m/s^2
+    (tmp_path / FILES["px4"]).write_text(export(as_si(cal)[0], "px4").text)
+    si_data = tmp_path / "xsens_si.txt"
+    np.savetxt(si_data, np.column_stack([raw[:, 0], as_si(cal, raw[:, 1:])[1]]), fmt="%.17g")
+    r = run_cli(["compare", xsens_si_file, tmp_path / "x.params", "--data", si_data, "--json", tmp_path / "p.json"])
     assert r.code == 0 and "(px4)" in r.out
     p = json.loads((tmp_path / "p.json").read_text())
     e = np.array([list(i["errors"].values()) for i in p["intervals"]])
     mx = stated_residual((tmp_path / "x.params").read_text())[0]
-    assert np.all(np.abs(e[:, 1] - e[:, 0]) <= mx) and p["rms"]["x.params (px4)"] > 5 * p["rms"]["cal.yaml"]
+    assert np.all(np.abs(e[:, 1] - e[:, 0]) <= mx) and p["rms"]["x.params (px4)"] > 5 * p["rms"]["cal_si.yaml"]
 
 
 # --- malicious inputs: exit 2, one line ---------------------------------------------------------

@@ -19,20 +19,26 @@ from imucal.model.parameters import base_parameters
 
 RIGHT = np.pi / 2
 RNG = np.random.default_rng(14)
-RAW = RNG.normal(0.0, 1700.0, (400, 3))
+#: m/s^2 per count: the sensor's numbers are a counts sensor's times K, its readings in m/s^2, the unit
+#: ArduPilot and PX4 hold (a calibration of counts is refused there, tests/test_trust_export.py).
+K = 1.0 / 1662.0
+RAW = RNG.normal(0.0, 1700.0, (400, 3)) * K
 TEMPS = RNG.uniform(15.0, 45.0, 400)
 
 
 def calibration(effects, coefficients: dict[str, float], angles=(RIGHT,) * 3) -> Calibration:
-    """A counts sensor with temperature effects over 15..45 degC (T_ref 30)."""
-    params = base_parameters((120.0, -75.0, 40.0), (1660.0, 1675.0, 1648.0), angles, raw_unit="counts")
+    """A sensor reading m/s^2 with temperature effects over 15..45 degC (T_ref 30); ``coefficients``
+    of the bias terms in counts (times K here), of the scale terms relative."""
+    s, b = [v * K for v in (120.0, -75.0, 40.0)], [v * K for v in (1660.0, 1675.0, 1648.0)]
+    params = base_parameters(s, b, angles, raw_unit="m/s^2")
+    params = params.with_values(dict(zip(("s1", "s2", "s3", "b1", "b2", "b3"), s + b)))
     for name, axes in effects:
         params = params.extended(make_effect(name, axes).parameters(params))
-    values = {n: v for n, v in coefficients.items()}
+    values = {n: v * (K if n.startswith("bias_") else 1.0) for n, v in coefficients.items()}
     values.update({n: 30.0 for n in params.names if n.endswith(("_tref", "_a2", "_a3"))})
     values.update({n: 75.0 for n in params.names if n.endswith(("_b2", "_b3"))})
     params = params.with_values(values)
-    return Calibration(params=params, std={n: 0.0 for n in params.names}, gravity=9.80665, raw_unit="counts",
+    return Calibration(params=params, std={n: 0.0 for n in params.names}, gravity=9.80665, raw_unit="m/s^2",
                        effects=effects, fit={"temperature_range": [15.0, 45.0]}, data={"file": "t.csv"})
 
 
@@ -113,6 +119,7 @@ def test_scale_terms_lose_what_the_file_states(fmt):
     raw = np.array([[120.0, -75.0, 40.0]]) + a * np.array([1660.0, 1675.0, 1648.0])  # orthogonal axes
     raw = raw + (temps[:, None] - 30.0) * np.array([2.1, -1.3, 0.7])  # the bias terms, exactly
     raw = raw + a * np.array([1660.0, 1675.0, 1648.0]) * (temps[:, None] - 30.0) * np.array([2e-4, -1e-4, 5e-5])
+    raw = raw * K  # in m/s^2
     err = np.linalg.norm(PEERS[fmt](out.text, raw, temps) - cal.apply(raw, {"temp": temps}), axis=1)
     assert 0.8 * stated <= err.max() <= stated * 1.005  # the note gives 3 digits
     assert stated == pytest.approx(9.80665 * 2e-4 * 15 / (1 - 2e-4 * 15), rel=5e-3)  # x at 15 degC, the worst end

@@ -26,6 +26,15 @@ hold nothing else:
              - _offset); CAL_GYRO0_XOFF..ZOFF [rad/s].
 The offset written is s_g / k, k the driver's sensitivity (imucal.export.gyro.OffsetFit); scale,
 misalignment and g-sensitivity are lost, measured in the accelerometer's best-aligned frame R.
+
+Units: both autopilots apply these numbers to their driver's reading in m/s^2 (INS_ACCOFFS @Units:
+m/s/s; PX4 CAL_ACC0_XOFF @unit m/s^2), so a calibration of readings in c m/s^2 per raw unit (g, mg)
+is written as offsets c s_i and scales 1/(c b_i) (READING_UNITS). A calibration whose unit is not
+stated ("raw", the default label) is written as if its readings were m/s^2 only when its numbers are
+ones an autopilot's own calibration accepts (PLAUSIBLE); a unit with no such factor (counts, LSB) is
+refused, as is a stated unit whose numbers are not plausible (counts labelled m/s^2): an autopilot
+would otherwise apply offsets in counts to readings in m/s^2.
+Text: every comment line goes through imucal.export.escape (ArduPilot's line-length limit included).
 """
 from __future__ import annotations
 
@@ -33,13 +42,15 @@ import math
 import re
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
 from imucal import __version__
 from imucal.calibration.frozen import Calibration
-from imucal.constants import SI_ACCEL_UNIT
+from imucal.constants import SI_ACCEL_UNIT, STANDARD_GRAVITY
 from imucal.errors import ImucalError, short
+from imucal.export.escape import ardupilot_comment, free_text, hash_comment
 from imucal.export.formats import ExportOptions, Exported, affine, dropped_effects
 from imucal.export.gyro import OffsetFit, offset_fit
 from imucal.export import tempcal
@@ -55,6 +66,35 @@ ARDUPILOT_GYRO = tuple(f"INS_GYROFFS_{a}" for a in AXES)
 PX4_GYRO = tuple(f"CAL_GYRO0_{a}OFF" for a in AXES)
 #: QGroundControl's parameter file: MAV_PARAM_TYPE_REAL32 for a float parameter, _INT32 for an integer.
 MAV_PARAM_TYPE_REAL32, MAV_PARAM_TYPE_INT32 = 9, 6
+#: Raw units whose readings the autopilots' drivers would give in m/s^2, with the factor c [m/s^2 per
+#: unit]; g is standard gravity, as the drivers convert it (ArduPilot GRAVITY_MSS, PX4 CONSTANTS_ONE_G).
+READING_UNITS = {SI_ACCEL_UNIT: 1.0, "g": STANDARD_GRAVITY, "mg": STANDARD_GRAVITY / 1000.0}
+#: The unit label of a recording whose unit was not given (imucal.data.load.DataSpec.unit).
+UNSTATED_UNIT = "raw"
+
+
+@dataclass(frozen=True)
+class Plausible:
+    """Offsets and scales an autopilot's own accelerometer calibration accepts."""
+
+    max_offset: float  #: [m/s^2]
+    min_scale: float
+    max_scale: float
+    source: str
+
+    def admits(self, offset: np.ndarray, scale: np.ndarray) -> bool:
+        return bool(np.all(np.abs(offset) <= self.max_offset) and np.all(scale >= self.min_scale)
+                    and np.all(scale <= self.max_scale))
+
+    def text(self) -> str:
+        return (f"|offset| <= {self.max_offset:g} m/s^2, scale {self.min_scale:g} to {self.max_scale:g}, "
+                f"{self.source}")
+
+
+#: ArduPilot's (libraries/AP_AccelCal/AccelCalibrator.cpp, accept_result: |offset| <= GRAVITY_MSS,
+#: 0.8 <= diag <= 1.2), applied to PX4's parameters too: the same quantities of a MEMS sensor after
+#: its driver's nominal scaling (PX4's own ranges are wider, up to a scale of 3, or absent).
+PLAUSIBLE = Plausible(STANDARD_GRAVITY, 0.8, 1.2, "ArduPilot's AccelCalibrator::accept_result")
 
 
 @dataclass(frozen=True)
@@ -116,25 +156,53 @@ def _thermal_notes(cal: Calibration, what: str) -> list[str]:
     return notes + list(dropped_effects(replace(cal, effects=rest)) if rest else ())
 
 
-def _notes(cal: Calibration, fit: DiagonalFit, what: str, units: str) -> tuple[str, ...]:
+def reading_factor(cal: Calibration, fit: DiagonalFit, what: str) -> float:
+    """c [m/s^2 per raw unit] that turns this calibration into the autopilot's (module docstring);
+    refused when no factor makes its numbers m/s^2 values the autopilot could hold."""
+    unit = cal.raw_unit
+    how = ("calibrate readings in m/s^2 or g and say so (--unit m/s^2 or --unit g, or data.unit in a run file); "
+           "a calibration of counts goes to --format matrix or imutk, or to `imucal codegen`")
+    if unit not in READING_UNITS and unit != UNSTATED_UNIT:
+        raise ImucalError(f"input unit {short(unit)} is not an acceleration unit {what} can hold (m/s^2, or "
+                          f"{', '.join(u for u in READING_UNITS if u != SI_ACCEL_UNIT)} converted)",
+                          field="units.input", fix=how)
+    c = READING_UNITS.get(unit, 1.0)
+    p = thermal(cal)
+    offset = (fit.offset if p is None else p.s_ref) * c
+    if not PLAUSIBLE.admits(offset, fit.scale / c):
+        got = (f"offsets {', '.join(f'{v:.4g}' for v in offset)} m/s^2 and scales "
+               f"{', '.join(f'{v:.4g}' for v in fit.scale / c)}")
+        said = ("is not stated ('raw'), and read as m/s^2 it gives" if unit == UNSTATED_UNIT
+                else f"{short(unit)} gives")
+        raise ImucalError(f"the input unit {said} {got}, outside what an autopilot's calibration accepts "
+                          f"({PLAUSIBLE.text()})", field="units.input", fix=how)
+    return c
+
+
+def _notes(cal: Calibration, fit: DiagonalFit, what: str, units: str, c: float) -> tuple[str, ...]:
     notes = [fit.sentence(what)]
     gfit = gyro_fit(cal)
     if gfit is not None:
         notes.append(gfit.sentence(what, cal.gyro.unit))
     notes += _thermal_notes(cal, what)
-    if cal.raw_unit != SI_ACCEL_UNIT:
+    if cal.raw_unit == UNSTATED_UNIT:
         notes.append(f"{what} applies {units} to its driver's readings in m/s^2 (offsets in m/s^2, scales "
                      f"near 1); this calibration's input unit is {cal.raw_unit!r}, so these numbers reproduce it "
                      f"only on readings in {cal.raw_unit}")
+    elif c != 1.0:
+        notes.append(f"{what} applies {units} to its driver's readings in m/s^2: this calibration's readings in "
+                     f"{cal.raw_unit} are converted at {c:.10g} m/s^2 per {cal.raw_unit} (offsets c s_i, scales "
+                     "1/(c b_i), temperature terms c times theirs)")
     return tuple(notes)
 
 
-def _header(cal: Calibration, title: str, formula: list[str], notes: tuple[str, ...]) -> list[str]:
-    src = (cal.data or {}).get("file", "?")
-    lines = [f"# {title}, exported by imucal {__version__} from a calibration of {src} ({cal.created or 'no date'})"]
-    lines += [f"# {ln}" for ln in formula]
-    lines += [f"# NOTE: {n}." for n in notes]
-    return lines
+def _header(cal: Calibration, title: str, formula: list[str], notes: tuple[str, ...],
+            comment: Callable[[str], list[str]]) -> list[str]:
+    """The comment lines above the parameters, each through the format's ``comment`` (escape.py)."""
+    src = free_text((cal.data or {}).get("file", "?"))
+    lines = [f"{title}, exported by imucal {__version__} from a calibration of {src} ({cal.created or 'no date'})"]
+    lines += formula + [f"NOTE: {n}." for n in notes]
+    return [out for ln in lines for out in comment(ln)]
 
 
 def _gyro_header(cal: Calibration, fit: OffsetFit | None, label: str, formula: str) -> list[str]:
@@ -145,12 +213,20 @@ def _gyro_header(cal: Calibration, fit: OffsetFit | None, label: str, formula: s
             f"k = {fit.sensitivity!r} {cal.gyro.unit} per rad/s{k}."]
 
 
-def _values(cal: Calibration, fit: DiagonalFit, acc_names: tuple[str, ...], gyro_names: tuple[str, ...]
-            ) -> list[tuple[str, float]]:
+def _offset_formula(cal: Calibration, offsets: str, scales: str, c: float) -> str:
+    if c == 1.0:
+        return f"{offsets} = the shifts s_i [{cal.raw_unit}], {scales} = 1/b_i of the paper's model."
+    return (f"{offsets} = c s_i [m/s^2], {scales} = 1/(c b_i) of the paper's model, c = {c!r} m/s^2 per "
+            f"{cal.raw_unit}.")
+
+
+def _values(cal: Calibration, fit: DiagonalFit, acc_names: tuple[str, ...], gyro_names: tuple[str, ...],
+            c: float) -> list[tuple[str, float]]:
     p = thermal(cal)
     offset = fit.offset if p is None else p.s_ref  # with temperature terms: s at the reference temperature
-    out = list(zip(acc_names, [*map(float, offset), *map(float, fit.scale)]))
+    out = list(zip(acc_names, [*map(float, offset * c), *map(float, fit.scale / c)]))
     if p is not None:
+        p = replace(p, s_ref=p.s_ref * c, coeffs=p.coeffs * c)  # offsets in m/s^2 of the reading
         out += tempcal.ardupilot_lines(p) if acc_names[0].startswith("INS_") else tempcal.px4_lines(p)
     gfit = gyro_fit(cal)
     if gfit is not None:
@@ -161,33 +237,35 @@ def _values(cal: Calibration, fit: DiagonalFit, acc_names: tuple[str, ...], gyro
 def to_ardupilot(cal: Calibration, opts: ExportOptions) -> Exported:
     """An ArduPilot parameter file (NAME,VALUE lines, as Mission Planner and MAVProxy load)."""
     fit = diagonal_fit(cal)
-    notes = _notes(cal, fit, "ArduPilot", "INS_ACCOFFS and INS_ACCSCAL")
+    c = reading_factor(cal, fit, "ArduPilot")
+    notes = _notes(cal, fit, "ArduPilot", "INS_ACCOFFS and INS_ACCSCAL", c)
     lines = _header(cal, "ArduPilot accelerometer" + (" and gyroscope" if cal.gyro else "") + " calibration", [
         "ArduPilot corrects each axis in the sensor frame (AP_InertialSensor_Backend.cpp,",
         "_rotate_and_correct_accel): a = (raw - INS_ACCOFFS) * INS_ACCSCAL, then rotates to the body.",
-        f"INS_ACCOFFS = the shifts s_i [{cal.raw_unit}], INS_ACCSCAL = 1/b_i of the paper's model.",
+        _offset_formula(cal, "INS_ACCOFFS", "INS_ACCSCAL", c),
         *_gyro_header(cal, gyro_fit(cal), "INS_GYROFFS", "_rotate_and_correct_gyro: omega = reading - INS_GYROFFS, "
-                      "reading = raw / k")], notes)
-    lines += [f"{n},{v!r}" for n, v in _values(cal, fit, ARDUPILOT_OFFSETS + ARDUPILOT_SCALES, ARDUPILOT_GYRO)]
+                      "reading = raw / k")], notes, ardupilot_comment)
+    lines += [f"{n},{v!r}" for n, v in _values(cal, fit, ARDUPILOT_OFFSETS + ARDUPILOT_SCALES, ARDUPILOT_GYRO, c)]
     return Exported("\n".join(lines) + "\n", notes)
 
 
 def to_px4(cal: Calibration, opts: ExportOptions) -> Exported:
     """A QGroundControl parameter file (vehicle, component, name, value, type; tab separated)."""
     fit = diagonal_fit(cal)
-    notes = _notes(cal, fit, "PX4", "CAL_ACC0_*OFF and CAL_ACC0_*SCALE") + (
+    c = reading_factor(cal, fit, "PX4")
+    notes = _notes(cal, fit, "PX4", "CAL_ACC0_*OFF and CAL_ACC0_*SCALE", c) + (
         "set CAL_ACC0_ID" + (" and CAL_GYRO0_ID" if cal.gyro else "") + " to your sensors' device ids (PX4 uses a "
         "calibration only for its device)",)
     lines = _header(cal, "PX4 accelerometer" + (" and gyroscope" if cal.gyro else "")
                     + " calibration (QGroundControl parameter file)", [
         "PX4 corrects each axis in the sensor frame (src/lib/sensor_calibration/Accelerometer.hpp,",
         "Correct()): a = rotation * ((raw - thermal_offset - CAL_ACC0_*OFF) .* CAL_ACC0_*SCALE).",
-        f"CAL_ACC0_*OFF = the shifts s_i [{cal.raw_unit}], CAL_ACC0_*SCALE = 1/b_i of the paper's model.",
+        _offset_formula(cal, "CAL_ACC0_*OFF", "CAL_ACC0_*SCALE", c),
         *_gyro_header(cal, gyro_fit(cal), "CAL_GYRO0_*OFF", "Gyroscope.hpp Correct(): omega = rotation * (reading - "
-                      "thermal_offset - CAL_GYRO0_*OFF), reading = raw / k")], notes)
-    lines.append("# Vehicle-Id\tComponent-Id\tName\tValue\tType")
+                      "thermal_offset - CAL_GYRO0_*OFF), reading = raw / k")], notes, lambda t: [hash_comment(t)])
+    lines.append("# Vehicle-Id\tComponent-Id\tName\tValue\tType")  # fixed text: QGroundControl's header
     lines += [f"1\t1\t{n}\t{v!r}\t{MAV_PARAM_TYPE_INT32 if isinstance(v, int) else MAV_PARAM_TYPE_REAL32}"
-              for n, v in _values(cal, fit, PX4_OFFSETS + PX4_SCALES, PX4_GYRO)]
+              for n, v in _values(cal, fit, PX4_OFFSETS + PX4_SCALES, PX4_GYRO, c)]
     return Exported("\n".join(lines) + "\n", notes)
 
 

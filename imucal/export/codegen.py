@@ -362,11 +362,42 @@ class GeneratedC:
         return {f"{self.prefix}.h": self.header, f"{self.prefix}.c": self.source}
 
 
+#: Header names (without .h) that PREFIX.h must not take, by where they come from. A build that puts
+#: the output folder on the include path (-I), or an Arduino sketch beside the library, would open
+#: ours for #include <stdio.h> (or the system's for ours); names are compared without case, as a
+#: macOS or Windows file system finds them.
+SYSTEM_HEADERS = {
+    # ISO/IEC 9899:2018 (C17) 7.1.2, and C23's stdbit.h and stdckdint.h
+    "the C standard library": (
+        "assert complex ctype errno fenv float inttypes iso646 limits locale math setjmp signal stdalign stdarg "
+        "stdatomic stdbool stddef stdint stdio stdlib stdnoreturn string tgmath threads time uchar wchar wctype "
+        "stdbit stdckdint").split(),
+    # POSIX.1-2017 (The Open Group Base Specifications Issue 7, Headers), those named by one word
+    "POSIX": (
+        "aio cpio dirent dlfcn fcntl fmtmsg fnmatch ftw glob grp iconv langinfo libgen monetary mqueue ndbm "
+        "netdb nl_types poll pthread pwd regex sched search semaphore spawn strings stropts syslog tar termios "
+        "trace ulimit unistd utime utmpx wordexp").split(),
+    # glibc, newlib and MSVC headers that portable code includes
+    "common C libraries": "alloca malloc memory endian byteswap features getopt io conio windows".split(),
+    # ArduinoCore-avr cores/arduino, and the libraries the Arduino IDE bundles
+    "Arduino": (
+        "Arduino Client HardwareSerial IPAddress Print Printable Server Stream Udp USBAPI WCharacter WString "
+        "binary new pins_arduino EEPROM SPI Wire SoftwareSerial Servo SD Ethernet WiFi LiquidCrystal Stepper "
+        "Keyboard Mouse HID").split(),
+}
+_SYSTEM_HEADER = {name.lower(): where for where, names in SYSTEM_HEADERS.items() for name in names}
+
+
 def check_prefix(prefix: str) -> str:
-    """The prefix must be a C identifier, not a keyword, and not start with _ (reserved names)."""
+    """The prefix must be a C identifier, not a keyword, not start with _ (reserved names), and not
+    name a system header (SYSTEM_HEADERS): its files are PREFIX.h and PREFIX.c."""
     if not isinstance(prefix, str) or not _IDENT.match(prefix) or prefix in _C_KEYWORDS:
         raise ImucalError(f"{prefix!r} is not a C identifier", field="prefix",
                           fix="use letters, digits and _, starting with a letter, e.g. imucal_xsens")
+    where = _SYSTEM_HEADER.get(prefix.lower())
+    if where is not None:
+        raise ImucalError(f"{prefix!r} would write {prefix}.h, a header of {where}: an #include of either "
+                          "could open the other", field="prefix", fix=f"choose another prefix, e.g. imucal_{prefix}")
     return prefix
 
 

@@ -22,6 +22,8 @@ gyroscope's omega = C raw_g + c_g - D a likewise (imucal.export.gyro):
 
 Effects (temperature, drift, nonlinearity) are not affine: every format gets the map at the
 effects' reference point, and the export says what it drops (``Exported.notes``).
+Text reaches these files through one escaping function per format (imucal.export.escape): the
+CSV's comments through hash_comment, JSON through json.dumps; the .calib holds numbers only.
 """
 from __future__ import annotations
 
@@ -32,6 +34,7 @@ import numpy as np
 
 from imucal.calibration.frozen import Calibration
 from imucal.constants import SI_ACCEL_UNIT, SI_RATE_UNIT
+from imucal.export.escape import hash_comment
 from imucal.export.gyro import MADLAB_GYR_UNIT, forward, gsens_sentence, imutk_factors, madlab_factors
 
 
@@ -145,12 +148,12 @@ def to_matrix(cal: Calibration, opts: ExportOptions) -> Exported:
     notes = dropped_effects(cal)
     g = None if cal.gyro is None else forward(cal.gyro)
     if opts.filename.lower().endswith(".csv"):
-        lines = ["# a = matrix @ raw + offset; columns m1,m2,m3,offset; "
-                 f"raw in {cal.raw_unit}, a in {SI_ACCEL_UNIT}"] + [f"# {n}" for n in notes]
+        lines = [hash_comment(t) for t in ["a = matrix @ raw + offset; columns m1,m2,m3,offset; "
+                                           f"raw in {cal.raw_unit}, a in {SI_ACCEL_UNIT}", *notes]]
         lines += [",".join(_num(v) for v in (*A[i], c[i])) for i in range(3)]
         if g is not None:
-            lines.append(f"# gyroscope: {MATRIX_GYRO_EQUATION}; columns m1,m2,m3,offset,acc_m1,acc_m2,acc_m3; "
-                         f"raw in {cal.gyro.unit}, omega in {SI_RATE_UNIT}, a in {SI_ACCEL_UNIT}")
+            lines.append(hash_comment(f"gyroscope: {MATRIX_GYRO_EQUATION}; columns m1,m2,m3,offset,acc_m1,acc_m2,"
+                                      f"acc_m3; raw in {cal.gyro.unit}, omega in {SI_RATE_UNIT}, a in {SI_ACCEL_UNIT}"))
             cg = -g.C @ g.s
             lines += [",".join(_num(v) for v in (*g.C[i], cg[i], *g.D[i])) for i in range(3)]
         return Exported("\n".join(lines) + "\n", notes)

@@ -38,11 +38,12 @@ from imucal.analysis.noise import allan_deviation, estimate
 from imucal.calibration.frozen import Calibration
 from imucal.data.static import detect_static
 from imucal.errors import ImucalError, short
+from imucal.export.escape import free_text, hash_comment, yaml_flow
 from imucal.export.formats import ExportOptions, Exported, KalibrNoise, affine, dropped_effects
 from imucal.export.gyro import kalibr_factors
 from imucal.export.peers import MAGNITUDE, AffineCalibration, GyroMap, Mat3, Vec3, checked, checked_gyro
 from imucal.files.schema import fill, rule
-from imucal.files.yamlio import dump_yaml, read_yaml
+from imucal.files.yamlio import read_yaml
 
 NOISE_FIELDS = ("accelerometer_noise_density", "accelerometer_random_walk", "gyroscope_noise_density",
                 "gyroscope_random_walk")
@@ -82,17 +83,59 @@ def still_noise(cal: Calibration, t: np.ndarray, raw: np.ndarray, rate: float,
                        gyroscope_noise_density=gyro_white, gyroscope_random_walk=gyro_rw)
 
 
-def _flow(x: Any) -> str:
-    """YAML flow text PyYAML (Kalibr's reader) reads back to the same floats."""
-    return dump_yaml(x, default_flow_style=True, width=1000).strip().removesuffix("...").strip()
+_flow = yaml_flow  #: YAML flow text on one line that PyYAML (Kalibr's reader) reads back to the same value
+
+
+def _kalibr_header(cal: Calibration) -> list[str]:
+    """The comment texts that open the file: provenance and Kalibr's model."""
+    g = cal.gyro
+    out = [f"Kalibr IMU configuration, exported by imucal {__version__} "
+           f"from a calibration of {free_text((cal.data or {}).get('file', '?'))} ({cal.created or 'no date'})",
+           "Kalibr's scale-misalignment model (kalibr_imu_camera_calibration/IccSensors.py,",
+           "IccScaledMisalignedImu): measurement = M (C_i_b f) + b_a, M lower triangular.",
+           f"accelerometers.M = imucal's apply matrix inverted, exactly [{cal.raw_unit} per m/s^2];",
+           "a = M^-1 (measurement - b_a)."]
+    if g is not None:
+        out += ["gyroscope: measurement = M C_gyro_i omega + A C_gyro_i a + b_g (addGyroscopeErrorTerms),",
+                "omega and a in the accelerometer's frame; M lower triangular, C_gyro_i a rotation,",
+                f"A the g-sensitivity [{g.unit} per m/s^2]; gyroscopes.M [{g.unit} per rad/s] (Kalibr's",
+                "rad/s when the raw unit is).",
+                "omega = (M C_gyro_i)^-1 (measurement - b_g - A C_gyro_i a): imucal's gyroscope, exactly.",
+                "Kalibr writes these intrinsics in its results; it does not read them as a starting point."]
+    return out
+
+
+def _noise_fields(cal: Calibration, n: KalibrNoise | None, how: str, notes: list[str]
+                  ) -> tuple[list[str], dict[str, Any]]:
+    """The comment texts about the noise fields, and their values (None: null); appends to ``notes``."""
+    noise: dict[str, Any] = {k: None for k in NOISE_FIELDS}
+    if n is None:
+        return [f"Noise: no still segment was given: {how}."], noise
+    texts = [f"Noise: imucal noise (overlapping Allan deviation, worst axis) on {n.segment}."]
+    noise.update(accelerometer_noise_density=n.accelerometer_noise_density,
+                 accelerometer_random_walk=n.accelerometer_random_walk,
+                 gyroscope_noise_density=n.gyroscope_noise_density, gyroscope_random_walk=n.gyroscope_random_walk)
+    for sensor, white, rw in (("accelerometer", n.accelerometer_noise_density, n.accelerometer_random_walk),
+                              ("gyroscope", n.gyroscope_noise_density, n.gyroscope_random_walk)):
+        if white is None:
+            why = ("this calibration has no gyroscope" if cal.gyro is None else
+                   "no gyroscope data on the still segment (give --gyro-data, or gx, gy, gz in --data)")
+            texts.append(f"{sensor} noise: not estimated: {why}.")
+            notes.append(f"{sensor}_noise_density and {sensor}_random_walk are null: {why}; Kalibr refuses null")
+        elif rw is None:
+            texts.append(f"{sensor}_random_walk: the curve shows no +1/2 slope (record a longer still log).")
+            notes.append(f"{sensor}_random_walk is null: the still segment shows no random walk (record a "
+                         "longer still log and run `imucal noise`); Kalibr refuses null")
+    return texts, noise
 
 
 def to_kalibr(cal: Calibration, opts: ExportOptions) -> Exported:
+    """Kalibr's imu.yaml (module docstring): every comment through hash_comment, every value through
+    yaml_flow (imucal.export.escape)."""
     A, s = affine(cal)
     M = np.linalg.inv(A)  # lower triangular, as Kalibr's M_accel
     M[np.triu_indices(3, 1)] = 0.0  # structural zeros (the inverse of a triangular matrix), not round-off
-    n = opts.noise
-    g = cal.gyro
+    n, g = opts.noise, cal.gyro
     notes = list(dropped_effects(cal))
     notes.append("Kalibr estimates the biases online; imucal's shifts are written as imucal_accelerometer_offset"
                  + ("" if g is None else " and imucal_gyroscope_offset") + ", which Kalibr does not read")
@@ -100,56 +143,22 @@ def to_kalibr(cal: Calibration, opts: ExportOptions) -> Exported:
         notes.append("gyroscopes: identity (this calibration has no gyroscope)")
     how = ("run `imucal noise --data STILL_LOG --calibration CAL` (or `imucal export ... --data LOG`) and copy "
            "its kalibr fields; Kalibr refuses null")
-    lines = [f"# Kalibr IMU configuration, exported by imucal {__version__} "
-             f"from a calibration of {(cal.data or {}).get('file', '?')} ({cal.created or 'no date'})",
-             "# Kalibr's scale-misalignment model (kalibr_imu_camera_calibration/IccSensors.py,",
-             "# IccScaledMisalignedImu): measurement = M (C_i_b f) + b_a, M lower triangular.",
-             f"# accelerometers.M = imucal's apply matrix inverted, exactly [{cal.raw_unit} per m/s^2];",
-             "# a = M^-1 (measurement - b_a)."]
-    if g is not None:
-        lines += ["# gyroscope: measurement = M C_gyro_i omega + A C_gyro_i a + b_g (addGyroscopeErrorTerms),",
-                  "# omega and a in the accelerometer's frame; M lower triangular, C_gyro_i a rotation,",
-                  f"# A the g-sensitivity [{g.unit} per m/s^2]; gyroscopes.M [{g.unit} per rad/s] (Kalibr's",
-                  "# rad/s when the raw unit is).",
-                  "# omega = (M C_gyro_i)^-1 (measurement - b_g - A C_gyro_i a): imucal's gyroscope, exactly.",
-                  "# Kalibr writes these intrinsics in its results; it does not read them as a starting point."]
-    lines += [f"# NOTE: {x}." for x in notes]
-    noise: dict[str, Any] = {k: None for k in NOISE_FIELDS}
-    if n is None:
-        lines.append(f"# Noise: no still segment was given: {how}.")
-    else:
-        lines.append(f"# Noise: imucal noise (overlapping Allan deviation, worst axis) on {n.segment}.")
-        noise.update(accelerometer_noise_density=n.accelerometer_noise_density,
-                     accelerometer_random_walk=n.accelerometer_random_walk,
-                     gyroscope_noise_density=n.gyroscope_noise_density,
-                     gyroscope_random_walk=n.gyroscope_random_walk)
-        for sensor, white, rw in (("accelerometer", n.accelerometer_noise_density, n.accelerometer_random_walk),
-                                  ("gyroscope", n.gyroscope_noise_density, n.gyroscope_random_walk)):
-            if white is None:
-                why = ("this calibration has no gyroscope" if g is None else
-                       "no gyroscope data on the still segment (give --gyro-data, or gx, gy, gz in --data)")
-                lines.append(f"# {sensor} noise: not estimated: {why}.")
-                notes.append(f"{sensor}_noise_density and {sensor}_random_walk are null: {why}; Kalibr refuses null")
-            elif rw is None:
-                lines.append(f"# {sensor}_random_walk: the curve shows no +1/2 slope (record a longer still log).")
-                notes.append(f"{sensor}_random_walk is null: the still segment shows no random walk (record a "
-                             "longer still log and run `imucal noise`); Kalibr refuses null")
-    for k in NOISE_FIELDS:
-        lines.append(f"{k}: {_flow(noise[k])}")
+    texts = _kalibr_header(cal) + [f"NOTE: {x}." for x in notes]
+    noise_texts, noise = _noise_fields(cal, n, how, notes)
+    lines = [hash_comment(t) for t in texts + noise_texts]
+    lines += [f"{k}: {_flow(noise[k])}" for k in NOISE_FIELDS]
     lines.append(f"rostopic: {_flow(opts.rostopic)}")
     rate = None if n is None else n.update_rate
-    lines.append(f"update_rate: {_flow(rate)}" + ("  # Hz: give --data LOG, or write your IMU's rate" if rate is None
-                                                  else "  # Hz"))
-    if g is None:
-        Mg, Cg, Ag = np.eye(3), np.eye(3), np.zeros((3, 3))
-    else:
-        Mg, Cg, Ag = kalibr_factors(g)
+    lines.append(f"update_rate: {_flow(rate)}  " + hash_comment("Hz: give --data LOG, or write your IMU's rate"
+                                                                if rate is None else "Hz"))
+    Mg, Cg, Ag = (np.eye(3), np.eye(3), np.zeros((3, 3))) if g is None else kalibr_factors(g)
     lines += [f"model: {MODEL}", "accelerometers:", f"  M: {_flow(M.tolist())}", "gyroscopes:",
               f"  M: {_flow(Mg.tolist())}", f"  A: {_flow(Ag.tolist())}", f"  C_gyro_i: {_flow(Cg.tolist())}",
-              f"imucal_accelerometer_offset: {_flow(s.tolist())}  # b_a = s [{cal.raw_unit}], not a Kalibr key"]
+              f"imucal_accelerometer_offset: {_flow(s.tolist())}  "
+              + hash_comment(f"b_a = s [{cal.raw_unit}], not a Kalibr key")]
     if g is not None:
-        lines.append(f"imucal_gyroscope_offset: {_flow(np.asarray(g.bias, float).tolist())}  # b_g = s_g [{g.unit}], "
-                     "not a Kalibr key")
+        lines.append(f"imucal_gyroscope_offset: {_flow(np.asarray(g.bias, float).tolist())}  "
+                     + hash_comment(f"b_g = s_g [{g.unit}], not a Kalibr key"))
     if n is None:
         notes.append(f"noise fields are null: {how}")
     return Exported("\n".join(lines) + "\n", tuple(notes))

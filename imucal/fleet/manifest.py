@@ -40,7 +40,7 @@ from imucal.config.run import RunConfig, config_from_dict
 from imucal.errors import ImucalError, key_text, short
 from imucal.files.inputs import read_input_text, resolve
 from imucal.files.schema import fill, keys, rule
-from imucal.files.yamlio import check_structure, read_yaml
+from imucal.files.yamlio import check_structure, parse_scalar, read_yaml
 
 FORMAT = "imucal-fleet-manifest"
 FORMAT_VERSION = 1
@@ -204,7 +204,7 @@ def _csv_units(text: str, path: str) -> list[tuple[str, Any, Any, dict, str]]:
             if "." in h and c != "":
                 sec, key = h.split(".")
                 try:
-                    val = yaml.safe_load(c)
+                    val = parse_scalar(c)  # as read_yaml reads numbers: 9:48 stays text
                 except yaml.YAMLError:
                     val = c
                 over.setdefault(sec, {})[key] = val
