@@ -151,3 +151,60 @@ def test_fit_fix_with_every_base_parameter_beside_an_effect_is_a_fit():
                             "fit": {"fix": ["s1", "s2", "s3", "b1", "b2", "b3", "phi", "psi", "theta"],
                                     "effects": ["bias_drift"]}})
     assert len(cfg.fit.fix) == 9
+
+
+# --- 2. apply refuses data in another unit than its calibration's --------------------------------
+@pytest.fixture(scope="module")
+def two_units(tmp_path_factory):
+    """A counts recording with its calibration, and an m/s^2 recording with its own."""
+    from conftest import calibrate_file, write_simulation
+
+    root = tmp_path_factory.mktemp("units")
+    counts = write_simulation(root / "counts.csv", mems_counts_sensor(np.random.default_rng(4)), cube_directions(),
+                              seed=4)
+    si = write_simulation(root / "si.csv", si_sensor(np.random.default_rng(5)), cube_directions(), seed=5)
+    cals = {}
+    for name, rec, unit in (("counts", counts, "raw"), ("si", si, "m/s^2")):
+        cals[name] = root / f"{name}.yaml"
+        calibrate_file(rec.path, data={"unit": unit}).calibration.save(cals[name])
+    return root, {"counts": counts.path, "si": si.path}, cals
+
+
+@pytest.mark.parametrize("cal, data, looks, takes", [
+    ("counts", "si", "m/s^2", "raw counts"),
+    ("si", "counts", "raw counts", "m/s^2"),
+])
+def test_apply_to_data_in_another_unit_is_refused(run_cli, two_units, tmp_path, unchanged, cal, data, looks, takes):
+    root, recs, cals = two_units
+    with unchanged():
+        r = run_cli(["apply", cals[cal], "--data", recs[data], "--out", tmp_path / "a.csv"])
+    assert r.code == 2
+    one_line_error(r.err, f"{recs[data]}: data.unit: |a| at rest ", "m/s^2 after calibration, where the calibration's "
+                   "gravity is 9.807 m/s^2 (median of 26 still intervals)",
+                   f"the data look like {looks} (|reading| at rest ", f"while the calibration takes {takes}",
+                   "--no-gravity-check writes the output anyway)")
+
+
+def test_apply_with_no_gravity_check_writes_and_warns(run_cli, two_units, tmp_path):
+    root, recs, cals = two_units
+    r = run_cli(["apply", cals["counts"], "--data", recs["si"], "--out", tmp_path / "a.csv", "--no-gravity-check"])
+    assert r.code == 0 and (tmp_path / "a.csv").exists()
+    assert r.err.startswith("imucal: warning: |a| at rest ") and "the data look like m/s^2" in r.err
+
+
+@pytest.mark.parametrize("which", ["counts", "si"])
+def test_apply_to_its_own_unit_reports_a_at_rest(run_cli, two_units, tmp_path, which):
+    root, recs, cals = two_units
+    r = run_cli(["apply", cals[which], "--data", recs[which], "--out", tmp_path / "a.csv"])
+    assert r.code == 0 and r.err == ""
+    assert "; |a| at rest 9.81 m/s^2 after calibration, where the calibration's gravity is 9.807 m/s^2" in r.out
+
+
+def test_apply_to_a_log_without_still_spans_says_it_was_not_checked(run_cli, two_units, tmp_path):
+    root, recs, cals = two_units
+    t = np.arange(3000) / 100.0
+    moving = np.column_stack([t, 9.0 * np.sin(0.7 * t), 9.0 * np.cos(1.1 * t), 3.0 * np.sin(0.3 * t)])
+    src = tmp_path / "moving.csv"
+    np.savetxt(src, moving, delimiter=",", header="t,ax,ay,az", comments="", fmt="%.9g")
+    r = run_cli(["apply", cals["si"], "--data", src, "--out", tmp_path / "a.csv"])
+    assert r.code == 0 and "; no still span: |a| at rest not checked" in r.out

@@ -16,6 +16,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--config", help="YAML run file: reuse its data section (columns, units, path)")
     options.add_data_options(p, gyro=True)
     p.add_argument("--out", required=True, help="output CSV")
+    p.add_argument("--no-gravity-check", action="store_true",
+                   help="write the output even when |a| at rest after calibration misses the calibration's "
+                        "gravity by more than 10 %% (default: refused, as data in another unit than the "
+                        "calibration's do; a warning instead with this flag)")
     p.set_defaults(run=run)
 
 
@@ -31,12 +35,32 @@ def _time_column(rec) -> tuple:
     return ts, ("%d" if exact_int else "%.17g")
 
 
+def _rest_words(chk) -> str:
+    """One sentence on |a| at rest after calibration (imucal.analysis.rest.RestCheck)."""
+    def unit(u: str) -> str:
+        return "raw counts" if u in ("raw", "counts") else u
+
+    text = (f"|a| at rest {chk.at_rest:.3g} m/s^2 after calibration, where the calibration's gravity is "
+            f"{chk.gravity:.4g} m/s^2 (median of {chk.intervals} still intervals)")
+    if chk.ok:
+        return text
+    looks = chk.data_looks_like
+    seen = f"|reading| at rest {chk.raw_at_rest:.4g}"
+    if looks is not None and unit(looks) != unit(chk.cal_unit):
+        return f"{text}: the data look like {looks} ({seen}) while the calibration takes {unit(chk.cal_unit)}"
+    return f"{text}: the data ({seen}) do not fit a calibration that takes {unit(chk.cal_unit)}"
+
+
 def run(args: argparse.Namespace) -> int:
     import io
+    import sys
 
     import numpy as np
 
+    from imucal.analysis.rest import rest_check
     from imucal.calibration.fileformat import load_calibration
+    from imucal.data.static import detect_static
+    from imucal.errors import ImucalError
     from imucal.data.load import load_recording
     from imucal.files.output import check_outputs, write_text_atomic
     from imucal.gyro.run import gyro_on_accel_samples
@@ -50,6 +74,16 @@ def run(args: argparse.Namespace) -> int:
     rec = load_recording(cfg.data, cfg.base_dir)
     covs = covariate_values(cal.covariates, temp=rec.temp, time=rec.t, source=rec.source, what="the calibration")
     a = cal.apply(rec.raw, covs)
+    chk = None
+    if rec.n >= 3:  # |a| at rest, where the data have still spans, must be the calibration's gravity
+        chk = rest_check(a, rec.raw, detect_static(rec.t, rec.raw, cfg.static, source=rec.source),
+                         cal.gravity, cal.raw_unit)
+    if chk is not None and not chk.ok:
+        if not args.no_gravity_check:
+            raise ImucalError(_rest_words(chk), file=rec.source, field="data.unit",
+                              fix=f"apply the calibration made for data in this unit, or give data in its unit "
+                                  f"({cal.raw_unit}); --no-gravity-check writes the output anyway")
+        sys.stderr.write(f"imucal: warning: {_rest_words(chk)}\n")
     cols, body = ["ax", "ay", "az"], [a]
     raw_g = None if cal.gyro is None else gyro_on_accel_samples(rec, None if gyro_file is None else str(gyro_file))
     if raw_g is not None:
@@ -65,5 +99,6 @@ def run(args: argparse.Namespace) -> int:
     what = "[m/s^2] and angular rate [rad/s]" if raw_g is not None else "[m/s^2]"
     note = ("; the calibration has a gyroscope but the data have none (gx, gy, gz or --gyro-data): "
             "acceleration only" if cal.gyro is not None and raw_g is None else "")
-    print(f"wrote {rec.n} calibrated samples {what} to {args.out}; t is {how}{note}")
+    rest = "; no still span: |a| at rest not checked" if chk is None else f"; {_rest_words(chk)}"
+    print(f"wrote {rec.n} calibrated samples {what} to {args.out}; t is {how}{note}{rest}")
     return 0

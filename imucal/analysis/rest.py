@@ -1,0 +1,65 @@
+"""Does a calibration fit the data it is applied to? |a| at rest against the calibration's gravity.
+
+A calibration maps readings in one unit (raw counts, m/s^2, g ...) to m/s^2. Applied to readings in
+another unit it still gives numbers, off by the ratio of the units. Where the data hold still spans,
+the calibrated |a| there must be the calibration's gravity; a unit mistake misses it by a factor
+(9.81, 1000, 2^14 ...), a sensor that aged since its calibration by a few per cent.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from imucal.constants import STANDARD_GRAVITY
+from imucal.data.static import Intervals, quantum
+from imucal.solve.stats import median
+
+#: Largest relative difference between |a| at rest after calibration and the calibration's gravity
+#: that passes (10 %): a unit mistake is a factor of 9.81 or more, a calibration that aged or a
+#: gravity of another place a few per cent at most.
+REST_TOLERANCE = 0.10
+#: Units a reading's |value| at rest reveals (that value in each), tried in this order.
+REST_UNITS: tuple[tuple[str, float], ...] = (("m/s^2", STANDARD_GRAVITY), ("g", 1.0), ("mg", 1000.0))
+
+
+@dataclass(frozen=True)
+class RestCheck:
+    """|a| at rest after a calibration, over the still intervals of the data it was applied to."""
+
+    at_rest: float  #: median over the intervals of |mean calibrated a| [m/s^2]
+    gravity: float  #: the calibration's gravity [m/s^2]
+    intervals: int  #: still intervals it was measured on
+    raw_at_rest: float  #: median over the intervals of |mean reading| [the data's unit]
+    integer: bool  #: the readings are whole numbers (counts)
+    cal_unit: str  #: the unit the calibration takes
+
+    @property
+    def ratio(self) -> float:
+        return self.at_rest / self.gravity
+
+    @property
+    def ok(self) -> bool:
+        return bool(abs(self.ratio - 1.0) <= REST_TOLERANCE)
+
+    @property
+    def data_looks_like(self) -> str | None:
+        """The unit whose gravity the readings' |value| at rest is (within REST_TOLERANCE), "raw
+        counts" for whole numbers that are none of them, else None."""
+        for unit, g in REST_UNITS:
+            if abs(self.raw_at_rest / g - 1.0) <= REST_TOLERANCE:
+                return unit
+        return "raw counts" if self.integer else None
+
+
+def rest_check(calibrated: np.ndarray, raw: np.ndarray, intervals: Intervals, gravity: float,
+               cal_unit: str) -> RestCheck | None:
+    """The check of ``calibrated`` (the calibration applied to ``raw``, one row per sample) on the
+    still ``intervals`` of ``raw``; None when there is none."""
+    if intervals.n == 0:
+        return None
+    spans = list(zip(intervals.start, intervals.end))
+    a = [float(np.linalg.norm(calibrated[s:e].mean(axis=0))) for s, e in spans]
+    r = [float(np.linalg.norm(raw[s:e].mean(axis=0))) for s, e in spans]
+    return RestCheck(at_rest=median(a), gravity=float(gravity), intervals=len(spans), raw_at_rest=median(r),
+                     integer=quantum(raw) == 1.0, cal_unit=cal_unit)
