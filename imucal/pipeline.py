@@ -298,6 +298,8 @@ def _problem(config: RunConfig, rec: Recording | RecordingSummary, iv: Intervals
         if config.fit.mode == "samples":
             samples = streamed.samples if streamed is not None else static_samples(iv, rec)
         noise = measured_noise(config, guess, rec.sample_rate)
+        if noise is not None:  # a noise file in another unit than the recording's is refused
+            noise[0].check_scale(iv.n_samples, iv.mean_std, noise[1], rec.source, config.data.unit)
         data = fit_data(model, iv, samples, config.fit.mode, rec.source, noise)
         # Observability on interval means (one row per interval), at the initial guess.
         mdata = fit_data(model, iv, None, "means", rec.source, noise) if data.mode != "means" else data

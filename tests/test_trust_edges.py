@@ -208,3 +208,64 @@ def test_apply_to_a_log_without_still_spans_says_it_was_not_checked(run_cli, two
     np.savetxt(src, moving, delimiter=",", header="t,ax,ay,az", comments="", fmt="%.9g")
     r = run_cli(["apply", cals["si"], "--data", src, "--out", tmp_path / "a.csv"])
     assert r.code == 0 and "; no still span: |a| at rest not checked" in r.out
+
+
+# --- 4. a noise file in another unit than the recording's ----------------------------------------
+def _noise_json(path, density: float, unit: str):
+    import json
+
+    axis = {"white_density": density}
+    path.write_text(json.dumps({"unit": unit, "axes": {"x": axis, "y": axis, "z": axis}}))
+    return path
+
+
+def _noise_run(tmp_path, data, unit: str, noise):
+    """The run file that calibrates ``data`` with the noise file ``noise``, and the command."""
+    cfg = tmp_path / "run.yaml"
+    cfg.write_text(f"data: {{path: {data}, unit: {unit}}}\nfit: {{noise: {noise.name}}}\n")
+    return ["calibrate", cfg, "--out", tmp_path / "out", "--no-figures", "--quiet"]
+
+
+#: White-noise densities of the simulated sensors at 100 Hz: 4 counts and 0.01 m/s^2 per sample.
+COUNTS_DENSITY, SI_DENSITY = 4.0 / 10.0, 0.01 / 10.0
+
+
+@pytest.mark.parametrize("data, unit, density, label, ratio", [
+    ("counts", "raw", SI_DENSITY, "raw", "0.00"),  # an m/s^2 log's noise, labelled raw: was "reduced chi-square 1e5"
+    ("si", "m/s^2", COUNTS_DENSITY, "m/s^2", "4"),  # a counts log's noise: was "b1, b2, b3 undetermined"
+])
+def test_a_noise_file_in_another_unit_is_refused_naming_both(run_cli, two_units, tmp_path, unchanged,
+                                                             data, unit, density, label, ratio):
+    root, recs, cals = two_units
+    noise = _noise_json(tmp_path / "noise.json", density, label)
+    args = _noise_run(tmp_path, recs[data], unit, noise)
+    with unchanged():
+        r = run_cli(args)
+    assert r.code == 2
+    one_line_error(r.err, "noise.json: unit: its noise of an interval mean is " + ratio,
+                   f"times the noise the recording {recs[data]} shows at rest (median over 26 still intervals",
+                   f"the noise file is in another unit than the recording (both labelled {label})",
+                   "(fix: measure the noise on a still log in the recording's unit")
+
+
+def test_a_kalibr_noise_file_in_g_for_a_counts_log_names_its_unit(run_cli, two_units, tmp_path, unchanged):
+    """Kalibr's density is in m/s^2 (converted by each axis's scale): one written in g is 9.81 times too small."""
+    root, recs, cals = two_units
+    right = 4.0 / (16384.0 / 9.80665) / 10.0  # 4 counts at 16384 counts per g, 100 Hz [m/s^2/sqrt(Hz)]
+    noise = tmp_path / "imu.yaml"
+    noise.write_text(f"accelerometer_noise_density: {right / 9.80665!r}\n")
+    args = _noise_run(tmp_path, recs["counts"], "raw", noise)
+    with unchanged():
+        r = run_cli(args)
+    assert r.code == 2
+    one_line_error(r.err, "imu.yaml: unit: its noise of an interval mean is 0.1",
+                   "(noise file: m/s^2, data.unit: raw)")
+    noise.write_text(f"accelerometer_noise_density: {right!r}\n")
+    assert run_cli(args).code == 0
+
+
+@pytest.mark.parametrize("data, unit, density", [("counts", "raw", COUNTS_DENSITY), ("si", "m/s^2", SI_DENSITY)])
+def test_a_noise_file_in_the_recordings_unit_is_used(run_cli, two_units, tmp_path, data, unit, density):
+    root, recs, cals = two_units
+    r = run_cli(_noise_run(tmp_path, recs[data], unit, _noise_json(tmp_path / "noise.json", density, unit)))
+    assert r.code == 0, r.err

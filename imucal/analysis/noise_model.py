@@ -32,6 +32,11 @@ from imucal.files.yamlio import read_yaml
 
 CALIBRATED = "m/s^2"
 FIX = "pass the JSON `imucal noise --json` writes, or a Kalibr imu.yaml"
+#: The noise a model gives the interval means may differ from the means' own noise (their scatter,
+#: imucal.data.static) by at most this factor either way (median over intervals and axes). A noise
+#: file in another unit misses by the units' ratio (9.81 for g, 1000 for mg, thousands for counts);
+#: the same sensor measured on another day, or held by hand, stays well within it.
+NOISE_UNIT_FACTOR = 5.0
 
 
 @dataclass(frozen=True)
@@ -42,6 +47,7 @@ class NoiseModel:
     floor: np.ndarray  #: (3,) Allan deviation floor FLICKER_FACTOR B [unit]; 0 where none was seen
     unit: str
     source: str
+    measured_in: str = ""  #: the noise file's own unit, when the model was converted from it (in_raw)
 
     def in_raw(self, raw_unit: str, scale: np.ndarray) -> "NoiseModel":
         """The model in the recording's raw unit: as is when the units agree, else (m/s^2) times
@@ -53,7 +59,32 @@ class NoiseModel:
                               f"{CALIBRATED}", file=self.source, field="unit",
                               fix="run `imucal noise` on the sensor's raw log (or with --calibration for m/s^2)")
         b = np.abs(np.asarray(scale, float))
-        return NoiseModel(self.white_density * b, self.floor * b, raw_unit, self.source)
+        return NoiseModel(self.white_density * b, self.floor * b, raw_unit, self.source, self.unit)
+
+    def check_scale(self, n: np.ndarray, mean_std: np.ndarray, rate: float, data: str | None,
+                    data_unit: str) -> None:
+        """Refuse a model whose noise of the interval means (``n`` samples each at ``rate`` Hz) is
+        not the data's own (``mean_std``, (k, 3), in the raw unit) within NOISE_UNIT_FACTOR: it
+        was measured in another unit than the recording's."""
+        own = np.asarray(mean_std, float)
+        ok = own > 0
+        if not ok.any():
+            return
+        ratio = float(np.median(np.sqrt(self.mean_variance(n, rate))[ok] / own[ok]))
+        if 1 / NOISE_UNIT_FACTOR <= ratio <= NOISE_UNIT_FACTOR:
+            return
+        density = own * np.sqrt(np.asarray(n, float)[:, None] / rate)  # the white density the data imply
+        mine = self.measured_in or self.unit
+        labels = f"both labelled {mine}" if mine == data_unit else f"noise file: {mine}, data.unit: {data_unit}"
+        raise ImucalError(
+            f"its noise of an interval mean is {ratio:.3g} times the noise the recording {data or ''} shows at "
+            f"rest (median over {int(np.count_nonzero(ok.any(axis=1)))} still intervals; white density "
+            f"{np.median(self.white_density):.3g} {self.unit}/sqrt(Hz) from the noise file, "
+            f"{np.median(density[ok]):.3g} {data_unit}/sqrt(Hz) in the data): the noise file is in another unit "
+            f"than the recording ({labels})",
+            file=self.source, field="unit",
+            fix="measure the noise on a still log in the recording's unit (imucal noise --data STILL_LOG), "
+                "or set data.unit to the unit its readings are in")
 
     def mean_variance(self, n: np.ndarray, rate: float) -> np.ndarray:
         """(k, 3) variance of the mean of ``n`` samples at ``rate`` Hz [unit^2] (module docstring)."""
