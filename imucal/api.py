@@ -10,12 +10,14 @@ report, the files and the JSON summary are one call away.
 from __future__ import annotations
 
 import hashlib
+from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
 
 from imucal.config.run import GravitySpec, RunConfig, config_from_dict
-from imucal.data.load import DataSpec, Recording, infer_time_unit, TIME_UNITS, MIN_RATE_HZ, MAX_RATE_HZ
+from imucal.data.load import DataSpec, Recording
+from imucal.data.timebase import rate_time_base, stamped_times
 from imucal.errors import ImucalError
 from imucal.pipeline import CalibrationRun, calibrate as _calibrate_config
 import dataclasses
@@ -50,24 +52,21 @@ def recording_from_arrays(acc: Any, t: Sequence[float] | None = None, temp: Sequ
     if t is None:
         if fs is None:
             raise ImucalError("no time stamps and no sample rate", field="t", fix="pass t=... or fs=... [Hz]")
-        stamps, tu, note = None, "s", f"no time column: {fs:g} Hz given"
+        stamps = None
+        tu, note, tb = rate_time_base(fs)
         tt = np.arange(n) / float(fs)
     else:
         stamps = np.asarray(t, float)
         if stamps.shape != (n,) or not np.isfinite(stamps).all() or not (np.diff(stamps) > 0).all():
             raise ImucalError("t must be N finite, strictly increasing time stamps", field="t")
-        tu, note = (infer_time_unit(stamps) if time_unit == "auto" else (time_unit, f"time unit given: {time_unit}"))
-        tt = (stamps - stamps[0]) * TIME_UNITS[tu]
-        rate = (n - 1) / tt[-1]
-        if not MIN_RATE_HZ <= rate <= MAX_RATE_HZ:
-            raise ImucalError(f"time in {tu} gives {rate:.4g} Hz, not an IMU sample rate", field="t",
-                              fix="pass time_unit='s', 'ms', 'us' or 'ns'")
+        # the readers' time base: unit, jitter, gaps, and fs (when given too) checked against t
+        tt, tu, note, tb = stamped_times(stamps, time_unit, fs, "t", Path(name))
     tc = None if temp is None else np.asarray(temp, float)
     if tc is not None and tc.shape != (n,):
         raise ImucalError(f"temp must have {n} values, got shape {tc.shape}", field="temp")
     sha = hashlib.sha256(np.ascontiguousarray(raw).tobytes()).hexdigest()
     return Recording(t=tt, raw=raw, temp=tc, unit=unit, source=name, sha256=sha, t_source=stamps,
-                     time_unit=tu, time_note=note)
+                     time_unit=tu, time_note=note, time_base=tb)
 
 
 def calibrate(acc: Any, t: Sequence[float] | None = None, temp: Sequence[float] | None = None, *,

@@ -23,8 +23,9 @@ RIGHT_ANGLE = math.pi / 2
 #: Default relative tolerance on the axis angles: 90 deg +- 2 % (paper, Section 1).
 DEFAULT_ANGLE_TOL = 0.02
 
-#: Time units of a time column, with their factor to seconds ("auto": inferred from the stamps).
-TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
+#: Time units of a time column, with their factor to seconds ("auto": inferred from the stamps;
+#: minutes are never inferred, only given or named when a run finds its poses only in minutes).
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9, "min": 60.0}
 TIME_UNIT_CHOICES = ("auto", *TIME_UNITS)
 #: A gyroscope's raw units (data.gyro_unit): auto, counts (= raw: the scale is searched), deg/s, rad/s.
 GYRO_UNIT_CHOICES = ("auto", "raw", "counts", "deg/s", "rad/s")

@@ -23,12 +23,12 @@ def write(tmp_path, name: str, text: str | bytes):
 
 # --- formats --------------------------------------------------------------------------------
 def test_csv_with_default_header(tmp_path):
-    p = write(tmp_path, "r.csv", "t,ax,ay,az\n10.0,1,2,3\n10.5,4,5,6\n11.0,7,8,9\n")
+    p = write(tmp_path, "r.csv", "t,ax,ay,az\n10.0,1,2,3\n10.0625,4,5,6\n10.125,7,8,9\n")
     rec = load_recording(p)
-    np.testing.assert_array_equal(rec.t, [0.0, 0.5, 1.0])  # time from the first sample
+    np.testing.assert_array_equal(rec.t, [0.0, 0.0625, 0.125])  # time from the first sample
     np.testing.assert_array_equal(rec.raw, [[1, 2, 3], [4, 5, 6], [7, 8, 9]])
     assert rec.temp is None and rec.unit == "raw" and rec.n == 3
-    assert rec.sample_rate == pytest.approx(2.0)
+    assert rec.sample_rate == pytest.approx(16.0)
     assert rec.sha256 == hashlib.sha256(p.read_bytes()).hexdigest()
     assert rec.source == str(p)
 
@@ -102,13 +102,15 @@ def test_yaml_index_mapping_without_header(tmp_path):
     np.testing.assert_allclose(rec.t, [0, 0.01])
 
 
-def test_sample_rate_override_replaces_a_guessed_time_column(tmp_path):
-    p = write(tmp_path, "r.csv", "t,ax,ay,az\n0,1,2,3\n0.013,4,5,6\n0.019,7,8,9\n")
-    rec = load_recording(DataSpec(path=str(p), sample_rate=100.0))
-    np.testing.assert_allclose(rec.t, [0.0, 0.01, 0.02])
-    # ... but not an explicitly mapped one
-    rec = load_recording(DataSpec(path=str(p), sample_rate=100.0, columns={"t": "t"}))
-    np.testing.assert_allclose(rec.t, [0.0, 0.013, 0.019])
+def test_sample_rate_beside_a_time_column_is_checked_not_used(tmp_path):
+    """Issue 25: a given rate no longer drops a time column (found by name or mapped): the stamps
+    are used and the rate checked against them (tests/test_trust_time.py)."""
+    p = write(tmp_path, "r.csv", "t,ax,ay,az\n0,1,2,3\n0.013,4,5,6\n0.019,7,8,9\n")  # 105 Hz
+    for cols in ({}, {"t": "t"}):
+        with pytest.raises(ImucalError, match="sample rate 100 Hz given, but the time column t steps at 105.3 Hz"):
+            load_recording(DataSpec(path=str(p), sample_rate=100.0, columns=cols))
+        rec = load_recording(DataSpec(path=str(p), sample_rate=104.0, columns=cols))
+        np.testing.assert_allclose(rec.t, [0.0, 0.013, 0.019])
 
 
 def test_skip_rows(tmp_path):
@@ -253,7 +255,7 @@ def test_time_not_increasing(tmp_path, times, line):
 
 @pytest.mark.parametrize("kw, field, match", [
     ({"format": "xlsx"}, "data.format", "unknown format 'xlsx'"),
-    ({"time_unit": "min"}, "data.time_unit", "unknown time unit 'min'"),
+    ({"time_unit": "h"}, "data.time_unit", "unknown time unit 'h'"),  # min is one since issue 25
     ({"sample_rate": 0.0}, "data.sample_rate", "sample rate 0.0 Hz is not an IMU rate"),
     ({"sample_rate": float("nan")}, "data.sample_rate", "is not an IMU rate"),
     ({"sample_rate": "fast"}, "data.sample_rate", "is not an IMU rate"),

@@ -182,9 +182,9 @@ def test_millisecond_stamps_in_a_simulated_csv(tmp_path, counts_recording, stamp
 def test_two_plausible_units_name_the_one_assumed(tmp_path):
     p = tmp_path / "r.txt"
     p.write_text("".join(f"{0.5 * k:.1f} 1 2 3\n" for k in range(20)))  # 2 Hz in s, 2 kHz in ms
-    rec = load_recording(p)
-    assert rec.time_unit == "s"
-    assert rec.time_note == ("time unit inferred: s (median step 0.5 -> 2 Hz; ms would give 2000 Hz: "
+    rec = load_recording(p)  # issue 25: one rule for fractional and integer stamps (closest to 200 Hz)
+    assert rec.time_unit == "ms"
+    assert rec.time_note == ("time unit inferred: ms (median step 0.5 -> 2000 Hz; s would give 2 Hz: "
                              "give --time-unit if that is right)")
     p.write_text("".join(f"{k} 1 2 3\n" for k in range(20)))  # integer ticks: 1 Hz in s, 1 kHz in ms
     assert load_recording(p).time_unit == "ms"

@@ -13,13 +13,13 @@ from pathlib import Path
 
 import numpy as np
 
-from imucal.calibration.fields import check_unit
-from imucal.constants import GYRO_UNIT_CHOICES, TIME_UNIT_CHOICES, TIME_UNITS
+from imucal.calibration.fields import check_raw_unit
+from imucal.constants import GYRO_UNIT_CHOICES, TIME_UNIT_CHOICES, TIME_UNITS  # noqa: F401 (re-exported)
 from imucal.errors import ImucalError, check_choice, short
-from imucal.solve.stats import median
 from imucal.data.rosbag import is_bag, read_bag
 from imucal.files.inputs import first_hole, max_data_bytes, open_regular
 from imucal.data.recording import MAX_ABS_VALUE, MAX_RATE_HZ, MIN_RATE_HZ, Recording  # noqa: F401 (re-exported)
+from imucal.data.timebase import rate_time_base, stamped_times
 from imucal.files.schema import rule
 
 FORMATS = ("auto", "csv", "whitespace")
@@ -33,10 +33,6 @@ def gyro_unit(spec: DataSpec, bag: bool = False) -> str:
     if spec.gyro_unit == "auto":
         return "rad/s" if bag else "raw"
     return "raw" if spec.gyro_unit == "counts" else spec.gyro_unit
-
-
-#: Leading time stamps whose integer values mark a tick counter (infer_time_unit).
-TIME_HEAD_ROWS = 1000
 
 
 @dataclass(frozen=True)
@@ -81,7 +77,7 @@ class DataSpec:
         for name in ("format", "time_unit", "unit", "gyro_unit", "stream"):
             if not isinstance(getattr(self, name), str):
                 raise ImucalError(f"{name} {short(getattr(self, name))} must be text", field=f"data.{name}")
-        check_unit(self.unit, "data.unit")  # the calibration file's rule: what calibrate writes reads back
+        check_raw_unit(self.unit, "data.unit")  # the calibration file's rule: what calibrate writes reads back
         if self.delimiter is not None and not (isinstance(self.delimiter, str) and len(self.delimiter) == 1
                                                and self.delimiter not in "\r\n"):
             raise ImucalError(f"delimiter {short(self.delimiter)} must be one character", field="data.delimiter",
@@ -432,45 +428,6 @@ def _no_header_layout(ncol: int, path: Path) -> dict[str, int]:
                       fix=f"map the columns, e.g. --columns {example} or data.columns in the YAML")
 
 
-def infer_time_unit(stamps: np.ndarray) -> tuple[str, str]:
-    """The unit (s, ms, us, ns) of time stamps and a sentence saying why (see time_unit_from_step)."""
-    dt = median(np.diff(stamps)) if stamps.size > 1 else float("nan")
-    head = stamps[:TIME_HEAD_ROWS]
-    return time_unit_from_step(dt, float(stamps[0]) if stamps.size else float("nan"),
-                               bool(np.all(head == np.round(head))))
-
-
-def time_unit_from_step(dt: float, first: float, integer_head: bool) -> tuple[str, str]:
-    """The unit (s, ms, us, ns) of time stamps with median step ``dt``, first stamp ``first`` and
-    integer values in their first TIME_HEAD_ROWS (``integer_head``), and a sentence saying why.
-
-    The sample rate must be an IMU's (1 Hz to 100 kHz). Among the units that give one, epoch
-    time decides when the stamps look like it (1.7e9 s = 1.7e12 ms = ...). Fractional stamps are
-    read in the first plausible unit of s, ms, us, ns (a logger that writes fractions writes
-    seconds unless that gives no IMU rate); integer stamps (tick counters) in the unit whose rate
-    is closest to 200 Hz on a log scale. A second plausible unit is named in the note.
-    """
-    if not (math.isfinite(dt) and dt > 0):
-        return "s", "time unit assumed: s (too few distinct time stamps to infer it)"
-    plausible = [u for u, f in TIME_UNITS.items() if MIN_RATE_HZ <= 1.0 / (dt * f) <= MAX_RATE_HZ]
-    if not plausible:
-        return "s", ""  # refused by the caller with the rate in the message
-    t0 = abs(first)
-    epoch = [u for u in plausible if 9.0e8 <= t0 * TIME_UNITS[u] <= 4.2e9]  # 1998 .. 2103
-    if epoch:
-        unit = epoch[0]
-        why = f"epoch time stamps; median step {dt:g} {unit} -> {1.0 / (dt * TIME_UNITS[unit]):.4g} Hz"
-        return unit, f"time unit inferred: {unit} ({why})"
-    if integer_head:
-        plausible.sort(key=lambda u: abs(math.log10(1.0 / (dt * TIME_UNITS[u]) / 200.0)))
-    unit = plausible[0]
-    note = f"time unit inferred: {unit} (median step {dt:g} -> {1.0 / (dt * TIME_UNITS[unit]):.4g} Hz"
-    if len(plausible) > 1:
-        alt = plausible[1]
-        note += f"; {alt} would give {1.0 / (dt * TIME_UNITS[alt]):.4g} Hz: give --time-unit if that is right"
-    return unit, note + ")"
-
-
 def _check_bag_spec(spec: DataSpec, path: Path) -> None:
     """Options of text files are refused for a bag (its messages name their fields and units)."""
     given = [n for n, v in (("columns", spec.columns), ("sample_rate", spec.sample_rate),
@@ -627,8 +584,6 @@ def layout(lines: list[str], spec: DataSpec, path: Path) -> Layout:
         body = k0
     _check_roles(cols, spec, path)
     roles = [r for r in ROLES if r in cols]
-    if spec.sample_rate is not None and "t" in cols and "t" not in spec.columns:
-        roles.remove("t")  # an explicit rate overrides a guessed time column
     tname = names[cols["t"]] if header_idx is not None and "t" in roles else "t"
     return Layout(delimiter=delim, columns=cols, roles=roles, body=body, body_first=first_lineno + body,
                   time_column=tname)
@@ -688,45 +643,17 @@ def load_recording(spec: DataSpec | str | os.PathLike, base_dir: str | os.PathLi
         if not (d > 0).all():
             raise not_increasing(line_of(int(np.flatnonzero(~(d > 0))[0]) + 1), path)
     if stamps is None:
-        unit, note = time_base_without_stamps(spec)
+        unit, note, tb = rate_time_base(spec.sample_rate)
         t = np.arange(n) / float(spec.sample_rate)
+    elif n:  # a given sample rate beside the stamps is checked against them (imucal.data.timebase)
+        t, unit, note, tb = stamped_times(stamps, spec.time_unit, spec.sample_rate, lay.time_column, path, line_of)
     else:
-        unit, note = stamp_unit(spec, infer_time_unit(stamps) if spec.time_unit == "auto" else None)
-        check_rate(n, float(stamps[-1] - stamps[0]) if n else 0.0, unit, path)
-        t = (stamps - stamps[0]) * TIME_UNITS[unit]
+        raise no_rows(path)
     raw = np.column_stack([data["ax"], data["ay"], data["az"]])
     gyro = np.column_stack([data["gx"], data["gy"], data["gz"]]) if lay.has_gyro else None
     return Recording(t=t, raw=raw, temp=data.get("temp"), unit=spec.unit, source=str(path), sha256=sha,
                      gyro=gyro, t_source=stamps, time_unit=unit, time_note=note, time_column=lay.time_column,
-                     gyro_unit=gyro_unit(spec))
-
-
-def time_base_without_stamps(spec: DataSpec) -> tuple[str, str]:
-    """Unit and note of a time base made from the given sample rate."""
-    return "s", f"no time column: {float(spec.sample_rate):g} Hz given"
-
-
-def stamp_unit(spec: DataSpec, inferred: tuple[str, str] | None) -> tuple[str, str]:
-    """The time column's unit and note: given in the spec, else ``inferred`` (infer_time_unit)."""
-    if spec.time_unit == "auto":
-        return inferred
-    return spec.time_unit, f"time unit given: {spec.time_unit}"
-
-
-def check_rate(n: int, span: float, unit: str, path: Path) -> None:
-    """Refuse ``n`` stamps over ``span`` (in ``unit``) unless they give an IMU sample rate."""
-    if n < 2:
-        return
-    rate = (n - 1) / float(span * TIME_UNITS[unit])
-    if not MIN_RATE_HZ <= rate <= MAX_RATE_HZ:
-        likely = [u for u, f in TIME_UNITS.items()
-                  if MIN_RATE_HZ <= (n - 1) / (float(span) * f) <= MAX_RATE_HZ]
-        fix = (f"the time column looks like {likely[0]}: give --time-unit {likely[0]} "
-               f"(data.time_unit: {likely[0]})" if likely else
-               "check the time column (or drop it and give --sample-rate)")
-        raise ImucalError(f"time in {unit} gives {rate:.4g} Hz, not an IMU sample rate "
-                          f"({MIN_RATE_HZ:g} Hz to {MAX_RATE_HZ:g} Hz)", file=str(path),
-                          field="data.time_unit", fix=fix)
+                     gyro_unit=gyro_unit(spec), time_base=tb)
 
 
 #: Recordings above this size are read in chunks (imucal.data.stream) when data.stream is "auto" [bytes].

@@ -2,7 +2,8 @@
 data/rosbag.py, chunks in data/stream.py)."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from enum import Enum
 
 import numpy as np
 
@@ -13,6 +14,47 @@ MIN_RATE_HZ, MAX_RATE_HZ = 1.0, 1.0e5
 #: Largest magnitude accepted in a data column: beyond it a value is corrupt, not a reading
 #: (squares of it would overflow double precision in the fit).
 MAX_ABS_VALUE = 1.0e30
+
+
+class TimeSource(str, Enum):
+    """Where a recording's times come from."""
+
+    STAMPS = "stamps"  #: the time column, as read (in its unit, from its first stamp)
+    CLOCK = "clock"  #: a clock fitted to jittered stamps: sample index x step, gaps kept
+    RATE = "rate"  #: no time column: sample index / the given sample rate
+
+
+@dataclass(frozen=True, eq=False)
+class TimeBase:
+    """How a recording's times were made (imucal.data.timebase), and the one sample rate they give.
+
+    Rendered to words by imucal.report; decided where the stamps are read."""
+
+    source: TimeSource
+    rate: float  #: [Hz] the one sample rate of the recording: 1 / its sample step
+    #: samples that follow a gap (a step of more than timebase.GAP_STEPS sample steps), in order
+    gap_index: np.ndarray = field(default_factory=lambda: np.empty(0, np.int64))
+    gap_seconds: np.ndarray = field(default_factory=lambda: np.empty(0))  #: [s] each gap's step
+    longest_gap_line: int = 0  #: the file's line of the sample after the longest gap (0: none, or arrays)
+    #: the stamps' evidence of jitter: the fraction of their steps shorter than timebase.SHORT_STEP
+    #: sample steps, and their median step [s] (which a clock's step replaces)
+    short_fraction: float = 0.0
+    median_step: float = float("nan")
+    rate_given: float | None = None  #: [Hz] a sample rate given beside the time column, checked against it
+
+    @property
+    def step(self) -> float:
+        """[s] the sample step."""
+        return 1.0 / self.rate
+
+    @property
+    def n_gaps(self) -> int:
+        return int(self.gap_index.size)
+
+    @property
+    def longest_gap(self) -> float:
+        """[s] the longest gap's step (0 without gaps)."""
+        return float(self.gap_seconds.max()) if self.gap_seconds.size else 0.0
 
 
 @dataclass(frozen=True)
@@ -31,6 +73,9 @@ class Recording:
     time_note: str = ""  #: how the time base was obtained (given, inferred, or from the rate)
     time_column: str = "t"  #: the time column's name in the file
     gyro_unit: str = "raw"  #: unit of ``gyro`` (and of a second gyro file): raw (counts), deg/s or rad/s
+    #: how ``t`` was made and the recording's one sample rate (None: built without one; the rate
+    #: is then that of t's span)
+    time_base: TimeBase | None = None
 
     @property
     def n(self) -> int:
@@ -48,6 +93,9 @@ class Recording:
 
     @property
     def sample_rate(self) -> float:
+        """[Hz] the one rate of the time base (not of the span, which gaps lengthen)."""
+        if self.time_base is not None:
+            return self.time_base.rate
         if self.n < 2:
             return float("nan")
         return float((self.n - 1) / (self.t[-1] - self.t[0]))
@@ -78,6 +126,7 @@ class RecordingSummary:
     time_unit: str
     time_note: str
     time_column: str
+    time_base: TimeBase | None = None
     raw: None = None
     t: None = None
     temp: None = None
@@ -86,6 +135,8 @@ class RecordingSummary:
 
     @property
     def sample_rate(self) -> float:
+        if self.time_base is not None:
+            return self.time_base.rate
         return float((self.n - 1) / self.t_last) if self.n > 1 else float("nan")
 
     @property

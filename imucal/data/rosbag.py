@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from imucal.data.recording import MAX_ABS_VALUE, MAX_RATE_HZ, MIN_RATE_HZ, Recording
+from imucal.data.timebase import stamped_times
 from imucal.errors import ImucalError
 from imucal.files.inputs import max_data_bytes, open_regular
 
@@ -100,11 +101,13 @@ def read_bag(path: str | os.PathLike, topic: str | None, temp_topic: str | None 
     raw = np.array(msgs.acc, float)
     gyro = None if msgs.no_gyro else np.array(msgs.gyr, float)
     _check_values(raw, gyro, path, topic)
-    t = (ns - ns[0]) * 1e-9
+    # the readers' time base (imucal.data.timebase): jittered stamps (receive times) re-timed, gaps kept
+    t, _, _, tb = stamped_times((ns - ns[0]).astype(float), "ns", None, "header.stamp", path)
     if temp is not None:
         temp = np.interp(ns - ns[0], temp[0] - ns[0], temp[1])  # held at the ends beyond the temperature messages
     return Recording(t=t, raw=raw, temp=temp, unit="m/s^2", source=str(path), sha256=sha, gyro=gyro,
-                     t_source=ns * 1e-9, time_unit="s", time_note=note, time_column="t", gyro_unit="rad/s")
+                     t_source=ns * 1e-9, time_unit="s", time_note=note, time_column="t", gyro_unit="rad/s",
+                     time_base=tb)
 
 
 def _connections(reader: object, path: Path, topic: str, msgtype: str, field: str, what: str) -> tuple[list, str]:
@@ -168,8 +171,8 @@ def _time_base(msgs: _ImuMessages, path: Path, topic: str) -> tuple[np.ndarray, 
         raise ImucalError(f"stamps are not strictly increasing at message {k} "
                           f"({ns[k - 1]} ns then {ns[k]} ns)", file=str(path), field=f"{topic}.header.stamp",
                           fix="drop duplicate or reordered messages before calibrating")
-    if ns.size > 1:
-        rate = (ns.size - 1) / float((ns[-1] - ns[0]) * 1e-9)
+    if ns.size > 1:  # the rate of the median step: a gap (a pause of the driver) is kept, not refused
+        rate = 1.0 / float(np.median(d) * 1e-9)
         if not MIN_RATE_HZ <= rate <= MAX_RATE_HZ:
             raise ImucalError(f"the stamps give {rate:.4g} Hz, not an IMU sample rate ({MIN_RATE_HZ:g} Hz to "
                               f"{MAX_RATE_HZ:g} Hz)", file=str(path), field=f"{topic}.header.stamp",

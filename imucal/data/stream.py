@@ -26,15 +26,15 @@ from pathlib import Path
 import numpy as np
 
 from imucal.constants import TIME_UNITS
-from imucal.data.load import (BINARY_PROBE, MAX_ABS_VALUE, TIME_HEAD_ROWS, DataSpec, Layout, as_spec,
-                              binary_file, check_lines, check_rate, corrupt_value, layout, line_too_long, lineno,
-                              long_line, no_rows, not_increasing,
-                              not_utf8, parse_block, resolve_path, unparsed, stamp_unit, time_base_without_stamps,
-                              time_unit_from_step, _MAX_SCAN_LINES)
+from imucal.data.load import (BINARY_PROBE, MAX_ABS_VALUE, DataSpec, Layout, as_spec, binary_file, check_lines,
+                              corrupt_value, layout, line_too_long, lineno, long_line, no_rows, not_increasing,
+                              not_utf8, parse_block, resolve_path, unparsed, _MAX_SCAN_LINES)
+from imucal.data.timebase import (GAP_STEPS, Decision, GapFinder, LagDiffs, StepStats, ValueCounts,
+                                  clock_times, decide, gap_excess, rate_time_base, time_base, time_unit_from_step)
 from imucal.data.static import (QUANTUM_ROWS, Intervals, MovingVariance, Segment, StaticSettings, VarianceSeries,
                                 auto_threshold, candidate_runs, edge_samples, intervals_from, quantum, still_segment,
                                 window_samples)
-from imucal.data.recording import RecordingSummary, StaticSamples
+from imucal.data.recording import RecordingSummary, StaticSamples, TimeBase
 from imucal.errors import ImucalError
 from imucal.solve.stats import median
 from imucal.files.inputs import open_regular
@@ -229,35 +229,32 @@ def head_layout(spec: DataSpec, path: Path) -> Layout:
     return _File(spec, path).lay
 
 
-class _Steps:
-    """Exact median of the differences of a series fed in chunks (distinct values with counts)."""
+class _Steps(ValueCounts):
+    """The differences of a series fed in chunks (carried across chunks), counted exactly."""
 
     def __init__(self) -> None:
-        self.values = np.empty(0)
-        self.counts = np.empty(0, np.int64)
+        super().__init__()
         self.last: float | None = None
 
-    def add(self, x: np.ndarray) -> None:
+    def feed(self, x: np.ndarray) -> None:
         if x.size == 0:
             return
         d = np.diff(x) if self.last is None else np.diff(np.concatenate([[self.last], x]))
         self.last = float(x[-1])
-        if d.size:
-            v, c = np.unique(d, return_counts=True)
-            allv = np.concatenate([self.values, v])
-            u, inv = np.unique(allv, return_inverse=True)
-            cnt = np.zeros(u.size, np.int64)
-            np.add.at(cnt, inv, np.concatenate([self.counts, c]))
-            self.values, self.counts = u, cnt
+        self.add(d)
 
-    def median(self) -> float:
-        m = int(self.counts.sum())
-        if m == 0:
-            return float("nan")
-        cum = np.cumsum(self.counts)
-        lo = self.values[np.searchsorted(cum, (m - 1) // 2, side="right")]
-        hi = self.values[np.searchsorted(cum, m // 2, side="right")]
-        return float(np.mean([lo, hi]))
+
+@dataclass(frozen=True)
+class _Clock:
+    """A jittered recording's clock (imucal.data.timebase): the decision and its gaps."""
+
+    dec: Decision
+    gap_index: np.ndarray
+    gap_step: np.ndarray  #: in the stamps' unit
+
+    @property
+    def cum(self) -> np.ndarray:
+        return gap_excess(self.dec, self.gap_step)
 
 
 @dataclass
@@ -277,11 +274,15 @@ class _Scan:
     unit_guess: str  #: the unit the times of this pass were computed in
     w_guess: int  #: the window the moving variance of this pass used
     mv: MovingVariance | None
+    time_base: TimeBase
+    clock: _Clock | None = None  #: the clock the times are to be made on (jittered stamps)
+    clock_guess: _Clock | None = None  #: the clock the times of this pass were made on
     var: VarianceSeries | None = None
 
     @property
     def consistent(self) -> bool:
-        return (self.unit, self.w) == (self.unit_guess, self.w_guess)
+        return (self.unit, self.w) == (self.unit_guess, self.w_guess) and (self.clock is None) == (
+            self.clock_guess is None)
 
 
 @dataclass
@@ -290,6 +291,7 @@ class _ScanState:
 
     unit: str | None
     w: int | None
+    clock: _Clock | None = None  #: the times are made on this clock (None: from the stamps as read)
     n: int = 0
     t_first: float = 0.0
     t_last: float = 0.0
@@ -300,9 +302,10 @@ class _ScanState:
     lows: np.ndarray = field(default_factory=lambda: np.full(3, np.inf))
     highs: np.ndarray = field(default_factory=lambda: np.full(3, -np.inf))
     stamp_steps: "_Steps" = field(default_factory=lambda: _Steps())
+    spans: LagDiffs = field(default_factory=lambda: LagDiffs())
     t_steps: "_Steps" = field(default_factory=lambda: _Steps())
-    head_stamps: list = field(default_factory=list)
     head_raw: list = field(default_factory=list)
+    blocks: list = field(default_factory=list)  #: (byte offset, bytes, first row) of each block with rows
     cached: int = 0
 
 
@@ -320,21 +323,24 @@ class StreamedRecording:
         roles = self.file.lay.roles
         self._it = {r: i for i, r in enumerate(roles)}
         # The window comes from the median step of the whole file: guessed from the first block, and
-        # the pass repeated in the rare case the guess (or the time unit) was wrong.
-        scan = self._scan(None, None)
+        # the pass repeated in the rare case the guess (or the time unit) was wrong, or when the
+        # stamps are jitter (the times are then made on the clock fitted in the first pass).
+        scan = self._scan(None, None, None)
         for _ in range(2):
             if scan.consistent:
                 break
-            scan = self._scan(scan.unit, scan.w)
+            scan = self._scan(scan.unit, scan.w, scan.clock)
         self._finish_scan(scan)
         self.recording = RecordingSummary(n=scan.n, t_last=scan.t_last, unit=self.spec.unit, source=str(self.path),
                                           sha256=self.file.sha, time_unit=scan.unit, time_note=scan.note,
-                                          time_column=self.file.lay.time_column)
+                                          time_column=self.file.lay.time_column, time_base=scan.time_base)
         self.intervals, self.samples = self._intervals(scan, keep_samples)
 
     # --- pass 1 ---------------------------------------------------------------------------------
-    def _times(self, arr: np.ndarray, row0: int, unit: str, t_first: float) -> np.ndarray:
+    def _times(self, arr: np.ndarray, row0: int, unit: str, t_first: float, clock: _Clock | None) -> np.ndarray:
         if "t" in self._it:
+            if clock is not None:
+                return clock_times(row0, arr.shape[0], clock.dec, clock.gap_index, clock.cum)
             return (arr[:, self._it["t"]] - t_first) * TIME_UNITS[unit]
         return np.arange(row0, row0 + arr.shape[0]) / float(self.spec.sample_rate)
 
@@ -345,13 +351,14 @@ class StreamedRecording:
         i = self._it
         return np.column_stack([arr[:, i["ax"]], arr[:, i["ay"]], arr[:, i["az"]]])
 
-    def _scan(self, unit_given: str | None, w_given: int | None) -> _Scan:
+    def _scan(self, unit_given: str | None, w_given: int | None, clock: _Clock | None) -> _Scan:
         """Pass 1: parse every block, hash, check values and time stamps, moving variance."""
-        st = _ScanState(unit=unit_given, w=w_given)
+        st = _ScanState(unit=unit_given, w=w_given, clock=clock)
         self._cache: list[tuple] | None = []
         for first, block, arr in self.file.rows(hash_it=True):
             if arr.shape[0] == 0:
                 continue
+            st.blocks.append((first, len(block), st.n))
             self._check_block(st, first, block, arr)
             if st.big is None and st.order is None:
                 self._accumulate(st, arr)
@@ -377,20 +384,15 @@ class StreamedRecording:
                 k = int(np.flatnonzero(bad)[0]) + (1 if prev is None else 0)
                 st.order = not_increasing(self.file.line_of(block, first, k), self.path)
         st.last_stamp = float(stamps[-1])
-        st.stamp_steps.add(stamps)
-        if sum(h.size for h in st.head_stamps) < TIME_HEAD_ROWS:
-            st.head_stamps.append(stamps[:TIME_HEAD_ROWS].copy())
+        st.stamp_steps.feed(stamps)
+        st.spans.add(stamps)
 
     def _accumulate(self, st: "_ScanState", arr: np.ndarray) -> None:
         """Times in the (guessed) unit, moving variance, ranges, the quantum's head, the memory cache."""
         if st.unit is None:  # a guess from the first block, checked at the end
-            if "t" in self._it:
-                stamps = arr[:, self._it["t"]]
-                st.unit = stamp_unit(self.spec, _infer(stamps, stamps[:TIME_HEAD_ROWS]))[0]
-            else:
-                st.unit = "s"
-        t = self._times(arr, st.n, st.unit, st.t_first)
-        st.t_steps.add(t)
+            st.unit = _guess_unit(self.spec, arr[:, self._it["t"]]) if "t" in self._it else "s"
+        t = self._times(arr, st.n, st.unit, st.t_first, st.clock)
+        st.t_steps.feed(t)
         if st.w is None:
             st.w = window_samples(self.settings, median(np.diff(t))) if t.size > 1 else 3
         if st.mv is None:
@@ -403,14 +405,15 @@ class StreamedRecording:
         st.t_last = float(t[-1])
         if self._cache is not None:  # the next passes read memory while the file fits in CACHE_BYTES
             temp = self._temp(arr)
-            st.cached += raw.nbytes + t.nbytes + (0 if temp is None else temp.nbytes)
+            stamps = arr[:, self._it["t"]].copy() if "t" in self._it else None
+            st.cached += raw.nbytes + t.nbytes + sum(0 if x is None else x.nbytes for x in (temp, stamps))
             if st.cached <= CACHE_BYTES:
-                self._cache.append((st.n, raw, t, temp))
+                self._cache.append((st.n, raw, t, temp, stamps))
             else:
                 self._cache = None
 
     def _scan_result(self, st: "_ScanState") -> _Scan:
-        """The first error met, or what pass 1 learnt with the time unit decided on every stamp."""
+        """The first error met, or what pass 1 learnt with the time base decided on every stamp."""
         path, spec, n = self.path, self.spec, st.n
         if self.file.unparsed is not None:
             raise self.file.unparsed
@@ -419,23 +422,60 @@ class StreamedRecording:
         for err in (st.big, st.order):
             if err is not None:
                 raise err
+        clock = None
         if "t" in self._it:
-            hs = np.concatenate(st.head_stamps)[:TIME_HEAD_ROWS]
-            unit_exact, note = stamp_unit(spec, time_unit_from_step(st.stamp_steps.median(), st.t_first,
-                                                                    bool(np.all(hs == np.round(hs))))
-                                          if spec.time_unit == "auto" else None)
-            check_rate(n, st.last_stamp - st.t_first, unit_exact, path)
+            stats = StepStats(n=n, first=st.t_first, last=st.last_stamp, median_step=st.stamp_steps.median(),
+                              span_median=st.spans.counts.median(),
+                              short=st.stamp_steps.below, long=st.stamp_steps.above)
+            dec = decide(stats, spec.time_unit, spec.sample_rate, self.file.lay.time_column, path)
+            unit_exact, note = dec.unit, dec.note
+            if st.clock is not None and st.clock.dec == dec:
+                gi, gs = st.clock.gap_index, st.clock.gap_step
+            elif dec.jittered or (n > 1 and stats.long(GAP_STEPS * dec.gap_ref) > 0):
+                gi, gs = self._gaps(dec)
+            else:
+                gi, gs = np.empty(0, np.int64), np.empty(0)
+            clock = _Clock(dec, gi, gs) if dec.jittered else None
+            tb = time_base(dec, stats, gi, gs, lambda k: self._row_line(st.blocks, k))
         else:
-            unit_exact, note = time_base_without_stamps(spec)
+            unit_exact, note, tb = rate_time_base(spec.sample_rate)
         if n < 3:  # as detect_static
             raise ImucalError(f"only {n} samples", file=str(path), field="data",
                               fix="record several seconds in each orientation")
-        # the times of this pass are in the guessed unit; if it was wrong, the next pass's window
-        # comes from the stamps' step in the right one
-        dt = st.t_steps.median() if unit_exact == st.unit else st.stamp_steps.median() * TIME_UNITS[unit_exact]
+        # the times of this pass are in the guessed unit (on the guessed clock); if either was wrong,
+        # the next pass's window comes from the stamps' step in the right one
+        same = unit_exact == st.unit and (clock is None) == (st.clock is None)
+        dt = st.t_steps.median() if same else tb.step
         return _Scan(n=n, unit=unit_exact, note=note, t_first=st.t_first, t_last=st.t_last, dt=dt,
                      w=window_samples(self.settings, dt), q=quantum(np.concatenate(st.head_raw)), lows=st.lows,
-                     highs=st.highs, unit_guess=st.unit, w_guess=st.w, mv=st.mv)
+                     highs=st.highs, unit_guess=st.unit, w_guess=st.w, mv=st.mv, time_base=tb, clock=clock,
+                     clock_guess=st.clock)
+
+    def _stamp_blocks(self) -> Iterator[np.ndarray]:
+        """The time stamps, a block at a time: from pass 1's cache when the file fitted in it."""
+        if self._cache is not None:
+            for entry in self._cache:
+                yield entry[4]
+            return
+        for _, _, arr in self.file.rows():
+            if arr.shape[0]:
+                yield arr[:, self._it["t"]]
+
+    def _gaps(self, dec: Decision) -> tuple[np.ndarray, np.ndarray]:
+        """The gaps of the stamps (imucal.data.timebase.GapFinder), found in one more pass."""
+        finder = GapFinder(dec)
+        for stamps in self._stamp_blocks():
+            finder.add(stamps)
+        return finder.finish()
+
+    def _row_line(self, blocks: list, k: int) -> int:
+        """The file's line of data row ``k`` (blocks: pass 1's (offset, bytes, first row))."""
+        i = max(0, np.searchsorted([b[2] for b in blocks], k, side="right") - 1)
+        offset, size, row0 = blocks[i]
+        with self.file._open() as f:
+            f.seek(offset)
+            block = f.read(size)
+        return self.file.line_of(block, offset, k - row0)
 
     def _finish_scan(self, scan: _Scan) -> None:
         if not scan.consistent:  # pragma: no cover - the third pass uses the exact unit and window
@@ -472,11 +512,12 @@ class StreamedRecording:
         """(first row, raw, t, temp) of every block: from pass 1's cache when the file fitted in it,
         else parsed again."""
         if self._cache is not None:
-            yield from self._cache
+            for entry in self._cache:
+                yield entry[:4]
             return
         row0 = 0
         for _, _, arr in self.file.rows():
-            yield row0, self._raw(arr), self._times(arr, row0, scan.unit, scan.t_first), self._temp(arr)
+            yield row0, self._raw(arr), self._times(arr, row0, scan.unit, scan.t_first, scan.clock), self._temp(arr)
             row0 += arr.shape[0]
 
     def _pieces(self, a: np.ndarray, b: np.ndarray, scan: _Scan
@@ -518,9 +559,16 @@ class StreamedRecording:
             yield StaticSamples(raw[idx], t[idx], None if temp is None else temp[idx])
 
 
-def _infer(stamps: np.ndarray, head: np.ndarray) -> tuple[str, str]:
-    dt = median(np.diff(stamps)) if stamps.size > 1 else float("nan")
-    return time_unit_from_step(dt, float(stamps[0]), bool(np.all(head == np.round(head))))
+def _guess_unit(spec: DataSpec, stamps: np.ndarray) -> str:
+    """The time unit from a first block's stamps: only a guess (the pass is repeated when the whole
+    file decides another), so a block the step cannot read is guessed s, not refused."""
+    if spec.time_unit != "auto":
+        return spec.time_unit
+    try:
+        return time_unit_from_step(median(np.diff(stamps)) if stamps.size > 1 else float("nan"),
+                                   float(stamps[0]))[0]
+    except ImucalError:
+        return "s"
 
 
 def _join(parts: list[tuple]) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:

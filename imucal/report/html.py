@@ -18,7 +18,7 @@ import numpy as np
 
 from imucal.pipeline import CalibrationRun
 from imucal.solve.misfit import POOR_FIT_P, POOR_FIT_REDCHI, excess_residuals
-from imucal.report.text import interval_residuals, t_quantile_975
+from imucal.report.text import interval_residuals, t_quantile_975, time_base_words
 from imucal.solve.stats import chi2_sf
 from imucal import __version__
 import io
@@ -215,6 +215,8 @@ def _statistics_html(run: CalibrationRun) -> str:
             ("SHA-256", f"<code>{esc(rec.sha256)}</code>")]
     if rec.time_note:
         rows.append(("time", esc(rec.time_note)))
+    if time_base_words(rec.time_base):
+        rows.append(("time base", esc(time_base_words(rec.time_base))))
     for d in cal.data.get("dropped_intervals", []):
         rows.append(("dropped interval", f"{d['t_start']:.2f} – {d['t_end']:.2f} s: {esc(d['reason'])}"))
     return table_html(["", ""], [[a, b] for a, b in rows])

@@ -6,6 +6,8 @@ import math
 import numpy as np
 
 from imucal.calibration.frozen import Calibration
+from imucal.data.recording import TimeBase, TimeSource
+from imucal.data.timebase import GAP_STEPS, SHORT_STEP
 from imucal.model.sensor import build_model
 from imucal.pipeline import CalibrationRun, fit_data
 from imucal.solve.fit import FitResult, jacobian_rows
@@ -59,8 +61,36 @@ def _calibration_lines(run: CalibrationRun) -> list[str]:
     L.append(f"    sha256             = {rec.sha256}")
     if rec.time_note:
         L.append(f"    time               = {rec.time_note}")
+    if time_base_words(rec.time_base):
+        L.append(f"    time base          = {time_base_words(rec.time_base)}")
     L.append(f"    gravity            = {cal.gravity:.6f} m/s^2 ({run.gravity_source})")
     return L
+
+
+def _duration(seconds: float) -> str:
+    for unit, f in (("h", 3600.0), ("min", 60.0), ("s", 1.0)):
+        if seconds >= f:
+            return f"{seconds / f:.3g} {unit}"
+    return f"{seconds * 1e3:.3g} ms"
+
+
+def time_base_words(tb: TimeBase | None) -> str:
+    """A recording's time base (imucal.data.timebase) in words; empty for stamps taken as read
+    without a gap or a checked rate, and for a given rate."""
+    if tb is None:
+        return ""
+    out = []
+    if tb.source is TimeSource.CLOCK:
+        out.append(f"the time stamps are jitter ({100 * tb.short_fraction:.3g} % of their steps are shorter than "
+                   f"{SHORT_STEP:g} of the sample step, median step {_duration(tb.median_step)}): the samples are "
+                   f"re-timed on a clock fitted to the stamps, {tb.rate:.4g} Hz")
+    if tb.n_gaps:
+        where = f" at line {tb.longest_gap_line}" if tb.longest_gap_line else ""
+        out.append(f"{tb.n_gaps} gap(s) in the time stamps (no sample for over {GAP_STEPS:g} sample steps) kept as "
+                   f"gaps, the longest {_duration(tb.longest_gap)}{where}")
+    if tb.rate_given is not None:
+        out.append(f"the sample rate given, {tb.rate_given:g} Hz, agrees with the time column ({tb.rate:.4g} Hz)")
+    return "; ".join(out)
 
 
 def _statistics_lines(run: CalibrationRun) -> list[str]:

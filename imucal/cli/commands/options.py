@@ -35,8 +35,11 @@ def add_data_options(p: argparse.ArgumentParser, data_required: bool = False, gy
                    help="column roles, 0-based indices or header names: t=0,ax=4,ay=5,az=6 "
                         "(roles t, ax, ay, az, gx, gy, gz, temp)")
     g.add_argument("--time-unit", choices=TIME_UNIT_CHOICES,
-                   help="unit of the time column (default auto: inferred and reported)")
-    g.add_argument("--sample-rate", type=float, help="sample rate [Hz] when the file has no time column")
+                   help="unit of the time column (default auto: s, ms, us or ns inferred from the stamps and "
+                        "reported; min only when given)")
+    g.add_argument("--sample-rate", type=float,
+                   help="sample rate [Hz]: the time base of a file without a time column; beside a time column "
+                        "it is checked against the stamps (refused when they disagree by more than a few per cent)")
     g.add_argument("--unit", help="unit of the raw readings (label only, e.g. raw or m/s^2)")
     if gyro:
         g.add_argument("--gyro-data", metavar="FILE",

@@ -1,0 +1,431 @@
+"""A recording's time base: its time unit, its one sample step, and its times, from the stamps as
+read or, where the stamps are jitter, from a clock fitted to them; gaps kept as gaps.
+
+Judged on the steps between stamps, in the stamps' own unit (no unit is needed to judge them):
+
+- the clock step: the median over k of (s[k + CLOCK_SPAN] - s[k]) / CLOCK_SPAN, a robust fit of
+  stamp against sample index. A logger's bursts shorter than CLOCK_SPAN samples average out in
+  it, and a gap touches only the CLOCK_SPAN spans across it.
+- jitter: more than JITTER_FRACTION of the steps are shorter than SHORT_STEP clock steps. A sensor
+  sampling at a steady rate never takes two samples a quarter of its period apart; a logger that
+  stamps samples when they arrive, in bursts, does.
+- a gap: a step longer than GAP_STEPS sample steps (samples are missing: the logger paused).
+  Between jittered stamps a long step is a gap only when the stamps after it stay late: the
+  median offset of the stamps from the clock over the CLOCK_SPAN samples after the step exceeds
+  that over the CLOCK_SPAN samples before it by at least half the step's excess (a stamp that was
+  only late is followed by early ones).
+
+Stamps that are not jitter are kept exactly: t = (s - s[0]) x unit, and the sample step is their
+median step. Jittered stamps are re-timed on the fitted clock: t_k = (k x clock step + the gaps
+before k) x unit, each gap as long as the jump of the stamps' offset from the clock across it.
+
+Both readers (imucal.data.load, whole; imucal.data.stream, in chunks) feed the same pieces: the
+step statistics (StepStats), the decision (decide), the gaps (GapFinder) and the times
+(clock_times), so that they give the same times to the bit.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+
+from imucal.constants import TIME_UNITS
+from imucal.data.recording import MAX_RATE_HZ, MIN_RATE_HZ, TimeBase, TimeSource
+from imucal.errors import ImucalError
+from imucal.solve.stats import median
+
+if TYPE_CHECKING:
+    from imucal.config.run import RunConfig
+    from imucal.data.recording import Recording, RecordingSummary
+
+#: Samples over which the clock step is measured [samples]: bursts of fewer samples average out.
+CLOCK_SPAN = 64
+#: A step shorter than this fraction of the clock step is no sampler's period: a stamp that was
+#: taken on arrival (in a burst), not at sampling.
+SHORT_STEP = 0.25
+#: Stamps are jitter when more than this fraction of their steps are short (SHORT_STEP): real
+#: loggers' good stamps have none (the Xsens and ROS recordings: none shorter than 0.5 steps).
+JITTER_FRACTION = 0.01
+#: A step longer than this many sample steps is a gap: at least one sample is missing.
+GAP_STEPS = 2.0
+#: The sample rate [Hz] a time unit is judged by when several give an IMU's: the unit whose rate
+#: lies closest to it on a log scale (MEMS loggers record at about 50 Hz to 1 kHz; 200 Hz is
+#: their middle). One rule for integer and fractional stamps: 0.9995 is milliseconds (1 kHz),
+#: not seconds (1 Hz).
+TYPICAL_RATE_HZ = 200.0
+#: Two units whose rates are within this many decades of equally close to TYPICAL_RATE_HZ are not
+#: told apart by the step (a step of 0.2: 5 Hz in s or 5 kHz in ms): --time-unit is asked for.
+AMBIGUOUS_DECADES = 0.3
+#: A sample rate given beside a time column is checked against the column's rate: they may differ
+#: by this fraction (a nominal rate against the sensor's clock; MEMS oscillators are specified to
+#: a few per cent), not more (a wrong rate, or the wrong column, is off by a factor).
+RATE_TOLERANCE = 0.05
+#: Time stamps this large, read in a unit, are epoch times (1998 .. 2103) [s].
+_EPOCH_S = (9.0e8, 4.2e9)
+#: The units a time column's unit is inferred among. Minutes are not: a 100 Hz log stamped in
+#: minutes steps like a 6 kHz one in seconds (minutes_hint names them when they are the answer).
+INFERRED_UNITS = ("s", "ms", "us", "ns")
+
+
+class ValueCounts:
+    """Distinct values with their counts, fed in chunks: the exact median of all values (as
+    imucal.solve.stats.median) and how many lie below or above a bound."""
+
+    def __init__(self) -> None:
+        self.values = np.empty(0)
+        self.counts = np.empty(0, np.int64)
+
+    def add(self, x: np.ndarray) -> None:
+        if x.size == 0:
+            return
+        v, c = np.unique(x, return_counts=True)
+        u, inv = np.unique(np.concatenate([self.values, v]), return_inverse=True)
+        cnt = np.zeros(u.size, np.int64)
+        np.add.at(cnt, inv, np.concatenate([self.counts, c]))
+        self.values, self.counts = u, cnt
+
+    def median(self) -> float:
+        m = int(self.counts.sum())
+        if m == 0:
+            return float("nan")
+        cum = np.cumsum(self.counts)
+        lo = self.values[np.searchsorted(cum, (m - 1) // 2, side="right")]
+        hi = self.values[np.searchsorted(cum, m // 2, side="right")]
+        return float(np.mean([lo, hi]))
+
+    def below(self, bound: float) -> int:
+        return int(self.counts[self.values < bound].sum())
+
+    def above(self, bound: float) -> int:
+        return int(self.counts[self.values > bound].sum())
+
+
+class LagDiffs:
+    """s[k + lag] - s[k] of a series fed in chunks (the clock step's spans), into ValueCounts."""
+
+    def __init__(self, lag: int = CLOCK_SPAN) -> None:
+        self.lag, self.tail, self.counts = lag, np.empty(0), ValueCounts()
+
+    def add(self, x: np.ndarray) -> None:
+        y = np.concatenate([self.tail, x])
+        if y.size > self.lag:
+            self.counts.add(y[self.lag:] - y[:-self.lag])
+        self.tail = y[-self.lag:]
+
+
+@dataclass(frozen=True)
+class StepStats:
+    """What a time base is decided on, in the stamps' unit (one pass over the stamps)."""
+
+    n: int
+    first: float  #: the first stamp
+    last: float  #: the last stamp
+    median_step: float
+    span_median: float  #: median of s[k + CLOCK_SPAN] - s[k] (nan with too few stamps)
+    short: Callable[[float], int]  #: number of steps below a bound
+    long: Callable[[float], int]  #: number of steps above a bound
+
+    @property
+    def clock_step(self) -> float:
+        """The robust fit's step: the span median / CLOCK_SPAN (the mean step with fewer stamps)."""
+        if math.isfinite(self.span_median):
+            return self.span_median / CLOCK_SPAN
+        return (self.last - self.first) / (self.n - 1) if self.n > 1 else float("nan")
+
+
+def step_stats(stamps: np.ndarray) -> StepStats:
+    """StepStats of stamps read whole (the chunked reader fills the same from ValueCounts)."""
+    d = np.diff(stamps)
+    span = stamps[CLOCK_SPAN:] - stamps[:-CLOCK_SPAN] if stamps.size > CLOCK_SPAN else np.empty(0)
+    return StepStats(n=int(stamps.size), first=float(stamps[0]), last=float(stamps[-1]),
+                     median_step=median(d) if d.size else float("nan"),
+                     span_median=median(span) if span.size else float("nan"),
+                     short=lambda b: int(np.count_nonzero(d < b)), long=lambda b: int(np.count_nonzero(d > b)))
+
+
+@dataclass(frozen=True)
+class Decision:
+    """The time base decided from StepStats: unit, note, and the step the times are made from."""
+
+    unit: str
+    note: str
+    jittered: bool
+    step: float  #: the sample step in the stamps' unit: the median step, or the clock's
+    gap_ref: float  #: steps longer than GAP_STEPS x this are gap candidates
+    short_fraction: float
+    rate_given: float | None
+
+    @property
+    def rate(self) -> float:
+        return 1.0 / (self.step * TIME_UNITS[self.unit]) if self.step > 0 else float("nan")
+
+
+def decide(st: StepStats, time_unit: str, rate_given: float | None, column: str, path: Path) -> Decision:
+    """Jitter or not, the unit (given, or inferred from the step), the step, the rate check."""
+    clock = st.clock_step
+    short = st.short(SHORT_STEP * clock) if st.n > 1 and clock > 0 else 0
+    frac = short / (st.n - 1) if st.n > 1 else 0.0
+    jittered = frac > JITTER_FRACTION
+    step, what = (clock, "clock step") if jittered else (st.median_step, "median step")
+    if time_unit != "auto":
+        unit, note = time_unit, f"time unit given: {time_unit}"
+    elif rate_given is not None and (by_rate := _unit_of_rate(step, rate_given)) is not None:
+        unit = by_rate
+        note = (f"time unit inferred: {unit} ({what} {step:g} -> {1.0 / (step * TIME_UNITS[unit]):.4g} Hz, "
+                f"the sample rate given)")
+    else:
+        unit, note = time_unit_from_step(step, st.first, what, path)
+    if st.n > 1:
+        check_rate(step, unit, path)
+    dec = Decision(unit=unit, note=note, jittered=jittered, step=step,
+                   gap_ref=clock if jittered else st.median_step, short_fraction=frac, rate_given=rate_given)
+    if rate_given is not None and st.n > 1 and abs(dec.rate / rate_given - 1.0) > RATE_TOLERANCE:
+        raise ImucalError(f"sample rate {rate_given:g} Hz given, but the time column {column} steps at "
+                          f"{dec.rate:.4g} Hz ({what} {step:g} {unit}): two sources of time disagree",
+                          file=str(path), field="data.sample_rate",
+                          fix=f"drop --sample-rate (data.sample_rate) to use the time column, or map the right "
+                              f"time column (--columns t=...); they may differ by {100 * RATE_TOLERANCE:g} %")
+    return dec
+
+
+def _unit_of_rate(step: float, rate: float) -> str | None:
+    """The one unit in which ``step`` gives ``rate`` within RATE_TOLERANCE, else None."""
+    if not (math.isfinite(step) and step > 0):
+        return None
+    hits = [u for u, f in TIME_UNITS.items() if abs(1.0 / (step * f) / rate - 1.0) <= RATE_TOLERANCE]
+    return hits[0] if len(hits) == 1 else None
+
+
+def time_unit_from_step(dt: float, first: float, what: str = "median step", path: Path | None = None
+                        ) -> tuple[str, str]:
+    """The unit (s, ms, us, ns) of time stamps with sample step ``dt`` and first stamp ``first``,
+    and a sentence saying why; refused when the step cannot tell two units apart.
+
+    The sample rate must be an IMU's (1 Hz to 100 kHz). Among the units that give one, epoch time
+    decides when the stamps look like it (1.7e9 s = 1.7e12 ms = ...); otherwise the unit whose
+    rate is closest to TYPICAL_RATE_HZ on a log scale, unless another is within AMBIGUOUS_DECADES
+    of as close. A second plausible unit is named in the note.
+    """
+    if not (math.isfinite(dt) and dt > 0):
+        return "s", "time unit assumed: s (too few distinct time stamps to infer it)"
+
+    def rate(u: str) -> float:
+        return 1.0 / (dt * TIME_UNITS[u])
+
+    plausible = [u for u in INFERRED_UNITS if MIN_RATE_HZ <= rate(u) <= MAX_RATE_HZ]
+    if not plausible:
+        return "s", ""  # refused by check_rate with the rate in the message
+    epoch = [u for u in plausible if _EPOCH_S[0] <= abs(first) * TIME_UNITS[u] <= _EPOCH_S[1]]
+    if epoch:
+        unit = epoch[0]
+        return unit, f"time unit inferred: {unit} (epoch time stamps; {what} {dt:g} {unit} -> {rate(unit):.4g} Hz)"
+
+    def distance(u: str) -> float:
+        return abs(math.log10(rate(u) / TYPICAL_RATE_HZ))
+
+    plausible.sort(key=distance)
+    unit = plausible[0]
+    if len(plausible) > 1 and distance(plausible[1]) - distance(unit) < AMBIGUOUS_DECADES:
+        alt = plausible[1]
+        raise ImucalError(f"the time stamps step by {dt:g}: {rate(unit):.4g} Hz in {unit} or {rate(alt):.4g} Hz in "
+                          f"{alt}, which the step alone cannot tell apart", file=None if path is None else str(path),
+                          field="data.time_unit",
+                          fix=f"give --time-unit {unit} or --time-unit {alt} (data.time_unit)")
+    note = f"time unit inferred: {unit} ({what} {dt:g} -> {rate(unit):.4g} Hz"
+    if len(plausible) > 1:
+        alt = plausible[1]
+        note += f"; {alt} would give {rate(alt):.4g} Hz: give --time-unit if that is right"
+    return unit, note + ")"
+
+
+def check_rate(step: float, unit: str, path: Path) -> None:
+    """Refuse a sample step (in ``unit``) that gives no IMU sample rate, naming the likely unit.
+    The step is the time base's, so a gap (a logger's pause) does not make a unit look wrong."""
+    rate = 1.0 / (step * TIME_UNITS[unit])
+    if MIN_RATE_HZ <= rate <= MAX_RATE_HZ:
+        return
+    likely = [u for u, f in TIME_UNITS.items() if MIN_RATE_HZ <= 1.0 / (step * f) <= MAX_RATE_HZ]
+    fix = (f"the time column looks like {likely[0]}: give --time-unit {likely[0]} (data.time_unit: {likely[0]})"
+           if likely else "check the time column (or drop it and give --sample-rate)")
+    raise ImucalError(f"time in {unit} gives {rate:.4g} Hz, not an IMU sample rate "
+                      f"({MIN_RATE_HZ:g} Hz to {MAX_RATE_HZ:g} Hz)", file=str(path), field="data.time_unit", fix=fix)
+
+
+class GapFinder:
+    """The gaps of stamps fed in chunks: (index of the sample after the gap, the step across it in
+    the time base, in the stamps' unit). The same gaps whatever the chunks: each step is judged
+    once the CLOCK_SPAN stamps after it are in (or the stamps have ended)."""
+
+    def __init__(self, dec: Decision) -> None:
+        self.dec = dec
+        self.base = 0  #: global index of buf[0]
+        self.buf = np.empty(0)
+        self.done = 0  #: steps below this (step k: samples k to k + 1) are judged
+        self.index: list[np.ndarray] = []
+        self.step: list[np.ndarray] = []
+
+    def add(self, stamps: np.ndarray, final: bool = False) -> None:
+        buf = np.concatenate([self.buf, stamps])
+        end = self.base + buf.size  # stamps in so far
+        hold = 0 if final or not self.dec.jittered else CLOCK_SPAN
+        upto = max(self.done, end - 1 - hold)  # judge steps done .. upto - 1
+        if upto > self.done:
+            self._judge(buf, end, upto, final)
+            self.done = upto
+        keep = max(0, min(self.done + 1 - CLOCK_SPAN, end) - self.base)  # the window before the next step
+        self.base, self.buf = self.base + keep, buf[keep:]
+
+    def _judge(self, buf: np.ndarray, end: int, upto: int, final: bool) -> None:
+        k = np.arange(self.done, upto)
+        d = buf[k + 1 - self.base] - buf[k - self.base]
+        long = d > GAP_STEPS * self.dec.gap_ref
+        k, d = k[long], d[long]
+        if k.size == 0:
+            return
+        if not self.dec.jittered:
+            self.index.append(k + 1)
+            self.step.append(d)
+            return
+        T = self.dec.step
+        r = buf - (self.base + np.arange(buf.size)) * T  # the stamps' offset from the clock
+        jump = _window_medians(r, k + 1 - self.base, end - self.base, after=True) - \
+            _window_medians(r, k + 1 - self.base, end - self.base, after=False)
+        gap = jump > 0.5 * (d - T)
+        self.index.append(k[gap] + 1)
+        self.step.append(T + jump[gap])
+
+    def finish(self) -> tuple[np.ndarray, np.ndarray]:
+        self.add(np.empty(0), final=True)
+        if not self.index:
+            return np.empty(0, np.int64), np.empty(0)
+        return np.concatenate(self.index).astype(np.int64), np.concatenate(self.step)
+
+
+def _window_medians(r: np.ndarray, at: np.ndarray, end: int, after: bool) -> np.ndarray:
+    """Median of r over the CLOCK_SPAN values from ``at`` on (``after``) or before it, each window
+    cut at 0 and ``end``."""
+    lo = at if after else np.maximum(at - CLOCK_SPAN, 0)
+    hi = np.minimum(at + CLOCK_SPAN, end) if after else at
+    out = np.empty(at.size)
+    full = (hi - lo) == CLOCK_SPAN
+    if full.any() and r.size >= CLOCK_SPAN:
+        win = sliding_window_view(r, CLOCK_SPAN)
+        idx = lo[full]
+        for j in range(0, idx.size, 4096):  # bounded memory: 4096 windows at a time
+            out[np.flatnonzero(full)[j:j + 4096]] = np.median(win[idx[j:j + 4096]], axis=1)
+    for i in np.flatnonzero(~full):  # windows cut at either end of the stamps
+        out[i] = median(r[lo[i]:hi[i]]) if hi[i] > lo[i] else 0.0
+    return out
+
+
+def clock_times(row0: int, m: int, dec: Decision, gap_index: np.ndarray, gap_cum: np.ndarray) -> np.ndarray:
+    """Times [s] of samples row0 .. row0 + m - 1 on a jittered recording's clock:
+    (k x step + the gaps' excess before k) x unit. ``gap_cum``: cumulative excess (gap step - step)."""
+    k = np.arange(row0, row0 + m)
+    j = np.searchsorted(gap_index, k, side="right")  # gaps at or before k
+    extra = np.concatenate([[0.0], gap_cum])[j]
+    return (k * dec.step + extra) * TIME_UNITS[dec.unit]
+
+
+def gap_excess(dec: Decision, gap_step: np.ndarray) -> np.ndarray:
+    """Cumulative time (stamps' unit) the gaps add to a clock of one step per sample."""
+    return np.cumsum(gap_step - dec.step)
+
+
+def time_base(dec: Decision, st: StepStats, gap_index: np.ndarray, gap_step: np.ndarray,
+              line_of: Callable[[int], int] | None) -> TimeBase:
+    """The typed record of a stamped recording's time base (rendered by imucal.report)."""
+    f = TIME_UNITS[dec.unit]
+    longest = int(gap_index[np.argmax(gap_step)]) if gap_index.size else -1
+    return TimeBase(source=TimeSource.CLOCK if dec.jittered else TimeSource.STAMPS, rate=dec.rate,
+                    gap_index=gap_index, gap_seconds=gap_step * f,
+                    longest_gap_line=line_of(longest) if line_of is not None and longest >= 0 else 0,
+                    short_fraction=dec.short_fraction, median_step=st.median_step * f, rate_given=dec.rate_given)
+
+
+def stamped_times(stamps: np.ndarray, time_unit: str, rate_given: float | None, column: str, path: Path,
+                  line_of: Callable[[int], int] | None = None) -> tuple[np.ndarray, str, str, TimeBase]:
+    """Times [s] from 0, unit, note and time base of stamps read whole (strictly increasing)."""
+    st = step_stats(stamps)
+    dec = decide(st, time_unit, rate_given, column, path)
+    if dec.jittered or (st.n > 1 and st.long(GAP_STEPS * dec.gap_ref) > 0):
+        finder = GapFinder(dec)
+        finder.add(stamps)
+        gi, gs = finder.finish()
+    else:
+        gi, gs = np.empty(0, np.int64), np.empty(0)
+    if dec.jittered:
+        t = clock_times(0, stamps.size, dec, gi, gap_excess(dec, gs))
+    else:
+        t = (stamps - stamps[0]) * TIME_UNITS[dec.unit]
+    return t, dec.unit, dec.note, time_base(dec, st, gi, gs, line_of)
+
+
+def rate_time_base(rate: float) -> tuple[str, str, TimeBase]:
+    """Unit, note and time base of a recording without a time column, at the given rate [Hz]."""
+    return "s", f"no time column: {float(rate):g} Hz given", TimeBase(source=TimeSource.RATE, rate=float(rate))
+
+
+#: Distinct orientations the stamps read in another unit must show before that unit is named as
+#: the likely one: a single pose read on a wrong time scale may split into runs, all one way.
+HINT_MIN_POSES = 3
+#: Words for a unit in a message.
+_UNIT_WORDS = {"min": "minutes", "s": "seconds", "ms": "milliseconds", "us": "microseconds", "ns": "nanoseconds"}
+
+
+def unit_hint(config: "RunConfig", rec: "Recording | RecordingSummary", found: int,
+              rails: dict | None = None) -> ImucalError | None:
+    """The refusal to give when a run finds fewer than two still poses (``found``) on a stamped
+    recording but HINT_MIN_POSES or more distinct ones with its stamps read in another unit
+    (minutes, which are never inferred, or another unit giving an IMU rate): the time unit looks
+    like that one. None otherwise. Only on that failure: each other unit costs one more detection
+    (a re-read for a file read in chunks)."""
+    tb = rec.time_base
+    if tb is None or tb.source is TimeSource.RATE or not math.isfinite(tb.rate):
+        return None
+    best: tuple[int, str, float] | None = None
+    for unit, f in TIME_UNITS.items():
+        rate = tb.rate * TIME_UNITS[rec.time_unit] / f
+        if unit == rec.time_unit or not MIN_RATE_HZ <= rate <= MAX_RATE_HZ:
+            continue
+        poses = _poses_in(config, rec, unit, f / TIME_UNITS[rec.time_unit], rails)
+        if poses >= max(HINT_MIN_POSES, found + 1) and (best is None or poses > best[0]):
+            best = (poses, unit, rate)
+    if best is None:
+        return None
+    poses, unit, rate = best
+    return ImucalError(f"the time column read in {rec.time_unit} gives {tb.rate:.4g} Hz and {found} still pose(s); "
+                       f"read in {unit} it gives {rate:.4g} Hz and {poses} distinct still poses: the time unit looks "
+                       f"like {_UNIT_WORDS[unit]}", file=rec.source, field="data.time_unit",
+                       fix=f"give --time-unit {unit} (data.time_unit: {unit})"
+                           + (", or write the time column in seconds" if unit == "min" else ""))
+
+
+def _poses_in(config: "RunConfig", rec: "Recording | RecordingSummary", unit: str, scale: float,
+              rails: dict | None) -> int:
+    """Distinct orientations of the still intervals found with the stamps read in ``unit``
+    (``scale``: that unit's factor over the one read)."""
+    from dataclasses import replace
+
+    from imucal.data.static import detect_static
+    from imucal.solve.observability import distinct_directions
+
+    try:
+        if rec.t is not None:  # read whole: the same time base on another scale
+            iv = detect_static(rec.t * scale, rec.raw, config.static, rec.temp, source=rec.source, rails=rails)
+        else:
+            from imucal.data.stream import StreamedRecording
+
+            iv = StreamedRecording(replace(config.data, time_unit=unit), config.static, config.base_dir,
+                                   rails).intervals
+    except ImucalError:
+        return 0
+    if iv.n == 0:
+        return 0
+    norm = np.linalg.norm(iv.mean, axis=1, keepdims=True)
+    return distinct_directions(iv.mean[norm[:, 0] > 0] / norm[norm[:, 0] > 0])[0]
