@@ -32,7 +32,7 @@ class TimeBase:
 
     source: TimeSource
     rate: float  #: [Hz] the one sample rate of the recording: 1 / its sample step
-    #: samples that follow a gap (a step of more than timebase.GAP_STEPS sample steps), in order
+    #: samples that follow a gap (samples missing: imucal.data.timebase), in order
     gap_index: np.ndarray = field(default_factory=lambda: np.empty(0, np.int64))
     gap_seconds: np.ndarray = field(default_factory=lambda: np.empty(0))  #: [s] each gap's step
     longest_gap_line: int = 0  #: the file's line of the sample after the longest gap (0: none, or arrays)

@@ -9,11 +9,12 @@ Judged on the steps between stamps, in the stamps' own unit (no unit is needed t
 - jitter: more than JITTER_FRACTION of the steps are shorter than SHORT_STEP clock steps. A sensor
   sampling at a steady rate never takes two samples a quarter of its period apart; a logger that
   stamps samples when they arrive, in bursts, does.
-- a gap: a step longer than GAP_STEPS sample steps (samples are missing: the logger paused).
-  Between jittered stamps a long step is a gap only when the stamps after it stay late: the
-  median offset of the stamps from the clock over the CLOCK_SPAN samples after the step exceeds
-  that over the CLOCK_SPAN samples before it by at least half the step's excess (a stamp that was
-  only late is followed by early ones).
+- a gap: a step longer than GAP_STEPS sample steps after which the stamps stay late (samples are
+  missing: the logger paused, or lost one): the median offset of the stamps from the clock over
+  the CLOCK_SPAN samples after the step exceeds that over the CLOCK_SPAN samples before it by at
+  least half a sample step and half the step's excess. A stamp that was only late (jitter, or a
+  good clock's scatter) is followed by early ones and leaves the offset where it was. Gaps
+  closer together than CLOCK_SPAN samples are measured together, approximately.
 
 Stamps that are not jitter are kept exactly: t = (s - s[0]) x unit, and the sample step is their
 median step. Jittered stamps are re-timed on the fitted clock: t_k = (k x clock step + the gaps
@@ -51,8 +52,12 @@ SHORT_STEP = 0.25
 #: Stamps are jitter when more than this fraction of their steps are short (SHORT_STEP): real
 #: loggers' good stamps have none (the Xsens and ROS recordings: none shorter than 0.5 steps).
 JITTER_FRACTION = 0.01
-#: A step longer than this many sample steps is a gap: at least one sample is missing.
-GAP_STEPS = 2.0
+#: A step longer than this many sample steps may be a gap (one lost sample makes a step of 2);
+#: it is one when the stamps after it stay late by at least GAP_JUMP sample steps.
+GAP_STEPS = 1.5
+#: The least lasting jump of the stamps' offset from the clock that is a gap [sample steps]: half a
+#: lost sample (the scatter of good stamps and the delays of jittered ones do not last).
+GAP_JUMP = 0.5
 #: The sample rate [Hz] a time unit is judged by when several give an IMU's: the unit whose rate
 #: lies closest to it on a log scale (MEMS loggers record at about 50 Hz to 1 kHz; 200 Hz is
 #: their middle). One rule for integer and fractional stamps: 0.9995 is milliseconds (1 kHz),
@@ -272,7 +277,7 @@ class GapFinder:
     def add(self, stamps: np.ndarray, final: bool = False) -> None:
         buf = np.concatenate([self.buf, stamps])
         end = self.base + buf.size  # stamps in so far
-        hold = 0 if final or not self.dec.jittered else CLOCK_SPAN
+        hold = 0 if final else CLOCK_SPAN
         upto = max(self.done, end - 1 - hold)  # judge steps done .. upto - 1
         if upto > self.done:
             self._judge(buf, end, upto, final)
@@ -287,17 +292,14 @@ class GapFinder:
         k, d = k[long], d[long]
         if k.size == 0:
             return
-        if not self.dec.jittered:
-            self.index.append(k + 1)
-            self.step.append(d)
-            return
         T = self.dec.step
         r = buf - (self.base + np.arange(buf.size)) * T  # the stamps' offset from the clock
         jump = _window_medians(r, k + 1 - self.base, end - self.base, after=True) - \
             _window_medians(r, k + 1 - self.base, end - self.base, after=False)
-        gap = jump > 0.5 * (d - T)
+        gap = (jump > 0.5 * (d - T)) & (jump > GAP_JUMP * T)
         self.index.append(k[gap] + 1)
-        self.step.append(T + jump[gap])
+        # the step across the gap: the stamps' own (kept as read), or the clock's
+        self.step.append(T + jump[gap] if self.dec.jittered else d[gap])
 
     def finish(self) -> tuple[np.ndarray, np.ndarray]:
         self.add(np.empty(0), final=True)

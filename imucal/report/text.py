@@ -86,8 +86,8 @@ def time_base_words(tb: TimeBase | None) -> str:
                    f"re-timed on a clock fitted to the stamps, {tb.rate:.4g} Hz")
     if tb.n_gaps:
         where = f" at line {tb.longest_gap_line}" if tb.longest_gap_line else ""
-        out.append(f"{tb.n_gaps} gap(s) in the time stamps (no sample for over {GAP_STEPS:g} sample steps) kept as "
-                   f"gaps, the longest {_duration(tb.longest_gap)}{where}")
+        out.append(f"{tb.n_gaps} gap(s) in the time stamps (samples missing: steps over {GAP_STEPS:g} sample steps that "
+                   f"the later stamps do not make up) kept as gaps, the longest {_duration(tb.longest_gap)}{where}")
     if tb.rate_given is not None:
         out.append(f"the sample rate given, {tb.rate_given:g} Hz, agrees with the time column ({tb.rate:.4g} Hz)")
     return "; ".join(out)
@@ -102,6 +102,9 @@ def _statistics_lines(run: CalibrationRun) -> list[str]:
     L.append(f"    # iterations       = {res.iterations}")
     L.append("    fit on             = interval means" if res.mode == "means" else
              f"    fit on             = {res.residuals.size} samples")
+    if res.mode == "means" and cal.fit.get("weights") == "auto":
+        L.append("    weights            = every interval alike (auto); each mean's noise sets the standard errors, "
+                 "not the values")
     L.append(f"    # intervals        = {iv.n} ({run.observability.n_distinct} distinct orientations)")
     L.append(f"    # free parameters  = {len(res.free_names)}")
     L.append(f"    chi-square         = {res.chi2:.6g}")
@@ -110,13 +113,10 @@ def _statistics_lines(run: CalibrationRun) -> list[str]:
     if res.excess > 0 or res.random_walk > 0:
         L.append(f"    noise alone        = reduced chi-square {res.redchi_noise:.6g}: the intervals scatter more "
                  "than their own noise")
-        if res.random_walk > 0:
-            L.append(f"    excess in weights  = {math.sqrt(res.excess):.4g} m/s^2 rms added to every interval's sigma "
-                     "(Paule-Mandel): the walk's scatter below, so that no quiet pose is over-trusted")
-        else:
-            L.append(f"    bias_instability   = {math.sqrt(res.excess):.4g} m/s^2 rms per visit of a pose (random "
-                     "offset between intervals, Paule-Mandel), added to every interval's sigma: weights and "
-                     "standard errors include it")
+    if res.excess > 0:
+        L.append(f"    bias_instability   = {math.sqrt(res.excess):.4g} m/s^2 rms per visit of a pose (random "
+                 f"offset between intervals, {'REML' if res.random_walk > 0 else 'Paule-Mandel'}), added to every "
+                 "interval's sigma: the standard errors include it")
     if res.random_walk > 0:
         L.append(f"    bias_random_walk   = {math.sqrt(res.random_walk):.4g} +/- {res.stochastic.q_std:.2g} m/s^2/sqrt(s) "
                  "(REML): the bias moved during the recording; the standard errors include the walk (its full "
