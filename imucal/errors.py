@@ -1,6 +1,8 @@
 """The one error type imucal raises for bad input: one line naming file, field and fix."""
 from __future__ import annotations
+
 import signal
+from typing import Any
 
 
 class ImucalError(Exception):
@@ -31,27 +33,109 @@ EXIT_OK = 0  #: success
 EXIT_NOT_CONVERGED = 1  #: the solver did not converge (outputs written, status "failed")
 EXIT_BAD_INPUT = 2  #: bad input, a refused run or a usage error: one line naming file, field, fix
 EXIT_INTERNAL = 3  #: an unexpected internal error (a bug): one line; rerun with --debug for the traceback
-EXIT_INTERRUPTED = 130  #: SIGINT (Ctrl-C) or SIGTERM: staged outputs removed, nothing published
+EXIT_INTERRUPTED = 130  #: ended by a signal (INTERRUPTING: Ctrl-C, SIGTERM, SIGHUP, ...): staged outputs removed
 EXIT_BROKEN_PIPE = 141  #: 128 + SIGPIPE: the reader of stdout left (`| head`); files already written stay
 
 
+# --- signals ---------------------------------------------------------------------------------------
+# Every signal that would end the process and can be caught ends a run the same way: where the program
+# is, as an exception, so staged outputs are removed (or the old set put back while one is placed), one
+# line names the signal, and the status is EXIT_INTERRUPTED for all of them: one status means "stopped
+# from outside, nothing written", whichever signal it was (the line says which). The shell's 128 + n is
+# kept for SIGINT (130, as before) and not spread over a dozen numbers a caller would have to list.
+# Python itself ignores SIGPIPE (a reader gone is BrokenPipeError: EXIT_BROKEN_PIPE) and SIGXFSZ (a file
+# too large is a write error); a signal ignored when the run starts (nohup's SIGHUP, a job started with &)
+# stays ignored, and one with a handler of the calling program is left to it.
+_TERMINATING = ("SIGHUP", "SIGINT", "SIGQUIT", "SIGUSR1", "SIGUSR2", "SIGPIPE", "SIGALRM", "SIGTERM", "SIGSTKFLT",
+                "SIGXCPU", "SIGXFSZ", "SIGVTALRM", "SIGPROF", "SIGIO", "SIGPWR")
+
+
+def _interrupting() -> tuple[int, ...]:
+    found = {int(getattr(signal, n)) for n in _TERMINATING if hasattr(signal, n)}
+    if hasattr(signal, "SIGRTMIN"):  # real-time signals: their default action ends the process too
+        found |= set(range(signal.SIGRTMIN, signal.SIGRTMAX + 1))
+    return tuple(sorted(found))
+
+
+#: Signals sent from outside whose default action ends the process (signal(7)). Not the faults the
+#: process raises itself (SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT, SIGSYS, SIGTRAP): no handler resumes
+#: from those, and SIGKILL and SIGSTOP cannot be caught.
+INTERRUPTING: tuple[int, ...] = _interrupting()
+
+
+def signal_name(signum: int) -> str:
+    """A signal's name: "SIGHUP", "SIGRTMIN+3", or "signal 99" for a number the platform does not name."""
+    try:
+        return signal.Signals(signum).name
+    except ValueError:
+        if hasattr(signal, "SIGRTMIN") and signal.SIGRTMIN < signum <= signal.SIGRTMAX:
+            return f"SIGRTMIN+{signum - signal.SIGRTMIN}"
+        return f"signal {signum}"
+
+
 class Terminated(KeyboardInterrupt):
-    """SIGTERM, raised where the program is, so staged outputs are removed as on Ctrl-C."""
+    """A signal other than SIGINT, raised where the program is, so staged outputs are removed as on Ctrl-C."""
+
+    def __init__(self, signum: int = signal.SIGTERM) -> None:
+        super().__init__(signum)
+        self.signum = signum
 
 
-#: Signals received while a command runs, recorded by the command line's handlers. A signal that
-#: arrives inside CasADi's C code is caught there and becomes a solver failure status; every
+#: Signals received while a command runs, recorded by the handlers of ``interrupt_on_signals``. A
+#: signal that arrives inside CasADi's C code is caught there and becomes a solver failure status; every
 #: solve calls ``raise_if_signalled`` after IPOPT returns, so the run ends as an interruption.
 SIGNALS: list[int] = []
+_TAKEN: set[int] = set()  #: signals whose handler is ``_on_signal`` (set by ``interrupt_on_signals``)
+
+
+def _raise_for(signum: int) -> None:
+    if signum == signal.SIGINT:
+        raise KeyboardInterrupt()
+    raise Terminated(signum)
+
+
+def _on_signal(signum: int, frame: object) -> None:  # noqa: ARG001 - signal handler signature
+    SIGNALS.append(signum)
+    if signum != signal.SIGINT:  # once: the cleanup is not interrupted again (a second Ctrl-C still is)
+        for s in _TAKEN - {signal.SIGINT}:
+            signal.signal(s, signal.SIG_IGN)
+    _raise_for(signum)
+
+
+def interrupt_on_signals() -> dict[int, Any]:
+    """Make every INTERRUPTING signal with its default action (Python's own handler for SIGINT) raise
+    KeyboardInterrupt (SIGINT) or Terminated (the others) where the program is. Ignored signals and
+    handlers of the calling program are left alone. Returns the handlers replaced, for
+    ``restore_signals``. Raises ValueError outside the main thread."""
+    replaced = {}
+    for s in INTERRUPTING:
+        h = signal.getsignal(s)
+        if h is signal.SIG_DFL or (s == signal.SIGINT and h is signal.default_int_handler):
+            replaced[s] = signal.signal(s, _on_signal)
+            _TAKEN.add(s)
+    return replaced
+
+
+def restore_signals(replaced: dict[int, Any], ignore: bool = False) -> None:
+    """Give back the handlers ``interrupt_on_signals`` replaced, or (``ignore``) ignore those signals:
+    a program whose run is over is not killed by a signal during its exit."""
+    for s, h in replaced.items():
+        signal.signal(s, signal.SIG_IGN if ignore else h)
+        _TAKEN.discard(s)
 
 
 def raise_if_signalled() -> None:
     """Raise the interrupt a signal asked for, if one arrived during the last solve."""
-
-    if signal.SIGTERM in SIGNALS:
-        raise Terminated()
     if SIGNALS:
-        raise KeyboardInterrupt()
+        _raise_for(next((s for s in SIGNALS if s != signal.SIGINT), SIGNALS[0]))
+
+
+def interruption_line(exc: BaseException | None, kept: str = "nothing was written") -> str:
+    """The one line an interrupted run ends with, naming the signal: "imucal: terminated by SIGHUP;
+    nothing was written" (``kept``: what stays, for a command that keeps finished work)."""
+    signum = getattr(exc, "signum", None) or next((s for s in SIGNALS if s != signal.SIGINT), None)
+    what = "interrupted" if signum is None else f"terminated by {signal_name(signum)}"
+    return f"imucal: {what}; {kept}"
 
 
 def short(value: object, limit: int = 40) -> str:

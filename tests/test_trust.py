@@ -512,7 +512,7 @@ def test_sigterm_removes_staged_outputs(work):
     if p.returncode == 0:
         pytest.skip("the run finished before it could be interrupted")
     assert p.returncode == 130, err
-    assert "terminated; nothing was written" in err and "Traceback" not in err
+    assert "terminated by SIGTERM; nothing was written" in err and "Traceback" not in err
     assert not (work / "sig").exists() or not any((work / "sig").iterdir())
 
 

@@ -9,7 +9,6 @@ import argparse
 import errno
 import importlib
 import os
-import signal
 import sys
 
 # One BLAS thread unless the user chose otherwise, set before numpy loads: imucal's matrices have a
@@ -19,8 +18,8 @@ for _var in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 from imucal import __version__
-from imucal.errors import (EXIT_BAD_INPUT, EXIT_BROKEN_PIPE, EXIT_INTERNAL, EXIT_INTERRUPTED, SIGNALS, ImucalError, Terminated,
-                           short)
+from imucal.errors import (EXIT_BAD_INPUT, EXIT_BROKEN_PIPE, EXIT_INTERNAL, EXIT_INTERRUPTED, SIGNALS, ImucalError,
+                           interrupt_on_signals, interruption_line, restore_signals, short)
 
 #: Subcommand name -> module. Modules import their heavy dependencies inside run().
 COMMANDS = {
@@ -84,17 +83,6 @@ def _print_traceback() -> None:
 _SIGNALLED = SIGNALS  #: signals received by this run (imucal.errors.SIGNALS)
 
 
-def _on_sigterm(signum, frame) -> None:  # noqa: ARG001 - signal handler signature
-    _SIGNALLED.append(signum)
-    signal.signal(signal.SIGTERM, signal.SIG_IGN)  # once: cleanup is not interrupted again
-    raise Terminated()
-
-
-def _on_sigint(signum, frame) -> None:  # noqa: ARG001 - signal handler signature
-    _SIGNALLED.append(signum)
-    raise KeyboardInterrupt()
-
-
 def _interrupted(exc: BaseException) -> bool:
     """An exception caused by a signal: raised inside a C extension (CasADi), KeyboardInterrupt
     can come back wrapped, e.g. as SystemError, with the interrupt in its context."""
@@ -116,12 +104,10 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "run", None):
         parser.print_help()
         return EXIT_BAD_INPUT
-    previous = previous_int = None
+    replaced: dict = {}
     _SIGNALLED.clear()
-    try:
-        previous = signal.signal(signal.SIGTERM, _on_sigterm)
-        if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
-            previous_int = signal.signal(signal.SIGINT, _on_sigint)
+    try:  # SIGINT, SIGTERM, SIGHUP, SIGQUIT, SIGUSR1, ... end the run as an interruption (imucal.errors)
+        replaced = interrupt_on_signals()
     except ValueError:  # not the main thread (e.g. a test runner's worker): leave it alone
         pass
     try:
@@ -132,8 +118,7 @@ def main(argv: list[str] | None = None) -> int:
         sys.stderr.write(f"imucal: error: {exc}\n")
         return EXIT_BAD_INPUT
     except KeyboardInterrupt as exc:
-        sys.stderr.write("imucal: terminated; nothing was written\n" if isinstance(exc, Terminated)
-                         else "imucal: interrupted; nothing was written\n")
+        sys.stderr.write(interruption_line(exc) + "\n")
         return EXIT_INTERRUPTED
     except BrokenPipeError:  # the reader of stdout left (e.g. `| head`): as a pipe tool, end quietly
         try:
@@ -149,8 +134,7 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_INTERNAL
     except Exception as exc:  # noqa: BLE001 - the last line of defence: one line, never a traceback
         if _interrupted(exc):
-            sys.stderr.write("imucal: terminated; nothing was written\n" if _SIGNALLED
-                             else "imucal: interrupted; nothing was written\n")
+            sys.stderr.write(interruption_line(None) + "\n")
             return EXIT_INTERRUPTED
         if isinstance(exc, OSError) and exc.errno in (errno.ENAMETOOLONG, errno.ELOOP):
             # a path the system cannot look up (too long, a symbolic-link loop): bad input, not a bug
@@ -168,11 +152,7 @@ def main(argv: list[str] | None = None) -> int:
         # (argv None: the console script, python -m imucal) the run is over and its outputs are
         # complete: a signal in the last milliseconds of the exit is ignored, not allowed to kill
         # the finished run (exit -15) by the default action restored here.
-        done = signal.SIG_IGN if as_program else None
-        if previous is not None:
-            signal.signal(signal.SIGTERM, done or previous)
-        if previous_int is not None:
-            signal.signal(signal.SIGINT, done or previous_int)
+        restore_signals(replaced, ignore=as_program)
 
 
 if __name__ == "__main__":  # pragma: no cover

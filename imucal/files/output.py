@@ -21,7 +21,7 @@ import tempfile
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
 
-from imucal.errors import ImucalError
+from imucal.errors import INTERRUPTING, ImucalError
 from imucal.files.inputs import same_file
 
 PathLike = str | os.PathLike
@@ -121,7 +121,8 @@ def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> None:
     created = _make_parent(path)
     tmp = None
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        with _signals_deferred():  # made and known to the cleanup below as one step
+            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
         os.fchmod(fd, 0o666 & ~_umask())  # mkstemp makes 0600; outputs follow the user's umask
         with os.fdopen(fd, "wb") as f:
             f.write(data)
@@ -146,13 +147,18 @@ def write_json_atomic(path: str | os.PathLike, obj: Any) -> None:
 
 
 def _pid_alive(pid: int) -> bool:
+    """Whether process ``pid`` runs. A zombie (ended, not yet reaped by its parent: a batch's or a
+    cluster's worker just killed) does not."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
     except PermissionError:
         return True
-    return True
+    try:  # Linux: the state follows the command name in parentheses, which may hold any character
+        return Path(f"/proc/{pid}/stat").read_bytes().rsplit(b")", 1)[1].split()[0] != b"Z"
+    except (OSError, IndexError):
+        return True
 
 
 def remove_stale_staging(folder: Path) -> None:
@@ -212,8 +218,11 @@ class _Deferred:
 
 @contextlib.contextmanager
 def _signals_deferred() -> Iterator[_Deferred]:
-    """Hold SIGINT and SIGTERM until the block ends, then act on the first as its handler would
-    (raising as usual); yields what arrived meanwhile. An ignored signal (SIG_IGN) stays ignored.
+    """Hold the signals that end a run (imucal.errors.INTERRUPTING: SIGINT, SIGTERM, SIGHUP, SIGQUIT,
+    SIGUSR1, ...) until the block ends, then act on the first as its handler would (raising as usual,
+    or the default action: the process ends, as if the signal came now); yields what arrived meanwhile.
+    An ignored signal (SIG_IGN) stays ignored, and a handler installed from C (None: faulthandler's,
+    say) is left alone, as Python could not put it back.
 
     The Python handlers are swapped for a note, not the signals masked: a process-directed signal goes
     to any thread that does not block it (BLAS, a test runner), and Python runs its handler in the main
@@ -222,8 +231,8 @@ def _signals_deferred() -> Iterator[_Deferred]:
     """
     d = _Deferred()
     try:
-        old = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
-        old = {s: h for s, h in old.items() if h != signal.SIG_IGN}
+        old = {s: signal.getsignal(s) for s in INTERRUPTING}
+        old = {s: h for s, h in old.items() if h is not None and h != signal.SIG_IGN}
         for s in old:
             signal.signal(s, lambda signum, frame: d.got.append(signum))
     except (ValueError, OSError):  # not the main thread: no handler to swap (none runs here either)
@@ -233,7 +242,7 @@ def _signals_deferred() -> Iterator[_Deferred]:
         yield d
     finally:
         for s, h in old.items():
-            signal.signal(s, signal.SIG_DFL if h is None else h)
+            signal.signal(s, h)
         if d.got:
             h = old[d.got[0]]
             if callable(h):
@@ -336,10 +345,10 @@ class OutputSet:
         published = False
         try:
             # Whole sets, one run after the other: a signal while waiting for another run's lock
-            # interrupts as usual. SIGINT and SIGTERM then wait while the set is placed and the staging
-            # removed (an interrupt in the middle left half a set, or deleted the old files with the
-            # staging): one that arrived while the set was placed puts the old set back and interrupts
-            # the run, which has then written nothing; one after the set is complete is dropped.
+            # interrupts as usual. The signals that end a run then wait while the set is placed and
+            # the staging removed (an interrupt in the middle left half a set, or deleted the old files
+            # with the staging): one that arrived while the set was placed puts the old set back and
+            # interrupts the run, which has then written nothing; one after the set is complete is dropped.
             with _locked(self._tmpdirs) if exc_type is None else contextlib.nullcontext():
                 with _signals_deferred() as sig:
                     try:

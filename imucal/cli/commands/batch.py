@@ -30,7 +30,7 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from imucal.config.limits import check_count
-    from imucal.errors import ImucalError
+    from imucal.errors import EXIT_INTERRUPTED, ImucalError, interruption_line
     from imucal.files.inputs import same_file
     from imucal.files.output import check_outputs
     from imucal.fleet.manifest import load_manifest
@@ -51,15 +51,15 @@ def run(args: argparse.Namespace) -> int:
     check_outputs(inputs, [out / REPORT_CSV, out / REPORT_TEXT, out / REPORT_PARQUET, out / REPORT_HTML])
     manifest = load_manifest(args.manifest, args.config)
     n = len(manifest.units)
-    try:
+    try:  # leaving the pool's block stops its workers, on an interrupt too (imucal.fleet.run)
         with executor(args.workers, args.scheduler) as pool, progress_bar(n) as step:
             records = run_units(manifest, out, pool, step)
-    except KeyboardInterrupt:
-        sys.stderr.write(f"imucal: batch stopped: finished units are kept in {out}; "
-                         "rerun the same command to resume\n")
-        raise
-    table = fleet_table(records, manifest.tolerances)
-    written = write_report(table, out, [p for p in inputs if p is not None], figures=not args.no_figures)
+        table = fleet_table(records, manifest.tolerances)
+        written = write_report(table, out, [p for p in inputs if p is not None], figures=not args.no_figures)
+    except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM, SIGHUP, ...: one line, EXIT_INTERRUPTED
+        sys.stderr.write(interruption_line(exc, f"batch stopped: finished units are kept in {out}; "
+                                                "rerun the same command to resume") + "\n")
+        return EXIT_INTERRUPTED
     print(summary_text(table), end="")
     print(f"wrote {n} unit folders and " + ", ".join(str(p) for p in written[:3])
           + (f" and {len(written) - 3} histograms" if len(written) > 3 else ""))
