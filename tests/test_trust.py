@@ -669,15 +669,20 @@ def test_the_finished_program_ignores_sigterm_until_it_exits(monkeypatch, tmp_pa
     complete run took ~0.1 s with the default action back, and a signal then exited -15 (CI)."""
     monkeypatch.chdir(tmp_path)
     monkeypatch.setattr(sys, "argv", ["imucal", "calibrate", "--data", "missing.csv", "--out", "o"])
-    before = signal.getsignal(signal.SIGTERM)
+    from imucal.errors import INTERRUPTING
+
+    saved = {s: h for s in INTERRUPTING if (h := signal.getsignal(s)) is not None}  # left ignored: later subprocesses
+    before = saved[signal.SIGTERM]
     try:
         assert main() == 2  # a refused run ends by the same path as a complete one
-        assert signal.getsignal(signal.SIGTERM) is signal.SIG_IGN
-        signal.signal(signal.SIGTERM, before)
+        assert signal.getsignal(signal.SIGTERM) is signal.SIG_IGN and signal.getsignal(signal.SIGHUP) is signal.SIG_IGN
+        for s, h in saved.items():
+            signal.signal(s, h)
         assert main(["calibrate", "--data", "missing.csv", "--out", "o"]) == 2  # from code: handler given back
         assert signal.getsignal(signal.SIGTERM) is before
     finally:
-        signal.signal(signal.SIGTERM, before)
+        for s, h in saved.items():
+            signal.signal(s, h)
 
 
 @pytest.mark.parametrize("delay", [0.3, 0.5, 0.7])

@@ -71,8 +71,7 @@ import imucal.files.output as output
 from imucal.cli.main import main
 
 sig, when, mode = int(sys.argv[1]), sys.argv[2], sys.argv[3]
-if mode == "ignored":
-    signal.signal(sig, signal.SIG_IGN)
+signal.signal(sig, signal.SIG_IGN if mode == "ignored" else signal.SIG_DFL)  # whatever the test runner had
 if when == "staging":
     real_mkdtemp = tempfile.mkdtemp
     def mkdtemp(*a, **k):
@@ -193,9 +192,17 @@ def _ids(manifest: Path) -> list[str]:
     return [u["id"] for u in yaml.safe_load(manifest.read_text())["units"]]
 
 
-def _batch(manifest: Path, out: Path, env: dict[str, str], **kw) -> subprocess.Popen:
+def _default_signals() -> None:
+    """In the child before exec: the dispositions of a fresh shell's command, whatever the test runner's
+    (`nohup pytest` ignores SIGHUP; a job started with & ignores SIGINT)."""
+    for s in INTERRUPTING:
+        signal.signal(s, signal.SIG_DFL)
+
+
+def _batch(manifest: Path, out: Path, env: dict[str, str]) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "imucal", "batch", str(manifest), "--out", str(out), "--workers", "2",
-                             "--no-figures"], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kw)
+                             "--no-figures"], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=_default_signals)
 
 
 def _table(out: Path) -> dict[str, dict]:
