@@ -220,7 +220,7 @@ def fit_warnings(res: FitResult, config: RunConfig, rec: Recording, dropped: lis
         out.append("0 degrees of freedom: the standard errors cannot be estimated from the residuals "
                    "(reported as n/a); fit samples (--mode samples) or hold more orientations")
     elif (misfit := excess_residuals(res.chi2_noise, res.dof)) is not None:
-        held = (f"; the weights and standard errors include it as a random bias per visit of a pose "
+        held = (f"; the standard errors include it as a random bias per visit of a pose "
                 f"(bias_instability, {math.sqrt(res.excess):.3g} m/s^2 rms)" if res.excess > 0 else "")
         if res.random_walk > 0 and res.bias_drift is not None:  # (the report's words: imucal.report.text)
             held = (f"; the bias moved during the recording (bias_random_walk, {math.sqrt(res.random_walk):.3g} "

@@ -80,8 +80,8 @@ def test_student_t_quantile_in_report(dof, t):
 
 def test_a_small_initial_barrier_reaches_the_default_optimum_in_fewer_iterations(monkeypatch):
     """ipopt.LEAST_SQUARES starts IPOPT's barrier near zero: on the auto-weighted Xsens fit (a first
-    pass, then two with the noise weights refreshed and a between-interval excess) every pass lands
-    where IPOPT's default start (mu_init 0.1) does, in fewer iterations."""
+    pass, then one with the weights refreshed at its solution) every pass lands where IPOPT's default
+    start (mu_init 0.1) does, in fewer iterations."""
     import imucal
     from conftest import real_file
     from imucal.solve import ipopt
@@ -105,7 +105,7 @@ def test_a_small_initial_barrier_reaches_the_default_optimum_in_fewer_iterations
         runs[key] = imucal.calibrate(xs[:, 1:], t=xs[:, 0], gravity=9.81744).result
     lsq._solver.cache_clear()
     s, d = runs["small"], runs["default"]
-    assert len(iters["small"]) == len(iters["default"]) >= 3  # the same passes
+    assert len(iters["small"]) == len(iters["default"]) >= 2  # the same passes
     assert sum(iters["small"]) < sum(iters["default"])
     assert s.success and d.success
     for n in d.free_names:

@@ -126,10 +126,10 @@ def test_auto_weights_use_the_random_walk_covariance_and_honest_errors():
     assert abs(np.std(z_noise) - 1) > abs(np.std(z_auto) - 1)  # chi2/dof-scaled errors do not describe a walk
 
 
-def test_without_excess_auto_is_still_the_noise_weighted_fit():
+def test_without_excess_auto_has_no_stochastic_bias():
     data = _means(3)
-    a, n = _fit(data, "auto"), _fit(data, "noise")
-    assert a.random_walk == 0.0 and a.excess == 0.0 and a.values() == n.values()
+    a, u = _fit(data, "auto"), _fit(data, "uniform")
+    assert a.random_walk == 0.0 and a.excess == 0.0 and a.bias_drift is None and a.values() == u.values()
 
 
 def test_simulator_random_walk_and_visit_offsets(tmp_path):

@@ -1,5 +1,6 @@
-"""weights: auto (the default) = the noise weights, plus a between-interval excess when the residuals
-exceed the noise (issue 12's honest weights). Checked against data made here with a known excess."""
+"""weights: auto (the default) = the uniform fit's values (issue 25: every interval alike), with standard
+errors from the noise of each mean, plus a between-interval excess when the residuals exceed the noise
+(issue 12's honest errors). Checked against data made here with a known excess."""
 from __future__ import annotations
 
 import numpy as np
@@ -32,11 +33,14 @@ def _fit(raw, var, weights):
     return fit(data, p, build_model(), G, weights=weights)
 
 
-def test_without_excess_auto_is_the_noise_weighted_fit():
+def test_without_excess_auto_has_the_uniform_values_and_the_noise_errors():
     raw, var = _means(40, 0.5, 0.0, seed=1)
-    a, n = _fit(raw, var, "auto"), _fit(raw, var, "noise")
-    assert a.excess == 0.0
-    assert a.values() == n.values() and a.std == n.std and a.chi2 == n.chi2
+    a, n, u = _fit(raw, var, "auto"), _fit(raw, var, "noise"), _fit(raw, var, "uniform")
+    assert a.excess == 0.0 and a.random_walk == 0.0
+    assert a.values() == u.values()  # every interval alike
+    assert a.chi2 == pytest.approx(n.chi2, rel=1e-3)  # the test of the noise is the noise-weighted fit's
+    for k in a.free_names:  # equal noise here: the noise-weighted fit's errors
+        assert a.std[k] == pytest.approx(n.std[k], rel=0.02), k
 
 
 def test_a_between_visit_excess_is_estimated_and_carried_into_the_errors():

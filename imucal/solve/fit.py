@@ -19,7 +19,7 @@ import numpy as np
 from imucal.solve import ipopt
 from imucal.solve import least_squares as lsq
 from imucal.solve import stochastic
-from imucal.solve.stats import between_excess, chi2_sf
+from imucal.solve.stats import between_excess, chi2_sf, projected_chi2
 from imucal.solve.vectorize import Vectorized
 from imucal.errors import ImucalError
 from imucal.model.sensor import SensorModel
@@ -32,8 +32,6 @@ EXCESS_P = 1e-3
 #: weights="auto": no stochastic-bias test above this reduced chi-square against the noise: that is a
 #: model error (the pipeline refuses such a fit), which a random walk would otherwise absorb.
 STOCHASTIC_MAX_REDCHI = 1.0e4
-#: weights="auto": at most this many solves while the excess settles.
-MAX_PASSES = 8
 #: samples mode: a scatter correction that moved a value by more than this many of its standard errors
 #: is a warning (the fit relied on it; interval means do not need it).
 SCATTER_NOTABLE_Z = 1.0
@@ -76,8 +74,8 @@ class FitResult:
     solve_time: float
     model_name: str
     at_bound: dict[str, str] = field(default_factory=dict)
-    #: between-interval excess variance added to every row's sigma^2 in the weights [(m/s^2)^2] (weights="auto",
-    #: Paule-Mandel; with a bias random walk named, the walk's scatter)
+    #: between-interval excess variance added to every row's sigma^2 in the standard errors [(m/s^2)^2]
+    #: (weights="auto": Paule-Mandel's, or REML's beside a named random walk)
     excess: float = 0.0
     chi2_noise: float = float("nan")  #: chi-square against the noise of each row alone
     random_walk: float = 0.0  #: bias random-walk q^2 in the standard errors [(m/s^2)^2 / s] (weights="auto")
@@ -106,10 +104,7 @@ class FitResult:
 
     @property
     def bias_instability(self) -> float:
-        """Per-visit bias offsets [m/s^2 rms]: the excess in the weights, or, with a random walk named (whose
-        scatter the weights' excess then holds), REML's own per-visit component (0 unless named too)."""
-        if self.random_walk > 0 and self.stochastic is not None:
-            return float(np.sqrt(self.stochastic.chosen.tau2))
+        """Per-visit bias offsets [m/s^2 rms] (Paule-Mandel's excess, or REML's beside a random walk)."""
         return float(np.sqrt(self.excess))
 
     @property
@@ -173,16 +168,16 @@ def fit(data: FitData, params: Parameters, model: SensorModel, gravity: float,
 
     ``weights="noise"`` weighs each row by 1/sigma^2 (its noise propagated from the raw
     scatter); ``"uniform"`` gives every row the median sigma (imu_tk's unweighted cost);
-    ``"auto"`` (interval means) adds to every sigma^2 the between-interval excess (a random bias
-    offset per visit of a pose) when the residuals exceed the noise at p < EXCESS_P, estimated by
-    Paule-Mandel and iterated with the fit: with no excess it is the noise-weighted fit. When the
-    REML test of imucal.solve.stochastic names a bias random walk (rows with times ``data.t``), the
-    bias moved during the recording: the values are still those of the weights above (the offsets
-    then estimate the bias averaged over the intervals, the constant that fits the still poses), and
-    the covariance is the sandwich under the walk's full covariance about that mean (``_walk_covariance``);
-    ``bias_drift`` says how far it moved. Samples mode: each row's gravity is g plus the second-order
-    terms of its interval's scatter (``_samples_rows``). ``hessian="exact"`` gives IPOPT the exact Hessian
-    instead of Gauss-Newton's J^T W J.
+    ``"auto"`` (interval means) has the uniform fit's values and the noise's standard errors: the
+    sandwich (J^T J)^-1 J^T V J (J^T J)^-1 with V each mean's noise, plus, when the residuals exceed
+    it at p < EXCESS_P, the between-interval excess (a random bias per visit of a pose, Paule-Mandel),
+    or, when the REML test of imucal.solve.stochastic names a bias random walk (rows with times
+    ``data.t``), the walk's covariance about its mean (the bias moved: the offsets then estimate the
+    bias averaged over the intervals; ``bias_drift`` says how far it moved). Every interval counts
+    alike because its own scatter does not tell how far its mean is off (``_sandwich``).
+    Samples mode: each row's gravity is g plus the second-order terms of its interval's scatter
+    (``_samples_rows``). ``hessian="exact"`` gives IPOPT the exact Hessian instead of Gauss-Newton's
+    J^T W J.
     """
     names = model.names
     if tuple(params.names) != names:
@@ -202,18 +197,8 @@ def fit(data: FitData, params: Parameters, model: SensorModel, gravity: float,
     status = str(it.stats.get("return_status", "unknown"))
     dof = n - len(free)
     r = lsq.residuals(fns, rows, it.p, pfix, it.g)
-    R = lsq.weighted_r_factor(fns, rows, it.sigma, it.p, pfix, it.g)
     fitted = params.with_values(dict(zip(free, it.p)))
-    chi2 = float(np.sum((r / it.sigma) ** 2))
-    redchi = chi2 / dof if dof > 0 else float("nan")
-    drift = None
-    if it.q2 > 0:  # a bias random walk: the sandwich under its covariance about the mean, and how far it moved
-        cov, drift = _walk_covariance(fns, rows, data, params, it, pfix, gravity, R)
-    else:
-        # Covariance from the Jacobian at the solution (via its SVD, symmetric by construction),
-        # scaled by the residual variance as lmfit's scale_covar does: (J^T W J)^-1 chi2/dof.
-        # With no degrees of freedom left, the noise-only covariance (J^T W J)^-1.
-        cov = unscaled_covariance(R) * (redchi if dof > 0 else 1.0)
+    sigma, chi2, chi2_noise, cov, drift = _statistics(fns, rows, data, params, it, pfix, gravity, r, dof)
     sd = np.sqrt(np.clip(np.diag(cov), 0, None))
     with np.errstate(divide="ignore", invalid="ignore"):
         corr = cov / np.outer(sd, sd)
@@ -222,18 +207,43 @@ def fit(data: FitData, params: Parameters, model: SensorModel, gravity: float,
         std.update({nm: float(v) for nm, v in zip(free, sd)})
     at_bound = {nm: b for nm in free if (b := fitted[nm].at_bound()) is not None}
     return FitResult(params=fitted, initial=params, std=std, covariance=cov, correlation=corr,
-                     free_names=free, gravity=gravity, mode=data.mode, residuals=r, sigma=it.sigma,
+                     free_names=free, gravity=gravity, mode=data.mode, residuals=r, sigma=sigma,
                      chi2=chi2, dof=dof, status=status, success=status in _CONVERGED, iterations=it.iterations,
                      solve_time=solve_time, model_name=model_label(model.name, params), at_bound=at_bound,
-                     excess=it.excess, chi2_noise=float(np.sum((r / it.sigma0) ** 2)), random_walk=it.q2,
+                     excess=it.excess, chi2_noise=chi2_noise, random_walk=it.q2,
                      stochastic=it.sto if it.q2 > 0 else None, bias_drift=drift,
                      scatter_term=None if it.samples is None else it.samples.term,
                      scatter_shift=None if it.samples is None else dict(zip(free, it.samples.shift)))
 
 
+def _statistics(fns, rows, data: FitData, params: Parameters, it: "_Iterated", pfix, gravity: float, r: np.ndarray,
+                dof: int) -> tuple[np.ndarray, float, float, np.ndarray, "stochastic.BiasDrift | None"]:
+    """(sigma of each row, chi-square, chi-square against the noise alone, covariance of the free
+    parameters, how far a walking bias moved)."""
+    if it.auto:  # the rows' covariance V and the sandwich; the test of the noise is the noise-weighted fit's
+        V, drift = _auto_rows_covariance(fns, rows, data, params, it, pfix, gravity)
+        J = lsq.jacobians(fns, rows, it.p, pfix, gravity)[1]
+        X = J[:, _movable(params, it.p)]
+        sigma = np.sqrt(np.diag(V))
+        # V's own chi-square is the V-weighted fit's (projected_chi2: about dof when V is right, whatever
+        # weights gave the values): it scales the sandwich as lmfit's scale_covar, except for a walk's V,
+        # the residuals' own (REML). The chi-square reported is at the values (a walk's V is full: V's own).
+        chi2_v = projected_chi2(r, V if drift is not None else sigma**2, X)
+        chi2 = chi2_v if drift is not None else float(np.sum((r / sigma) ** 2))
+        k = 1.0 if drift is not None or dof < 1 else chi2_v / dof
+        return sigma, chi2, projected_chi2(r, it.sigma0**2, X), _sandwich(J, V, k), drift
+    # Covariance from the Jacobian at the solution (via its SVD, symmetric by construction),
+    # scaled by the residual variance as lmfit's scale_covar does: (J^T W J)^-1 chi2/dof.
+    # With no degrees of freedom left, the noise-only covariance (J^T W J)^-1.
+    chi2 = float(np.sum((r / it.sigma) ** 2))
+    R = lsq.weighted_r_factor(fns, rows, it.sigma, it.p, pfix, it.g)
+    cov = unscaled_covariance(R) * (chi2 / dof if dof > 0 else 1.0)
+    return it.sigma, chi2, float(np.sum((r / it.sigma0) ** 2)), cov, None
+
+
 @dataclass
 class _Iterated:
-    """Where the weighted fit and its weights settled."""
+    """Where the fit settled, and the noise, excess and walk its standard errors take."""
 
     p: np.ndarray  #: free parameters
     sigma0: np.ndarray  #: noise of each row alone
@@ -245,55 +255,53 @@ class _Iterated:
     iterations: int
     stats: dict
     samples: "_SamplesRows | None" = None  #: samples mode: the scatter correction at the last pass
+    auto: bool = False  #: weights="auto" on interval means: uniform values, standard errors from the noise
 
 
 def _iterate(fns, rows, data: FitData, params: Parameters, model: SensorModel, pfix: np.ndarray, gravity: float,
              weights: str, hessian: str) -> _Iterated:
-    """IPOPT on the weighted rows, the weights refreshed from the noise propagated at the estimate;
-    once at the solution and, with weights="auto", until the between-interval excess (and a named
-    bias random walk's variances, which the covariance uses) settles."""
+    """IPOPT on the weighted rows, twice: the weights refreshed from the noise propagated at the first
+    solution. weights="auto" on interval means: the uniform fit, then at its solution the noise of each
+    mean, the between-interval excess and the walk test (``_excess``) for the standard errors."""
     free = params.free_names
     scale = np.array([params[nm].scale for nm in free])
     lo, hi = np.array([params[nm].lower for nm in free]), np.array([params[nm].upper for nm in free])
     p_now = np.array([params[nm].value for nm in free])
     dof = data.raw.shape[0] - len(free)
-    iters, excess, q2, sto, passes = 0, 0.0, 0.0, None, 0
-    walk_test = True  # the REML random-walk test (imucal.solve.stochastic) runs until it rejects a walk once
+    auto = weights == "auto" and data.mode == "means"
+    values_weights = "uniform" if auto else weights
+    iters = 0
     scatter = _interval_scatter(data) if data.mode == "samples" else None
     srows = None
     shown = None if data.mode == "samples" else False  # samples mode: a bar on a terminal (report.progress)
     with progress(f"samples fit ({data.raw.shape[0]:,} samples)", unit="pass", enabled=shown) as step:
-        while True:
+        for _ in range(2):  # once more, with the weights at the solution
             if scatter is None:
-                g, sigma0 = gravity, lsq.noise_sigma(fns, rows, data.raw_var, p_now, pfix, gravity, weights)
+                g, sigma0 = gravity, lsq.noise_sigma(fns, rows, data.raw_var, p_now, pfix, gravity, values_weights)
             else:
-                srows = _samples_rows(fns, model, free, scatter, p_now, pfix, gravity, weights)
+                srows = _samples_rows(fns, model, free, scatter, p_now, pfix, gravity, values_weights)
                 g, sigma0 = srows.g, srows.sigma0
-            sigma = np.sqrt(sigma0**2 + excess)
-            R = lsq.weighted_r_factor(fns, rows, sigma, p_now, pfix, g)
+            R = lsq.weighted_r_factor(fns, rows, sigma0, p_now, pfix, g)
             d = _step_scale(R, scale)  # p = p0 + d * x
-            problem = lsq.Problem(fns, rows, 1.0 / sigma**2, pfix, g, p_now, d, exact=hessian == "exact", step=step)
+            problem = lsq.Problem(fns, rows, 1.0 / sigma0**2, pfix, g, p_now, d, exact=hessian == "exact", step=step)
             x, stats = lsq.solve(problem, (lo - p_now) / d, (hi - p_now) / d)
             iters += int(stats.get("iter_count", 0))
             p_now = np.clip(p_now + d * x, lo, hi)
-            passes += 1
-            if weights != "auto" or data.mode != "means" or dof < 1:
-                if passes < 2:
-                    continue  # once more, with the weights at the solution
-                break
-            if passes >= MAX_PASSES:
-                break
-            # The excess at this solution; the next pass refreshes the noise weights and the excess together.
-            r0 = lsq.residuals(fns, rows, p_now, pfix, gravity)
-            s0 = lsq.noise_sigma(fns, rows, data.raw_var, p_now, pfix, gravity, weights)
-            new, new_q2, sto = _excess(fns, rows, data, params, p_now, pfix, gravity, r0, s0, dof, walk_test)
-            walk_test = sto is not None  # the REML test rejected a walk once: later passes only re-estimate tau^2
-            settled = (abs(new - excess) <= 1e-4 * max(new, excess) and abs(new_q2 - q2) <= 1e-4 * max(new_q2, q2)
-                       ) or (new == 0.0 and excess == 0.0 and new_q2 == 0.0 and q2 == 0.0)
-            if settled and passes >= 2:  # (no excess after the first pass: one refresh of the noise weights)
-                break
-            excess, q2 = new, new_q2
-    return _Iterated(p_now, sigma0, sigma, g, excess, q2, sto, iters, stats, srows)
+    excess, q2, sto = 0.0, 0.0, None
+    if auto:  # the noise at the solution, and what the residuals show beyond it
+        sigma0 = lsq.noise_sigma(fns, rows, data.raw_var, p_now, pfix, gravity, "noise")
+        if dof >= 1:
+            r0, X, _ = lsq.jacobians(fns, rows, p_now, pfix, gravity)
+            X = X[:, _movable(params, p_now)]
+            excess, q2, sto = _excess(fns, rows, data, params, p_now, pfix, gravity, r0, sigma0, X, dof)
+    return _Iterated(p_now, sigma0, np.sqrt(sigma0**2 + excess), g, excess, q2, sto, iters, stats, srows, auto)
+
+
+def _movable(params: Parameters, p_now: np.ndarray) -> np.ndarray:
+    """Which free parameters are off their bounds at p_now: the directions a weighted fit could still take
+    out of the residuals (``projected_chi2``); one at a bound cannot."""
+    at = params.with_values(dict(zip(params.free_names, p_now)))
+    return np.array([at[n].at_bound() is None for n in params.free_names], bool)
 
 
 def _components(fns, rows, data: FitData, params: Parameters, p_now, pfix, gravity: float,
@@ -309,43 +317,55 @@ def _scales(params: Parameters, p_now, pfix) -> np.ndarray:
     return np.array([values[f"b{i}"] for i in (1, 2, 3)])
 
 
-def _walk_covariance(fns, rows, data: FitData, params: Parameters, it: _Iterated, pfix, gravity: float,
-                     R: np.ndarray) -> tuple[np.ndarray, "stochastic.BiasDrift"]:
-    """The covariance of the values when the bias walks, and how far it moved.
+def _auto_rows_covariance(fns, rows, data: FitData, params: Parameters, it: _Iterated, pfix, gravity: float
+                          ) -> tuple[np.ndarray, "stochastic.BiasDrift | None"]:
+    """weights="auto": the covariance V of the interval means' residuals, and how far a walking bias moved.
 
-    The values come from the diagonal weights W (noise plus the excess); under the walk the rows'
-    covariance is V, the walk taken about its mean over the intervals (``Components.about_mean``,
-    REML's variances), so the sandwich (J^T W J)^-1 J^T W V W J (J^T W J)^-1 is the covariance of the
-    values around the scales and angles and the bias averaged over the intervals: the offsets'
-    epoch. Not scaled by chi2/dof: V is the residuals' own covariance, estimated from them (REML).
+    V is each mean's noise plus the between-interval excess; with a bias random walk, plus the walk about
+    its mean over the intervals (``Components.about_mean``, REML's variances), so that the offsets' errors
+    are those of the bias averaged over the intervals: their epoch.
     """
+    if it.q2 <= 0:
+        return np.diag(it.sigma**2), None
     c = _components(fns, rows, data, params, it.p, pfix, gravity, it.sigma0)
-    V = c.about_mean(it.sto.chosen.tau2, it.sto.chosen.q2)
-    J = lsq.jacobians(fns, rows, it.p, pfix, gravity)[1] / (it.sigma**2)[:, None]  # W J
-    bread = unscaled_covariance(R)  # (J^T W J)^-1
-    cov = bread @ (J.T @ V @ J) @ bread
-    drift = stochastic.bias_drift(c, it.sto.chosen.tau2, it.sto.chosen.q2, _scales(params, it.p, pfix))
-    return 0.5 * (cov + cov.T), drift
+    tau2, q2 = it.sto.chosen.tau2, it.sto.chosen.q2
+    return c.about_mean(tau2, q2), stochastic.bias_drift(c, tau2, q2, _scales(params, it.p, pfix))
+
+
+def _sandwich(J: np.ndarray, V: np.ndarray, k: float) -> np.ndarray:
+    """weights="auto": k (J^T J)^-1 J^T V J (J^T J)^-1, the covariance of the uniform fit's values.
+
+    The values weigh every interval alike: on real recordings an interval's own scatter does not tell
+    how far its mean is off (motion, a settling sensor, model error). Weighing by it left the default
+    calibration fitting its own still poses up to 1.23 x worse than the uniform fit (the MPU-6050),
+    with no better accuracy on the other recordings of the same sensor (ROS data2-4, each applied to
+    the others). k scales V as lmfit's scale_covar does (V's own chi-square over dof), or is 1 when V
+    is the residuals' own (a walk's, REML).
+    """
+    bread = unscaled_covariance(J)  # (J^T J)^-1
+    cov = bread @ (J.T @ V @ J) @ bread * k
+    return 0.5 * (cov + cov.T)
 
 
 def _excess(fns, rows, data: FitData, params: Parameters, p_now, pfix, gravity: float, r0: np.ndarray,
-            s0: np.ndarray, dof: int, walk_test: bool = True) -> tuple[float, float, "stochastic.StochasticFit | None"]:
+            s0: np.ndarray, X: np.ndarray, dof: int) -> tuple[float, float, "stochastic.StochasticFit | None"]:
     """weights="auto": (tau^2, q^2, the test) when the residuals exceed the noise at p < EXCESS_P.
 
-    tau^2 is Paule-Mandel's common between-interval variance, the excess in the weights. A bias
-    random walk named by the REML test (imucal.solve.stochastic), and told apart from per-visit
-    offsets, adds its q^2 (with the test, whose variances the covariance uses); q^2 is 0 otherwise
-    (or above stochastic.MAX_INTERVALS intervals).
+    The test is the noise-weighted fit's chi-square (``projected_chi2``: the columns of the Jacobian X
+    taken out of r0, whatever weights gave it). A bias random walk named by the REML test
+    (imucal.solve.stochastic), and told apart from per-visit offsets, gives its (tau^2, q^2) and the
+    test; otherwise (or above stochastic.MAX_INTERVALS intervals) tau^2 is Paule-Mandel's common
+    between-interval variance (iterated with the weighted fit: ``between_excess`` with X) and q^2 is 0.
     """
-    if chi2_sf(float(np.sum((r0 / s0) ** 2)), dof) >= EXCESS_P:
+    chi2 = projected_chi2(r0, s0**2, X)
+    if chi2_sf(chi2, dof) >= EXCESS_P:
         return 0.0, 0.0, None
-    tau2 = between_excess(r0, s0, dof)
-    if walk_test and data.t is not None and len(params.free_names) + 3 < len(r0) and stochastic.feasible(len(r0)) and (
-            float(np.sum((r0 / s0) ** 2)) / dof < STOCHASTIC_MAX_REDCHI):
+    if data.t is not None and len(params.free_names) + 3 < len(r0) and stochastic.feasible(len(r0)) and (
+            chi2 / dof < STOCHASTIC_MAX_REDCHI):
         sto = stochastic.select(_components(fns, rows, data, params, p_now, pfix, gravity, s0))
         if stochastic.RANDOM_WALK in sto.named and not sto.ambiguous:  # undecided: the per-visit excess
-            return tau2, sto.chosen.q2, sto
-    return tau2, 0.0, None
+            return sto.chosen.tau2, sto.chosen.q2, sto
+    return between_excess(r0, s0, dof, X), 0.0, None
 
 
 @dataclass(frozen=True)

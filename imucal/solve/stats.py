@@ -74,21 +74,44 @@ def chi2_sf_array(x: np.ndarray, k: int) -> np.ndarray:
             head = head + np.where(h > 0, np.exp(-h + power * logh - lg), 1.0 if power == 0 else 0.0)
     return np.minimum(1.0, head)
 
-def between_excess(r, sigma, dof: int) -> float:
+def projected_chi2(r, var, X) -> float:
+    """min over d of (r - X d)^T V^-1 (r - X d), V = diag(var) or ``var`` itself (n x n): the chi-square
+    of residuals r against V with the columns of X (the fit's parameters) taken out, to first order:
+    the weighted fit's own chi-square whatever weights gave r (imucal.solve.fit, weights="auto")."""
+    r, V, X = np.asarray(r, float), np.asarray(var, float), np.asarray(X, float)
+    if V.ndim == 1:
+        w = 1.0 / np.sqrt(V)
+        rw, Xw = r * w, X * w[:, None]
+    else:
+        L = np.linalg.cholesky(V)
+        rw, Xw = np.linalg.solve(L, r), np.linalg.solve(L, X)
+    c = np.linalg.norm(Xw, axis=0)
+    U, sv, _ = np.linalg.svd(Xw / np.where(c > 0, c, 1.0), full_matrices=False)
+    U = U[:, sv > sv.max(initial=0.0) * 1e-12]  # (directions the rows do not determine take nothing out)
+    e = rw - U @ (U.T @ rw)
+    return float(e @ e)
+
+
+def between_excess(r, sigma, dof: int, X=None) -> float:
     """Paule-Mandel estimate of a common excess variance s^2 between rows: the s^2 >= 0 with
     sum r_k^2 / (sigma_k^2 + s^2) = dof (the random-effects moment equation that REML solves
     approximately; Paule & Mandel 1982, DerSimonian & Kacker 2007). 0 when the residuals are
-    within their noise."""
+    within their noise. With ``X`` (the fit's Jacobian), the left side is ``projected_chi2``: the
+    weighted fit's own residuals at that s^2, whatever weights gave r (the iterated estimate)."""
 
     r2, s2 = np.asarray(r, float) ** 2, np.asarray(sigma, float) ** 2
-    if dof < 1 or np.sum(r2 / s2) <= dof:
+
+    def chi2(extra: float) -> float:  # decreasing in the excess
+        return float(np.sum(r2 / (s2 + extra))) if X is None else projected_chi2(r, s2 + extra, X)
+
+    if dof < 1 or chi2(0.0) <= dof:
         return 0.0
     lo, hi = 0.0, float(np.sum(r2)) / dof
-    while np.sum(r2 / (s2 + hi)) > dof:  # bracket (guards against degenerate sigma)
+    while chi2(hi) > dof:  # bracket (guards against degenerate sigma)
         hi *= 2.0
     for _ in range(200):  # bisection on a monotone function: robust, 1e-15 relative
         mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if np.sum(r2 / (s2 + mid)) > dof else (lo, mid)
+        lo, hi = (mid, hi) if chi2(mid) > dof else (lo, mid)
         if hi - lo <= 1e-15 * hi:
             break
     return 0.5 * (lo + hi)
