@@ -231,7 +231,7 @@ def time_unit_from_step(dt: float, first: float, what: str = "median step", path
         return unit, f"time unit inferred: {unit} (epoch time stamps; {what} {dt:g} {unit} -> {rate(unit):.4g} Hz)"
 
     def distance(u: str) -> float:
-        return abs(math.log10(rate(u) / TYPICAL_RATE_HZ))
+        return _decades_from_typical(rate(u))
 
     plausible.sort(key=distance)
     unit = plausible[0]
@@ -246,6 +246,10 @@ def time_unit_from_step(dt: float, first: float, what: str = "median step", path
         alt = plausible[1]
         note += f"; {alt} would give {rate(alt):.4g} Hz: give --time-unit if that is right"
     return unit, note + ")"
+
+
+def _decades_from_typical(rate: float) -> float:
+    return abs(math.log10(rate / TYPICAL_RATE_HZ))
 
 
 def check_rate(step: float, unit: str, path: Path) -> None:
@@ -383,18 +387,21 @@ _UNIT_WORDS = {"min": "minutes", "s": "seconds", "ms": "milliseconds", "us": "mi
 def unit_hint(config: "RunConfig", rec: "Recording | RecordingSummary", found: int,
               rails: dict | None = None) -> ImucalError | None:
     """The refusal to give when a run finds fewer than two still poses (``found``) on a stamped
-    recording but HINT_MIN_POSES or more distinct ones with its stamps read in another unit
-    (minutes, which are never inferred, or another unit giving an IMU rate): the time unit looks
-    like that one. None otherwise. Only on that failure: each other unit costs one more detection
-    (a re-read for a file read in chunks)."""
+    recording but HINT_MIN_POSES or more distinct ones with its stamps read in another unit that
+    gives a more usual rate (closer to TYPICAL_RATE_HZ: minutes, which are never inferred, or
+    another): the time unit looks like that one. None otherwise (a log that only moves, read 60
+    times slower, may look still; at a rate further from an IMU's usual one it is not tried).
+    Only on that failure: each unit tried costs one more detection (a re-read for a file read in
+    chunks)."""
     tb = rec.time_base
     if tb is None or tb.source is TimeSource.RATE or not math.isfinite(tb.rate):
         return None
     best: tuple[int, str, float] | None = None
     for unit, f in TIME_UNITS.items():
         rate = tb.rate * TIME_UNITS[rec.time_unit] / f
-        if unit == rec.time_unit or not MIN_RATE_HZ <= rate <= MAX_RATE_HZ:
-            continue
+        if unit == rec.time_unit or not MIN_RATE_HZ <= rate <= MAX_RATE_HZ or (
+                _decades_from_typical(rate) >= _decades_from_typical(tb.rate)):
+            continue  # only a unit that gives a more usual rate (the inference's rule) is tried
         poses = _poses_in(config, rec, unit, f / TIME_UNITS[rec.time_unit], rails)
         if poses >= max(HINT_MIN_POSES, found + 1) and (best is None or poses > best[0]):
             best = (poses, unit, rate)
