@@ -138,7 +138,8 @@ def _driven(tmp_path: Path, recording: Path, sig: int, when: str, mode: str = "c
     (tmp_path / "driver.py").write_text(DRIVER)
     return subprocess.run([sys.executable, str(tmp_path / "driver.py"), str(int(sig)), when, mode, "calibrate",
                            "--data", str(recording), "--out", "out", "--no-figures", "--quiet"],
-                          cwd=tmp_path, env=_env(tmp_path), capture_output=True, text=True, timeout=DEADLINE)
+                          cwd=tmp_path, env={**os.environ, "PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1"},
+                          capture_output=True, text=True, timeout=DEADLINE)
 
 
 @pytest.mark.parametrize("name", ["SIGHUP", "SIGQUIT", "SIGUSR1", "SIGUSR2", "SIGALRM", "SIGXCPU", "SIGTERM",
@@ -200,9 +201,9 @@ def _default_signals() -> None:
 
 
 def _batch(manifest: Path, out: Path, env: dict[str, str]) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "imucal", "batch", str(manifest), "--out", str(out), "--workers", "2",
-                             "--no-figures"], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            preexec_fn=_default_signals)
+    return subprocess.Popen([sys.executable, "-m", "imucal", "batch", str(manifest), "--out", str(out),
+                             "--workers", "2", "--no-figures"], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, preexec_fn=_default_signals)
 
 
 def _table(out: Path) -> dict[str, dict]:
@@ -299,7 +300,8 @@ def test_dask_a_killed_worker_costs_only_its_unit(fleet, tmp_path, monkeypatch, 
         r = run_cli(["batch", fleet, "--out", out, "--scheduler", cluster.scheduler_address, "--no-figures"])
     assert r.code == 0, r.err
     table = _table(out)
-    assert {u: row["status"] for u, row in table.items()} == {u: "internal error" if u == always else "ok" for u in ids}, \
+    expected = {u: "internal error" if u == always else "ok" for u in ids}
+    assert {u: row["status"] for u, row in table.items()} == expected, \
         {u: row["error"] for u, row in table.items() if row["error"]}
     assert f"unit {always}: worker lost (2 times): KilledWorker" in table[always]["error"]
     for k in ("IMUCAL_TEST_HOOK", "KILL_ALWAYS"):

@@ -113,7 +113,8 @@ def _unit_record(unit: Unit, out: str) -> dict:
     try:
         return calibrate_unit(unit, out)
     except Exception as exc:  # noqa: BLE001 - a bug in one unit must not stop the fleet
-        return _lost(unit, str(exc) if isinstance(exc, ImucalError) else f"{type(exc).__name__}: {short(str(exc), 200)}")
+        why = str(exc) if isinstance(exc, ImucalError) else f"{type(exc).__name__}: {short(str(exc), 200)}"
+        return _lost(unit, why)
 
 
 def _lost(unit: Unit, error: str) -> dict:
