@@ -17,7 +17,7 @@ import numpy as np
 
 import imucal.calibration.frozen as frozen
 from imucal.calibration.fields import (ACCELEROMETER, DATE_PATTERN, GYROSCOPE, NAME_PATTERN, SHA256_PATTERN,
-                                      VERSION_PATTERN, check_unit)
+                                      VERSION_PATTERN, check_raw_unit, check_unit)
 from imucal.constants import SI_ACCEL_UNIT
 from imucal.errors import ImucalError, short
 from imucal.files.output import write_text_atomic
@@ -268,7 +268,7 @@ def check_text_fields(cal: "frozen.Calibration", path: str = "<calibration>") ->
             raise bad("created", cal.created, "an ISO 8601 date", "write e.g. 2024-05-01T12:00:00+00:00") from None
     if cal.software_version and not VERSION_PATTERN.match(cal.software_version):
         raise bad("software.version", cal.software_version, "a version number", regen)
-    check_unit(cal.raw_unit, "units.input", path)
+    check_raw_unit(cal.raw_unit, "units.input", path)
     for n, p in cal.params.items():
         if not NAME_PATTERN.match(n):
             raise bad("parameters", n, "a parameter name", regen)

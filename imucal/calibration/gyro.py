@@ -14,7 +14,7 @@ from typing import Any, Literal, Mapping
 
 import numpy as np
 
-from imucal.calibration.fields import GYROSCOPE, UNIT_PATTERN
+from imucal.calibration.fields import GYROSCOPE, check_unit
 from imucal.errors import ImucalError, short
 from imucal.files.schema import fill, rule
 from imucal.gyro.model import misalignment_entries, rate_map
@@ -107,7 +107,7 @@ class GyroCalibration:
 
 #: Values of the file: finite, |x| <= 1e15; standard errors may be NaN (undetermined).
 _VALUE = rule(ge=-1e15, le=1e15, fix="restore the file imucal wrote")
-_STD = rule(ge=-1e15, le=1e15, allow_nan=True, fix="restore the file imucal wrote")
+_STD = rule(ge=0, le=1e15, allow_nan=True, fix="restore the file imucal wrote")  # a standard error is >= 0
 Vec3 = tuple[float, float, float]
 Mat3 = tuple[Vec3, Vec3, Vec3]
 
@@ -135,9 +135,7 @@ class GyroUnits:
     gsens: str = "(rad/s)/(m/s^2)"
 
     def __post_init__(self) -> None:
-        if not UNIT_PATTERN.match(self.input):
-            raise ImucalError(f"{short(self.input)} is not a unit", field="gyroscope.units.input",
-                              fix="a short unit such as rad/s, deg/s or LSB")
+        check_unit(self.input, "gyroscope.units.input", fix="a short unit such as rad/s, deg/s or LSB")
 
 
 @dataclass(frozen=True)
