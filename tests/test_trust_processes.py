@@ -211,6 +211,18 @@ def _table(out: Path) -> dict[str, dict]:
         return {r["unit"]: r for r in csv.DictReader(f)}
 
 
+def test_how_a_worker_died_is_said_in_words():
+    from imucal.fleet.manifest import Unit
+    from imucal.fleet.run import _death, _deaths_text
+
+    assert [_death(c) for c in (-9, 128 + 15, 1)] == ["killed by SIGKILL", "stopped by SIGTERM", "ended with status 1"]
+    unit = Unit("u7", None, "")
+    assert _deaths_text(unit, [-9, 143]) == ("unit u7: its worker process died 2 times (killed by SIGKILL, then stopped "
+                                             "by SIGTERM): out of memory, a crash in native code or a kill from outside; "
+                                             "the unit is tried again on the next run")
+    assert "out of memory" not in _deaths_text(unit, [1, 1])  # a worker that could not start: no signal to blame
+
+
 def _units_consistent(out: Path, ids: list[str]) -> set[str]:
     """Every unit folder holds a whole set of files or none (its marker last); the units done."""
     sets = {u: {p.name for p in (out / u).iterdir()} if (out / u).is_dir() else set() for u in ids}

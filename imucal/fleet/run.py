@@ -27,8 +27,8 @@ from multiprocessing.connection import Connection, wait
 from pathlib import Path
 from typing import Any, Callable, Iterator
 
-from imucal.errors import (EXIT_INTERRUPTED, INTERRUPTING, ImucalError, interrupt_on_signals, short,
-                           signal_name)
+from imucal.errors import (EXIT_INTERRUPTED, INTERRUPTING, ImucalError, interrupt_on_signals, raise_if_signalled,
+                           short, signal_name)
 from imucal.files.inputs import max_data_bytes, open_regular, read_input_text
 from imucal.files.output import OutputSet, remove_stale_staging, write_json_atomic
 from imucal.fleet.manifest import Manifest, Unit
@@ -157,7 +157,9 @@ def _worker(conn: Connection, batch_alive: Connection) -> None:
     threading.Thread(target=_stop_with_batch, args=(batch_alive,), name="imucal-batch-watch", daemon=True).start()
     try:
         while (job := conn.recv()) is not None:
-            conn.send(_unit_record(*job))
+            rec = _unit_record(*job)
+            raise_if_signalled()  # one that native code turned into the unit's error ends the worker all the same
+            conn.send(rec)
     except (EOFError, OSError):  # the batch closed its end, or is gone
         pass
     except KeyboardInterrupt as exc:  # a signal: the unit's staging is removed; end as a caught signal does
@@ -171,6 +173,14 @@ def _death(exitcode: int | None) -> str:
     if exitcode is not None and exitcode - 128 in INTERRUPTING:  # caught, and ended as _worker ends
         return f"stopped by {signal_name(exitcode - 128)}"
     return f"ended with status {exitcode}"
+
+
+def _deaths_text(unit: Unit, exitcodes: list[int | None]) -> str:
+    """The one-line error of a unit that took WORKER_LOSSES workers down with it."""
+    signalled = any(c is not None and (c < 0 or c - 128 in INTERRUPTING) for c in exitcodes)
+    why = ": out of memory, a crash in native code or a kill from outside" if signalled else ""
+    return (f"unit {unit.id}: its worker process died {len(exitcodes)} times "
+            f"({', then '.join(map(_death, exitcodes))}){why}; the unit is tried again on the next run")
 
 
 @dataclass
@@ -214,6 +224,10 @@ class _Processes:
                 process = self._ctx.Process(target=_worker, args=(theirs, self._alive), name="imucal-batch-worker")
                 try:
                     process.start()
+                except OSError as exc:  # no memory or process slot left for another worker
+                    raise ImucalError(f"cannot start a worker process: {exc.strerror or exc}", field="--workers",
+                                      fix="give fewer --workers, or free memory; rerun the same command to resume") \
+                        from None
                 finally:
                     theirs.close()  # the worker's end lives in the worker only: its death closes it
                 w = _Worker(process, mine)
@@ -231,8 +245,8 @@ class _Processes:
         w.conn.close()
         self._pool.remove(w)
 
-    def _collect(self, w: _Worker) -> dict | str:
-        """The record ``w`` sent, or how it died without one (it is then dropped)."""
+    def _collect(self, w: _Worker) -> dict | int | None:
+        """The record ``w`` sent, or the exit status it died with without one (it is then dropped)."""
         try:
             if w.conn.poll():
                 rec, w.unit = w.conn.recv(), None
@@ -240,7 +254,7 @@ class _Processes:
         except (EOFError, OSError):
             pass
         self._drop(w)
-        return _death(w.process.exitcode)
+        return w.process.exitcode
 
     def results(self, units: list[Unit], out: str) -> Iterator[dict]:
         """Each unit's record, as the units finish."""
@@ -261,9 +275,7 @@ class _Processes:
                     if len(deaths[unit.id]) < WORKER_LOSSES:
                         queue.appendleft(unit)
                     else:
-                        yield _lost(unit, f"unit {unit.id}: its worker process died {len(deaths[unit.id])} times "
-                                          f"({', then '.join(deaths[unit.id])}): out of memory, a crash in native "
-                                          "code or a kill from outside; the unit is tried again on the next run")
+                        yield _lost(unit, _deaths_text(unit, deaths[unit.id]))
             if not queue:  # nothing left to give: idle workers may go
                 for w in [w for w in self._pool if w.unit is None]:
                     with contextlib.suppress(OSError):
