@@ -370,7 +370,7 @@ def test_gyro_text_fields_are_refused_or_sanitised(synthetic, tmp_path):
     cal = synthetic["gsens"]
     for unit in (PWN, "rad/s//x", "deg/s\n"):
         bad = dataclasses.replace(cal, gyro=dataclasses.replace(cal.gyro, unit=unit))
-        with pytest.raises(ImucalError, match=r"^gyroscope.units.input: .* is not a unit \(fix: "):
+        with pytest.raises(ImucalError, match=r"gyroscope.units.input: .* is not a unit \(letters, digits"):
             generate_c(bad)
     fit = {"rms_direction_error_deg": {"after": PWN, "before": "1e999 */"}, "chi2": PWN}
     gen = generate_c(dataclasses.replace(cal, gyro=dataclasses.replace(cal.gyro, fit=fit)), prefix="tx")
