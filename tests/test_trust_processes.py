@@ -322,3 +322,18 @@ def test_dask_a_killed_worker_costs_only_its_unit(fleet, tmp_path, monkeypatch, 
     assert r.code == 0 and f"({len(ids) - 1} skipped: already done)" in r.out, r.err
     assert all(row["status"] == "ok" for row in _table(out).values())
     assert not _leftovers(out)  # what the killed cluster workers had staged: removed by the rerun at the latest
+
+
+def test_a_worker_that_cannot_start_is_one_line(fleet, tmp_path, run_cli, unchanged, monkeypatch):
+    import errno
+    import multiprocessing.process
+
+    def no_slot(self):
+        raise OSError(errno.EAGAIN, "Resource temporarily unavailable")
+
+    monkeypatch.setattr(multiprocessing.process.BaseProcess, "start", no_slot)
+    with unchanged(tmp_path):
+        r = run_cli(["batch", fleet, "--out", tmp_path / "res", "--workers", "2", "--no-figures"])
+    assert r.code == 2 and r.out == ""
+    _one_line(r.err, "imucal: error: --workers: cannot start a worker process: Resource temporarily unavailable "
+                     "(fix: give fewer --workers, or free memory; rerun the same command to resume)")
