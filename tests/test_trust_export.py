@@ -329,6 +329,16 @@ def test_calibrate_refuses_a_unit_its_readers_would_refuse(run_cli, tmp_path, un
     assert r.code == 2 and "data.unit: " in r.err
 
 
+@pytest.mark.parametrize("unit", ["m/s$^2$", "<b>LSB</b>", "m/"])
+def test_simulate_refuses_a_unit_calibrate_would_refuse(run_cli, tmp_path, unchanged, unit):
+    cfg = tmp_path / "sim.yaml"
+    cfg.write_text(yaml.safe_dump({"sensor": {"unit": unit}}))
+    with unchanged():
+        r = run_cli(["simulate", cfg, "--out", tmp_path / "sim.csv"])
+    assert r.code == 2
+    one_line_error(r.err, f"{cfg}: sensor.unit: ", "is not a unit")
+
+
 @settings(max_examples=200, deadline=None)
 @given(unit=st.text(max_size=45) | st.sampled_from(["m/s^2", "g", "counts", "LSB", "m/s$^2$", "a//b", "m/", "x" * 32,
                                                     "x" * 33, "x" * 41]))

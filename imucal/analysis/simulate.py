@@ -15,6 +15,7 @@ from typing import Literal, Mapping, Union
 
 import numpy as np
 
+from imucal.calibration.fields import check_raw_unit
 from imucal.constants import RIGHT_ANGLE, STANDARD_GRAVITY
 from imucal.errors import ImucalError, short
 from imucal.data.recording import MAX_ABS_VALUE
@@ -300,9 +301,8 @@ class SensorSection:
             v = getattr(self, key)
             if v is not None and not all(x >= 0 for x in _three(v)):
                 raise ImucalError(f"{key} must be non-negative [{unit}]", field=f"sensor.{key}")
-        if self.unit is not None and not self.unit.isprintable():
-            raise ImucalError(f"unit {short(self.unit)} must be a short name", field="sensor.unit",
-                              fix="e.g. unit: raw or unit: m/s^2")
+        if self.unit is not None:  # the rule calibrate and the calibration file apply: the readings calibrate
+            check_raw_unit(self.unit, "sensor.unit", fix="e.g. unit: raw or unit: m/s^2")
 
 
 @dataclass(frozen=True)
