@@ -95,7 +95,7 @@ def verdict(run: CalibrationRun) -> Verdict:
               "cannot be tested: 0 degrees of freedom" if consistent is None else
               f"reduced chi-square {res.redchi_noise:.3g} (chi-square {res.chi2_noise:.4g} on {res.dof} dof, "
               f"p = {p:.3g}; poor when above {POOR_FIT_REDCHI:g} with p < {POOR_FIT_P:g})"
-              + (f"; the weights include a between-interval excess of {res.excess ** 0.5:.3g} m/s^2 rms "
+              + (f"; the standard errors include a between-interval excess of {res.excess ** 0.5:.3g} m/s^2 rms "
                  "(bias_instability)" if res.excess > 0 else "")),
         Check("every parameter determined by the poses", not obs.poorly_determined,
               f"{obs.n_distinct} distinct orientations; Jacobian condition {obs.condition:.3g}"
