@@ -29,8 +29,9 @@ from imucal.constants import TIME_UNITS
 from imucal.data.load import (BINARY_PROBE, MAX_ABS_VALUE, DataSpec, Layout, as_spec, binary_file, check_lines,
                               corrupt_value, layout, line_too_long, lineno, long_line, no_rows, not_increasing,
                               not_utf8, parse_block, resolve_path, unparsed, _MAX_SCAN_LINES)
-from imucal.data.timebase import (GAP_STEPS, Decision, GapFinder, LagDiffs, StepStats, ValueCounts,
-                                  clock_times, decide, gap_excess, rate_time_base, time_base, time_unit_from_step)
+from imucal.data.timebase import (CLOCK_SPAN, GAP_STEPS, Decision, GapFinder, LagDiffs, StepStats, ValueCounts,
+                                  clock_times, decide, gap_excess, rate_time_base, refine, time_base,
+                                  time_unit_from_step)
 from imucal.data.static import (QUANTUM_ROWS, Intervals, MovingVariance, Segment, StaticSettings, VarianceSeries,
                                 auto_threshold, candidate_runs, edge_samples, intervals_from, quantum, still_segment,
                                 window_samples)
@@ -248,9 +249,10 @@ class _Steps(ValueCounts):
 class _Clock:
     """A jittered recording's clock (imucal.data.timebase): the decision and its gaps."""
 
-    dec: Decision
+    dec: Decision  #: refined (imucal.data.timebase.refine)
     gap_index: np.ndarray
-    gap_step: np.ndarray  #: in the stamps' unit
+    gap_step: np.ndarray  #: in the stamps' unit, on the refined clock
+    decided: Decision  #: before refinement: a later pass that decides the same reuses the gaps
 
     @property
     def cum(self) -> np.ndarray:
@@ -302,7 +304,8 @@ class _ScanState:
     lows: np.ndarray = field(default_factory=lambda: np.full(3, np.inf))
     highs: np.ndarray = field(default_factory=lambda: np.full(3, -np.inf))
     stamp_steps: "_Steps" = field(default_factory=lambda: _Steps())
-    spans: LagDiffs = field(default_factory=lambda: LagDiffs())
+    spans: LagDiffs = field(default_factory=lambda: LagDiffs())  #: its tail: the last CLOCK_SPAN stamps
+    head_stamps: list = field(default_factory=list)  #: the first CLOCK_SPAN stamps
     t_steps: "_Steps" = field(default_factory=lambda: _Steps())
     head_raw: list = field(default_factory=list)
     blocks: list = field(default_factory=list)  #: (byte offset, bytes, first row) of each block with rows
@@ -386,6 +389,8 @@ class StreamedRecording:
         st.last_stamp = float(stamps[-1])
         st.stamp_steps.feed(stamps)
         st.spans.add(stamps)
+        if sum(h.size for h in st.head_stamps) < CLOCK_SPAN:
+            st.head_stamps.append(stamps[:CLOCK_SPAN].copy())
 
     def _accumulate(self, st: "_ScanState", arr: np.ndarray) -> None:
         """Times in the (guessed) unit, moving variance, ranges, the quantum's head, the memory cache."""
@@ -426,16 +431,21 @@ class StreamedRecording:
         if "t" in self._it:
             stats = StepStats(n=n, first=st.t_first, last=st.last_stamp, median_step=st.stamp_steps.median(),
                               span_median=st.spans.counts.median(),
+                              head=np.concatenate(st.head_stamps)[:CLOCK_SPAN], tail=st.spans.tail[-CLOCK_SPAN:],
                               short=st.stamp_steps.below, long=st.stamp_steps.above)
             dec = decide(stats, spec.time_unit, spec.sample_rate, self.file.lay.time_column, path)
-            unit_exact, note = dec.unit, dec.note
-            if st.clock is not None and st.clock.dec == dec:
-                gi, gs = st.clock.gap_index, st.clock.gap_step
-            elif dec.jittered or (n > 1 and stats.long(GAP_STEPS * dec.gap_ref) > 0):
-                gi, gs = self._gaps(dec)
+            if st.clock is not None and st.clock.decided == dec:
+                clock = st.clock
+                dec, gi, gs = clock.dec, clock.gap_index, clock.gap_step
             else:
-                gi, gs = np.empty(0, np.int64), np.empty(0)
-            clock = _Clock(dec, gi, gs) if dec.jittered else None
+                if dec.jittered or (n > 1 and stats.long(GAP_STEPS * dec.gap_ref) > 0):
+                    gi, gs = self._gaps(dec)
+                else:
+                    gi, gs = np.empty(0, np.int64), np.empty(0)
+                decided = dec
+                dec, gs = refine(dec, stats, gi, gs, path)
+                clock = _Clock(dec, gi, gs, decided) if dec.jittered else None
+            unit_exact, note = dec.unit, dec.note
             tb = time_base(dec, stats, gi, gs, lambda k: self._row_line(st.blocks, k))
         else:
             unit_exact, note, tb = rate_time_base(spec.sample_rate)

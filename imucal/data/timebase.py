@@ -28,12 +28,11 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
-from numpy.lib.stride_tricks import sliding_window_view
 
 from imucal.constants import TIME_UNITS
 from imucal.data.recording import MAX_RATE_HZ, MIN_RATE_HZ, TimeBase, TimeSource
@@ -58,6 +57,12 @@ GAP_STEPS = 1.5
 #: The least lasting jump of the stamps' offset from the clock that is a gap [sample steps]: half a
 #: lost sample (the scatter of good stamps and the delays of jittered ones do not last).
 GAP_JUMP = 0.5
+#: Fewest stamps on either side of a step its jump is told from [samples]: within this many of
+#: either end of a recording a lasting jump cannot be told from a late or early stamp.
+GAP_WINDOW_MIN = CLOCK_SPAN // 4
+#: Most candidate steps judged together (a dense run of long steps is judged in pieces of this
+#: many, so that memory and time stay bounded) [steps].
+MAX_CLUSTER = 1024
 #: The sample rate [Hz] a time unit is judged by when several give an IMU's: the unit whose rate
 #: lies closest to it on a log scale (MEMS loggers record at about 50 Hz to 1 kHz; 200 Hz is
 #: their middle). One rule for integer and fractional stamps: 0.9995 is milliseconds (1 kHz),
@@ -132,6 +137,8 @@ class StepStats:
     last: float  #: the last stamp
     median_step: float
     span_median: float  #: median of s[k + CLOCK_SPAN] - s[k] (nan with too few stamps)
+    head: np.ndarray  #: the first CLOCK_SPAN stamps (all, with fewer)
+    tail: np.ndarray  #: the last CLOCK_SPAN stamps (all, with fewer)
     short: Callable[[float], int]  #: number of steps below a bound
     long: Callable[[float], int]  #: number of steps above a bound
 
@@ -150,6 +157,7 @@ def step_stats(stamps: np.ndarray) -> StepStats:
     return StepStats(n=int(stamps.size), first=float(stamps[0]), last=float(stamps[-1]),
                      median_step=median(d) if d.size else float("nan"),
                      span_median=median(span) if span.size else float("nan"),
+                     head=stamps[:CLOCK_SPAN].copy(), tail=stamps[-CLOCK_SPAN:].copy(),
                      short=lambda b: int(np.count_nonzero(d < b)), long=lambda b: int(np.count_nonzero(d > b)))
 
 
@@ -164,6 +172,7 @@ class Decision:
     gap_ref: float  #: steps longer than GAP_STEPS x this are gap candidates
     short_fraction: float
     rate_given: float | None
+    time_unit: str  #: the unit asked for (data.time_unit: "auto" or a unit)
 
     @property
     def rate(self) -> float:
@@ -177,18 +186,11 @@ def decide(st: StepStats, time_unit: str, rate_given: float | None, column: str,
     frac = short / (st.n - 1) if st.n > 1 else 0.0
     jittered = frac > JITTER_FRACTION
     step, what = (clock, "clock step") if jittered else (st.median_step, "median step")
-    if time_unit != "auto":
-        unit, note = time_unit, f"time unit given: {time_unit}"
-    elif rate_given is not None and (by_rate := _unit_of_rate(step, rate_given)) is not None:
-        unit = by_rate
-        note = (f"time unit inferred: {unit} ({what} {step:g} -> {1.0 / (step * TIME_UNITS[unit]):.4g} Hz, "
-                f"the sample rate given)")
-    else:
-        unit, note = time_unit_from_step(step, st.first, what, path)
+    unit, note = _unit_and_note(step, st.first, time_unit, rate_given, what, path)
     if st.n > 1:
         check_rate(step, unit, path)
-    dec = Decision(unit=unit, note=note, jittered=jittered, step=step,
-                   gap_ref=clock if jittered else st.median_step, short_fraction=frac, rate_given=rate_given)
+    dec = Decision(unit=unit, note=note, jittered=jittered, step=step, gap_ref=clock if jittered else st.median_step,
+                   short_fraction=frac, rate_given=rate_given, time_unit=time_unit)
     if rate_given is not None and st.n > 1 and abs(dec.rate / rate_given - 1.0) > RATE_TOLERANCE:
         raise ImucalError(f"sample rate {rate_given:g} Hz given, but the time column {column} steps at "
                           f"{dec.rate:.4g} Hz ({what} {step:g} {unit}): two sources of time disagree",
@@ -196,6 +198,41 @@ def decide(st: StepStats, time_unit: str, rate_given: float | None, column: str,
                           fix=f"drop --sample-rate (data.sample_rate) to use the time column, or map the right "
                               f"time column (--columns t=...); they may differ by {100 * RATE_TOLERANCE:g} %")
     return dec
+
+
+def _unit_and_note(step: float, first: float, time_unit: str, rate_given: float | None, what: str,
+                   path: Path) -> tuple[str, str]:
+    """The unit (given; or the one the given rate names; or inferred from the step) and its note."""
+    if time_unit != "auto":
+        return time_unit, f"time unit given: {time_unit}"
+    if rate_given is not None and (unit := _unit_of_rate(step, rate_given)) is not None:
+        return unit, (f"time unit inferred: {unit} ({what} {step:g} -> {1.0 / (step * TIME_UNITS[unit]):.4g} Hz, "
+                      f"the sample rate given)")
+    return time_unit_from_step(step, first, what, path)
+
+
+def refine(dec: Decision, st: StepStats, gap_index: np.ndarray, gap_step: np.ndarray, path: Path
+           ) -> tuple[Decision, np.ndarray]:
+    """A jittered recording's clock step fitted end to end: the offset of its last CLOCK_SPAN stamps
+    from the clock, less that of its first and less the gaps between, over the samples between
+    (each end's offset a median). The span median the gaps were found with is robust but biased
+    by bursts of uneven shape; over the whole recording the ends are not. Returns the refined
+    decision (its note names the refined step) and the gaps' steps on the refined clock."""
+    if not dec.jittered or st.n < 2:
+        return dec, gap_step
+    T = dec.step
+    jumps = np.concatenate([[0.0], np.cumsum(gap_step - T)])
+
+    def offset(stamps: np.ndarray, i0: int) -> float:
+        i = np.arange(i0, i0 + stamps.size)
+        return median(stamps - i * T - jumps[np.searchsorted(gap_index, i, side="right")])
+
+    between = (st.n - st.tail.size) + (st.tail.size - st.head.size) / 2  # from the middle of one end to the other's
+    step = T + (offset(st.tail, st.n - st.tail.size) - offset(st.head, 0)) / between
+    unit, note = _unit_and_note(step, st.first, dec.time_unit, dec.rate_given, "clock step", path)
+    if unit != dec.unit:  # pragma: no cover - a step that moves by a unit's factor: keep the decision's
+        return dec, gap_step
+    return replace(dec, step=step, note=note), gap_step - T + step
 
 
 def _unit_of_rate(step: float, rate: float) -> str | None:
@@ -266,67 +303,74 @@ def check_rate(step: float, unit: str, path: Path) -> None:
 
 
 class GapFinder:
-    """The gaps of stamps fed in chunks: (index of the sample after the gap, the step across it in
-    the time base, in the stamps' unit). The same gaps whatever the chunks: each step is judged
-    once the CLOCK_SPAN stamps after it are in (or the stamps have ended)."""
+    """The gaps of stamps fed in chunks: (index of the sample after each gap, the step across it in
+    the time base, in the stamps' unit). The same gaps whatever the chunks.
+
+    Candidates (steps over GAP_STEPS sample steps) closer than 2 x CLOCK_SPAN samples form a
+    cluster (of at most MAX_CLUSTER), judged once the stamps after it are in: its longest step
+    first (a logger's pause), every accepted gap's jump taken out of the offsets before the next
+    step is judged, so that a shift is counted once however many long steps share its windows."""
 
     def __init__(self, dec: Decision) -> None:
         self.dec = dec
         self.base = 0  #: global index of buf[0]
         self.buf = np.empty(0)
-        self.done = 0  #: steps below this (step k: samples k to k + 1) are judged
-        self.index: list[np.ndarray] = []
-        self.step: list[np.ndarray] = []
+        self.scanned = 0  #: steps below this (step k: samples k to k + 1) are searched for candidates
+        self.pending: list[int] = []  #: candidates not yet judged
+        self.index: list[int] = []  #: accepted gaps, cluster by cluster
+        self.jump: list[float] = []
+        self.step: list[float] = []
 
     def add(self, stamps: np.ndarray, final: bool = False) -> None:
         buf = np.concatenate([self.buf, stamps])
         end = self.base + buf.size  # stamps in so far
-        hold = 0 if final else CLOCK_SPAN
-        upto = max(self.done, end - 1 - hold)  # judge steps done .. upto - 1
-        if upto > self.done:
-            self._judge(buf, end, upto, final)
-            self.done = upto
-        keep = max(0, min(self.done + 1 - CLOCK_SPAN, end) - self.base)  # the window before the next step
+        if end - 1 > self.scanned:
+            k = np.arange(self.scanned, end - 1)
+            d = buf[k + 1 - self.base] - buf[k - self.base]
+            self.pending += k[d > GAP_STEPS * self.dec.gap_ref].tolist()
+            self.scanned = end - 1
+        while self.pending:
+            p = self.pending[:MAX_CLUSTER + 1]
+            n = next((i + 1 for i in range(len(p) - 1) if p[i + 1] - p[i] >= 2 * CLOCK_SPAN), min(len(p), MAX_CLUSTER))
+            after = end - 1 - p[n - 1]  # stamps in after the cluster's last step
+            closed = n < len(p) or after >= 2 * CLOCK_SPAN  # no later step can join it
+            if not final and not (closed and after >= CLOCK_SPAN):
+                break  # the cluster may grow, or its last windows are not in yet
+            self._judge(p[:n], buf, end)
+            del self.pending[:n]
+        first = min([self.scanned, *self.pending]) + 1 - CLOCK_SPAN  # the next windows start here
+        keep = max(0, min(first, end) - self.base)
         self.base, self.buf = self.base + keep, buf[keep:]
 
-    def _judge(self, buf: np.ndarray, end: int, upto: int, final: bool) -> None:
-        k = np.arange(self.done, upto)
-        d = buf[k + 1 - self.base] - buf[k - self.base]
-        long = d > GAP_STEPS * self.dec.gap_ref
-        k, d = k[long], d[long]
-        if k.size == 0:
-            return
+    def _judge(self, ks: list[int], buf: np.ndarray, end: int) -> None:
+        """Judge one cluster of candidate steps (global indices ``ks``), the longest first."""
         T = self.dec.step
-        r = buf - (self.base + np.arange(buf.size)) * T  # the stamps' offset from the clock
-        jump = _window_medians(r, k + 1 - self.base, end - self.base, after=True) - \
-            _window_medians(r, k + 1 - self.base, end - self.base, after=False)
-        gap = (jump > 0.5 * (d - T)) & (jump > GAP_JUMP * T)
-        self.index.append(k[gap] + 1)
-        # the step across the gap: the stamps' own (kept as read), or the clock's
-        self.step.append(T + jump[gap] if self.dec.jittered else d[gap])
+        lo, hi = max(ks[0] + 1 - CLOCK_SPAN, 0), min(ks[-1] + 1 + CLOCK_SPAN, end)
+        i = np.arange(lo, hi)
+        r = buf[i - self.base] - i * T  # the stamps' offset from the clock ...
+        for g, jump in zip(self.index[::-1], self.jump[::-1]):  # ... less the gaps already found in it
+            if g <= lo:
+                break
+            r[g - lo:] -= jump
+        k = np.array(ks)
+        d = buf[k + 1 - self.base] - buf[k - self.base]
+        for j in np.argsort(-d, kind="stable"):
+            at = k[j] + 1 - lo  # the first sample after the step, in r
+            after, before = r[at:at + CLOCK_SPAN], r[max(at - CLOCK_SPAN, 0):at]
+            if min(after.size, before.size) < GAP_WINDOW_MIN:
+                continue  # too near an end of the recording to tell from jitter
+            jump = median(after) - median(before)
+            if jump > 0.5 * (d[j] - T) and jump > GAP_JUMP * T:
+                r[at:] -= jump  # counted once: the later windows see it taken out
+                self.index.append(int(k[j]) + 1)
+                self.jump.append(float(jump))
+                # the step across the gap: the stamps' own (kept as read), or the clock's
+                self.step.append(T + jump if self.dec.jittered else float(d[j]))
 
     def finish(self) -> tuple[np.ndarray, np.ndarray]:
         self.add(np.empty(0), final=True)
-        if not self.index:
-            return np.empty(0, np.int64), np.empty(0)
-        return np.concatenate(self.index).astype(np.int64), np.concatenate(self.step)
-
-
-def _window_medians(r: np.ndarray, at: np.ndarray, end: int, after: bool) -> np.ndarray:
-    """Median of r over the CLOCK_SPAN values from ``at`` on (``after``) or before it, each window
-    cut at 0 and ``end``."""
-    lo = at if after else np.maximum(at - CLOCK_SPAN, 0)
-    hi = np.minimum(at + CLOCK_SPAN, end) if after else at
-    out = np.empty(at.size)
-    full = (hi - lo) == CLOCK_SPAN
-    if full.any() and r.size >= CLOCK_SPAN:
-        win = sliding_window_view(r, CLOCK_SPAN)
-        idx = lo[full]
-        for j in range(0, idx.size, 4096):  # bounded memory: 4096 windows at a time
-            out[np.flatnonzero(full)[j:j + 4096]] = np.median(win[idx[j:j + 4096]], axis=1)
-    for i in np.flatnonzero(~full):  # windows cut at either end of the stamps
-        out[i] = median(r[lo[i]:hi[i]]) if hi[i] > lo[i] else 0.0
-    return out
+        order = np.argsort(self.index, kind="stable")
+        return np.array(self.index, np.int64)[order], np.array(self.step, float)[order]
 
 
 def clock_times(row0: int, m: int, dec: Decision, gap_index: np.ndarray, gap_cum: np.ndarray) -> np.ndarray:
@@ -366,6 +410,7 @@ def stamped_times(stamps: np.ndarray, time_unit: str, rate_given: float | None, 
     else:
         gi, gs = np.empty(0, np.int64), np.empty(0)
     if dec.jittered:
+        dec, gs = refine(dec, st, gi, gs, path)
         t = clock_times(0, stamps.size, dec, gi, gap_excess(dec, gs))
     else:
         t = (stamps - stamps[0]) * TIME_UNITS[dec.unit]
