@@ -315,13 +315,15 @@ def test_unstated_unit_with_m_per_s2_numbers_still_exports_and_says_so():
 
 
 # --- a unit is refused where it enters, by the reader's rule -------------------------------------
-@pytest.mark.parametrize("unit", ["m/s$^2$", "x" * 5000, "m/s^2\nARMING_CHECK", "a//b", "m/s²", "<b>LSB</b>", "x" * 33])
+@pytest.mark.parametrize("unit", ["m/s$^2$", "x" * 5000, "m/s^2\nARMING_CHECK", "a//b", "m/s²", "<b>LSB</b>",
+                                  "x" * 33])
 def test_calibrate_refuses_a_unit_its_readers_would_refuse(run_cli, tmp_path, unchanged, unit):
     rec = write_simulation(tmp_path / "s.csv", si_sensor(np.random.default_rng(6)), cube_directions(), seed=6)
     with unchanged():
         r = run_cli(["calibrate", "--data", rec.path, "--unit", unit, "--out", tmp_path / "o"])
     assert r.code == 2
-    one_line_error(r.err, "data.unit: ", "is not a unit (letters, digits, ^ . % ( ) / - space; at most 32, not ending in /)",
+    one_line_error(r.err, "data.unit: ",
+                   "is not a unit (letters, digits, ^ . % ( ) / - space; at most 32, not ending in /)",
                    "(fix: write e.g. counts, m/s^2 or g)")
     (tmp_path / "run.yaml").write_text(yaml.safe_dump({"data": {"path": "s.csv", "unit": unit}}))
     with unchanged():
@@ -374,7 +376,8 @@ def cal_text(tmp_path: Path, edit) -> Path:
 
 
 @pytest.mark.parametrize("edit, field, words", [
-    (lambda d: d.update(gravity=588.0), "gravity", "gravity 588.0 is not a local gravity on Earth in m/s^2 (9.4 to 9.9)"),
+    (lambda d: d.update(gravity=588.0), "gravity",
+     "gravity 588.0 is not a local gravity on Earth in m/s^2 (9.4 to 9.9)"),
     (lambda d: d.update(gravity=9.3), "gravity", "gravity 9.3 is not a local gravity"),
     (lambda d: d.update(gravity=float("nan")), "gravity", "gravity is not finite"),
     (lambda d: d["parameters"]["s2"].update(std=-0.01), "parameters.s2.std", "-0.01 is not a standard error"),
