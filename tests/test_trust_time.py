@@ -517,3 +517,20 @@ def test_gaps_do_not_depend_on_how_the_stamps_are_split(kind):
         got = parts.finish()
         np.testing.assert_array_equal(got[0], want[0])
         np.testing.assert_array_equal(got[1], want[1])
+
+
+@pytest.mark.parametrize("how", STREAM_HOW)
+def test_stamps_rounded_coarser_than_their_step_give_one_rate(tmp_path, how, small_chunks):
+    """A 300 Hz sensor stamped in whole milliseconds (steps 3, 3, 4, ...): the median step says
+    333 Hz, the clock 300 Hz. Before, the report printed both; now the note and the rate are the
+    clock's, and the stamps (no jitter: no step under a quarter of the clock's) are kept as read."""
+    n = 3000
+    stamps = np.round(np.arange(n) * 10 / 3 + 5000)
+    src = tmp_path / "ms.csv"
+    src.write_text("t,ax,ay,az\n" + "".join(f"{s:.0f},1,2,{16384 + k % 3}\n" for k, s in enumerate(stamps)))
+    rec = load_recording(src) if how == "never" else streamed(src).recording
+    assert rec.time_unit == "ms" and rec.sample_rate == pytest.approx(300.0, rel=1e-4)
+    assert rec.time_note.startswith("time unit inferred: ms (clock step 3.33") and "-> 300 Hz" in rec.time_note
+    assert rec.time_base.source.value == "stamps" and rec.time_base.n_gaps == 0
+    if how == "never":
+        np.testing.assert_array_equal(rec.t, (stamps - stamps[0]) * 1e-3)

@@ -16,9 +16,11 @@ Judged on the steps between stamps, in the stamps' own unit (no unit is needed t
   good clock's scatter) is followed by early ones and leaves the offset where it was. Gaps
   closer together than CLOCK_SPAN samples are measured together, approximately.
 
-Stamps that are not jitter are kept exactly: t = (s - s[0]) x unit, and the sample step is their
-median step. Jittered stamps are re-timed on the fitted clock: t_k = (k x clock step + the gaps
-before k) x unit, each gap as long as the jump of the stamps' offset from the clock across it.
+The recording's one sample step is the clock step (for jittered stamps refined end to end; see
+refine): the rate the report prints, the note names and a given rate is checked against. Stamps
+that are not jitter are kept exactly: t = (s - s[0]) x unit. Jittered stamps are re-timed on the
+fitted clock: t_k = (k x clock step + the gaps before k) x unit, each gap as long as the jump of the
+stamps' offset from the clock across it.
 
 Both readers (imucal.data.load, whole; imucal.data.stream, in chunks) feed the same pieces: the
 step statistics (StepStats), the decision (decide), the gaps (GapFinder) and the times
@@ -168,7 +170,7 @@ class Decision:
     unit: str
     note: str
     jittered: bool
-    step: float  #: the sample step in the stamps' unit: the median step, or the clock's
+    step: float  #: the sample step in the stamps' unit: the clock's (StepStats.clock_step; refine)
     gap_ref: float  #: steps longer than GAP_STEPS x this are gap candidates
     short_fraction: float
     rate_given: float | None
@@ -185,22 +187,22 @@ def decide(st: StepStats, time_unit: str, rate_given: float | None, column: str,
     short = st.short(SHORT_STEP * clock) if st.n > 1 and clock > 0 else 0
     frac = short / (st.n - 1) if st.n > 1 else 0.0
     jittered = frac > JITTER_FRACTION
-    step, what = (clock, "clock step") if jittered else (st.median_step, "median step")
-    unit, note = _unit_and_note(step, st.first, time_unit, rate_given, what, path)
+    shown, what = _shown(jittered, st.median_step, clock)
+    unit, note = _unit_and_note(shown, what, st.first, time_unit, rate_given, path)
     if st.n > 1:
-        check_rate(step, unit, path)
-    dec = Decision(unit=unit, note=note, jittered=jittered, step=step, gap_ref=clock if jittered else st.median_step,
+        check_rate(clock, unit, path)
+    dec = Decision(unit=unit, note=note, jittered=jittered, step=clock, gap_ref=clock if jittered else st.median_step,
                    short_fraction=frac, rate_given=rate_given, time_unit=time_unit)
     if rate_given is not None and st.n > 1 and abs(dec.rate / rate_given - 1.0) > RATE_TOLERANCE:
         raise ImucalError(f"sample rate {rate_given:g} Hz given, but the time column {column} steps at "
-                          f"{dec.rate:.4g} Hz ({what} {step:g} {unit}): two sources of time disagree",
+                          f"{dec.rate:.4g} Hz ({what} {shown:g} {unit}): two sources of time disagree",
                           file=str(path), field="data.sample_rate",
                           fix=f"drop --sample-rate (data.sample_rate) to use the time column, or map the right "
                               f"time column (--columns t=...); they may differ by {100 * RATE_TOLERANCE:g} %")
     return dec
 
 
-def _unit_and_note(step: float, first: float, time_unit: str, rate_given: float | None, what: str,
+def _unit_and_note(step: float, what: str, first: float, time_unit: str, rate_given: float | None,
                    path: Path) -> tuple[str, str]:
     """The unit (given; or the one the given rate names; or inferred from the step) and its note."""
     if time_unit != "auto":
@@ -213,12 +215,14 @@ def _unit_and_note(step: float, first: float, time_unit: str, rate_given: float 
 
 def refine(dec: Decision, st: StepStats, gap_index: np.ndarray, gap_step: np.ndarray, path: Path
            ) -> tuple[Decision, np.ndarray]:
-    """A jittered recording's clock step fitted end to end: the offset of its last CLOCK_SPAN stamps
-    from the clock, less that of its first and less the gaps between, over the samples between
-    (each end's offset a median). The span median the gaps were found with is robust but biased
-    by bursts of uneven shape; over the whole recording the ends are not. Returns the refined
-    decision (its note names the refined step) and the gaps' steps on the refined clock."""
-    if not dec.jittered or st.n < 2:
+    """The clock step fitted end to end: the offset of the last CLOCK_SPAN stamps from the clock,
+    less that of the first and less the gaps between, over the samples between (each end's
+    offset a median). The span median the gaps were found with is robust but not exact: biased by
+    uneven bursts, blind to the odd short step of a good clock (the Xsens log's: 100.000 Hz for
+    its 100.010). Returns the refined decision (its note names the refined rate) and the gaps'
+    steps (a jittered clock's on the refined step; good stamps' as read)."""
+    between = (st.n - st.tail.size) + (st.tail.size - st.head.size) / 2  # from the middle of one end to the other's
+    if st.n < 2 or between <= 0:
         return dec, gap_step
     T = dec.step
     jumps = np.concatenate([[0.0], np.cumsum(gap_step - T)])
@@ -227,12 +231,21 @@ def refine(dec: Decision, st: StepStats, gap_index: np.ndarray, gap_step: np.nda
         i = np.arange(i0, i0 + stamps.size)
         return median(stamps - i * T - jumps[np.searchsorted(gap_index, i, side="right")])
 
-    between = (st.n - st.tail.size) + (st.tail.size - st.head.size) / 2  # from the middle of one end to the other's
     step = T + (offset(st.tail, st.n - st.tail.size) - offset(st.head, 0)) / between
-    unit, note = _unit_and_note(step, st.first, dec.time_unit, dec.rate_given, "clock step", path)
-    if unit != dec.unit:  # pragma: no cover - a step that moves by a unit's factor: keep the decision's
+    unit, note = _unit_and_note(*_shown(dec.jittered, st.median_step, step), st.first, dec.time_unit,
+                                dec.rate_given, path)
+    if unit != dec.unit or not step > 0:  # pragma: no cover - a step moved by a unit's factor: keep the decision
         return dec, gap_step
-    return replace(dec, step=step, note=note), gap_step - T + step
+    return replace(dec, step=step, note=note), (gap_step - T + step if dec.jittered else gap_step)
+
+
+def _shown(jittered: bool, median_step: float, step: float) -> tuple[float, str]:
+    """The step a note names: the median step where it prints the clock's rate (good stamps: the
+    words they always had), else the clock step (jitter; stamps rounded coarser than their step,
+    as 3, 3, 4 ms for 3.33 ms)."""
+    if not jittered and f"{1 / median_step:.4g}" == f"{1 / step:.4g}":
+        return median_step, "median step"
+    return step, "clock step"
 
 
 def _unit_of_rate(step: float, rate: float) -> str | None:
@@ -409,8 +422,8 @@ def stamped_times(stamps: np.ndarray, time_unit: str, rate_given: float | None, 
         gi, gs = finder.finish()
     else:
         gi, gs = np.empty(0, np.int64), np.empty(0)
+    dec, gs = refine(dec, st, gi, gs, path)
     if dec.jittered:
-        dec, gs = refine(dec, st, gi, gs, path)
         t = clock_times(0, stamps.size, dec, gi, gap_excess(dec, gs))
     else:
         t = (stamps - stamps[0]) * TIME_UNITS[dec.unit]
