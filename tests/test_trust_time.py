@@ -59,6 +59,7 @@ def calibration(tmp_path, run_cli) -> Path:
 
 LOOP_COMMANDS = {
     "calibrate": lambda lp, cal, w: ["calibrate", "--data", lp, "--out", w / "o"],
+    "calibrate-stream": lambda lp, cal, w: ["calibrate", "--data", lp, "--stream", "always", "--out", w / "o"],
     "discover-config": lambda lp, cal, w: ["discover", "--config", ROOT / "configs" / "xsens-mti-imutk.yaml",
                                            "--data", lp, "--json", w / "d.json"],
     "calibrate-gyro-data": lambda lp, cal, w: ["calibrate", "--data", cal.parent.parent / "sim.csv",
@@ -270,6 +271,8 @@ def test_bursty_stamps_calibrate_as_the_true_times_and_report_one_rate(bursty, r
         r = run_cli(["calibrate", "--data", src, "--out", out, "--no-figures", "--quiet"])
         assert r.code == 0, r.err
         runs[name] = yaml.safe_load((out / "calibration.yaml").read_text()), (out / "report.txt").read_text()
+        html = (out / "report.html").read_text()  # both have the pause; the bursty one is re-timed
+        assert "<td>time base</td>" in html and ("re-timed on a clock fitted" in html) == (name == "bursty")
     (c, _), (b, report) = runs["clean"], runs["bursty"]
     assert b["fit"]["n_intervals"] == c["fit"]["n_intervals"] == 26
     for k, v in c["parameters"].items():
