@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from imucal.calibration.fields import check_raw_unit
-from imucal.constants import GYRO_UNIT_CHOICES, TIME_UNIT_CHOICES, TIME_UNITS  # noqa: F401 (re-exported)
+from imucal.constants import GYRO_UNIT_CHOICES, TIME_UNIT_CHOICES
 from imucal.errors import ImucalError, check_choice, short
 from imucal.data.rosbag import is_bag, read_bag
 from imucal.files.inputs import first_hole, max_data_bytes, open_regular
