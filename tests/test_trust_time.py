@@ -285,7 +285,8 @@ def test_bursty_stamps_calibrate_as_the_true_times_and_report_one_rate(bursty, r
     assert (f"samples, 117.5 s, {rate}, unit raw)" in head and f"(clock step 0.00999984 -> {rate})" in head
             and "    time base          = the time stamps are jitter (10.7 % of their steps are shorter than 0.25 of "
                 "the sample step, median step 10.8 ms): the samples are re-timed on a clock fitted to the stamps, "
-                f"{rate}; 1 gap(s) in the time stamps (samples missing: steps over 1.5 sample steps that the later stamps do not make up) kept as gaps, the longest "
+                f"{rate}; 1 gap(s) in the time stamps (samples missing: steps over 1.5 sample steps that the later "
+                "stamps do not make up) kept as gaps, the longest "
                 f"2.01 s at line {pause + 2}" in head), head
 
 
@@ -488,7 +489,8 @@ def test_a_five_hour_gap_is_kept_and_named_not_read_as_a_wrong_unit(tmp_path, ru
     res = run_cli(["calibrate", "--data", src, "--stream", how, "--out", tmp_path / "o", "--no-figures", "--quiet"])
     assert res.code == 0, res.err
     report = (tmp_path / "o" / "report.txt").read_text()
-    assert (f"time base          = 1 gap(s) in the time stamps (samples missing: steps over 1.5 sample steps that the later stamps do not make up) kept as gaps, "
+    assert ("time base          = 1 gap(s) in the time stamps (samples missing: steps over 1.5 sample steps that the "
+            "later stamps do not make up) kept as gaps, "
             f"the longest 5 h at line {cut + 2}") in report
     assert "100 Hz, unit raw)" in report and yaml.safe_load(
         (tmp_path / "o" / "calibration.yaml").read_text())["fit"]["n_intervals"] == 26

@@ -41,7 +41,8 @@ class DataSpec:
 
     ``columns`` maps the roles t, ax, ay, az, temp to column names (CSV with header) or to
     0-based column indices (files without header). Without a time column, give
-    ``sample_rate`` [Hz]; beside one it is checked against the stamps (imucal.data.timebase). ``unit`` labels the raw values ("raw" counts, or "m/s^2").
+    ``sample_rate`` [Hz]; beside one it is checked against the stamps (imucal.data.timebase).
+    ``unit`` labels the raw values ("raw" counts, or "m/s^2").
     ``gyro_unit`` is the gyroscope's raw unit (GYRO_UNIT_CHOICES): counts start the gyro fit with a
     search for the scale, deg/s and rad/s with the nominal scale; "auto" is rad/s for a ROS bag
     (REP 103) and counts otherwise.

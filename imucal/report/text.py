@@ -86,8 +86,9 @@ def time_base_words(tb: TimeBase | None) -> str:
                    f"re-timed on a clock fitted to the stamps, {tb.rate:.4g} Hz")
     if tb.n_gaps:
         where = f" at line {tb.longest_gap_line}" if tb.longest_gap_line else ""
-        out.append(f"{tb.n_gaps} gap(s) in the time stamps (samples missing: steps over {GAP_STEPS:g} sample steps that "
-                   f"the later stamps do not make up) kept as gaps, the longest {_duration(tb.longest_gap)}{where}")
+        out.append(f"{tb.n_gaps} gap(s) in the time stamps (samples missing: steps over {GAP_STEPS:g} sample steps "
+                   f"that the later stamps do not make up) kept as gaps, the longest "
+                   f"{_duration(tb.longest_gap)}{where}")
     if tb.rate_given is not None:
         out.append(f"the sample rate given, {tb.rate_given:g} Hz, agrees with the time column ({tb.rate:.4g} Hz)")
     return "; ".join(out)
