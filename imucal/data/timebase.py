@@ -13,11 +13,13 @@ Judged on the steps between stamps, in the stamps' own unit (no unit is needed t
   missing: the logger paused, or lost one): the median offset of the stamps from the clock over
   the CLOCK_SPAN samples after the step exceeds that over the CLOCK_SPAN samples before it by at
   least half a sample step and half the step's excess. A stamp that was only late (jitter, or a
-  good clock's scatter) is followed by early ones and leaves the offset where it was. Gaps
-  closer together than CLOCK_SPAN samples are measured together, approximately.
+  good clock's scatter) is followed by early ones and leaves the offset where it was. Long steps
+  closer together than 2 x CLOCK_SPAN samples are judged together, the longest first, each jump
+  found taken out before the next: a shift is counted once (two gaps that close may be counted
+  as one, at the longer step).
 
-The recording's one sample step is the clock step (for jittered stamps refined end to end; see
-refine): the rate the report prints, the note names and a given rate is checked against. Stamps
+The recording's one sample step is the clock step refined end to end (refine): the rate the
+report prints, the note names and a given rate is checked against. Stamps
 that are not jitter are kept exactly: t = (s - s[0]) x unit. Jittered stamps are re-timed on the
 fitted clock: t_k = (k x clock step + the gaps before k) x unit, each gap as long as the jump of the
 stamps' offset from the clock across it.
