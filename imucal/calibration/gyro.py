@@ -48,7 +48,8 @@ class GyroCalibration:
                         "gsens": res.gsens_std if res.uses_gsens else np.zeros((3, 3))},
                    fit={**res.to_dict()["fit"], "rms_direction_error_deg": res.rms_direction_error_deg,
                         "gsens_p_value": [float(v) for v in res.gsens_p_value],
-                        **({"not_still": res.to_dict()["not_still"]} if res.still and res.still.rejected else {})})
+                        **({"not_still": res.to_dict()["not_still"]} if res.still and res.still.rejected else {}),
+                        **({"gap_motions": res.to_dict()["gap_motions"]} if res.gapped else {})})
 
     @property
     def uses_gsens(self) -> bool:

@@ -181,11 +181,12 @@ def fit_gyro(data: GyroData, options: GyroOptions = GyroOptions(), segments: np.
     gm, _, am, _ = data.static_means()
     st = fit_static(gm, am, options.gsens)
     lead_in = lead_in_for(data, options.gsens, options.lead_in_s, st)
-    seg = motion_segments(data, lead_in)
+    seg = every = motion_segments(data, lead_in)
+    nx = 12 if options.free_bias else 9
+    _require_motions(every, nx, data.source)
     if segments is not None:
         seg = seg.subset(np.asarray(segments, int))
     corrected = data.gyro - st.bias - data.acc @ st.H.T  # raw - s_g - B_g G_s a
-    nx = 12 if options.free_bias else 9
     steps = _steps(data, seg, corrected)
     scale0 = options.nominal_scale or NOMINAL_SCALE.get(data.unit)
     if scale0 is None:
@@ -194,7 +195,13 @@ def fit_gyro(data: GyroData, options: GyroOptions = GyroOptions(), segments: np.
     w = 1.0 / _segment_sigma(data, seg, scale0)
     problem = _Problem(steps, scale0, w, nx)
     names = ("x_scale_x", "x_scale_y", "x_scale_z") + MIS_NAMES + (("db_x", "db_y", "db_z") if options.free_bias else ())
-    _require_observable(problem.jacobian(np.zeros(nx))[1], names, options.min_angle_deg, data.source)
+    try:
+        _require_observable(problem.jacobian(np.zeros(nx))[1], names, options.min_angle_deg, data.source)
+    except ImucalError as exc:
+        if not seg.gapped:
+            raise
+        raise ImucalError(f"{exc.message} ({_gapped_words(every)})", file=exc.file, field=exc.field,
+                          fix=exc.fix) from None
     x, stats = least_squares.solve(problem, np.full(nx, -np.inf), np.full(nx, np.inf))
     r, J = problem.jacobian(x)
     wr = np.repeat(w, 3)
@@ -206,7 +213,26 @@ def fit_gyro(data: GyroData, options: GyroOptions = GyroOptions(), segments: np.
     sd = np.sqrt(np.diag(cov))
     res = _result(data, options, st, seg, x, sd, cov, scale0, corrected, stats, chi2, dof, redchi, names,
                   time.perf_counter() - tic)
-    return replace(res, lead_in_s=lead_in, still=None if still is None else still.with_scale(res.scale))
+    return replace(res, lead_in_s=lead_in, still=None if still is None else still.with_scale(res.scale),
+                   gapped=seg.gapped)
+
+
+def _gapped_words(seg: Segments) -> str:
+    """How many motions a gap left out (``seg``: every motion's segments, before any subset)."""
+    n = len(seg.gapped)
+    return (f"{n} of {n + seg.n} motions left out: a gap in the time stamps lies inside "
+            f"{'it' if n == 1 else 'each'}, the longest {max(g.longest_gap for g in seg.gapped):.3g} s")
+
+
+def _require_motions(seg: Segments, nx: int, source: str | None) -> None:
+    """Refuse when the motions left after those with a gap (segments.motion_segments) are too few for
+    the rotation fit: each gives two residual components, and the fit needs more than its nx unknowns."""
+    if not seg.gapped or 2 * seg.n > nx:
+        return
+    raise ImucalError(f"{seg.n} motions left for the gyro fit's {nx} unknowns (at least {nx // 2 + 1} needed): "
+                      f"{_gapped_words(seg)}", file=source, field="t",
+                      fix="record again without pauses of the logger during motions (or cut the recording at "
+                          "the gaps and calibrate the longest part)")
 
 
 def _segment_sigma(data: GyroData, seg: Segments, scale0: np.ndarray) -> np.ndarray:

@@ -1,11 +1,12 @@
 """The typed result of a gyroscope fit: values, standard errors, correlations, evidence."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
 from imucal.gyro.model import apply_rate, misalignment_entries
+from imucal.gyro.segments import GapMotion
 from imucal.gyro.still import NotStill, Stillness
 from imucal.solve.misfit import ExcessResiduals, excess_residuals
 from imucal.solve.ipopt import CONVERGED
@@ -40,6 +41,8 @@ class GyroResult:
     lead_in_s: float = 0.0  #: [s] the segments started and ended this far inside the still poses
     #: which static intervals the gyro showed still (imucal.gyro.still); None when not judged
     still: Stillness | None = None
+    #: the motions left out because a gap of the time stamps lies inside them (imucal.gyro.segments)
+    gapped: tuple[GapMotion, ...] = ()
 
     @property
     def success(self) -> bool:
@@ -90,6 +93,7 @@ class GyroResult:
             "fit": {"status": self.status, "iterations": self.iterations, "chi2": self.chi2, "dof": self.dof,
                     "redchi": self.redchi, "n_segments": int(self.segments.size)},
             "not_still": [] if self.still is None else [not_still_dict(r) for r in self.still.rejected],
+            "gap_motions": [asdict(g) for g in self.gapped],
         }
 
     def report(self) -> str:

@@ -13,8 +13,9 @@ from imucal.gyro.segments import GyroData, gyro_data_from_run
 
 
 def gyro_channel(rec: Recording, gyro_file: str | None = None
-                 ) -> tuple[np.ndarray, np.ndarray, str, float | None] | None:
-    """(time stamps [s], raw rates (N, 3), source, accelerometer start in the gyro's clock), or None.
+                 ) -> tuple[np.ndarray, np.ndarray, str, float | None, np.ndarray | None] | None:
+    """(time stamps [s], raw rates (N, 3), source, accelerometer start in the gyro's clock, the
+    second file's gaps (its samples after one; None for the recording's own columns)), or None.
 
     A second file is read with the loader's defaults (imu_tk: t x y z); its time stamps and the
     accelerometer's share one clock, so both keep their original origin.
@@ -22,14 +23,14 @@ def gyro_channel(rec: Recording, gyro_file: str | None = None
     if gyro_file is None:
         if rec.gyro is None:
             return None
-        return rec.t, rec.gyro, rec.source, None
+        return rec.t, rec.gyro, rec.source, None, None
     g = load_recording(gyro_file)
     if g.t_source is None or rec.t_source is None:
         raise ImucalError("both files need time stamps to share one time base", file=str(gyro_file),
                           field="--gyro-data", fix="record t in both files (imu_tk: t x y z)")
     t_g = g.t_source * TIME_UNITS[g.time_unit]
     acc_t0 = float(rec.t_source[0]) * TIME_UNITS[rec.time_unit]
-    return t_g, g.raw, g.source, acc_t0
+    return t_g, g.raw, g.source, acc_t0, None if g.time_base is None else g.time_base.gap_index
 
 
 #: A calibrated gyroscope that leaves the gravity direction this far off [deg rms] over the
@@ -45,11 +46,12 @@ def gyro_data(run, gyro_file: str | None = None, unit: str | None = None) -> tup
     ch = gyro_channel(run.recording, gyro_file)
     if ch is None:
         return None
-    t, raw, source, acc_t0 = ch
+    t, raw, source, acc_t0, gaps = ch
     if gyro_file is not None and raw.shape[0] == run.recording.n:
         acc_t0 = None  # same samples: taken one by one
     try:
-        return gyro_data_from_run(run, t, raw, unit=unit or run.recording.gyro_unit, acc_t0=acc_t0), source
+        return gyro_data_from_run(run, t, raw, unit=unit or run.recording.gyro_unit, acc_t0=acc_t0,
+                                  gyro_gaps=gaps), source
     except ImucalError as exc:
         raise ImucalError(exc.message, file=exc.file or source, field=exc.field, fix=exc.fix) from None
 
@@ -78,7 +80,7 @@ def gyro_on_accel_samples(rec: Recording, gyro_file: str | None = None) -> np.nd
     ch = gyro_channel(rec, gyro_file)
     if ch is None:
         return None
-    t_g, raw, source, acc_t0 = ch
+    t_g, raw, source, acc_t0, _ = ch
     if acc_t0 is None or raw.shape[0] == rec.n:
         return raw
     t_a = rec.t_source * TIME_UNITS[rec.time_unit]

@@ -1,7 +1,12 @@
-"""The data of a gyro fit: one time base, static intervals, and the motion segments between them."""
+"""The data of a gyro fit: one time base, static intervals, and the motion segments between them.
+
+A motion that holds a gap of the time stamps (samples missing: imucal.data.timebase) cannot be
+integrated: the rotation during the gap is unknown. ``motion_segments`` leaves every such motion
+out of the segments and names it (``GapMotion``), so that no fit or score integrates across a gap.
+"""
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -23,6 +28,8 @@ class GyroData:
     end: np.ndarray  #: one past the last sample index of each static interval
     unit: str = "raw"  #: gyro unit: raw, rad/s or deg/s
     source: str | None = None
+    #: samples that follow a gap in the time stamps (Recording.time_base.gap_index), in order
+    gaps: np.ndarray = field(default_factory=lambda: np.empty(0, np.int64))
 
     def __post_init__(self) -> None:
         n = self.t.shape[0]
@@ -61,6 +68,17 @@ class GyroData:
 
 
 @dataclass(frozen=True)
+class GapMotion:
+    """A motion left out of the gyro fit: its time stamps have a gap (samples missing) inside it."""
+
+    segment: int  #: k: the motion between still poses k and k+1 (of those the fit kept)
+    t_start: float  #: [s] where its integration would have started
+    t_end: float  #: [s] where it would have ended
+    n_gaps: int  #: gaps inside it
+    longest_gap: float  #: [s] the longest step across one of them
+
+
+@dataclass(frozen=True)
 class Segments:
     """Motion segments k: from the last sample of static interval k to the first of interval k+1."""
 
@@ -70,6 +88,7 @@ class Segments:
     u1: np.ndarray  #: (n, 3) gravity direction at the end
     sigma_u: np.ndarray  #: (n,) standard error of one component of u0 - u1 from the static means [rad]
     index: np.ndarray  #: segment numbers (k: between intervals k and k+1)
+    gapped: tuple[GapMotion, ...] = ()  #: the motions left out because a gap lies inside them
 
     @property
     def n(self) -> int:
@@ -82,7 +101,7 @@ class Segments:
 
     def subset(self, keep: np.ndarray) -> "Segments":
         return Segments(self.first[keep], self.last[keep], self.u0[keep], self.u1[keep], self.sigma_u[keep],
-                        self.index[keep])
+                        self.index[keep], self.gapped)
 
 
 def motion_segments(data: GyroData, lead_in: float = 0.0) -> Segments:
@@ -90,7 +109,9 @@ def motion_segments(data: GyroData, lead_in: float = 0.0) -> Segments:
 
     ``lead_in`` [s]: integrate from this far before the end of a still pose to this far after the
     start of the next (at most a quarter of each pose), since a static detector's window can hold
-    a motion's first or last moments; the directions stay the whole poses' means.
+    a motion's first or last moments; the directions stay the whole poses' means. A motion with a
+    gap of the time stamps inside it (one of its steps ends at a sample of ``data.gaps``) is left
+    out and named in ``Segments.gapped``.
     """
     _, _, a, a_se = data.static_means()
     norm = np.linalg.norm(a, axis=1)
@@ -105,7 +126,24 @@ def motion_segments(data: GyroData, lead_in: float = 0.0) -> Segments:
         raise ImucalError("static intervals overlap or are out of order", file=data.source, field="intervals",
                           fix="give intervals sorted by time and disjoint")
     k = np.arange(first.size)
-    return Segments(first, last, u[:-1], u[1:], np.sqrt(sig[:-1] ** 2 + sig[1:] ** 2), k)
+    seg = Segments(first, last, u[:-1], u[1:], np.sqrt(sig[:-1] ** 2 + sig[1:] ** 2), k)
+    return _without_gaps(seg, data)
+
+
+def _without_gaps(seg: Segments, data: GyroData) -> Segments:
+    """``seg`` less the motions whose steps cross a gap (step i-1 -> i for a gap at sample i)."""
+    gaps = np.asarray(data.gaps, np.int64)
+    if gaps.size == 0:
+        return seg
+    lo, hi = np.searchsorted(gaps, seg.first, side="right"), np.searchsorted(gaps, seg.last, side="right")
+    hit = hi > lo  # a gap g with first < g <= last
+    if not hit.any():
+        return seg
+    dt = np.diff(data.t)
+    gapped = tuple(GapMotion(int(seg.index[k]), float(data.t[seg.first[k]]), float(data.t[seg.last[k]]),
+                             int(hi[k] - lo[k]), float(dt[gaps[lo[k]:hi[k]] - 1].max()))
+                   for k in np.flatnonzero(hit))
+    return replace(seg.subset(~hit), gapped=gapped)
 
 
 def interpolate(t_target: np.ndarray, t_src: np.ndarray, x_src: np.ndarray) -> np.ndarray:
@@ -119,17 +157,32 @@ def interpolate(t_target: np.ndarray, t_src: np.ndarray, x_src: np.ndarray) -> n
 
 
 def gyro_data_from_run(run, gyro_t: np.ndarray, gyro_raw: np.ndarray, unit: str = "raw",
-                       acc_t0: float | None = None) -> GyroData:
+                       acc_t0: float | None = None, gyro_gaps: np.ndarray | None = None) -> GyroData:
     """GyroData from an accelerometer ``CalibrationRun`` and the gyro channel.
 
     The loader starts the accelerometer's time at 0; ``acc_t0`` is its first time stamp in the
     gyro's clock (default: the gyro's first time stamp). A gyro with as many samples as the
     accelerometer is taken sample by sample (same time stamps); otherwise it is interpolated.
+    The gaps are the accelerometer's time base's and, for an interpolated gyro, every step of
+    the accelerometer that overlaps one of the gyro's own gaps (``gyro_gaps``: its samples after one).
     """
     t = run.recording.t
     acc = run.calibration.apply(run.recording.raw)
     g = np.asarray(gyro_raw, float)
+    tb = getattr(run.recording, "time_base", None)
+    gaps = np.empty(0, np.int64) if tb is None else np.asarray(tb.gap_index, np.int64)
     if g.shape[0] != t.shape[0]:
-        g = interpolate(t, np.asarray(gyro_t, float) - (gyro_t[0] if acc_t0 is None else acc_t0), g)
+        tg = np.asarray(gyro_t, float) - (gyro_t[0] if acc_t0 is None else acc_t0)
+        g = interpolate(t, tg, g)
+        if gyro_gaps is not None and len(gyro_gaps):
+            gaps = np.union1d(gaps, _overlapping_steps(t, tg, np.asarray(gyro_gaps, np.int64)))
     return GyroData(t=t, gyro=g, acc=acc, start=run.intervals.start, end=run.intervals.end, unit=unit,
-                    source=run.recording.source)
+                    source=run.recording.source, gaps=gaps)
+
+
+def _overlapping_steps(t: np.ndarray, t_other: np.ndarray, other_gaps: np.ndarray) -> np.ndarray:
+    """Samples i of ``t`` whose step from i-1 overlaps a gap of ``t_other`` (its step into a sample of
+    ``other_gaps``): t[i] > the gap's start and t[i-1] < its end."""
+    lo = np.searchsorted(t, t_other[other_gaps - 1], side="right")  # first i with t[i] > start
+    hi = np.searchsorted(t, t_other[other_gaps], side="left")  # first i with t[i] >= end: i - 1 < end
+    return np.unique(np.concatenate([np.arange(max(a, 1), min(b + 1, t.size)) for a, b in zip(lo, hi)]))

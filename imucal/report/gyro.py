@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from imucal.gyro.segments import GapMotion
 from imucal.gyro.still import MIN_INTERVALS, NotStill, Stillness
 from imucal.report.misfit import excess_words
 
@@ -39,6 +40,7 @@ def gyro_report(res: GyroResult) -> str:
         L.append(f"  correlation({a}, {b}) = {c:+.3f}")
     if res.still is not None:
         L += still_lines(res.still)
+    L += gap_lines(res.gapped)
     return "\n".join(L)  # its warnings (gyro_warnings) join the run's: printed, in the files, in the verdict
 
 
@@ -56,6 +58,15 @@ def still_lines(st: Stillness) -> list[str]:
          "sides of it are integrated as one"]
     L += [f"    {_not_still(r)}" for r in sorted(st.rejected, key=lambda r: r.interval)]
     return L
+
+
+def gap_lines(gapped: tuple[GapMotion, ...]) -> list[str]:
+    """The motions left out of the fit because the time stamps have a gap inside them."""
+    if not gapped:
+        return []
+    return [f"  motions left out: {len(gapped)}, each with a gap in the time stamps inside it (samples missing: "
+            "the rotation during a gap is unknown, so the motion cannot be integrated)"] + [
+        f"    {g.t_start:.2f}..{g.t_end:.2f} s: {g.n_gaps} gap(s), the longest {g.longest_gap:.3g} s" for g in gapped]
 
 
 def _not_still(r: NotStill) -> str:
