@@ -104,6 +104,9 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "run", None):
         parser.print_help()
         return EXIT_BAD_INPUT
+    if getattr(sys.stdout, "errors", None) == "strict" and hasattr(sys.stdout, "reconfigure"):
+        # a file name that is not UTF-8 (b'log\xff.csv') prints escaped, as files.output writes it
+        sys.stdout.reconfigure(errors="backslashreplace")
     replaced: dict = {}
     _SIGNALLED.clear()
     try:  # SIGINT, SIGTERM, SIGHUP, SIGQUIT, SIGUSR1, ... end the run as an interruption (imucal.errors)

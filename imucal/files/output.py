@@ -138,8 +138,20 @@ def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> None:
         raise
 
 
+#: How text outputs are encoded: UTF-8, and whatever UTF-8 cannot hold escaped (backslashreplace).
+#: A file name with bytes that are not UTF-8 (b'log\xff.csv' on Linux) reaches the text as a lone
+#: surrogate (Python's surrogateescape): it is written as the escape \udcff, so the file stays UTF-8
+#: that every reader (YAML, JSON, HTML, C) takes, and the name stays recognisable.
+TEXT_ERRORS = "backslashreplace"
+
+
+def encode_text(text: str) -> bytes:
+    """``text`` as every text output is written (TEXT_ERRORS)."""
+    return text.encode("utf-8", errors=TEXT_ERRORS)
+
+
 def write_text_atomic(path: str | os.PathLike, text: str) -> None:
-    write_bytes_atomic(path, text.encode("utf-8"))
+    write_bytes_atomic(path, encode_text(text))
 
 
 def write_json_atomic(path: str | os.PathLike, obj: Any) -> None:
@@ -295,7 +307,7 @@ class OutputSet:
     def text(self, dest: str | os.PathLike, text: str) -> None:
         tmp = self._stage(dest)
         try:
-            tmp.write_text(text, encoding="utf-8")
+            tmp.write_bytes(encode_text(text))
         except OSError as exc:
             raise _write_error(Path(dest), exc) from None
 
