@@ -2,7 +2,10 @@
 """Right by default on real recordings (issue 25): for every real recording in ../shared/data/real, and
 any recording or run file you name, the default calibration's RMS of |a| - g on its still poses beside
 the uniformly weighted fit's on the same poses, their ratio (target <= 1.02), and whether the bias moved
-during the recording (a bias random walk: how far, per axis, in mg).
+during the recording (a bias random walk: how far, per axis, in mg). For every recording with a gyroscope,
+the static intervals its default fit found not still for the gyro, and the RMS gravity-direction error of
+the default gyro fit beside the fit without those intervals (target: no worse) and the fit that takes every
+interval as still (before issue 25), all on the same motions (imucal.gyro.check).
 
     python scripts/trust_real.py                     # every real recording -> docs/trust_real.md
     python scripts/trust_real.py my_run.yaml          # ... and a run file of yours
@@ -17,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 import sys
 import time
 from dataclasses import dataclass, field, replace
@@ -29,7 +33,9 @@ ROOT = Path(__file__).resolve().parents[1]
 REAL = (ROOT / ".." / "shared" / "data" / "real").resolve()
 #: The target: the default calibration fits its still poses no worse than this times the uniform fit.
 TARGET_RATIO = 1.02
-MIKOFF = {"columns": {"ax": 0, "ay": 1, "az": 2}, "sample_rate": 100, "unit": "m/s^2"}
+#: mikoff's logs: acceleration [m/s^2] in columns 0-2, angular rate [rad/s] in columns 3-5, 100 Hz
+MIKOFF = {"columns": {"ax": 0, "ay": 1, "az": 2, "gx": 3, "gy": 4, "gz": 5}, "sample_rate": 100, "unit": "m/s^2",
+          "gyro_unit": "rad/s"}
 #: magnetometer-ckexplorer's acc_log.csv states no rate: it is 160 blocks of 100 samples, one block per
 #: orientation, with no samples while the board moved. 25 Hz makes a block a 4 s hold for the default
 #: static detector (0.5 s window, 1.5 s minimum); the values do not depend on the rate (no term in time),
@@ -47,12 +53,18 @@ class Source:
     gravity: float | None = None  #: [m/s^2]; None: the run file's, else standard gravity
     fit: dict = field(default_factory=dict)
     note: str = ""
+    #: data fields added to a run file's (a gyroscope file the run file does not name: path relative to REAL)
+    extra: dict = field(default_factory=dict)
 
     def run_config(self):
         from imucal.config.run import config_from_dict, load_config
 
         if self.config is not None:
-            return load_config(self.config)
+            cfg = load_config(self.config)
+            if not self.extra:
+                return cfg
+            extra = {k: str(REAL / v) if k == "gyro_path" else v for k, v in self.extra.items()}
+            return replace(cfg, data=replace(cfg.data, **extra))
         data = {**self.data, "path": str(REAL / self.data["path"]) if not Path(self.data["path"]).is_absolute()
                 else self.data["path"]}
         d = {"data": data, "fit": dict(self.fit)}
@@ -68,7 +80,8 @@ SOURCES = [
            note="6 axis-aligned poses: angles held at 90 deg, samples mode (its run file)"),
     Source("mpu6050-tomisuarez", ROOT / "configs" / "mpu6050-tomisuarez.yaml", note="phi held (its run file)"),
     Source("ros-imu data1", data={"path": f"{ROS}/data1/acc_data.txt", "unit": "m/s^2"}, gravity=9.81744),
-    *[Source(f"ros-imu data{k}", ROOT / "configs" / f"ros-imu-data{k}.yaml") for k in (2, 3, 4)],
+    *[Source(f"ros-imu data{k}", ROOT / "configs" / f"ros-imu-data{k}.yaml",
+             extra={"gyro_path": f"{ROS}/data{k}/gyro_data.txt", "gyro_unit": "rad/s"}) for k in (2, 3, 4)],
     *[Source(f"mpu9150-mikoff imu{k}", data={"path": f"mpu9150-mikoff/imu{k}.log", **MIKOFF}) for k in (0, 1, 2)],
     Source("magnetometer-ckexplorer acc_log", data={"path": "magnetometer-ckexplorer/acc_log.csv",
                                                       "sample_rate": CKEXPLORER_RATE, "unit": "g"},
@@ -86,6 +99,8 @@ class Row:
     refused: str | None = None
     rms_default: float = math.nan  #: RMS of |a| - g over the default run's interval means [m/s^2]
     rms_uniform: float = math.nan  #: the uniform calibration's on the same interval means [m/s^2]
+    gyro: object | None = None  #: imucal.gyro.check.StillCheck; None without a gyroscope
+    gyro_refused: str | None = None  #: the gyroscope fit's refusal, if any
     seconds: float = 0.0
 
     @property
@@ -131,8 +146,20 @@ def evaluate(src: Source) -> Row:
     else:
         row.rms_default = _rms_on(row.default, row.default.calibration)
         row.rms_uniform = _rms_on(row.default, row.uniform.calibration)
+        _gyro(row)
     row.seconds = time.perf_counter() - t0
     return row
+
+
+def _gyro(row: Row) -> None:
+    """The gyroscope's three fits (imucal.gyro.check) on the default run, when the recording has one."""
+    from imucal.errors import ImucalError
+    from imucal.gyro.check import run_still_check
+
+    try:
+        row.gyro = run_still_check(row.default)
+    except ImucalError as exc:
+        row.gyro_refused = str(exc)
 
 
 # --- the table: each column a header and a cell; the gyroscope's columns go in GYRO_COLUMNS -----------
@@ -173,9 +200,31 @@ ACC_COLUMNS: tuple[Column, ...] = (
            else "yes" if r.met else "NO"),
     Column("bias moved", _moved),
 )
-#: The gyroscope's columns (its direction error beside the fit without the rejected intervals), to come
-#: from the gyroscope's trust work: Column(header, cell) entries here appear after ACC_COLUMNS.
-GYRO_COLUMNS: tuple[Column, ...] = ()
+
+
+def _gyro_cell(cell: Callable[[object], str], first: bool = False) -> Callable[[Row], str]:
+    """A gyroscope cell: "—" without a gyroscope; where its fit was refused, the first column says so."""
+    return lambda r: cell(r.gyro) if r.gyro is not None else "refused (notes)" if r.gyro_refused and first else "—"
+
+
+def _not_still(c) -> str:
+    """How many intervals the gyro found turning, and their mean rates [deg/s] beyond the bias."""
+    if not c.rejected:
+        return f"0 of {c.n_intervals}"
+    rates = ", ".join(f"{math.hypot(*r.rate_deg_s):.2g}" for r in sorted(c.rejected, key=lambda r: r.interval))
+    return f"{len(c.rejected)} of {c.n_intervals}: {rates} deg/s"
+
+
+#: The gyroscope's columns (imucal.gyro.check.StillCheck): its direction error beside the fit without
+#: the rejected intervals and the fit that takes every static interval as still, on the same motions.
+GYRO_COLUMNS: tuple[Column, ...] = (
+    Column("gyro: not still", _gyro_cell(_not_still, first=True)),
+    Column("gyro motions", _gyro_cell(lambda c: f"{c.n_segments}")),
+    Column("gyro default [deg]", _gyro_cell(lambda c: f"{c.default_deg:.4f}")),
+    Column("without rejected [deg]", _gyro_cell(lambda c: f"{c.removed_deg:.4f}")),
+    Column("all still (old) [deg]", _gyro_cell(lambda c: f"{c.all_still_deg:.4f}")),
+    Column("default no worse", _gyro_cell(lambda c: "yes" if c.no_worse else "NO")),
+)
 
 
 def markdown(rows: list[Row]) -> str:
@@ -188,6 +237,12 @@ def markdown(rows: list[Row]) -> str:
          "the default run's still intervals: RMS of |a| - g over the interval means. Target: default <= "
          f"{TARGET_RATIO:g} x uniform. \"Bias moved\": the bias random walk the default fit names, largest minus "
          "smallest of its smoothed estimate over the intervals, per sensor axis.", "",
+         "Gyroscope (where the recording has one; `imucal.gyro.check`): \"not still\" are the static intervals "
+         "the default gyro fit found turning (mean rate beyond the still poses' bias, deg/s), which it takes as no "
+         "still pose. Three fits, all scored on the same motions (those between the intervals kept, RMS "
+         "gravity-direction error): the default; the fit with the rejected intervals removed from the recording; "
+         "and the fit that takes every static interval as still (the behaviour before issue 25). Target: default "
+         "no worse than without the rejected intervals.", "",
          "| " + " | ".join(c.header for c in cols) + " |", "|" + "---|" * len(cols)]
     for r in rows:
         if r.refused:
@@ -195,12 +250,27 @@ def markdown(rows: list[Row]) -> str:
         else:
             L.append("| " + " | ".join(c.cell(r) for c in cols) + " |")
     notes = [f"* {r.source.name}: {r.source.note}." for r in rows if r.source.note]
-    notes += [f"* {r.source.name}: refused (exit 2): `{r.refused.replace(str(REAL), '../shared/data/real')}`"
-              for r in rows if r.refused]
-    ok = [r for r in rows if r.assessable]
-    L += ["", f"{sum(bool(r.met) for r in ok)} of {len(ok)} recordings with more interval means than parameters "
-              f"meet the target; {sum(1 for r in rows if r.refused)} refused.", ""]
+    notes += [f"* {r.source.name}: refused (exit 2): `{_shown(r.refused)}`" for r in rows if r.refused]
+    notes += [f"* {r.source.name}: gyroscope refused (exit 2): `{_shown(r.gyro_refused)}`"
+              for r in rows if r.gyro_refused]
+    L += ["", _summary(rows), ""]
     return "\n".join(L + (["Notes:", "", *notes, ""] if notes else []))
+
+
+def _summary(rows: list[Row]) -> str:
+    """How many recordings meet each target."""
+    ok = [r for r in rows if r.assessable]
+    gy = [r.gyro for r in rows if r.gyro is not None]
+    n_gyro_refused = sum(bool(r.gyro_refused) for r in rows)
+    return (f"{sum(bool(r.met) for r in ok)} of {len(ok)} recordings with more interval means than parameters "
+            f"meet the target; {sum(1 for r in rows if r.refused)} refused. Gyroscope: the default no worse than "
+            f"without the rejected intervals on {sum(c.no_worse for c in gy)} of {len(gy)} recordings"
+            + (f"; {n_gyro_refused} refused." if n_gyro_refused else "."))
+
+
+def _shown(message: str) -> str:
+    """A refusal with the real recordings' folder as the README names it, however the path was spelled."""
+    return re.sub(r"\S*/shared/data/real", "../shared/data/real", message.replace(str(REAL), "../shared/data/real"))
 
 
 def to_json(rows: list[Row]) -> list[dict]:
@@ -213,9 +283,19 @@ def to_json(rows: list[Row]) -> list[dict]:
                   "rms_default": r.rms_default, "rms_uniform": r.rms_uniform, "ratio": r.ratio,
                   "assessable": r.assessable, "met": r.met, "random_walk": math.sqrt(res.random_walk),
                   "bias_drift": None if res.bias_drift is None else res.bias_drift.to_json(
-                      r.default.calibration.raw_unit)}
+                      r.default.calibration.raw_unit), "gyro": _gyro_json(r)}
         out.append(d)
     return out
+
+
+def _gyro_json(r: Row) -> dict | None:
+    c = r.gyro
+    if c is None:
+        return {"refused": r.gyro_refused} if r.gyro_refused else None
+    return {"intervals": c.n_intervals, "segments": c.n_segments, "default_deg": c.default_deg,
+            "removed_deg": c.removed_deg, "all_still_deg": c.all_still_deg, "no_worse": c.no_worse,
+            "not_still": [{"interval": n.interval, "t_start": n.t_start, "t_end": n.t_end,
+                           "rate_deg_s": list(n.rate_deg_s or ()), "test": n.test.value} for n in c.rejected]}
 
 
 def _user_sources(args: argparse.Namespace) -> list[Source]:
