@@ -13,6 +13,8 @@ measures against our calibration:
     rest over 20 000 directions of a at |a| = g; and the RMS over every sample of the Xsens log.
     ArduPilot and PX4 read rad/s from their driver: raw / k with the sensitivity k the export states.
 The same calibration given effects (bias_temperature, scale_drift) checks that each says what it drops.
+ArduPilot and PX4 hold m/s^2 and refuse a calibration of counts: their rows are the same sensor with its
+readings converted as a driver does (driver_si), measured against that converted calibration.
 Writes docs/export_formats.md (and prints it).
 
     python scripts/export_table.py
@@ -107,19 +109,40 @@ def with_effects(cal: Calibration) -> Calibration:
     return dataclasses.replace(cal, params=params, std={n: 0.0 for n in params.names}, effects=effects)
 
 
+#: the formats whose parameters apply to a driver's readings in m/s^2 (imucal.export.autopilot)
+AUTOPILOTS = ("ardupilot", "px4")
+
+
+def driver_si(cal: Calibration, rec):
+    """The same sensor with its readings in m/s^2 as a driver converts them, (raw - z) / k (z: the shifts'
+    mean, the ADC's zero; k: the mean sensitivity [raw per m/s^2]): the calibration of those readings
+    (the calibrated acceleration unchanged) and the recording so converted. As tests/test_export_peers.py."""
+    from imucal.model.parameters import Parameters
+
+    z, k = float(np.mean(cal.values[0:3])), float(np.mean(cal.values[3:6]))
+    shift = {"s1": z, "s2": z, "s3": z}
+    params = Parameters(dataclasses.replace(
+        p, value=(p.value - shift.get(n, 0.0)) / k, lower=(p.lower - shift.get(n, 0.0)) / k,
+        upper=(p.upper - shift.get(n, 0.0)) / k, scale=p.scale / k, unit="m/s^2" if n in shift else "1")
+        if n in ("s1", "s2", "s3", "b1", "b2", "b3") else p for n, p in cal.params.items())
+    return (dataclasses.replace(cal, params=params, raw_unit="m/s^2"),
+            dataclasses.replace(rec, raw=(rec.raw - z) / k, unit="m/s^2"), z, k)
+
+
 def main() -> int:
     cfg = load_config(CONFIG)
     gyro_file = str(cfg.base_dir / cfg.data.gyro_path)
-    cal = calibrate_imu(cfg, gyro_file=gyro_file).calibration
-    rec = load_recording(cfg.data, cfg.base_dir)
-    raw_g = gyro_on_accel_samples(rec, gyro_file)
-    iv = detect_static(rec.t, rec.raw, cfg.static, rec.temp, source=rec.source)
-    eff = with_effects(cal)
-    fit = gyro_fit(cal)
+    counts_cal = calibrate_imu(cfg, gyro_file=gyro_file).calibration
+    counts_rec = load_recording(cfg.data, cfg.base_dir)
+    raw_g = gyro_on_accel_samples(counts_rec, gyro_file)
+    iv = detect_static(counts_rec.t, counts_rec.raw, cfg.static, counts_rec.temp, source=counts_rec.source)
+    si_cal, si_rec, zero, k_si = driver_si(counts_cal, counts_rec)
+    fit = gyro_fit(si_cal)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for fmt in FORMATS:
             name = NAMES[fmt]
+            cal, rec = (si_cal, si_rec) if fmt in AUTOPILOTS else (counts_cal, counts_rec)
             out = export(cal, fmt, ExportOptions(filename=name))
             path = Path(tmp) / name
             path.write_text(out.text)
@@ -129,15 +152,16 @@ def main() -> int:
             else:
                 peer = read_peer(path, fmt)
             mx, rms, R = direction_error(cal, peer)
-            k = fit.sensitivity if fmt in ("ardupilot", "px4") else 1.0
+            k = fit.sensitivity if fmt in AUTOPILOTS else 1.0
             g = gyro_errors(cal, peer, R, k, rec.raw, raw_g)
             cmp = compare(cal, peer, rec, iv, cal.gravity, ("ours", fmt))
-            dropped = [n for n in export(eff, fmt, ExportOptions(filename=name)).notes if n.startswith("effects")]
+            dropped = [n for n in export(with_effects(cal), fmt, ExportOptions(filename=name)).notes
+                       if n.startswith("effects")]
             rows.append((fmt, *HOLDS[fmt], mx, rms, float(cmp.rms[1]), float(cmp.rms[0]), g, bool(dropped)))
     lines = ["# Export formats: what each holds, and what it loses for the Xsens MTi", "",
              "Produced by `python scripts/export_table.py`: the Xsens recording (`configs/xsens-mti-imutk.yaml`, "
              "accelerometer and gyroscope) calibrated, exported to each format, read back with imucal's strict "
-             f"reader, and applied to raw readings. g = {cal.gravity} m/s^2; {iv.n} still intervals.", "",
+             f"reader, and applied to raw readings. g = {counts_cal.gravity} m/s^2; {iv.n} still intervals.", "",
              "<!-- begin:table -->",
              "| format | map it holds | temperature terms | gyroscope | noise (Kalibr fields) | "
              "lost over all directions: max / RMS [m/s^2] | still intervals: RMS of abs(a) - g [m/s^2] (ours "
@@ -147,7 +171,7 @@ def main() -> int:
         lines.append(f"| `{fmt}` | {holds} | {temp} | {gyro} | {noise} | {mx:.2g} / {rms:.2g} | {crms:.5f} |")
     lines += ["", "The gyroscope, in the accelerometer's best-aligned frame [deg/s]:", "",
               "| format | lost at abs(omega) = 1 rad/s, all directions: max / RMS | lost at rest, abs(a) = g, all "
-              f"directions: max / RMS | on the Xsens log ({rec.n} samples): RMS |",
+              f"directions: max / RMS | on the Xsens log ({counts_rec.n} samples): RMS |",
               "|---|---|---|---|"]
     for r in rows:
         g = r[9]
@@ -157,12 +181,14 @@ def main() -> int:
               "effects' reference point and `imucal export` prints what was dropped (checked with the Xsens "
               f"calibration given bias_temperature and scale_drift terms: {sum(r[-1] for r in rows)} of {len(rows)} "
               "formats say so). `imucal codegen` keeps every effect.",
-              "ArduPilot and PX4 apply their parameters to the driver's readings in m/s^2; the Xsens calibration's "
-              "input is raw counts, so their numbers reproduce it only on counts (the export says so). Their gyro "
-              f"offsets are in rad/s for a driver sensitivity k = {fit.sensitivity:.6g} counts per rad/s (the single "
-              "value that best fits this calibration; the export states it).",
-              f"The Xsens gyroscope's g-sensitivity (G_s, all three rows selected) is {np.abs(cal.gyro.gsens).max():.2g} "
-              "(rad/s)/(m/s^2) at most: imu_tk, which has no such term, loses it at rest; madlab (K_ga), Kalibr (A) "
+              "ArduPilot and PX4 apply their parameters to the driver's readings in m/s^2, and `imucal export` refuses "
+              "a calibration of counts such as the Xsens one (it converts g and mg): their rows are the same sensor "
+              f"with its readings converted as a driver does, (raw - {zero:.6g}) / {k_si:.6g} (the ADC's zero and the "
+              "mean sensitivity), calibrated by the same map. Their gyro offsets are in rad/s for a driver "
+              f"sensitivity k = {fit.sensitivity:.6g} counts per rad/s (the single value that best fits this "
+              "calibration; the export states it).",
+              "The Xsens gyroscope's g-sensitivity (G_s, all three rows selected) is "
+              f"{np.abs(counts_cal.gyro.gsens).max():.2g} (rad/s)/(m/s^2) at most: imu_tk, which has no such term, loses it at rest; madlab (K_ga), Kalibr (A) "
               "and the matrix file (acc_matrix) hold it.",
               "Kalibr's row uses imucal's offset keys; Kalibr itself estimates the biases online.",
               "<!-- end:table -->", ""]

@@ -175,7 +175,8 @@ def markdown(outs: list[Outcome], ros: list[Outcome]) -> str:
          "Each recording is calibrated by `imucal calibrate` with default settings and the gravity its authors used. "
          "Both calibrations are then evaluated on **imucal's** static intervals: RMS of |a| - g over the interval "
          "means, the authors' |a| computed with their own formula (no conversion involved), and the chi-square "
-         "with the noise of each mean alone (what the noise-weighted fit minimises; the default weights add a between-interval excess when the data show one).", "",
+         "with the noise of each mean alone (what the noise-weighted fit minimises; the default fit counts every "
+         "interval alike, and the noise sets its standard errors).", "",
          "<!-- begin:table -->",
          "| recording | unit | intervals (distinct) | model | RMS ours [m/s^2] | RMS authors [m/s^2] | authors' tool | "
          "chi2 ours | chi2 authors |", "|---|---|---|---|---|---|---|---|---|"]
@@ -192,7 +193,7 @@ def markdown(outs: list[Outcome], ros: list[Outcome]) -> str:
     if usable:
         L += ["", "Ours / authors' RMS on the same intervals: " + ", ".join(
             f"{o.rec.name} {o.rms_ours / o.rms_authors:.2f}" for o in usable) + ". This is partly home advantage: "
-              "our fit minimises the (noise-weighted) residual on exactly these intervals, while the authors fitted "
+              "our fit minimises the residual on exactly these intervals, while the authors fitted "
               "on intervals of their own detector with their own cost. The out-of-sample comparison is the "
               "cross-application between recordings of the ROS IMU below."]
     L += ["", "Refused and annotated recordings:", ""]
