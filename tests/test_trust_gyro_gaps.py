@@ -14,7 +14,7 @@ import pytest
 import yaml
 
 from imucal.gyro.fit import GyroOptions, fit_gyro
-from imucal.gyro.segments import GyroData, motion_segments
+from imucal.gyro.segments import GyroData, gap_spans, motion_segments
 from imucal.gyro.simulate import GyroTruth, hand_held
 
 TRUTH = GyroTruth(bias=np.array([0.01, -0.02, 0.005]), scale=np.array([1.01, 0.99, 1.005]),
@@ -53,7 +53,7 @@ def test_a_motion_with_a_gap_is_left_out_and_named():
     i = (d.end[MOTION] + d.start[MOTION + 1]) // 2
     t = d.t.copy()
     t[i:] += 0.5  # samples missing from i on: the step into i is a gap
-    seg = motion_segments(replace(d, t=t, gaps=np.array([i])))
+    seg = motion_segments(replace(d, t=t, gaps=gap_spans(t, [i])))
     assert seg.n == d.n_intervals - 2 and MOTION not in seg.index.tolist()
     (g,) = seg.gapped
     assert (g.segment, g.n_gaps) == (MOTION, 1) and g.longest_gap == pytest.approx(0.51)
@@ -65,7 +65,7 @@ def test_a_gap_inside_a_still_pose_leaves_every_motion():
     lead-in) costs no motion."""
     d = session()
     i = (d.start[MOTION] + d.end[MOTION]) // 2
-    seg = motion_segments(replace(d, gaps=np.array([i])), lead_in=0.5)
+    seg = motion_segments(replace(d, gaps=gap_spans(d.t, [i])), lead_in=0.5)
     assert seg.n == d.n_intervals - 1 and seg.gapped == ()
 
 
@@ -73,8 +73,8 @@ def test_a_gap_at_the_edge_of_a_lead_in_is_inside_the_motion():
     """With a lead-in the motion is integrated from inside the still pose: a gap there is inside it."""
     d = session()
     i = d.end[MOTION] - 10  # 0.1 s before the pose ends: inside a 0.5 s lead-in
-    assert motion_segments(replace(d, gaps=np.array([i]))).gapped == ()
-    (g,) = motion_segments(replace(d, gaps=np.array([i])), lead_in=0.5).gapped
+    assert motion_segments(replace(d, gaps=gap_spans(d.t, [i]))).gapped == ()
+    (g,) = motion_segments(replace(d, gaps=gap_spans(d.t, [i])), lead_in=0.5).gapped
     assert g.segment == MOTION
 
 
@@ -117,7 +117,7 @@ def test_the_gap_skewed_the_fit_when_integrated_across():
     cut = replace(d, t=d.t[rows], gyro=d.gyro[rows], acc=d.acc[rows],
                   start=np.searchsorted(rows, d.start), end=np.searchsorted(rows, d.end))
     gap = int(np.flatnonzero(np.diff(rows) > 1)[0]) + 1
-    blind, kept = fit_gyro(cut, GyroOptions()), fit_gyro(replace(cut, gaps=np.array([gap])), GyroOptions())
+    blind, kept = fit_gyro(cut, GyroOptions()), fit_gyro(replace(cut, gaps=gap_spans(cut.t, [gap])), GyroOptions())
     assert blind.gapped == () and [g.segment for g in kept.gapped] == [MOTION]
     assert np.max(np.abs(blind.scale - TRUTH.scale) / kept.scale_std) > 10
     assert np.all(np.abs(kept.scale - TRUTH.scale) < 4 * kept.scale_std)
@@ -137,8 +137,8 @@ def test_a_gap_in_a_second_gyro_file_leaves_its_motion_out(run_cli, tmp_path):
     assert r.code == 0, r.err
     gyro = json.loads((tmp_path / "s.json").read_text())["gyro"]
     (g,) = gyro["gap_motions"]
-    assert g["longest_gap"] == pytest.approx(0.01)  # an accelerometer step inside the gyro's gap
-    assert g["n_gaps"] == CUT + 1 and gyro["fit"]["n_segments"] == d.n_intervals - 2
+    assert g["longest_gap"] == pytest.approx((CUT + 1) * 0.01, abs=1e-6)  # the gyro's own step across it
+    assert g["n_gaps"] == 1 and gyro["fit"]["n_segments"] == d.n_intervals - 2
     assert np.all(np.abs(np.array(gyro["scale"]) - TRUTH.scale) < 4 * np.array(gyro["std"]["scale"]))
 
 
@@ -169,7 +169,7 @@ def test_an_axis_turned_only_in_motions_with_gaps_is_refused_naming_the_gaps():
     first = [int(d.end[k] + d.start[k + 1]) // 2 for k in range(4)]
     assert fit_gyro(d, GyroOptions(still="off")).segments.size == 10  # every axis turned: fits
     with pytest.raises(ImucalError) as e:
-        fit_gyro(replace(d, gaps=np.array(first)), GyroOptions(still="off"))
+        fit_gyro(replace(d, gaps=gap_spans(d.t, first)), GyroOptions(still="off"))
     msg = str(e.value)
     assert msg.startswith("<simulated>: gyro.scale: the gyro scale is not determined for the y and z axes: ") and (
         " (4 of 10 motions left out: a gap in the time stamps lies inside each, the longest 0.01 s) (fix: add "

@@ -28,8 +28,9 @@ class GyroData:
     end: np.ndarray  #: one past the last sample index of each static interval
     unit: str = "raw"  #: gyro unit: raw, rad/s or deg/s
     source: str | None = None
-    #: samples that follow a gap in the time stamps (Recording.time_base.gap_index), in order
-    gaps: np.ndarray = field(default_factory=lambda: np.empty(0, np.int64))
+    #: (k, 2) the gaps in the time stamps (samples missing: Recording.time_base), each as the times [s]
+    #: of the samples on either side of it, on ``t``'s time base (``gap_spans``)
+    gaps: np.ndarray = field(default_factory=lambda: np.empty((0, 2)))
 
     def __post_init__(self) -> None:
         n = self.t.shape[0]
@@ -109,9 +110,9 @@ def motion_segments(data: GyroData, lead_in: float = 0.0) -> Segments:
 
     ``lead_in`` [s]: integrate from this far before the end of a still pose to this far after the
     start of the next (at most a quarter of each pose), since a static detector's window can hold
-    a motion's first or last moments; the directions stay the whole poses' means. A motion with a
-    gap of the time stamps inside it (one of its steps ends at a sample of ``data.gaps``) is left
-    out and named in ``Segments.gapped``.
+    a motion's first or last moments; the directions stay the whole poses' means. A motion whose
+    integration span t[first]..t[last] overlaps a gap of ``data.gaps`` is left out and named in
+    ``Segments.gapped``.
     """
     _, _, a, a_se = data.static_means()
     norm = np.linalg.norm(a, axis=1)
@@ -131,19 +132,32 @@ def motion_segments(data: GyroData, lead_in: float = 0.0) -> Segments:
 
 
 def _without_gaps(seg: Segments, data: GyroData) -> Segments:
-    """``seg`` less the motions whose steps cross a gap (step i-1 -> i for a gap at sample i)."""
-    gaps = np.asarray(data.gaps, np.int64)
+    """``seg`` less the motions whose integration span overlaps a gap (a gap's span lies between two
+    samples: one inside a motion's steps overlaps it, one that ends at its first sample does not)."""
+    gaps = np.asarray(data.gaps, float).reshape(-1, 2)
     if gaps.size == 0:
         return seg
-    lo, hi = np.searchsorted(gaps, seg.first, side="right"), np.searchsorted(gaps, seg.last, side="right")
-    hit = hi > lo  # a gap g with first < g <= last
-    if not hit.any():
+    t0, t1 = data.t[seg.first], data.t[seg.last]  # both increasing: the motions are disjoint, in order
+    lo = np.searchsorted(t1, gaps[:, 0], side="right")  # the first motion ending after the gap starts
+    hi = np.searchsorted(t0, gaps[:, 1], side="left")  # past the last motion starting before it ends
+    some = np.flatnonzero(hi > lo)  # the gaps inside some motion (most lie in still poses)
+    if some.size == 0:
         return seg
-    dt = np.diff(data.t)
-    gapped = tuple(GapMotion(int(seg.index[k]), float(data.t[seg.first[k]]), float(data.t[seg.last[k]]),
-                             int(hi[k] - lo[k]), float(dt[gaps[lo[k]:hi[k]] - 1].max()))
+    motion = np.concatenate([np.arange(lo[j], hi[j]) for j in some])
+    length = np.repeat(gaps[some, 1] - gaps[some, 0], hi[some] - lo[some])
+    count, longest = np.zeros(seg.n, int), np.zeros(seg.n)
+    np.add.at(count, motion, 1)
+    np.maximum.at(longest, motion, length)
+    hit = count > 0
+    gapped = tuple(GapMotion(int(seg.index[k]), float(t0[k]), float(t1[k]), int(count[k]), float(longest[k]))
                    for k in np.flatnonzero(hit))
     return replace(seg.subset(~hit), gapped=gapped)
+
+
+def gap_spans(t: np.ndarray, after: np.ndarray) -> np.ndarray:
+    """(k, 2) the times [s] on either side of each gap, from the samples ``after`` the gaps."""
+    i = np.asarray(after, np.int64)
+    return np.column_stack([t[i - 1], t[i]]) if i.size else np.empty((0, 2))
 
 
 def interpolate(t_target: np.ndarray, t_src: np.ndarray, x_src: np.ndarray) -> np.ndarray:
@@ -163,26 +177,18 @@ def gyro_data_from_run(run, gyro_t: np.ndarray, gyro_raw: np.ndarray, unit: str 
     The loader starts the accelerometer's time at 0; ``acc_t0`` is its first time stamp in the
     gyro's clock (default: the gyro's first time stamp). A gyro with as many samples as the
     accelerometer is taken sample by sample (same time stamps); otherwise it is interpolated.
-    The gaps are the accelerometer's time base's and, for an interpolated gyro, every step of
-    the accelerometer that overlaps one of the gyro's own gaps (``gyro_gaps``: its samples after one).
+    The gaps are the accelerometer's time base's and, for an interpolated gyro, its own
+    (``gyro_gaps``: its samples after a gap), on the accelerometer's clock.
     """
     t = run.recording.t
     acc = run.calibration.apply(run.recording.raw)
     g = np.asarray(gyro_raw, float)
     tb = getattr(run.recording, "time_base", None)
-    gaps = np.empty(0, np.int64) if tb is None else np.asarray(tb.gap_index, np.int64)
+    gaps = gap_spans(t, np.empty(0, np.int64) if tb is None else tb.gap_index)
     if g.shape[0] != t.shape[0]:
         tg = np.asarray(gyro_t, float) - (gyro_t[0] if acc_t0 is None else acc_t0)
         g = interpolate(t, tg, g)
-        if gyro_gaps is not None and len(gyro_gaps):
-            gaps = np.union1d(gaps, _overlapping_steps(t, tg, np.asarray(gyro_gaps, np.int64)))
+        if gyro_gaps is not None:
+            gaps = np.vstack([gaps, gap_spans(tg, gyro_gaps)])
     return GyroData(t=t, gyro=g, acc=acc, start=run.intervals.start, end=run.intervals.end, unit=unit,
                     source=run.recording.source, gaps=gaps)
-
-
-def _overlapping_steps(t: np.ndarray, t_other: np.ndarray, other_gaps: np.ndarray) -> np.ndarray:
-    """Samples i of ``t`` whose step from i-1 overlaps a gap of ``t_other`` (its step into a sample of
-    ``other_gaps``): t[i] > the gap's start and t[i-1] < its end."""
-    lo = np.searchsorted(t, t_other[other_gaps - 1], side="right")  # first i with t[i] > start
-    hi = np.searchsorted(t, t_other[other_gaps], side="left")  # first i with t[i] >= end: i - 1 < end
-    return np.unique(np.concatenate([np.arange(max(a, 1), min(b + 1, t.size)) for a, b in zip(lo, hi)]))
