@@ -42,7 +42,7 @@ from imucal.gyro import GyroOptions, fit_gyro  # noqa: E402
 from imucal.gyro import attitude  # noqa: E402
 from imucal.gyro.fit import _grid_argmin, _search_scale, _segment_sigma, _steps  # noqa: E402
 from imucal.gyro.gsens import fit_static  # noqa: E402
-from imucal.gyro.model import misalignment_entries  # noqa: E402
+from imucal.model.gyroscope import gyro_model, gyro_parameters, misalignment_entries  # noqa: E402
 from imucal.gyro.segments import motion_segments  # noqa: E402
 from imucal.gyro.run import gyro_data  # noqa: E402
 from imucal.pipeline import calibrate  # noqa: E402
@@ -103,19 +103,24 @@ def same_optimum(data) -> list[str]:
     gm, _, am, _ = data.static_means()
     st = fit_static(gm, am, "auto")
     seg = motion_segments(data)
-    corrected = data.gyro - st.bias - data.acc @ st.H.T
-    steps = _steps(data, seg, corrected)
-    scale0 = np.full(3, _search_scale(steps, 9))
+    steps = _steps(data, seg)
+    model = gyro_model()
+    start = gyro_parameters(data.unit, st.bias, np.ones(3), gsens=st.H)
+    free = start.free_names  # scale_x..z, then the six entries of M_g
+    scale0 = np.full(3, _search_scale(steps, start))
     coarse = 10.0 ** np.arange(-2, 6.01, 0.1)
-    xs, rv = attitude.chained_graph(data.t, seg, corrected, 9, np.ones(3))
-    cost = ca.Function("cost", [xs], [ca.sumsqr(rv)])  # scale = 1 + x_s: the grid's scale k at x_s = k - 1
-    grid_cost = [float(cost(np.r_[np.full(3, k - 1.0), np.zeros(6)])) for k in coarse]
-    xs, rv = attitude.chained_graph(data.t, seg, corrected, 9, scale0)
+    xs, rv = attitude.chained_graph(data.t, seg, data.gyro, data.acc, model, free, np.array(start.values()))
+    cost = ca.Function("cost", [xs], [ca.sumsqr(rv)])  # every scale at the grid's k, M_g = I
+    grid_cost = [float(cost(np.r_[np.full(3, k), np.zeros(6)])) for k in coarse]
+    params = gyro_parameters(data.unit, st.bias, scale0, gsens=st.H)
+    xs, rv = attitude.chained_graph(data.t, seg, data.gyro, data.acc, model, free, np.array(params.values()))
     w = np.repeat(1.0 / _segment_sigma(data, seg, scale0), 3)
-    solver = ca.nlpsol("chained", "ipopt", {"x": xs, "f": 0.5 * ca.sumsqr(rv * ca.DM(w))},
+    d = np.array([params[n].scale for n in free])
+    p0 = np.array([params[n].value for n in free])
+    x = ca.MX.sym("x", len(free))
+    solver = ca.nlpsol("chained", "ipopt", {"x": x, "f": 0.5 * ca.sumsqr(ca.substitute(rv, xs, p0 + d * x) * ca.DM(w))},
                        {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "ipopt.tol": 1e-12})
-    x = np.asarray(solver(x0=np.zeros(9))["x"]).ravel()
-    ref = np.r_[scale0 * (1 + x[0:3]), x[3:9]]
+    ref = p0 + d * np.asarray(solver(x0=np.zeros(len(free)))["x"]).ravel()
     ours = np.r_[res.scale, misalignment_entries(res.misalignment)]
     sd = np.r_[res.scale_std, misalignment_entries(res.misalignment_std)]
     names = ["scale_x", "scale_y", "scale_z", "m_xy", "m_xz", "m_yx", "m_yz", "m_zx", "m_zy"]
@@ -127,7 +132,7 @@ def same_optimum(data) -> list[str]:
          "|---|---|---|---|---|"]
     for n, a, b, s in zip(names, ours, ref, sd):
         L.append(f"| {n} | {a:.10g} | {b:.10g} | {abs(a - b) / max(abs(b), 1e-300):.1e} | {abs(a - b) / s:.1e} |")
-    pruned = _grid_argmin(steps, coarse, 9)
+    pruned = _grid_argmin(steps, start, coarse)
     L += ["", f"Coarse scale grid (81 points, 10^-2 to 10^6): pruned search {pruned:.6g}, argmin of the chained "
           f"graph's cost at every point {coarse[int(np.argmin(grid_cost))]:.6g}."]
     return L

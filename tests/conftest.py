@@ -178,3 +178,48 @@ def unchanged(tmp_path):
         assert not (added or removed or changed), f"added {added}, removed {removed}, changed {changed}"
 
     return check
+
+
+def gyro_rate(raw: np.ndarray, bias, scale, mis, gsens=None, acc: np.ndarray | None = None) -> np.ndarray:
+    """The gyroscope's inverse model written directly in numpy, independently of imucal.model.gyroscope:
+    omega = M_g^-1 (B_g^-1 (raw - s_g) - G_s a), M_g unit diagonal with off-diagonal ``mis`` (m_xy, m_xz,
+    m_yx, m_yz, m_zx, m_zy), G_s [(rad/s) per (m/s^2)]."""
+    M = np.eye(3)
+    for k, (i, j) in enumerate(((0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1))):
+        M[i, j] = mis[k]
+    y = (np.atleast_2d(raw) - np.asarray(bias, float)) / np.asarray(scale, float)
+    if gsens is not None and acc is not None:
+        y = y - np.atleast_2d(acc) @ np.asarray(gsens, float).T
+    return np.linalg.solve(M, y.T).T
+
+
+def rk4_directions(t: np.ndarray, rate: np.ndarray, seg) -> np.ndarray:
+    """Gravity-direction error [deg] per motion segment, integrated by imu_tk's quaternion RK4 step in
+    plain numpy, stepping every segment together: independent of imucal.gyro.attitude's generated code."""
+    def omega(w: np.ndarray) -> np.ndarray:
+        x, y, c = w[:, 0], w[:, 1], w[:, 2]
+        O = np.zeros((w.shape[0], 4, 4))
+        O[:, 0, 1:], O[:, 1:, 0] = -w, w
+        O[:, 1, 2], O[:, 1, 3], O[:, 2, 1], O[:, 2, 3], O[:, 3, 1], O[:, 3, 2] = c, -y, -c, x, y, -x
+        return O
+
+    steps = seg.last - seg.first
+    q = np.tile([1.0, 0, 0, 0], (seg.n, 1))
+    for j in range(int(steps.max(initial=0))):
+        act = j < steps
+        i = np.minimum(seg.first + j, seg.last - 1)
+        dt = np.where(act, t[i + 1] - t[i], 0.0)[:, None]
+        w0, w1 = rate[i], rate[i + 1]
+        O0, Om, O1 = omega(w0), omega(0.5 * (w0 + w1)), omega(w1)
+        k1 = 0.5 * np.einsum("nij,nj->ni", O0, q)
+        k2 = 0.5 * np.einsum("nij,nj->ni", Om, q + 0.5 * dt * k1)
+        k3 = 0.5 * np.einsum("nij,nj->ni", Om, q + 0.5 * dt * k2)
+        k4 = 0.5 * np.einsum("nij,nj->ni", O1, q + dt * k3)
+        qn = q + dt * (k1 + 2 * k2 + 2 * k3 + k4) / 6
+        q = qn / np.linalg.norm(qn, axis=1, keepdims=True)
+    w, x, y, z = q.T
+    R = np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], 1),
+                  np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], 1),
+                  np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], 1)], 1)
+    carried = np.einsum("nji,nj->ni", R, seg.u0)
+    return np.degrees(np.arctan2(np.linalg.norm(np.cross(carried, seg.u1), axis=1), np.sum(carried * seg.u1, axis=1)))

@@ -6,9 +6,11 @@ import pytest
 
 from imucal.errors import ImucalError
 from imucal.gyro import GyroOptions, fit_gyro
+from conftest import gyro_rate, rk4_directions
 from imucal.gyro.evaluate import direction_errors_deg
 from imucal.gyro.fit import _steps
-from imucal.gyro.model import apply_rate, misalignment_entries, misalignment_matrix
+from imucal.model.gyroscope import gyro_model, gyro_parameters, misalignment_entries, misalignment_matrix
+from imucal.solve.vectorize import apply_values
 from imucal.gyro.segments import motion_segments
 from imucal.gyro.simulate import GyroTruth, simulate
 
@@ -53,25 +55,32 @@ def test_refuses_when_an_axis_is_never_turned_about() -> None:
     assert "add rotations about the z axis" in str(e.value)
 
 
-def test_casadi_graph_and_numpy_evaluator_agree() -> None:
+def test_generated_integration_equals_an_independent_numpy_rk4() -> None:
+    """The fit's residuals (the description's apply, RK4 increments and products generated from CasADi) and
+    the report's direction errors agree with imu_tk's RK4 written in plain numpy (conftest.rk4_directions)."""
     data = simulate(TRUTH, TURNS[:4], seed=5)
     seg = motion_segments(data)
-    x = np.r_[0.01, -0.02, 0.005, 0.01, 0.0, -0.01, 0.02, 0.0, 0.01]
-    corrected = data.gyro - TRUTH.bias
-    r = _steps(data, seg, corrected).residuals(x, TRUTH.scale)
-    rate = apply_rate(data.gyro, TRUTH.bias, TRUTH.scale * (1 + x[:3]), x[3:9])
-    ang = direction_errors_deg(data.t, rate, seg)
+    scale, mis = TRUTH.scale * (1 + np.r_[0.01, -0.02, 0.005]), np.r_[0.01, 0.0, -0.01, 0.02, 0.0, 0.01]
+    params = gyro_parameters("raw", TRUTH.bias, scale, mis)
+    free = params.free_names
+    r = _steps(data, seg).residuals(gyro_model(), free, [params[n].value for n in free], params.values())
+    ang = rk4_directions(data.t, gyro_rate(data.gyro, TRUTH.bias, scale, mis), seg)
     # |R^T u0 - u1| = 2 sin(angle / 2) for unit vectors
     np.testing.assert_allclose(np.linalg.norm(r, axis=1), 2 * np.sin(np.radians(ang) / 2), rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(direction_errors_deg(data.t, gyro_rate(data.gyro, TRUTH.bias, scale, mis), seg), ang,
+                               rtol=1e-9, atol=1e-12)
 
 
 def test_apply_inverts_the_forward_model() -> None:
+    """The description's map (numpy generated from CasADi) inverts raw = s_g + B_g (M_g omega + G_s a)."""
     rng = np.random.default_rng(0)
     omega, acc = rng.normal(size=(5, 3)), rng.normal(size=(5, 3))
     G = rng.normal(size=(3, 3)) * 1e-4
     M = misalignment_matrix(TRUTH.mis)
     raw = TRUTH.bias + (omega @ M.T + acc @ G.T) * TRUTH.scale
-    np.testing.assert_allclose(apply_rate(raw, TRUTH.bias, TRUTH.scale, TRUTH.mis, G, acc), omega, atol=1e-9)
+    p = gyro_parameters("raw", TRUTH.bias, TRUTH.scale, TRUTH.mis, (TRUTH.scale[:, None] * G).ravel())
+    np.testing.assert_allclose(apply_values(gyro_model(), p.values(), raw, acc), omega, atol=1e-9)
+    assert misalignment_entries(M).tolist() == TRUTH.mis.tolist()
 
 
 def test_bad_gsens_option_is_refused() -> None:

@@ -10,6 +10,7 @@ from imucal.gyro import GyroOptions, fit_gyro
 from imucal.gyro.attitude import chained_graph
 from imucal.gyro.fit import _grid_argmin, _segment_sigma, _steps
 from imucal.gyro.gsens import fit_static
+from imucal.model.gyroscope import gyro_model, gyro_parameters
 from imucal.gyro.segments import motion_segments
 from imucal.gyro.simulate import GyroTruth, simulate
 
@@ -24,44 +25,63 @@ def case():
     seg = motion_segments(data)
     gm, _, am, _ = data.static_means()
     st = fit_static(gm, am, "off")
-    return data, seg, data.gyro - st.bias - data.acc @ st.H.T
+    return data, seg, st
 
 
-@pytest.mark.parametrize("nx", [9, 12])
-def test_residuals_and_jacobian_equal_the_chained_graph(case, nx: int) -> None:
-    data, seg, corrected = case
-    scale0 = TRUTH.scale * 1.01
-    xs, rv = chained_graph(data.t, seg, corrected, nx, scale0)
+def _params(st, scale, free_bias=False):
+    return gyro_parameters("raw", st.bias, scale, gsens=st.H, free_bias=free_bias)
+
+
+@pytest.mark.parametrize("free_bias", [False, True])
+def test_residuals_and_jacobian_equal_the_chained_graph(case, free_bias: bool) -> None:
+    data, seg, st = case
+    params = _params(st, TRUTH.scale * 1.01, free_bias)
+    free, pfix = params.free_names, np.array(params.values())
+    xs, rv = chained_graph(data.t, seg, data.gyro, data.acc, gyro_model(), free, pfix)
     f = ca.Function("ref", [xs], [rv, ca.jacobian(rv, xs)])
-    x = np.random.default_rng(1).normal(size=nx) * 0.02
-    r_ref, J_ref = (np.asarray(v) for v in f(x))
-    r, J = _steps(data, seg, corrected).jacobian(x, scale0)
+    d = np.array([params[n].scale for n in free])
+    pfree = np.array([params[n].value for n in free]) + d * np.random.default_rng(1).normal(size=len(free)) * 0.02
+    r_ref, J_ref = (np.asarray(v) for v in f(pfree))
+    r, J = _steps(data, seg).jacobian(gyro_model(), free, pfree, pfix)
     np.testing.assert_allclose(r.ravel(), r_ref.ravel(), rtol=0, atol=1e-13)
-    np.testing.assert_allclose(J, J_ref, rtol=0, atol=1e-11 * np.abs(J_ref).max())
+    np.testing.assert_allclose(J * d, J_ref * d, rtol=0, atol=1e-11 * np.abs(J_ref * d).max())
 
 
 def test_optimum_equals_the_exact_hessian_nlp(case) -> None:
-    data, seg, corrected = case
+    data, seg, st = case
     r = fit_gyro(data, GyroOptions(gsens="off", nominal_scale=4700.0))
-    scale0 = np.full(3, 4700.0)
-    w = 1.0 / _segment_sigma(data, seg, scale0)
-    xs, rv = chained_graph(data.t, seg, corrected, 9, scale0)
-    obj = 0.5 * ca.sumsqr(rv * ca.DM(np.repeat(w, 3)))
-    solver = ca.nlpsol("ref", "ipopt", {"x": xs, "f": obj},
+    params = _params(st, np.full(3, 4700.0))
+    free = params.free_names
+    w = 1.0 / _segment_sigma(data, seg, np.full(3, 4700.0))
+    xs, rv = chained_graph(data.t, seg, data.gyro, data.acc, gyro_model(), free, np.array(params.values()))
+    d = np.array([params[n].scale for n in free])
+    p0 = np.array([params[n].value for n in free])
+    x = ca.MX.sym("x", len(free))
+    obj = 0.5 * ca.sumsqr(ca.substitute(rv, xs, p0 + d * x) * ca.DM(np.repeat(w, 3)))
+    solver = ca.nlpsol("ref", "ipopt", {"x": x, "f": obj},
                        {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "ipopt.tol": 1e-12})
-    x = np.asarray(solver(x0=np.zeros(9))["x"]).ravel()
+    p = p0 + d * np.asarray(solver(x0=np.zeros(len(free)))["x"]).ravel()
     assert solver.stats()["success"]
-    np.testing.assert_allclose(r.scale, scale0 * (1 + x[0:3]), rtol=1e-6)
-    assert np.all(np.abs(r.scale - scale0 * (1 + x[0:3])) <= 1e-3 * r.scale_std)
+    ref = dict(zip(free, p))
+    scale = np.array([ref[f"scale_{a}"] for a in "xyz"])
+    np.testing.assert_allclose(r.scale, scale, rtol=1e-6)
+    assert np.all(np.abs(r.scale - scale) <= 1e-3 * r.scale_std)
     ours = np.array([r.misalignment[i, j] for i, j in ((0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1))])
     sd = np.array([r.misalignment_std[i, j] for i, j in ((0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1))])
-    assert np.all(np.abs(ours - x[3:9]) <= 1e-3 * sd), (ours, x[3:9], sd)
+    mis = np.array([ref[n] for n in ("m_xy", "m_xz", "m_yx", "m_yz", "m_zx", "m_zy")])
+    assert np.all(np.abs(ours - mis) <= 1e-3 * sd), (ours, mis, sd)
 
 
 def test_pruned_grid_search_is_the_grid_argmin(case) -> None:
-    data, seg, corrected = case
-    steps = _steps(data, seg, corrected)
+    data, seg, st = case
+    steps = _steps(data, seg)
+    params = _params(st, np.ones(3))
+    free, pfix = params.free_names, params.values()
+
+    def cost(k: float) -> float:
+        return float((steps.residuals(gyro_model(), free, np.r_[np.full(3, k), np.zeros(6)], pfix) ** 2).sum())
+
     grid = 10.0 ** np.arange(1, 5.01, 0.1)
-    brute = grid[int(np.argmin([steps.residuals(np.zeros(9), np.full(3, k)).__pow__(2).sum() for k in grid]))]
-    assert _grid_argmin(steps, grid, 9) == brute
+    brute = grid[int(np.argmin([cost(k) for k in grid]))]
+    assert _grid_argmin(steps, params, grid) == brute
     assert abs(np.log10(brute / 4770.0)) < 0.1  # and it found the true scale's basin

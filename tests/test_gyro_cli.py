@@ -41,9 +41,11 @@ def test_two_files_calibrate_both_sensors(two_files_run):
 
 
 def test_the_calibration_file_applies_the_gyro_as_the_fit_did(two_files_run):
-    """Saved and loaded, the gyro part gives the fit's calibrated rates (imucal.gyro.model.apply_rate)."""
+    """Saved and loaded, the gyro part gives the fit's calibrated rates (the model written independently:
+    conftest.gyro_rate)."""
+    from conftest import gyro_rate
     from imucal.calibration.fileformat import load_calibration
-    from imucal.gyro.model import apply_rate, misalignment_entries
+    from imucal.model.gyroscope import misalignment_entries
 
     _, d = two_files_run
     cal = load_calibration(d / "o" / "calibration.yaml")
@@ -52,7 +54,7 @@ def test_the_calibration_file_applies_the_gyro_as_the_fit_did(two_files_run):
     raw_a = np.loadtxt(real_file(*ACC))[::500, 1:]
     acc, omega = cal.apply_imu(raw_a, raw_g)
     gs = np.array(g["gsens"]) if any(g["gsens_selected"]) else None
-    want = apply_rate(raw_g, np.array(g["bias"]), np.array(g["scale"]),
+    want = gyro_rate(raw_g, np.array(g["bias"]), np.array(g["scale"]),
                       misalignment_entries(np.array(g["misalignment"])), gs, acc)
     np.testing.assert_allclose(omega, want, rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(cal.gyro.apply(raw_g[0], acc[0]), want[0], rtol=1e-9, atol=1e-12)

@@ -7,11 +7,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from conftest import gyro_rate
 from imucal.errors import ImucalError
 from imucal.gyro import GyroOptions, fit_gyro
 from imucal.gyro.coverage import Z95, binomial_band, monte_carlo, scores
 from imucal.gyro.evaluate import direction_errors_deg
-from imucal.gyro.model import apply_rate
 from imucal.gyro.segments import motion_segments
 from imucal.gyro.simulate import GyroTruth, Motion, hand_held, record
 
@@ -28,7 +28,7 @@ def test_hand_held_attitude_follows_the_rate() -> None:
     quiet = GyroTruth(TRUTH.bias, TRUTH.scale, TRUTH.mis, TRUTH.gsens, noise=0.0)
     d = hand_held(quiet, seed=3, unit="rad/s", acc_noise=0.0)
     seg = motion_segments(d)
-    err = direction_errors_deg(d.t, apply_rate(d.gyro, quiet.bias, quiet.scale, quiet.mis, quiet.gsens, d.acc), seg)
+    err = direction_errors_deg(d.t, gyro_rate(d.gyro, quiet.bias, quiet.scale, quiet.mis, quiet.gsens, d.acc), seg)
     turned = np.degrees(np.arccos(np.clip(np.sum(seg.u0 * seg.u1, axis=1), -1, 1)))
     assert err.max() < 0.01 and np.median(turned) > 30, (err.max(), np.median(turned))
     assert len(set(np.diff(d.start))) > 1  # poses and turns of different lengths

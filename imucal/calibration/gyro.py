@@ -17,7 +17,9 @@ import numpy as np
 from imucal.calibration.fields import GYROSCOPE, check_unit
 from imucal.errors import ImucalError, short
 from imucal.files.schema import fill, rule
-from imucal.gyro.model import misalignment_entries, rate_map
+from imucal.model.gyroscope import gyro_model, gyro_parameters, misalignment_entries
+from imucal.model.parameters import Parameters
+from imucal.solve.vectorize import apply_values
 from imucal.gyro.result import GyroResult
 
 KIND = GYROSCOPE
@@ -55,10 +57,15 @@ class GyroCalibration:
     def uses_gsens(self) -> bool:
         return bool(np.any(self.gsens != 0))
 
+    def parameters(self) -> Parameters:
+        """The gyroscope description's named parameters (imucal.model.gyroscope): H = B_g G_s."""
+        return gyro_parameters(self.unit, self.bias, self.scale, misalignment_entries(self.misalignment),
+                               (np.asarray(self.scale, float)[:, None] * np.asarray(self.gsens, float)).ravel())
+
     def rate_map(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(C, c, D) with omega = C raw + c - D a."""
-        C, D = rate_map(self.scale, misalignment_entries(self.misalignment), self.gsens)
-        return C, -C @ self.bias, D
+        """(C, c, D) with omega = C raw + c - D a: the description's map, affine (SensorModel.affine)."""
+        C, c, B = (np.asarray(v) for v in gyro_model().affine(self.parameters().values()))
+        return C, c.ravel(), -B
 
     def apply(self, raw: np.ndarray, acc: np.ndarray | None = None) -> np.ndarray:
         """Calibrated rate [rad/s] of raw readings (N, 3) or (3,); ``acc`` [m/s^2] is the
@@ -68,13 +75,11 @@ class GyroCalibration:
         raw = np.atleast_2d(raw)
         if raw.ndim != 2 or raw.shape[1] != 3:
             raise ImucalError(f"gyro data must have shape (N, 3) or (3,), got {raw.shape}", field="raw_gyro")
-        C, c, D = self.rate_map()
-        w = raw @ C.T + c
-        if self.uses_gsens:
-            if acc is None:
-                raise ImucalError("this gyro calibration has a g-sensitivity", field="acc",
-                                  fix="pass the calibrated acceleration of the same samples")
-            w -= np.atleast_2d(np.asarray(acc, float)) @ D.T
+        if self.uses_gsens and acc is None:
+            raise ImucalError("this gyro calibration has a g-sensitivity", field="acc",
+                              fix="pass the calibrated acceleration of the same samples")
+        a = None if acc is None else np.broadcast_to(np.atleast_2d(np.asarray(acc, float)), raw.shape)
+        w = apply_values(gyro_model(), self.parameters().values(), raw, a)
         return w[0] if one else w
 
     def to_dict(self) -> dict[str, Any]:

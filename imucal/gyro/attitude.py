@@ -7,6 +7,11 @@ that are multiplied side by side (one numpy operation over all blocks per positi
 products of each segment in turn. Every increment is computed at once (numpy code generated from the
 CasADi model by imucal.solve.vectorize): no per-sample Python, no graph to build per data shape.
 
+The rate of each step's ends is the sensor description's own map (SensorModel.apply of
+imucal.model.gyroscope: raw reading and calibrated acceleration in, rad/s out), with the free and
+fixed parameters split as imucal.solve.least_squares.split_parameters does; a rate calibrated by any
+other means (a peer's calibration) is integrated by the same increments (``rate_steps``).
+
 Exact derivatives of the discrete scheme, without approximation: with Pre_j = a_0 (x) ... (x) a_{j-1},
     dP = sum_j Pre_j (x) da_j (x) a_j* (x) Pre_j* (x) P = (0, sum_j R(Pre_j) t_j) (x) P,
 t_j = vec(da_j (x) a_j*) (the scalar part is zero for a unit a_j), R(q) the rotation of q
@@ -20,7 +25,9 @@ from functools import cached_property, lru_cache
 import casadi as ca
 import numpy as np
 
-from imucal.gyro.model import direction_residual, quat_mul, quat_to_rot, rate_map, rk4_increment, rk4_step
+from imucal.gyro.model import direction_residual, quat_mul, quat_to_rot, rk4_increment, rk4_step
+from imucal.model.sensor import SensorModel
+from imucal.solve.least_squares import split_parameters
 from imucal.solve.vectorize import Vectorized
 
 #: steps per block: about the square root of a long segment's steps (hundreds)
@@ -28,42 +35,52 @@ BLOCK = 32
 _IDENTITY = np.array([1.0, 0.0, 0.0, 0.0])
 
 
-def fit_rates(x, scale0, y):
-    """Calibrated rate of the fit's unknowns x: C (y - db), B_g = diag(scale0 (1 + x_s)), db = scale0 1e-3 x_b."""
-    C, _ = rate_map(scale0 * (1 + x[0:3]), x[3:9])
-    db = scale0 * 1e-3 * x[9:12] if x.shape[0] > 9 else ca.DM.zeros(3, 1)
-    return ca.mtimes(C, y - db)
-
-
 @dataclass(frozen=True)
 class _Generated:
-    """Numpy evaluators generated from the CasADi model, for ``nx`` unknowns."""
+    """Numpy evaluators generated from the CasADi model, for one set of free parameters."""
 
-    increment: Vectorized  #: (x, scale0, y0, y1, dt) -> a (unit quaternion of one step)
-    tangent: Vectorized  #: (x, scale0, y0, y1, dt, Pre) -> R(Pre) vec(da/dx (x) a*)   (3 x nx)
+    increment: Vectorized  #: (pfree, pfix, raw0, raw1, acc0, acc1, dt) -> a (unit quaternion of one step)
+    tangent: Vectorized  #: (..., Pre) -> R(Pre) vec(da/dpfree (x) a*)   (3 x nfree)
     product: Vectorized  #: (p, q) -> p (x) q
     end: Vectorized  #: (P, u0, u1) -> r = R(P)^T u0 - u1 (imu_tk's residual)
-    end_jac: Vectorized  #: (P, u0, u1, Phi) -> r, dr/dx with dP/dx = (0, Phi) (x) P
+    end_jac: Vectorized  #: (P, u0, u1, Phi) -> r, dr/dpfree with dP/dpfree = (0, Phi) (x) P
 
 
-@lru_cache(maxsize=4)
-def _generated(nx: int) -> _Generated:
-    x, s0, y0, y1, dt = (ca.SX.sym(n, k) for n, k in (("x", nx), ("scale0", 3), ("y0", 3), ("y1", 3), ("dt", 1)))
-    a = rk4_increment()(fit_rates(x, s0, y0), fit_rates(x, s0, y1), dt)
-    conj = a * ca.DM([1, -1, -1, -1])
-    da = ca.jacobian(a, x)
-    pre = ca.SX.sym("pre", 4)
-    t = ca.horzcat(*[quat_mul(da[:, k], conj)[1:4] for k in range(nx)])
-    args = [x, s0, y0, y1, dt]
+@lru_cache(maxsize=1)
+def _shared() -> tuple[Vectorized, Vectorized, Vectorized, Vectorized]:
+    """(rate increment (w0, w1, dt) -> a, product, end residual, angle (P, u0, u1) -> deg): what integrating a
+    calibrated rate needs, whoever calibrated it."""
+    w0, w1, dt = ca.SX.sym("w0", 3), ca.SX.sym("w1", 3), ca.SX.sym("dt")
     p, q = ca.SX.sym("p", 4), ca.SX.sym("q", 4)
-    P, u0, u1, Phi = ca.SX.sym("P", 4), ca.SX.sym("u0", 3), ca.SX.sym("u1", 3), ca.SX.sym("Phi", 3, nx)
+    P, u0, u1 = ca.SX.sym("P", 4), ca.SX.sym("u0", 3), ca.SX.sym("u1", 3)
+    carried = ca.mtimes(quat_to_rot(P / ca.norm_2(P)).T, u0)  # R^T u0, gravity carried to the end
+    angle = ca.atan2(ca.norm_2(ca.cross(carried, u1)), ca.dot(carried, u1)) * (180.0 / np.pi)
+    return (Vectorized(ca.Function("gyro_rate_increment", [w0, w1, dt], [rk4_increment()(w0, w1, dt)])),
+            Vectorized(ca.Function("gyro_qmul", [p, q], [quat_mul(p, q)])),
+            Vectorized(ca.Function("gyro_end", [P, u0, u1], [direction_residual()(P / ca.norm_2(P), u0, u1)])),
+            Vectorized(ca.Function("gyro_angle", [P, u0, u1], [angle])))
+
+
+@lru_cache(maxsize=8)
+def _generated(model: SensorModel, free: tuple[str, ...]) -> _Generated:
+    pf, pfix, p = split_parameters(model.names, free)
+    raw0, raw1, acc0, acc1 = (ca.SX.sym(n, 3) for n in ("raw0", "raw1", "acc0", "acc1"))
+    dt = ca.SX.sym("dt")
+    a = rk4_increment()(model.apply(raw0, acc0, p), model.apply(raw1, acc1, p), dt)
+    conj = a * ca.DM([1, -1, -1, -1])
+    da = ca.jacobian(a, pf)
+    pre = ca.SX.sym("pre", 4)
+    nf = len(free)
+    t = ca.horzcat(*[quat_mul(da[:, k], conj)[1:4] for k in range(nf)])
+    args = [pf, pfix, raw0, raw1, acc0, acc1, dt]
+    P, u0, u1, Phi = ca.SX.sym("P", 4), ca.SX.sym("u0", 3), ca.SX.sym("u1", 3), ca.SX.sym("Phi", 3, nf)
     r = direction_residual()(P / ca.norm_2(P), u0, u1)
-    dP = ca.horzcat(*[quat_mul(ca.vertcat(0, Phi[:, k]), P) for k in range(nx)])
+    dP = ca.horzcat(*[quat_mul(ca.vertcat(0, Phi[:, k]), P) for k in range(nf)])
+    _, product, end, _ = _shared()
     return _Generated(
         increment=Vectorized(ca.Function("gyro_increment", args, [a])),
         tangent=Vectorized(ca.Function("gyro_tangent", args + [pre], [ca.mtimes(quat_to_rot(pre), t)])),
-        product=Vectorized(ca.Function("gyro_qmul", [p, q], [quat_mul(p, q)])),
-        end=Vectorized(ca.Function("gyro_end", [P, u0, u1], [r])),
+        product=product, end=end,
         end_jac=Vectorized(ca.Function("gyro_end_jac", [P, u0, u1, Phi], [r, ca.mtimes(ca.jacobian(r, P), dP)])))
 
 
@@ -89,7 +106,7 @@ class Layout:
         return Layout(np.tile(np.asarray(self.lengths, int), times))
 
 
-def products(gen: _Generated, a: np.ndarray, layout: Layout, prefixes: bool = False
+def products(product: Vectorized, a: np.ndarray, layout: Layout, prefixes: bool = False
              ) -> tuple[np.ndarray, np.ndarray | None]:
     """Each segment's product P (4, n) of the row increments a (4, S); with ``prefixes`` also Pre_j (4, S)."""
     row_block, row_pos, block_seg, block_pos, nb = layout.index
@@ -100,63 +117,83 @@ def products(gen: _Generated, a: np.ndarray, layout: Layout, prefixes: bool = Fa
     for i in range(BLOCK):
         if prefixes:
             inner[:, :, i] = cur
-        cur = gen.product(cur, grid[:, :, i])[0]
+        cur = product(cur, grid[:, :, i])[0]
     n = nb.size
-    outer = np.repeat(_IDENTITY[:, None, None], n, 1).repeat(int(nb.max()), 2)  # block products of a segment
+    outer = np.repeat(_IDENTITY[:, None, None], n, 1).repeat(int(nb.max(initial=1)), 2)  # block products of a segment
     outer[:, block_seg, block_pos] = cur
     seg = np.repeat(_IDENTITY[:, None], n, 1)
     before = np.empty((4, block_seg.size)) if prefixes else None  # product of a segment's earlier blocks
-    for m in range(int(nb.max())):
+    for m in range(int(nb.max(initial=0))):
         if prefixes:
             at = block_pos == m
             before[:, at] = seg[:, block_seg[at]]
-        seg = gen.product(seg, outer[:, :, m])[0]
+        seg = product(seg, outer[:, :, m])[0]
     if not prefixes:
         return seg, None
-    return seg, gen.product(before[:, row_block], inner[:, row_block, row_pos])[0]
+    return seg, product(before[:, row_block], inner[:, row_block, row_pos])[0]
+
+
+def _step_rows(first: np.ndarray, last: np.ndarray) -> np.ndarray:
+    """The sample index of each RK4 step's start, segment by segment (a step runs from i to i + 1)."""
+    return np.concatenate([np.arange(f, l) for f, l in zip(first, last)]) if len(first) else np.zeros(0, int)
 
 
 @dataclass(frozen=True)
 class SegmentSteps:
     """The RK4 steps of a fit: rows concatenated segment by segment, and each segment's directions."""
 
-    y0: np.ndarray  #: (3, S) corrected raw rate at each step's start
-    y1: np.ndarray  #: (3, S) ... and end
+    raw0: np.ndarray  #: (3, S) raw reading at each step's start
+    raw1: np.ndarray  #: (3, S) ... and end
+    acc0: np.ndarray  #: (3, S) calibrated acceleration at each step's start [m/s^2] (the map's inputs)
+    acc1: np.ndarray  #: (3, S) ... and end
     dt: np.ndarray  #: (1, S) [s]
     u0: np.ndarray  #: (3, n) gravity direction at the segment's start
     u1: np.ndarray  #: (3, n) ... and end
     layout: Layout
 
+    @classmethod
+    def of(cls, t: np.ndarray, raw: np.ndarray, acc: np.ndarray, seg) -> "SegmentSteps":
+        """The steps of the segments ``seg`` (imucal.gyro.segments.Segments) of samples (t, raw, acc)."""
+        i0 = _step_rows(seg.first, seg.last)
+        T = (lambda x: np.ascontiguousarray(x.T))
+        return cls(T(raw[i0]), T(raw[i0 + 1]), T(acc[i0]), T(acc[i0 + 1]), (t[i0 + 1] - t[i0])[None, :],
+                   T(seg.u0), T(seg.u1), Layout(np.asarray(seg.lengths, int)))
+
     @property
     def n(self) -> int:
         return int(self.u0.shape[1])
 
-    def residuals(self, x: np.ndarray, scale0: np.ndarray) -> np.ndarray:
+    def _args(self, pfree, pfix) -> list:
+        return [pfree, pfix, self.raw0, self.raw1, self.acc0, self.acc1, self.dt]
+
+    def residuals(self, model: SensorModel, free: tuple[str, ...], pfree, pfix) -> np.ndarray:
         """imu_tk's residual R^T u0 - u1 of every segment, (n, 3)."""
-        gen = _generated(x.size)
-        a = gen.increment(x, scale0, self.y0, self.y1, self.dt)[0]
-        P, _ = products(gen, a, self.layout)
+        gen = _generated(model, free)
+        a = gen.increment(*self._args(pfree, pfix))[0]
+        P, _ = products(gen.product, a, self.layout)
         return gen.end(P, self.u0, self.u1)[0].T
 
-    def jacobian(self, x: np.ndarray, scale0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Residuals (n, 3) and their Jacobian (3 n, nx), rows in the order r_0x, r_0y, r_0z, r_1x, ..."""
-        gen = _generated(x.size)
-        a = gen.increment(x, scale0, self.y0, self.y1, self.dt)[0]
-        P, pre = products(gen, a, self.layout, prefixes=True)
-        t = gen.tangent(x, scale0, self.y0, self.y1, self.dt, pre)[0]  # (3 nx, S), column-major 3 x nx
+    def jacobian(self, model: SensorModel, free: tuple[str, ...], pfree, pfix) -> tuple[np.ndarray, np.ndarray]:
+        """Residuals (n, 3) and their Jacobian (3 n, nfree), rows in the order r_0x, r_0y, r_0z, r_1x, ..."""
+        gen = _generated(model, free)
+        nf = len(free)
+        a = gen.increment(*self._args(pfree, pfix))[0]
+        P, pre = products(gen.product, a, self.layout, prefixes=True)
+        t = gen.tangent(*self._args(pfree, pfix), pre)[0]  # (3 nf, S), column-major 3 x nf
         starts = np.r_[0, np.cumsum(self.layout.lengths)[:-1]]
         Phi = np.add.reduceat(t, starts, axis=1)  # sum over each segment's steps
         r, J = gen.end_jac(P, self.u0, self.u1, Phi)
-        return r.T, J.T.reshape(self.n, x.size, 3).transpose(0, 2, 1).reshape(3 * self.n, x.size)
+        return r.T, J.T.reshape(self.n, nf, 3).transpose(0, 2, 1).reshape(3 * self.n, nf)
 
-    def costs(self, scales: np.ndarray, nx: int) -> np.ndarray:
-        """sum |r|^2 over the segments at x = 0, for each scalar nominal scale in ``scales`` (one pass)."""
-        k = len(scales)
-        gen = _generated(nx)
-        s0 = np.repeat(np.asarray(scales, float), self.dt.shape[1])[None, :].repeat(3, 0)
+    def costs(self, model: SensorModel, free: tuple[str, ...], pfree: np.ndarray, pfix) -> np.ndarray:
+        """sum |r|^2 over the segments for each column of ``pfree`` (nfree, k), in one pass."""
+        k = pfree.shape[1]
+        gen = _generated(model, free)
         tile = (lambda v: np.tile(v, (1, k)))
-        a = gen.increment(np.zeros(nx), s0, tile(self.y0), tile(self.y1), tile(self.dt))[0]
-        P, _ = products(gen, a, self.layout.tiled(k))
+        rows = np.repeat(pfree, self.dt.shape[1], axis=1)
+        a = gen.increment(rows, pfix, tile(self.raw0), tile(self.raw1), tile(self.acc0), tile(self.acc1),
+                          tile(self.dt))[0]
+        P, _ = products(gen.product, a, self.layout.tiled(k))
         r = gen.end(P, tile(self.u0), tile(self.u1))[0]
         return np.sum(r.reshape(3, k, self.n) ** 2, axis=(0, 2))
 
@@ -165,22 +202,39 @@ class SegmentSteps:
         L = np.asarray(self.layout.lengths, int)
         starts = np.r_[0, np.cumsum(L)[:-1]]
         rows = np.concatenate([np.arange(starts[s], starts[s] + L[s]) for s in keep])
-        return SegmentSteps(self.y0[:, rows], self.y1[:, rows], self.dt[:, rows], self.u0[:, keep],
-                            self.u1[:, keep], Layout(L[keep]))
+        return SegmentSteps(self.raw0[:, rows], self.raw1[:, rows], self.acc0[:, rows], self.acc1[:, rows],
+                            self.dt[:, rows], self.u0[:, keep], self.u1[:, keep], Layout(L[keep]))
 
 
-def chained_graph(t: np.ndarray, seg, corrected: np.ndarray, nx: int, scale0: np.ndarray) -> tuple[ca.MX, ca.MX]:
-    """The check's reference: unknowns x and residuals (3 n) of imu_tk's normalised RK4 steps chained in one
-    CasADi graph (restarted at each segment), exact derivatives by CasADi. Slow to build; for tests and
+def rate_directions(t: np.ndarray, rate: np.ndarray, seg) -> np.ndarray:
+    """Angle [deg] between R^T u0 and u1 of every segment of ``seg``, ``rate`` (N, 3) [rad/s] calibrated by
+    anyone: the same RK4 increments and products as the fit, generated from the same CasADi model."""
+    if seg.n == 0:
+        return np.zeros(0)
+    increment, product, _, angle = _shared()
+    i0 = _step_rows(seg.first, seg.last)
+    a = increment(np.ascontiguousarray(rate[i0].T), np.ascontiguousarray(rate[i0 + 1].T),
+                  (t[i0 + 1] - t[i0])[None, :])[0]
+    P, _ = products(product, a, Layout(np.asarray(seg.lengths, int)))
+    return angle(P, np.ascontiguousarray(seg.u0.T), np.ascontiguousarray(seg.u1.T))[0][0]
+
+
+def chained_graph(t: np.ndarray, seg, raw: np.ndarray, acc: np.ndarray, model: SensorModel,
+                  free: tuple[str, ...], pfix: np.ndarray) -> tuple[ca.MX, ca.MX]:
+    """The check's reference: free parameters and residuals (3 n) of imu_tk's normalised RK4 steps chained
+    in one CasADi graph (restarted at each segment), exact derivatives by CasADi. Slow to build; for tests and
     scripts/bench_gyro.py, which compare the fast path (and its optimum) with it."""
-    x = ca.MX.sym("x", nx)
-    i0 = np.concatenate([np.arange(f, l) for f, l in zip(seg.first, seg.last)])
-    W0 = fit_rates(x, ca.DM(scale0), ca.DM(corrected[i0].T))
-    W1 = fit_rates(x, ca.DM(scale0), ca.DM(corrected[i0 + 1].T))
+    pf = ca.MX.sym("pfree", len(free))
+    index = {n: i for i, n in enumerate(free)}
+    p = ca.vertcat(*[pf[index[n]] if n in index else float(pfix[i]) for i, n in enumerate(model.names)])
+    i0 = _step_rows(seg.first, seg.last)
+    rates = model.apply.map(i0.size)
+    W0 = rates(ca.DM(raw[i0].T), ca.DM(acc[i0].T), ca.repmat(p, 1, i0.size))
+    W1 = rates(ca.DM(raw[i0 + 1].T), ca.DM(acc[i0 + 1].T), ca.repmat(p, 1, i0.size))
     ends = np.cumsum(seg.lengths) - 1
     reset = np.zeros((1, i0.size))
     reset[0, np.r_[0, ends[:-1] + 1]] = 1.0
     U = ca.vertcat(W0, W1, ca.DM((t[i0 + 1] - t[i0])[None, :]), ca.DM(reset))
     Q = rk4_step().mapaccum("gyro_path", i0.size)(ca.DM([1, 0, 0, 0]), U)
     r = direction_residual().map(seg.n)(Q[:, ends.tolist()], ca.DM(seg.u0.T), ca.DM(seg.u1.T))
-    return x, ca.vec(r)
+    return pf, ca.vec(r)

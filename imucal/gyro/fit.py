@@ -1,8 +1,9 @@
 """The gyro rotation fit: one IPOPT NLP over all motion segments, exact derivatives, Gauss-Newton Hessian.
 
-Unknowns (scaled to be near 1 or 0): relative scale x_s (B_g = B0 (1 + x_s)), the six entries of
-M_g, and optionally a bias correction x_b [mrad/s] (imu_tk's enableGyroBiasOptimization). Bias and
-g-sensitivity come from the static intervals (``gsens``) and correct the raw rate before the fit.
+Unknowns: the gyroscope description's named parameters (imucal.model.gyroscope): the scales and the six
+entries of M_g, and optionally the bias (imu_tk's enableGyroBiasOptimization), scaled p = p0 + d x with d
+each parameter's solver scale (the nominal scale, 1, a milli-rad/s of reading). Bias and g-sensitivity
+come from the static intervals (``gsens``) and are held at their values there.
 The residual of segment k is imu_tk's R_k^T u0 - u1, divided by its noise: the static directions'
 standard error and the angle random walk of the gyro noise over the segment's duration.
 """
@@ -17,11 +18,15 @@ from imucal.solve import least_squares
 from imucal.errors import ImucalError
 from imucal.gyro.evaluate import direction_errors_deg
 from imucal.gyro.gsens import StaticFit, fit_static
-from imucal.gyro.attitude import Layout, SegmentSteps
+from imucal.gyro.attitude import SegmentSteps
 from imucal.gyro.lead_in import lead_in_for
-from imucal.gyro.model import AXES, MIS_NAMES, apply_rate, misalignment_matrix
+from imucal.model.gyroscope import (AXES, BIAS_NAMES, MIS_NAMES, SCALE_NAMES, gyro_model, gyro_parameters, values)
+from imucal.model.parameters import Parameters
+from imucal.model.sensor import SensorModel
 from imucal.gyro.result import GyroResult
 from imucal.gyro.segments import GyroData, Segments, motion_segments
+from imucal.model.gyroscope import misalignment_matrix
+from imucal.solve.vectorize import apply_values
 from imucal.gyro.still import judge
 
 #: raw units with a known nominal scale [unit per rad/s]
@@ -58,66 +63,82 @@ class GyroOptions:
                               fix="give auto, or the seconds to integrate from inside each still pose, e.g. 0.5")
 
 
-def _steps(data: GyroData, seg: Segments, corrected: np.ndarray) -> SegmentSteps:
-    """The RK4 steps of the motion segments: corrected raw rates at both ends of each step, dt, directions."""
-    i0 = np.concatenate([np.arange(f, l) for f, l in zip(seg.first, seg.last)])
-    return SegmentSteps(np.ascontiguousarray(corrected[i0].T), np.ascontiguousarray(corrected[i0 + 1].T),
-                        (data.t[i0 + 1] - data.t[i0])[None, :], np.ascontiguousarray(seg.u0.T),
-                        np.ascontiguousarray(seg.u1.T), Layout(np.asarray(seg.lengths, int)))
+def _steps(data: GyroData, seg: Segments) -> SegmentSteps:
+    """The RK4 steps of the motion segments: raw rates and calibrated acceleration at both ends, dt, directions."""
+    return SegmentSteps.of(data.t, data.gyro, data.acc, seg)
 
 
-def _grid_argmin(steps: SegmentSteps, grid: np.ndarray, nx: int) -> float:
-    """The grid value of least cost sum_k |r_k|^2 (x = 0), the first of equal ones.
+def _grid_argmin(steps: SegmentSteps, params: Parameters, grid: np.ndarray) -> float:
+    """The grid value of least cost sum_k |r_k|^2, every scale at it and M_g = I, the first of equal ones.
 
     Exact pruning: the cost is a sum of squares over segments, so a scale whose sum over some
     segments already exceeds a complete cost cannot be the least. The segments are taken in groups
     of growing size; after the first group the most promising scale is completed to give that bound.
     """
+    model, free = gyro_model(), params.free_names
+    at = np.array([params[n].value for n in free])
+    is_scale = np.array([n in SCALE_NAMES for n in free])
+    pfix = np.array(params.values(), float)
+
+    def cost(g: SegmentSteps, scales: np.ndarray) -> np.ndarray:
+        rows = np.where(is_scale[:, None], scales[None, :], np.where(np.isin(free, MIS_NAMES), 0.0, at)[:, None])
+        return g.costs(model, free, rows, pfix)
+
     cuts = [c for c in (2, 6, 14) if c < steps.n]
     groups = [steps.subset(g) for g in np.split(np.arange(steps.n), cuts)]
-    partial = groups[0].costs(grid, nx)
+    partial = cost(groups[0], grid)
     best = int(np.argmin(partial))
-    bound = partial[best] + sum(float(g.costs(grid[[best]], nx)[0]) for g in groups[1:])
+    bound = partial[best] + sum(float(cost(g, grid[[best]])[0]) for g in groups[1:])
     alive = np.ones(grid.size, bool)
     alive[best] = False
     for g in groups[1:]:
         alive &= partial <= bound
         if alive.any():
-            partial[alive] += g.costs(grid[alive], nx)
+            partial[alive] += cost(g, grid[alive])
     alive &= partial <= bound
     partial[best] = bound
     cand = np.flatnonzero(alive | (np.arange(grid.size) == best))
     return float(grid[cand[int(np.argmin(partial[cand]))]])
 
 
-def _search_scale(steps: SegmentSteps, nx: int) -> float:
+def _search_scale(steps: SegmentSteps, params: Parameters) -> float:
     """Scalar nominal scale [unit per rad/s] minimising the direction mismatch (log grid, then refine)."""
-    best = _grid_argmin(steps, 10.0 ** np.arange(-2, 6.01, 0.1), nx)
-    return _grid_argmin(steps, best * np.linspace(0.88, 1.12, 25), nx)
+    best = _grid_argmin(steps, params, 10.0 ** np.arange(-2, 6.01, 0.1))
+    return _grid_argmin(steps, params, best * np.linspace(0.88, 1.12, 25))
 
 
 class _Problem:
-    """1/2 sum_k w_k^2 |r_k|^2 over the segments, for IPOPT through imucal.solve.least_squares.
+    """1/2 sum_k w_k^2 |r_k|^2 over the segments, for IPOPT through imucal.solve.least_squares, in scaled
+    unknowns x: the free parameters are p0 + d x (d each one's solver scale).
 
     Gradient J^T W r and Gauss-Newton Hessian J^T W J from one Jacobian per point (cached).
     """
 
-    def __init__(self, steps: SegmentSteps, scale0: np.ndarray, w: np.ndarray, nx: int) -> None:
-        self.steps, self.scale0, self.wr, self.n_free = steps, scale0, np.repeat(w, 3), nx
+    def __init__(self, steps: SegmentSteps, model: SensorModel, params: Parameters, w: np.ndarray) -> None:
+        self.steps, self.model, self.wr = steps, model, np.repeat(w, 3)
+        self.free = params.free_names
+        self.n_free = len(self.free)
+        self.pfix = np.array(params.values(), float)
+        self.p0 = np.array([params[n].value for n in self.free])
+        self.d = np.array([params[n].scale for n in self.free])
         self._key: bytes | None = None
         self._rj: tuple[np.ndarray, np.ndarray] = (np.zeros(0), np.zeros(0))
 
+    def p_of(self, x) -> np.ndarray:
+        return self.p0 + self.d * np.asarray(x, float).ravel()
+
     def jacobian(self, x) -> tuple[np.ndarray, np.ndarray]:
-        """Residuals (3 n,) and Jacobian (3 n, nx), unweighted."""
+        """Residuals (3 n,) and Jacobian (3 n, nx) in the scaled unknowns, unweighted."""
         x = np.asarray(x, float).ravel()
         if self._key != x.tobytes():
-            r, J = self.steps.jacobian(x, self.scale0)
-            self._key, self._rj = x.tobytes(), (r.ravel(), J)
+            r, J = self.steps.jacobian(self.model, self.free, self.p_of(x), self.pfix)
+            self._key, self._rj = x.tobytes(), (r.ravel(), J * self.d)
         return self._rj
 
     def value(self, x) -> float:
         x = np.asarray(x, float).ravel()
-        r = self._rj[0] if self._key == x.tobytes() else self.steps.residuals(x, self.scale0).ravel()
+        r = self._rj[0] if self._key == x.tobytes() else self.steps.residuals(self.model, self.free, self.p_of(x),
+                                                                              self.pfix).ravel()
         return 0.5 * float(np.sum((self.wr * r) ** 2))
 
     def derivatives(self, x) -> tuple[float, np.ndarray, np.ndarray]:
@@ -150,7 +171,8 @@ def _require_observable(J: np.ndarray, names: tuple[str, ...], min_deg: float, s
     with correlations, a null direction of J^T J or a scale whose standard error, as an angle,
     is below ``min_deg``.
     """
-    info = J.T @ J
+    order = [names.index(n) for n in SCALE_NAMES] + [k for k, n in enumerate(names) if n not in SCALE_NAMES]
+    info = (J.T @ J)[np.ix_(order, order)]  # the scales first
     alone = np.degrees(np.sqrt(np.diag(info)[0:3]))
     weak = [k for k in range(3) if not alone[k] >= min_deg]
     if weak:
@@ -186,32 +208,38 @@ def fit_gyro(data: GyroData, options: GyroOptions = GyroOptions(), segments: np.
     _require_motions(every, nx, data.source)
     if segments is not None:
         seg = seg.subset(np.asarray(segments, int))
-    corrected = data.gyro - st.bias - data.acc @ st.H.T  # raw - s_g - B_g G_s a
-    steps = _steps(data, seg, corrected)
+    model = gyro_model()
+    steps = _steps(data, seg)
+    start = gyro_parameters(data.unit, st.bias, np.ones(3), gsens=st.H, free_bias=options.free_bias,
+                            gsens_free=st.selected)
     scale0 = options.nominal_scale or NOMINAL_SCALE.get(data.unit)
     if scale0 is None:
-        scale0 = _search_scale(steps, nx)
+        scale0 = _search_scale(steps, start)
     scale0 = np.full(3, float(scale0))
+    params = gyro_parameters(data.unit, st.bias, scale0, gsens=st.H, free_bias=options.free_bias,
+                             gsens_free=st.selected)
     w = 1.0 / _segment_sigma(data, seg, scale0)
-    problem = _Problem(steps, scale0, w, nx)
-    names = ("x_scale_x", "x_scale_y", "x_scale_z") + MIS_NAMES + (("db_x", "db_y", "db_z") if options.free_bias else ())
+    problem = _Problem(steps, model, params, w)
+    names = params.free_names
     try:
-        _require_observable(problem.jacobian(np.zeros(nx))[1], names, options.min_angle_deg, data.source)
+        _require_observable(problem.jacobian(np.zeros(problem.n_free))[1], names, options.min_angle_deg, data.source)
     except ImucalError as exc:
         if not seg.gapped:
             raise
         raise ImucalError(f"{exc.message} ({_gapped_words(every)})", file=exc.file, field=exc.field,
                           fix=exc.fix) from None
-    x, stats = least_squares.solve(problem, np.full(nx, -np.inf), np.full(nx, np.inf))
+    lo = np.array([(params[n].lower - params[n].value) / params[n].scale for n in names])
+    x, stats = least_squares.solve(problem, lo, np.full(len(names), np.inf))
     r, J = problem.jacobian(x)
     wr = np.repeat(w, 3)
     Jw = J * wr[:, None]
     chi2 = float(np.sum((r.ravel() * wr) ** 2))
-    dof = 2 * seg.n - nx  # the residual's component along u1 is of second order: 2 per segment
+    dof = 2 * seg.n - len(names)  # the residual's component along u1 is of second order: 2 per segment
     redchi = chi2 / dof if dof > 0 else float("nan")
     cov = np.linalg.inv(Jw.T @ Jw) * (redchi if dof > 0 else 1.0)
     sd = np.sqrt(np.diag(cov))
-    res = _result(data, options, st, seg, x, sd, cov, scale0, corrected, stats, chi2, dof, redchi, names,
+    fitted = params.with_values(dict(zip(names, problem.p_of(x))))
+    res = _result(data, st, seg, params, fitted, problem.d * sd, cov, stats, chi2, dof, redchi,
                   time.perf_counter() - tic)
     return replace(res, lead_in_s=lead_in, still=None if still is None else still.with_scale(res.scale),
                    gapped=seg.gapped)
@@ -243,28 +271,30 @@ def _segment_sigma(data: GyroData, seg: Segments, scale0: np.ndarray) -> np.ndar
     return np.sqrt(seg.sigma_u**2 + rate_sd**2 * dt * dur)
 
 
-def _result(data, options, st: StaticFit, seg, x, sd, cov, scale0, corrected, stats, chi2, dof, redchi, names,
-            seconds) -> GyroResult:
-    scale = scale0 * (1 + x[0:3])
-    scale_sd = scale0 * sd[0:3]
-    M = misalignment_matrix(x[3:9])
-    Msd = misalignment_matrix(sd[3:9]) - np.eye(3)
-    bias, bias_sd = st.bias.copy(), st.bias_std.copy()
-    if options.free_bias:
-        bias = bias + scale0 * 1e-3 * x[9:12]
-        bias_sd = np.sqrt(bias_sd**2 + (scale0 * 1e-3 * sd[9:12]) ** 2)
+def _result(data: GyroData, st: StaticFit, seg: Segments, start: Parameters, fitted: Parameters, sd: np.ndarray,
+            cov: np.ndarray, stats: dict, chi2: float, dof: int, redchi: float, seconds: float) -> GyroResult:
+    names = fitted.free_names
+    v, std = values(fitted), dict(zip(names, sd))
+    scale = v["scale"]
+    scale_sd = np.array([std[n] for n in SCALE_NAMES])
+    Msd = misalignment_matrix(np.array([std[n] for n in MIS_NAMES])) - np.eye(3)
+    bias, bias_sd = v["bias"], st.bias_std.copy()
+    if BIAS_NAMES[0] in std:  # the static fit's error and the rotation fit's correction's
+        bias_sd = np.sqrt(bias_sd**2 + np.array([std[n] for n in BIAS_NAMES]) ** 2)
     G = st.H / scale[:, None]  # H = B_g G_s
     G_sd = st.H_std / scale[:, None]
-    corr = cov / np.outer(sd, sd)
-    rate_before = corrected / scale0  # static bias (and g-sensitivity) removed, nominal scale, no misalignment
-    before = direction_errors_deg(data.t, rate_before, seg)
-    rate = apply_rate(data.gyro, bias, scale, x[3:9], G if st.selected.any() else None, data.acc)
-    after = direction_errors_deg(data.t, rate, seg)
+    d = np.sqrt(np.diag(cov))
+    corr = cov / np.outer(d, d)
+    model = gyro_model()
+    # before: static bias (and g-sensitivity) removed, nominal scale, no misalignment
+    before = direction_errors_deg(data.t, apply_values(model, start.values(), data.gyro, data.acc), seg)
+    after = direction_errors_deg(data.t, apply_values(model, fitted.values(), data.gyro, data.acc), seg)
     return GyroResult(unit=data.unit, bias=bias, bias_std=bias_sd, scale=scale, scale_std=scale_sd,
-                      misalignment=M, misalignment_std=Msd, gsens=G, gsens_std=G_sd, gsens_selected=st.selected,
-                      gsens_p_value=st.p_value, names=names, correlation=corr, segments=seg.index,
-                      error_before_deg=before, error_deg=after, status=str(stats["return_status"]),
-                      iterations=int(stats["iter_count"]), chi2=chi2, dof=dof, redchi=redchi, seconds=seconds)
+                      misalignment=v["misalignment"], misalignment_std=Msd, gsens=G, gsens_std=G_sd,
+                      gsens_selected=st.selected, gsens_p_value=st.p_value, names=names, correlation=corr,
+                      segments=seg.index, error_before_deg=before, error_deg=after,
+                      status=str(stats["return_status"]), iterations=int(stats["iter_count"]), chi2=chi2, dof=dof,
+                      redchi=redchi, seconds=seconds, params=fitted)
 
 
 def cross_validate(data: GyroData, options: GyroOptions = GyroOptions(), folds: int = 5) -> np.ndarray:

@@ -1,74 +1,21 @@
-"""The gyroscope model, written once in CasADi.
+"""The gyroscope's attitude maths, written once in CasADi: imu_tk's quaternion RK4 step and its residual.
 
-Forward (what the sensor reports):  raw_g = s_g + B_g (M_g omega + G_s a)
-Inverse (what ``apply`` computes):  omega = M_g^-1 (B_g^-1 (raw_g - s_g) - G_s a)
-
-s_g  bias [raw]; B_g = diag(scale) [raw per rad/s]; M_g maps the rate in the accelerometer's
-orthonormal output frame to the gyro's sensitive axes, unit diagonal and six free off-diagonal
-entries (the diagonal is carried by B_g: a general 3x3 M_g with a free diagonal would duplicate
-the scale, so only 9 = 3 + 6 entries of B_g M_g are identifiable); G_s the g-sensitivity
-[(rad/s) per (m/s^2)], a the calibrated specific force [m/s^2] in the accelerometer's frame.
-
-The attitude over a motion segment is integrated with imu_tk's quaternion RK4 step (Tedaldi 2014,
-rate sampled at both ends and linearly interpolated at the midpoint), normalised after each step.
+The gyroscope's map from raw to calibrated rate is its sensor description (imucal.model.gyroscope:
+named parameters, omega = M_g^-1 (B_g^-1 (raw_g - s_g) - G_s a)). The attitude over a motion segment
+is integrated with imu_tk's quaternion RK4 step (Tedaldi 2014, rate sampled at both ends and linearly
+interpolated at the midpoint), normalised after each step (imucal.gyro.attitude multiplies the steps).
 """
 from __future__ import annotations
 
 import casadi as ca
-import numpy as np
 
-from imucal.model.channels import ACCELERATION, ANGULAR_RATE, TIME, Channel
+from imucal.model.channels import Channel
+from imucal.model.gyroscope import (AXES, MIS_NAMES, gyro_model, misalignment_entries,  # noqa: F401
+                                    misalignment_matrix)
 
-#: the channels the gyroscope model reads: its rate, the calibrated specific force (gravity
-#: directions, g-sensitivity) and the time base it integrates over
-READS: tuple[Channel, ...] = (ANGULAR_RATE, ACCELERATION, TIME)
-
-#: names of M_g's free entries: m_ij is row i (gyro axis), column j (frame axis)
-MIS_NAMES = ("m_xy", "m_xz", "m_yx", "m_yz", "m_zx", "m_zy")
-_MIS_INDEX = ((0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1))
-AXES = "xyz"
-
-
-def misalignment_matrix(m: "ca.SX | ca.MX | np.ndarray") -> "ca.SX | ca.MX | np.ndarray":
-    """M_g from its six off-diagonal entries (unit diagonal)."""
-    if isinstance(m, np.ndarray):
-        M = np.eye(3)
-        for k, (i, j) in enumerate(_MIS_INDEX):
-            M[i, j] = m[k]
-        return M
-    M = type(m).eye(3)
-    for k, (i, j) in enumerate(_MIS_INDEX):
-        M[i, j] = m[k]
-    return M
-
-
-def misalignment_entries(M: np.ndarray) -> np.ndarray:
-    """The six off-diagonal entries of a unit-diagonal M_g (inverse of ``misalignment_matrix``)."""
-    return np.array([M[i, j] for i, j in _MIS_INDEX])
-
-
-def rate_map(scale, mis, gsens=None):
-    """Return (C, D) with omega = C (raw - s_g) - D a: C = M_g^-1 B_g^-1, D = M_g^-1 G_s."""
-    M = misalignment_matrix(mis)
-    if isinstance(M, np.ndarray):
-        Minv = np.linalg.inv(M)
-        C = Minv @ np.diag(1.0 / np.asarray(scale))
-        D = np.zeros((3, 3)) if gsens is None else Minv @ np.asarray(gsens)
-        return C, D
-    Minv = ca.inv(M)
-    C = ca.mtimes(Minv, ca.diag(1.0 / scale))
-    D = ca.DM.zeros(3, 3) if gsens is None else ca.mtimes(Minv, gsens)
-    return C, D
-
-
-def apply_rate(raw: np.ndarray, bias: np.ndarray, scale: np.ndarray, mis: np.ndarray,
-               gsens: np.ndarray | None = None, acc: np.ndarray | None = None) -> np.ndarray:
-    """Calibrated angular rate [rad/s] of raw samples (N x 3); ``acc`` [m/s^2] when G_s is set."""
-    C, D = rate_map(np.asarray(scale, float), np.asarray(mis, float), gsens)
-    w = (np.atleast_2d(raw) - bias) @ C.T
-    if gsens is not None:
-        w = w - np.atleast_2d(acc) @ D.T
-    return w
+#: the channels the gyroscope reads: its rate, the calibrated specific force (gravity directions,
+#: g-sensitivity) and the time base it integrates over (its description's)
+READS: tuple[Channel, ...] = gyro_model().reads
 
 
 def _omega_matrix(w):

@@ -5,7 +5,9 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from imucal.gyro.model import apply_rate, misalignment_entries
+from imucal.model.gyroscope import gyro_model
+from imucal.model.parameters import Parameters
+from imucal.solve.vectorize import apply_values
 from imucal.gyro.segments import GapMotion
 from imucal.gyro.still import NotStill, Stillness
 from imucal.solve.misfit import ExcessResiduals, excess_residuals
@@ -43,6 +45,8 @@ class GyroResult:
     still: Stillness | None = None
     #: the motions left out because a gap of the time stamps lies inside them (imucal.gyro.segments)
     gapped: tuple[GapMotion, ...] = ()
+    #: the description's named parameters as fitted (imucal.model.gyroscope)
+    params: Parameters | None = None
 
     @property
     def success(self) -> bool:
@@ -59,8 +63,7 @@ class GyroResult:
         if self.uses_gsens and acc is None:
             raise ValueError("this gyro calibration has a g-sensitivity: pass the calibrated acceleration")
         one = np.ndim(raw) == 1
-        w = apply_rate(np.atleast_2d(raw), self.bias, self.scale, misalignment_entries(self.misalignment),
-                       self.gsens if self.uses_gsens else None, None if acc is None else np.atleast_2d(acc))
+        w = apply_values(gyro_model(), self.params.values(), raw, None if acc is None else np.atleast_2d(acc))
         return w[0] if one else w
 
     @property

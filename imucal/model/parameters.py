@@ -33,6 +33,9 @@ class Parameter:
     fixed: bool = False
     scale: float = 1.0
     description: str = ""
+    #: predicted standard error, in units of ``scale``, above which the evidence leaves it undetermined
+    #: (imucal.solve.observability); None: the evidence's own rule
+    undetermined: float | None = None
 
     def __post_init__(self) -> None:
         if not self.scale > 0 or not math.isfinite(self.scale):

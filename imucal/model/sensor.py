@@ -17,14 +17,15 @@ covariates such as temperature or time; the base model has none.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from functools import lru_cache
+from functools import cached_property, lru_cache
 from typing import Mapping, Sequence
 
 import casadi as ca
 
 from imucal.model.geometry import (frame, frame_inverse_transpose, frame_np, geometry_function,  # noqa: F401
                                    gram, gram_det, gram_det_np, gram_np, tbar)
-from imucal.model.channels import ACCELERATION, Channel, covariate_channels
+from imucal.constants import SI_ACCEL_UNIT
+from imucal.model.channels import ACCELERATION, COVARIATES, Channel, covariate_channels
 from imucal.model.parameters import BASE_NAMES, Parameter, Parameters
 from imucal.model.parameters import base_parameters
 
@@ -66,41 +67,89 @@ class Effect:
         return m
 
 
+#: The sensor kinds (``SensorModel.kind``; a calibration file's section names).
+ACCELEROMETER, GYROSCOPE = "accelerometer", "gyroscope"
+
+
 @dataclass(frozen=True)
 class SensorModel:
-    """The symbolic model with a fixed set of effects; CasADi functions are built once.
+    """One sensor, described as data (issue 26): every sensor is an instance, and the fit, the
+    covariance, the observability check, the file section, the numpy evaluator and the C are generated
+    from it (docs/architecture.md, "A sensor is data").
 
-    It declares what it reads (``reads``: channels), its parameters (``parameters``: named, with
-    units and bounds) and its residual (``residual``).
+      kind      "accelerometer", "gyroscope" (the calibration file's section, the report's heading)
+      label     the model's name (nakov-ivanov-9+effects, imutk-gyro ...)
+      channel   the raw channel it calibrates (imucal.model.channels: columns and unit)
+      inputs    the other inputs its map reads, in order: covariate keys (temp, time: Effect.covariates)
+                or another sensor's calibrated columns (ax, ay, az: the gyroscope's g-sensitivity)
+      names     its parameters in the order of p (named Parameters with units, bounds, scales and
+                undetermined thresholds are built by each sensor's own function)
+      output    the calibrated channel: its columns (ax.., gx..) and unit (m/s^2, rad/s)
+      functions CasADi functions built once:
+        apply(raw[3], inputs[k], p[n]) -> calibrated[3]   the map from raw to calibrated
+      and, generated from apply, ``affine``: p -> (A, c, B) with calibrated = A raw + c + B inputs, for a
+      map that is affine in raw and inputs (None otherwise: an accelerometer with effects)
+        and the residual of its evidence: the accelerometer's residual(raw, cov, p, g) = |a| - g per row
+        (the gyroscope's evidence, its motion segments, integrates apply: imucal.gyro.attitude)
 
-    Functions (all per sample; ``cov`` holds the covariates named in ``covariates``):
+    The accelerometer's model (``build_model``) also has, per sample (``cov`` = ``inputs``):
       measured(raw[3], cov[k], p[np]) -> m[3]          Eq. (theModel) plus effects
       accel(raw, cov, p)              -> a_orth[3]     Theorem
       norm(raw, cov, p)               -> |a|           Proposition 2 (m^T G^-1 m)
       residual(raw, cov, p, g)        -> |a| - g       the calibration condition g = a_nonorth
-      linear_map(p)                   -> A[3x3], c[3]  a_orth = A raw + c (base model only)
     """
 
     effects: tuple[Effect, ...]
     names: tuple[str, ...]
-    covariates: tuple[str, ...]
+    inputs: tuple[str, ...]
     functions: Mapping[str, ca.Function] = field(compare=False, repr=False)
+    kind: str = ACCELEROMETER
+    label: str = ""
+    channel: Channel = ACCELERATION
+    output: Channel = ACCELERATION.with_unit(SI_ACCEL_UNIT)
+    #: channels its evidence reads beyond its raw channel and inputs (the gyroscope's: time)
+    evidence_reads: tuple[Channel, ...] = ()
 
     @property
     def name(self) -> str:
+        if self.label:
+            return self.label
         if not self.effects:
             return "nakov-ivanov-9"
         return "nakov-ivanov-9+" + "+".join(f"{e.name}[{''.join('xyz'[a] for a in e.axes)}]"
                                             for e in self.effects)
 
     @property
+    def covariates(self) -> tuple[str, ...]:
+        """The inputs that are covariates of the recording (temp, time), in the layout of ``cov``."""
+        return tuple(k for k in self.inputs if k in COVARIATES)
+
+    @property
     def reads(self) -> tuple[Channel, ...]:
-        """The channels the model reads: the acceleration, and the covariates of its effects."""
-        return (ACCELERATION, *covariate_channels(self.covariates))
+        """The channels the model reads: its raw channel, the channels behind its inputs (covariates, or
+        the sensor whose calibrated output it takes), and what its evidence needs."""
+        out = [self.channel, *covariate_channels(self.covariates)]
+        out += [ACCELERATION for k in self.inputs if k in ACCELERATION.columns][:1]
+        out += list(self.evidence_reads)
+        return tuple(dict.fromkeys(out))
 
     @property
     def is_affine(self) -> bool:
-        return not self.effects
+        """The map is calibrated = A raw + c + B inputs (``affine``)."""
+        return self.affine is not None
+
+    @cached_property
+    def affine(self) -> ca.Function | None:
+        """p -> (A[3x3], c[3], B[3xk]) with calibrated = A raw + c + B inputs, derived from ``apply`` by
+        CasADi (A, B its Jacobians, c its value at zero); None when apply is not affine in raw and inputs."""
+        f = self.functions["apply"]
+        raw, inp, p = (ca.SX.sym(n, f.sparsity_in(k)) for k, n in enumerate(("raw", "inputs", "p")))
+        y = f(raw, inp, p)
+        x = ca.vertcat(raw, inp)
+        if not ca.is_linear(y, x):
+            return None
+        c = ca.substitute(y, x, ca.DM.zeros(x.shape))
+        return ca.Function("affine", [p], [ca.jacobian(y, raw), c, ca.jacobian(y, inp)], ["p"], ["A", "c", "B"])
 
     def parameters(self, base: Parameters) -> Parameters:
         """Base parameters extended by each effect's parameters."""
@@ -152,6 +201,9 @@ def _build(effects: tuple[Effect, ...], names: tuple[str, ...]) -> dict:
                 A[i, j] = L[i, j] / b[j]  # A = E^-T diag(1/b): lower triangular
         c = -ca.mtimes(A, ca.vertcat(*s))
         fns["linear_map"] = ca.Function("linear_map", [p], [A, c], ["p"], ["A", "c"])
+        # Theorem: a = A (raw - s), the shift subtracted first (exact for raw near s, offset-binary counts)
+        a_orth = ca.mtimes(A, raw - ca.vertcat(*s))
+    fns["apply"] = ca.Function("apply", [raw, cov, p], [a_orth], ["raw", "inputs", "p"], ["calibrated"])
     return fns
 
 

@@ -53,13 +53,21 @@ def _vectorized(fn: ca.Function) -> Vectorized:
     return Vectorized(fn)
 
 
+def split_parameters(names: tuple[str, ...], free: tuple[str, ...]) -> tuple[ca.SX, ca.SX, ca.SX]:
+    """(pfree, pfix, p): the symbols of the free parameters and of all parameters' fixed values, and the
+    model's parameter vector p taking each free one from pfree and every other from pfix. Every evidence's
+    generated evaluators take (pfree, pfix) this way: one set of free parameters, one code path."""
+    pf, pfix = ca.SX.sym("pfree", len(free)), ca.SX.sym("pfix", len(names))
+    index = {n: k for k, n in enumerate(free)}
+    return pf, pfix, ca.vertcat(*[pf[index[n]] if n in index else pfix[i] for i, n in enumerate(names)])
+
+
 @lru_cache(maxsize=64)
 def row_functions(model: SensorModel, free: tuple[str, ...]) -> RowFunctions:
     """The row evaluators for ``model`` with ``free`` parameters, built once and cached."""
-    names = model.names
     raw, cov = ca.SX.sym("raw", 3), ca.SX.sym("cov", len(model.covariates))
-    pf, pfix, g = ca.SX.sym("pfree", len(free)), ca.SX.sym("pfix", len(names)), ca.SX.sym("g")
-    p = ca.vertcat(*[pf[free.index(n)] if n in free else pfix[i] for i, n in enumerate(names)])
+    pf, pfix, p = split_parameters(model.names, free)
+    g = ca.SX.sym("g")
     r = model.residual(raw, cov, p, g)
     args = [raw, cov, pf, pfix, g]
     J = ca.jacobian(r, pf)

@@ -13,6 +13,7 @@ constants (``repr`` of floats): nothing user-supplied reaches it.
 """
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import Callable, Sequence
 
 import casadi as ca
@@ -107,3 +108,27 @@ class Vectorized:
                 out[i + j * n1] = v
             res.append(out)
         return res
+
+
+#: Rows per block of ``apply_values``: the generated code's registers stay in the CPU cache.
+APPLY_BLOCK = 65536
+
+
+@lru_cache(maxsize=64)
+def _apply_evaluator(fn: ca.Function) -> Vectorized:
+    return Vectorized(fn)
+
+
+def apply_values(model, p: Sequence[float] | np.ndarray, raw: np.ndarray, inputs: np.ndarray | None = None
+                 ) -> np.ndarray:
+    """A sensor description's map (``SensorModel.apply``) over rows: raw (N, 3) and inputs (N, k) at the
+    parameter values ``p`` -> calibrated (N, 3), numpy generated from the CasADi function, in blocks."""
+    raw = np.atleast_2d(np.asarray(raw, float))
+    n, k = raw.shape[0], len(model.inputs)
+    inp = np.zeros((n, k)) if inputs is None else np.asarray(inputs, float).reshape(n, k)
+    f = _apply_evaluator(model.functions["apply"])
+    p = np.asarray(p, float)
+    out = np.empty((n, 3))
+    for s in range(0, n, APPLY_BLOCK):
+        out[s:s + APPLY_BLOCK] = f(raw[s:s + APPLY_BLOCK].T, inp[s:s + APPLY_BLOCK].T, p)[0].T
+    return out
