@@ -17,7 +17,7 @@ _LAZY = {
     "recording_from_arrays": "imucal.api",
     "summary": "imucal.report.text",
     "fit_report": "imucal.report.text",
-    "Recording": "imucal.data.load",
+    "Recording": "imucal.data.recording",
     "load_recording": "imucal.data.load",
     "detect_static": "imucal.data.static",
     "Intervals": "imucal.data.static",

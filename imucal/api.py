@@ -16,7 +16,8 @@ from typing import Any, Sequence
 import numpy as np
 
 from imucal.config.run import GravitySpec, RunConfig, config_from_dict
-from imucal.data.load import DataSpec, Recording
+from imucal.data.recording import Recording
+from imucal.data.spec import DataSpec
 from imucal.data.timebase import rate_time_base, stamped_times
 from imucal.errors import ImucalError
 from imucal.pipeline import CalibrationRun, calibrate as _calibrate_config

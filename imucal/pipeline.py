@@ -13,8 +13,8 @@ import numpy as np
 from imucal.calibration.frozen import Calibration, now_utc
 from imucal.config.run import RunConfig
 
-from imucal.data.load import Recording, load_recording, rails, use_stream
-from imucal.data.recording import RecordingSummary, StaticSamples
+from imucal.data.load import load_recording, use_stream
+from imucal.data.recording import Recording, RecordingSummary, StaticSamples
 from imucal.errors import ImucalError
 from imucal.solve.fit import SCATTER_NOTABLE_Z, FitData, FitResult, fit, jacobian_rows
 from imucal.solve.initial import InitialGuess, ellipsoid_guess
@@ -24,7 +24,7 @@ from imucal.solve.observability import Observability, analyse, distinct_directio
 from imucal.constants import RIGHT_ANGLE
 from imucal.model.parameters import ANGLE_NAMES, BASE_NAMES, Parameters, base_parameters
 from imucal.data.static import Intervals, detect_static
-from imucal.data.timebase import unit_hint
+from imucal.data.unit_hint import unit_hint
 from imucal.solve.misfit import excess_residuals  # one rule for every sensor's fit
 from imucal.report.misfit import excess_words
 from imucal.model.effects_registry import effects_from_specs
@@ -244,7 +244,7 @@ def sample_residuals(cal: Calibration, model: SensorModel, samples: StaticSample
 def read_intervals(config: RunConfig, recording: Recording | None = None
                    ) -> tuple[Recording | RecordingSummary, Intervals, StreamedRecording | None]:
     """The recording (or its streamed summary) and its static intervals; refuses too few of them."""
-    declared = rails(config.data.saturation) if config.data.saturation is not None else None
+    declared = config.data.declared_rails
     streamed: StreamedRecording | None = None
     if recording is None and use_stream(config.data, config.base_dir):  # bounded memory (imucal.data.stream)
         from imucal.data.stream import StreamedRecording  # measured start-up (docs/architecture.md)

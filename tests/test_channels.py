@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from imucal.data.load import Recording
+from imucal.data.recording import Recording
 from imucal.errors import ImucalError
 from imucal.gyro.model import READS as GYRO_READS
 from imucal.model.channels import (ACCELERATION, ANGULAR_RATE, TEMPERATURE, TIME, covariate_matrix,

@@ -10,7 +10,7 @@ import pytest
 
 from conftest import real_file
 from imucal.config.run import config_from_dict, load_config
-from imucal.data.load import DataSpec, gyro_unit
+from imucal.data.spec import DataSpec, gyro_unit
 from imucal.errors import ImucalError
 from imucal.gyro import fit as gyro_fit
 from imucal.gyro.evaluate import rms

@@ -11,7 +11,8 @@ import pytest
 
 from conftest import real_file
 from imucal.config.run import config_from_dict, load_config
-from imucal.data.load import DataSpec, load_recording
+from imucal.data.load import load_recording
+from imucal.data.spec import DataSpec
 from imucal.errors import ImucalError
 
 

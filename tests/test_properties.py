@@ -19,7 +19,8 @@ from imucal.calibration.frozen import Calibration
 
 from imucal.calibration.fileformat import load_calibration
 from imucal.config.run import load_config
-from imucal.data.load import DataSpec, load_recording
+from imucal.data.load import load_recording
+from imucal.data.spec import DataSpec
 from imucal.errors import ImucalError
 from imucal.solve.fit import FitData, fit
 from imucal.model.sensor import build_model

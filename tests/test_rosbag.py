@@ -130,7 +130,8 @@ def test_a_bag_calibrates_as_the_same_samples_in_a_csv(si_bags, run_cli, tmp_pat
 
 
 def test_the_recording_from_a_bag_holds_the_messages(si_bags):
-    from imucal.data.load import DataSpec, load_recording
+    from imucal.data.load import load_recording
+    from imucal.data.spec import DataSpec
 
     bags, _, t, sim = si_bags
     for ros in BAG_KINDS:
@@ -164,7 +165,8 @@ def test_noise_and_apply_run_on_a_bag(si_bags, run_cli, tmp_path):
 
 
 def test_gyro_and_temperature_topics_are_read(tmp_path):
-    from imucal.data.load import DataSpec, load_recording
+    from imucal.data.load import load_recording
+    from imucal.data.spec import DataSpec
 
     t = np.arange(200) / 100.0
     acc = np.column_stack([np.zeros(200), np.zeros(200), np.full(200, 9.8)])
@@ -180,7 +182,8 @@ def test_gyro_and_temperature_topics_are_read(tmp_path):
 
 
 def test_zero_header_stamps_fall_back_to_receive_time(tmp_path):
-    from imucal.data.load import DataSpec, load_recording
+    from imucal.data.load import load_recording
+    from imucal.data.spec import DataSpec
 
     t = np.arange(50) / 100.0
     acc = np.tile([0.0, 0.0, 9.8], (50, 1))

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from imucal.data.load import data_line_count
+from imucal.data.lines import data_line_count
 from imucal.solve.stats import median
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -95,24 +95,26 @@ _FILES = {
 @pytest.mark.parametrize("name", list(_FILES))
 @pytest.mark.parametrize("skip", [0, 1])
 def test_the_fast_reader_gives_the_line_by_line_result(name: str, skip: int, tmp_path: Path, monkeypatch) -> None:
-    """load._fast_table (no Python string per line) returns what the line by line reader returns, or
+    """whole._fast_table (no Python string per line) returns what the line by line reader returns, or
     leaves the file to it: the same array bit for bit, or the same one-line error."""
-    from imucal.data import load
+    from imucal.data import whole
+    from imucal.data.load import load_recording
+    from imucal.data.spec import DataSpec
     from imucal.errors import ImucalError
 
     path = tmp_path / "rec.txt"
     path.write_bytes((("junk line\n" if skip else "") + _FILES[name]).encode("utf-8"))
-    spec = load.DataSpec(path=str(path), skip_rows=skip, sample_rate=None)
+    spec = DataSpec(path=str(path), skip_rows=skip, sample_rate=None)
 
     def read():
         try:
-            rec = load.load_recording(spec)
+            rec = load_recording(spec)
             return np.column_stack([rec.t, rec.raw])
         except ImucalError as exc:
             return str(exc)
 
     fast = read()
-    monkeypatch.setattr(load, "_fast_table", lambda *a: None)
+    monkeypatch.setattr(whole, "_fast_table", lambda *a: None)
     slow = read()
     if isinstance(slow, str):
         assert fast == slow
@@ -121,9 +123,10 @@ def test_the_fast_reader_gives_the_line_by_line_result(name: str, skip: int, tmp
 
 
 def test_the_fast_reader_reads_the_shipped_recording() -> None:
-    from imucal.data import load
+    from imucal.data import whole
+    from imucal.data.spec import as_spec
 
     blob = XSENS.read_bytes()
-    got = load._fast_table(blob, load.as_spec(str(XSENS)), XSENS)
+    got = whole._fast_table(blob, as_spec(str(XSENS)), XSENS)
     assert got is not None and got[1].shape == (51175, 4)
     np.testing.assert_array_equal(got[1], np.loadtxt(XSENS))

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from conftest import real_file
-from imucal.data.load import DataSpec, load_recording
+from imucal.data.load import load_recording
+from imucal.data.spec import DataSpec
 from imucal.errors import ImucalError
 from imucal.analysis.simulate import cube_directions, frame_matrix, mems_counts_sensor, si_sensor
 from imucal.data.static import StaticSettings, detect_static, moving_variance

@@ -16,7 +16,8 @@ import imucal.data.static as static_mod
 import imucal.data.load as load_mod
 import imucal.data.stream as stream_mod
 from conftest import real_file
-from imucal.data.load import DataSpec, load_recording
+from imucal.data.load import load_recording
+from imucal.data.spec import DataSpec
 from imucal.data.static import MovingVariance, detect_static, moving_variance
 from imucal.data.load import has_gyro, use_stream
 from imucal.data.stream import StreamedRecording

@@ -21,7 +21,8 @@ import yaml
 
 from conftest import RATE, calibrate_file, real_file, write_simulation
 from imucal.solve.ipopt import CONVERGED
-from imucal.data.load import load_recording, parse_columns
+from imucal.data.load import load_recording
+from imucal.data.spec import parse_columns
 from imucal.cli.main import main
 from imucal.errors import EXIT_INTERNAL, ImucalError
 from imucal.analysis.simulate import SensorSpec, cube_directions

@@ -13,7 +13,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from conftest import real_file, write_simulation
-from imucal.data.load import DataSpec, load_recording, parse_columns, rails
+from imucal.data.load import load_recording
+from imucal.data.spec import DataSpec, parse_columns, rails
 from imucal.errors import ImucalError
 from imucal.analysis.simulate import cube_directions, mems_counts_sensor
 from imucal.data.static import detect_static

@@ -76,7 +76,7 @@ def test_a_slow_start_is_cut_where_it_began():
 
 def test_streamed_slow_recording_gives_the_same_intervals(tmp_path, monkeypatch):
     import imucal.data.stream as stream_mod
-    from imucal.data.load import DataSpec
+    from imucal.data.spec import DataSpec
     from imucal.data.stream import StreamedRecording
 
     monkeypatch.setattr(stream_mod, "CHUNK_BYTES", 50_000)

@@ -346,7 +346,7 @@ def test_simulate_refuses_a_unit_calibrate_would_refuse(run_cli, tmp_path, uncha
                                                     "x" * 33, "x" * 41]))
 def test_the_option_and_the_file_take_the_same_units(unit):
     """data.unit is accepted exactly when a calibration file with that unit loads."""
-    from imucal.data.load import DataSpec
+    from imucal.data.spec import DataSpec
 
     try:
         DataSpec(path="x.csv", unit=unit)

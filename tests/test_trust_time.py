@@ -17,7 +17,8 @@ import yaml
 
 from conftest import write_simulation
 from imucal.analysis.simulate import cube_directions, mems_counts_sensor
-from imucal.data.load import DataSpec, load_recording
+from imucal.data.load import load_recording
+from imucal.data.spec import DataSpec
 from imucal.errors import ImucalError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -141,7 +142,7 @@ def test_mapped_duplicated_column_is_refused_and_an_index_reads_it(tmp_path):
 def test_line_without_end_is_refused_naming_its_line(tmp_path, run_cli, unchanged, how):
     """A file whose text stops in one enormous line (here just past MAX_LINE_BYTES; the same rule
     holds a 20 GB one back) is refused at that line, not read on to its end."""
-    from imucal.data.load import MAX_LINE_BYTES
+    from imucal.data.lines import MAX_LINE_BYTES
 
     src = tmp_path / "long.csv"
     src.write_text("t,ax,ay,az\n" + rows_text(300) + "1" * (MAX_LINE_BYTES + 1))
@@ -460,7 +461,7 @@ def test_a_single_pose_on_a_wrong_time_scale_is_not_called_minutes(tmp_path, run
     """One pose tapped every 10 s (a noise log): read in minutes it splits into runs between the
     taps, but all point one way, so minutes are not named."""
     from imucal.data.static import detect_static
-    from imucal.data.timebase import HINT_MIN_POSES
+    from imucal.data.unit_hint import HINT_MIN_POSES
 
     n = 18000
     rng = np.random.default_rng(2)

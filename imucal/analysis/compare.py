@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from imucal.data.load import Recording
+from imucal.data.recording import Recording
 from imucal.data.static import Intervals
 from imucal.errors import ImucalError
 from imucal.model.channels import covariate_values

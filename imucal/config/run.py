@@ -14,7 +14,7 @@ from typing import Any, Mapping
 
 
 from imucal.constants import DEFAULT_ANGLE_TOL
-from imucal.data.load import DataSpec
+from imucal.data.spec import DataSpec
 from imucal.errors import ImucalError, check_choice, short
 from imucal.model.gravity import normal_gravity
 from imucal.model.parameters import BASE_NAMES

@@ -1,5 +1,5 @@
-"""A loaded recording and the limits every reader applies (CSV/MAT in data/load.py, bags in
-data/rosbag.py, chunks in data/stream.py)."""
+"""A loaded recording and the limits every reader applies (text read whole in data/whole.py, bags in
+data/rosbag.py, text in chunks in data/stream.py)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field

@@ -598,7 +598,7 @@ def detect_static(t: np.ndarray, raw: np.ndarray, settings: StaticSettings = Sta
                   rails: dict | None = None) -> Intervals:
     """Find the intervals in which the sensor is still; drop those with a clipped axis.
 
-    ``rails``: declared rails (imucal.data.load.rails); None detects clipping from the data.
+    ``rails``: declared rails (imucal.data.spec.rails); None detects clipping from the data.
     Dropped intervals are listed in ``meta["dropped"]`` (t_start, t_end, axis, rail, reason).
     imucal.data.stream does the same on a file read in chunks.
     """

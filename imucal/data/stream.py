@@ -1,12 +1,13 @@
 """Long recordings in bounded memory: read in blocks of lines, detect static intervals on the way,
 keep only what the fit needs.
 
-The rules are imucal.data.load's (header, column roles, time unit, the same one-line errors for the
-same bad line) and imucal.data.static's (the same moving variance, threshold and per-interval
+The rules are the whole-file reader's (imucal.data.layout: header, column roles; imucal.data.lines:
+the same one-line errors for the same bad line; imucal.data.timebase: the time base) and
+imucal.data.static's (the same moving variance, threshold and per-interval
 statistics, computed by the same functions), so the intervals and the fit are those of the
 in-memory path. Numbers are parsed by pandas' C parser, a block of about CHUNK_BYTES at a time;
 a block it reads differently from numpy.loadtxt (anything unusual: quotes, NaN, too few columns,
-exotic line breaks) is parsed by the loader's own routine, which names the bad line.
+exotic line breaks) is parsed line by line (imucal.data.lines.parse_block), which names the bad line.
 
 Passes over the file: 1. parse, SHA-256, time base, moving variance (float32, 4 bytes a sample)
 and its threshold; 2. the statistics of each still interval (and its samples in samples mode);
@@ -19,38 +20,34 @@ import csv
 import hashlib
 import io
 import os
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from imucal.constants import TIME_UNITS
-from imucal.data.load import (BINARY_PROBE, MAX_ABS_VALUE, DataSpec, Layout, as_spec, binary_file, check_lines,
-                              corrupt_value, layout, line_too_long, lineno, long_line, no_rows, not_increasing,
-                              not_utf8, parse_block, resolve_path, unparsed, _MAX_SCAN_LINES)
+from imucal.data.layout import Layout, file_head
+from imucal.data.lines import (MAX_STREAM_BYTES, check_lines, check_text, corrupt_value, lineno, no_rows,
+                               not_increasing, not_utf8, parse_block, plain_text, unparsed)
+from imucal.data.spec import DataSpec, as_spec, resolve_path
 from imucal.data.timebase import (CLOCK_SPAN, GAP_STEPS, Decision, GapFinder, LagDiffs, StepStats, ValueCounts,
                                   clock_times, decide, gap_excess, rate_time_base, refine, time_base,
                                   time_unit_from_step)
 from imucal.data.static import (QUANTUM_ROWS, Intervals, MovingVariance, Segment, StaticSettings, VarianceSeries,
                                 auto_threshold, candidate_runs, edge_samples, intervals_from, quantum, still_segment,
                                 window_samples)
-from imucal.data.recording import RecordingSummary, StaticSamples, TimeBase
+from imucal.data.recording import MAX_ABS_VALUE, RecordingSummary, StaticSamples, TimeBase
 from imucal.errors import ImucalError
 from imucal.solve.stats import median
 from imucal.files.inputs import open_regular
 from imucal.report.progress import progress
 
-#: Largest recording read in chunks [bytes].
-MAX_STREAM_BYTES = 1024**4
 #: Bytes parsed at a time (whole lines).
 CHUNK_BYTES = 16 * 1024**2
 #: Parsed samples kept after the first pass, so that the next ones need not parse the file again,
 #: while they fit in this many bytes (raw, t and temperature as float64).
 CACHE_BYTES = 256 * 1024**2
-#: Largest head searched for the header and the first data line [bytes].
-MAX_HEAD_BYTES = 64 * 1024**2
-_EXOTIC = (b"\x0b", b"\x0c", b"\x1c", b"\x1d", b"\x1e")  # line breaks for str.splitlines, not for pandas
 
 
 class _File:
@@ -82,46 +79,8 @@ class _File:
 
     def _head(self) -> tuple[Layout, int]:
         """Header and layout from the head of the file; byte offset of the body."""
-        skip = self.spec.skip_rows
         with self._open() as f:
-            head = f.read(BINARY_PROBE)
-            if b"\x00" in head:
-                raise binary_file(self.path)
-            size = 1 << 20
-            while True:
-                head += f.read(size - len(head))
-                self._check_text(head, lambda: 1)
-                eof = len(head) < size
-                cut = len(head) if eof else head.rfind(b"\n") + 1
-                try:
-                    text = head[:cut].decode("utf-8-sig")
-                except UnicodeDecodeError:
-                    raise not_utf8(self.path) from None
-                plain = text.splitlines()
-                rest = plain[skip:]
-                k0 = next((i for i, ln in enumerate(rest) if ln.strip() and not ln.lstrip().startswith("#")), None)
-                if eof or (k0 is not None and len(rest) > k0 + _MAX_SCAN_LINES + 1):
-                    break
-                if size >= MAX_HEAD_BYTES:
-                    raise ImucalError(f"no header or data line in the first {MAX_HEAD_BYTES} bytes", file=str(self.path),
-                                      field="data.path", fix="remove the leading text, or give data.stream: never")
-                size *= 4
-        lay = layout(rest, self.spec, self.path)
-        bom = 3 if head.startswith(b"\xef\xbb\xbf") else 0
-        kept = text.splitlines(keepends=True)  # the same lines with their line breaks
-        offset = bom + sum(len(ln.encode("utf-8")) for ln in kept[:skip + lay.body])
-        return lay, offset
-
-    def _check_text(self, buf: bytes, first_line: Callable[[], int]) -> None:
-        """The whole-file reader's refusals for ``buf`` (which starts a line): a NUL byte (a sparse or
-        binary file) and a line longer than MAX_LINE_BYTES. ``first_line``: buf's first line
-        number, counted only for a message."""
-        nul = buf.find(b"\x00")
-        if nul >= 0:
-            raise binary_file(self.path, first_line() + buf.count(b"\n", 0, nul))
-        start = long_line(buf)
-        if start is not None:
-            raise line_too_long(self.path, first_line() + buf.count(b"\n", 0, start))
+            return file_head(f, self.spec, self.path)
 
     def line_at(self, offset: int) -> int:
         """Line number of the line starting at byte ``offset`` of the body (counted when a message
@@ -162,7 +121,7 @@ class _File:
                         yield at, carry
                     break
                 buf = carry + data
-                self._check_text(buf, lambda: self.line_at(at))  # a sparse tail or a line without end stops here
+                check_text(buf, self.path, lambda: self.line_at(at))  # a sparse tail or a line without end stops here
                 cut = buf.rfind(b"\n") + 1
                 if cut == 0:
                     carry = buf
@@ -182,9 +141,7 @@ class _File:
         if self.unparsed is not None:
             check_lines(self._lines(block), self.line_at(offset), lay.delimiter, lay.usecols, self.path)
             return np.empty((0, len(lay.usecols)))
-        plain = block.isascii() and not any(c in block for c in _EXOTIC) and (
-            b"\r" not in block or block.count(b"\r") == block.count(b"\r\n"))
-        if plain:
+        if plain_text(block):
             # imported here: pandas adds about 0.3 s to start-up, which a short recording read whole
             # never pays (the measured start-up of `imucal calibrate` in docs/benchmarks.md)
             import pandas as pd
@@ -223,11 +180,6 @@ class _File:
     def line_of(self, block: bytes, offset: int, k: int) -> int:
         """File line of data row ``k`` of the block at ``offset``."""
         return lineno(block.decode("utf-8").splitlines(), k, self.line_at(offset))
-
-
-def head_layout(spec: DataSpec, path: Path) -> Layout:
-    """The layout of a recording's head, as the chunked reader sees it (imucal.data.load.has_gyro)."""
-    return _File(spec, path).lay
 
 
 class _Steps(ValueCounts):

@@ -24,7 +24,7 @@ that are not jitter are kept exactly: t = (s - s[0]) x unit. Jittered stamps are
 fitted clock: t_k = (k x clock step + the gaps before k) x unit, each gap as long as the jump of the
 stamps' offset from the clock across it.
 
-Both readers (imucal.data.load, whole; imucal.data.stream, in chunks) feed the same pieces: the
+The readers (imucal.data.whole and imucal.data.rosbag, whole; imucal.data.stream, in chunks) feed the same pieces: the
 step statistics (StepStats), the decision (decide), the gaps (GapFinder) and the times
 (clock_times), so that they give the same times to the bit.
 """
@@ -34,7 +34,6 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -42,10 +41,6 @@ from imucal.constants import TIME_UNITS
 from imucal.data.recording import MAX_RATE_HZ, MIN_RATE_HZ, TimeBase, TimeSource
 from imucal.errors import ImucalError
 from imucal.solve.stats import median
-
-if TYPE_CHECKING:
-    from imucal.config.run import RunConfig
-    from imucal.data.recording import Recording, RecordingSummary
 
 #: Samples over which the clock step is measured [samples]: bursts of fewer samples average out.
 CLOCK_SPAN = 64
@@ -283,7 +278,7 @@ def time_unit_from_step(dt: float, first: float, what: str = "median step", path
         return unit, f"time unit inferred: {unit} (epoch time stamps; {what} {dt:g} {unit} -> {rate(unit):.4g} Hz)"
 
     def distance(u: str) -> float:
-        return _decades_from_typical(rate(u))
+        return decades_from_typical(rate(u))
 
     plausible.sort(key=distance)
     unit = plausible[0]
@@ -300,7 +295,7 @@ def time_unit_from_step(dt: float, first: float, what: str = "median step", path
     return unit, note + ")"
 
 
-def _decades_from_typical(rate: float) -> float:
+def decades_from_typical(rate: float) -> float:
     return abs(math.log10(rate / TYPICAL_RATE_HZ))
 
 
@@ -435,66 +430,3 @@ def stamped_times(stamps: np.ndarray, time_unit: str, rate_given: float | None, 
 def rate_time_base(rate: float) -> tuple[str, str, TimeBase]:
     """Unit, note and time base of a recording without a time column, at the given rate [Hz]."""
     return "s", f"no time column: {float(rate):g} Hz given", TimeBase(source=TimeSource.RATE, rate=float(rate))
-
-
-#: Distinct orientations the stamps read in another unit must show before that unit is named as
-#: the likely one: a single pose read on a wrong time scale may split into runs, all one way.
-HINT_MIN_POSES = 3
-#: Words for a unit in a message.
-_UNIT_WORDS = {"min": "minutes", "s": "seconds", "ms": "milliseconds", "us": "microseconds", "ns": "nanoseconds"}
-
-
-def unit_hint(config: "RunConfig", rec: "Recording | RecordingSummary", found: int,
-              rails: dict | None = None) -> ImucalError | None:
-    """The refusal to give when a run finds fewer than two still poses (``found``) on a stamped
-    recording but HINT_MIN_POSES or more distinct ones with its stamps read in another unit that
-    gives a more usual rate (closer to TYPICAL_RATE_HZ: minutes, which are never inferred, or
-    another): the time unit looks like that one. None otherwise (a log that only moves, read 60
-    times slower, may look still; at a rate further from an IMU's usual one it is not tried).
-    Only on that failure: each unit tried costs one more detection (a re-read for a file read in
-    chunks)."""
-    tb = rec.time_base
-    if tb is None or tb.source is TimeSource.RATE or not math.isfinite(tb.rate):
-        return None
-    best: tuple[int, str, float] | None = None
-    for unit, f in TIME_UNITS.items():
-        rate = tb.rate * TIME_UNITS[rec.time_unit] / f
-        if unit == rec.time_unit or not MIN_RATE_HZ <= rate <= MAX_RATE_HZ or (
-                _decades_from_typical(rate) >= _decades_from_typical(tb.rate)):
-            continue  # only a unit that gives a more usual rate (the inference's rule) is tried
-        poses = _poses_in(config, rec, unit, f / TIME_UNITS[rec.time_unit], rails)
-        if poses >= max(HINT_MIN_POSES, found + 1) and (best is None or poses > best[0]):
-            best = (poses, unit, rate)
-    if best is None:
-        return None
-    poses, unit, rate = best
-    return ImucalError(f"the time column read in {rec.time_unit} gives {tb.rate:.4g} Hz and {found} still pose(s); "
-                       f"read in {unit} it gives {rate:.4g} Hz and {poses} distinct still poses: the time unit looks "
-                       f"like {_UNIT_WORDS[unit]}", file=rec.source, field="data.time_unit",
-                       fix=f"give --time-unit {unit} (data.time_unit: {unit})"
-                           + (", or write the time column in seconds" if unit == "min" else ""))
-
-
-def _poses_in(config: "RunConfig", rec: "Recording | RecordingSummary", unit: str, scale: float,
-              rails: dict | None) -> int:
-    """Distinct orientations of the still intervals found with the stamps read in ``unit``
-    (``scale``: that unit's factor over the one read)."""
-    from dataclasses import replace
-
-    from imucal.data.static import detect_static
-    from imucal.solve.observability import distinct_directions
-
-    try:
-        if rec.t is not None:  # read whole: the same time base on another scale
-            iv = detect_static(rec.t * scale, rec.raw, config.static, rec.temp, source=rec.source, rails=rails)
-        else:
-            from imucal.data.stream import StreamedRecording
-
-            iv = StreamedRecording(replace(config.data, time_unit=unit), config.static, config.base_dir,
-                                   rails).intervals
-    except ImucalError:
-        return 0
-    if iv.n == 0:
-        return 0
-    norm = np.linalg.norm(iv.mean, axis=1, keepdims=True)
-    return distinct_directions(iv.mean[norm[:, 0] > 0] / norm[norm[:, 0] > 0])[0]

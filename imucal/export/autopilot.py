@@ -69,7 +69,7 @@ MAV_PARAM_TYPE_REAL32, MAV_PARAM_TYPE_INT32 = 9, 6
 #: Raw units whose readings the autopilots' drivers would give in m/s^2, with the factor c [m/s^2 per
 #: unit]; g is standard gravity, as the drivers convert it (ArduPilot GRAVITY_MSS, PX4 CONSTANTS_ONE_G).
 READING_UNITS = {SI_ACCEL_UNIT: 1.0, "g": STANDARD_GRAVITY, "mg": STANDARD_GRAVITY / 1000.0}
-#: The unit label of a recording whose unit was not given (imucal.data.load.DataSpec.unit).
+#: The unit label of a recording whose unit was not given (imucal.data.spec.DataSpec.unit).
 UNSTATED_UNIT = "raw"
 
 

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from imucal.constants import TIME_UNITS
-from imucal.data.load import Recording, load_recording
+from imucal.data.load import load_recording
+from imucal.data.recording import Recording
 from imucal.errors import ImucalError
 from imucal.gyro.fit import GyroOptions, fit_gyro
 from imucal.gyro.result import GyroResult

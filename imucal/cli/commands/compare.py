@@ -29,7 +29,7 @@ def run(args: argparse.Namespace) -> int:
 
     from imucal.analysis.compare import compare
     from imucal.calibration.fileformat import load_calibration
-    from imucal.data.load import load_recording, rails
+    from imucal.data.load import load_recording
     from imucal.data.static import detect_static
     from imucal.export.registry import guess_format, read_peer
     from imucal.files.output import check_outputs, write_json_atomic
@@ -41,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
     fmt = args.format or guess_format(args.other)
     other = read_peer(args.other, fmt)
     rec = load_recording(cfg.data, cfg.base_dir)
-    declared = rails(cfg.data.saturation) if cfg.data.saturation is not None else None
+    declared = cfg.data.declared_rails
     iv = detect_static(rec.t, rec.raw, cfg.static, rec.temp, source=rec.source, rails=declared)
     names = (Path(args.calibration).name, f"{Path(args.other).name} ({fmt})")
     res = compare(cal, other, rec, iv, cal.gravity, names)

@@ -130,7 +130,7 @@ def _gravity(args: argparse.Namespace, cfg: RunConfig) -> GravitySpec:
 def run_config(args: argparse.Namespace, config: str | None = None, data_override: bool = True) -> RunConfig:
     """The RunConfig from a YAML file (optional) and the command's options."""
     from imucal.config.run import config_from_dict, load_config
-    from imucal.data.load import parse_columns
+    from imucal.data.spec import parse_columns
     from imucal.files.inputs import resolve
 
     if config:

@@ -1,0 +1,231 @@
+"""Where a text recording's numbers are: the delimiter (sniffed), the header line and the column
+of each role (Layout), found in the lines after ``skip_rows`` or in the head of a file.
+
+imucal.data.lines reads the rows; this module only looks at the head: the first data line and
+MAX_SCAN_LINES after the first non-comment line.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import BinaryIO
+
+from imucal.data.lines import BINARY_PROBE, MAX_STREAM_BYTES, binary_file, check_text, is_number, not_utf8, split
+from imucal.data.spec import ROLES, DataSpec
+from imucal.errors import ImucalError, short
+from imucal.files.inputs import open_regular
+
+#: Lines after the first non-comment line searched for the header (and the lines a layout may
+#: depend on).
+MAX_SCAN_LINES = 50
+#: Largest head of a file searched for the header and the first data line [bytes].
+MAX_HEAD_BYTES = 64 * 1024**2
+
+
+def sniff_delimiter(line: str) -> str | None:
+    for d in (",", ";", "\t"):
+        if d in line:
+            return d
+    return None
+
+
+_DEFAULT_NAMES = {"t": ("t", "time", "timestamp"), "ax": ("ax", "acc_x", "accx", "x"),
+                  "ay": ("ay", "acc_y", "accy", "y"), "az": ("az", "acc_z", "accz", "z"),
+                  "gx": ("gx", "gyro_x", "gyrx", "wx"), "gy": ("gy", "gyro_y", "gyry", "wy"),
+                  "gz": ("gz", "gyro_z", "gyrz", "wz"), "temp": ("temp", "temperature", "t_c")}
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Where a recording's numbers are: delimiter, column of each role read, first data line."""
+
+    delimiter: str | None
+    columns: dict  #: role -> 0-based column index (every role found)
+    roles: list  #: the roles read, in ROLES order
+    body: int  #: index (in the lines after skip_rows) of the first line after the header
+    body_first: int  #: its 1-based line number in the file
+    time_column: str  #: the time column's name in the file ("t" without a header)
+
+    @property
+    def usecols(self) -> list[int]:
+        return [self.columns[r] for r in self.roles]
+
+    @property
+    def has_gyro(self) -> bool:
+        return "gx" in self.roles
+
+
+def _no_header_layout(ncol: int, path: Path) -> dict[str, int]:
+    """Column roles of a file without header and without a mapping."""
+    if ncol == 3:
+        return {"ax": 0, "ay": 1, "az": 2}
+    if ncol == 4:
+        return {"t": 0, "ax": 1, "ay": 2, "az": 3}  # imu_tk: t x y z
+    if ncol == 5:
+        return {"t": 0, "ax": 1, "ay": 2, "az": 3, "temp": 4}  # imucal's simulate layout
+    if ncol < 3:
+        raise ImucalError(f"has {ncol} column(s): an accelerometer recording needs at least ax ay az",
+                          file=str(path), field="data.columns",
+                          fix="check the delimiter (data.delimiter) or give the file with its three axes")
+    # The likely layout, and a mapping for it that the user can check against the file.
+    hint, example = {6: (" (logs like the MPU-6050's hold ax ay az gx gy gz)", "ax=0,ay=1,az=2"),
+                     7: (" (imu_tk-style logs hold t gx gy gz ax ay az)", "t=0,ax=4,ay=5,az=6")}.get(
+                         ncol, ("", "t=0,ax=1,ay=2,az=3"))
+    raise ImucalError(f"has {ncol} columns and no header: the layout is ambiguous{hint}", file=str(path),
+                      field="data.columns",
+                      fix=f"map the columns, e.g. --columns {example} or data.columns in the YAML")
+
+
+def _find_header(lines: list[str], k0: int, spec: DataSpec, path: Path) -> int | None:
+    """Index of the header line: the first text line with the mapped (or known default) names."""
+    if spec.format not in ("auto", "csv"):
+        return None
+    wanted = [str(v) for r, v in spec.columns.items() if isinstance(v, str)]
+    first_text: list[str] | None = None  # the first non-numeric line, for the message
+    for i in range(k0, min(len(lines), k0 + MAX_SCAN_LINES)):
+        toks = split(lines[i], spec.delimiter or sniff_delimiter(lines[i]))
+        if toks and not all(is_number(t) for t in toks):
+            names = [t.strip().strip('"').strip("'") for t in toks]
+            first_text = names if first_text is None else first_text
+            if wanted and not all(w in names for w in wanted):
+                continue
+            if not wanted and not any(n.lower() in sum(_DEFAULT_NAMES.values(), ()) for n in names):
+                continue
+            return i
+    if wanted and first_text is not None:
+        missing = [w for w in wanted if w not in first_text]
+        raise ImucalError(f"mapped column(s) {missing} not in header {first_text[:12]}", file=str(path),
+                          field="data.columns", fix="map the roles to the header's names")
+    if spec.format == "csv":
+        raise ImucalError("no header line with the mapped column names found", file=str(path),
+                          field="data.columns",
+                          fix="add a header row, or set data.format: whitespace with column indices")
+    return None
+
+
+def _header_columns(names: list[str], spec: DataSpec, path: Path) -> dict[str, int]:
+    """Role -> column index from a header: the mapped names (or indices), else the default names."""
+    lower = [n.lower() for n in names]
+    cols: dict[str, int] = {}
+    for role in ROLES:
+        if role in spec.columns:
+            want = spec.columns[role]
+            if isinstance(want, int):
+                cols[role] = want
+            elif want in names:
+                cols[role] = _only_column(names, want, role, path)
+            else:
+                raise ImucalError(f"column {short(want)} (for {role}) not in header {short(names, 200)}",
+                                  file=str(path), field=f"data.columns.{role}",
+                                  fix="map the role to one of the header's names")
+        else:
+            name = next((c for c in _DEFAULT_NAMES[role] if c in lower), None)
+            if name is not None:
+                cols[role] = _only_column(lower, name, role, path)
+    return cols
+
+
+def _only_column(names: list[str], name: str, role: str, path: Path) -> int:
+    """The index of the one header column called ``name`` (read as ``role``); a name the header
+    gives twice is refused, naming both positions (1-based), not the first taken silently."""
+    at = [i for i, n in enumerate(names) if n == name]
+    if len(at) > 1:
+        raise ImucalError(f"the header names column {short(name)} (read as {role}) twice: columns "
+                          f"{at[0] + 1} and {at[1] + 1}", file=str(path), field=f"data.columns.{role}",
+                          fix=f"rename one of them, or map {role} to a 0-based column index "
+                              f"(e.g. --columns {role}={at[0]})")
+    return at[0]
+
+
+def _check_roles(cols: dict[str, int], spec: DataSpec, path: Path) -> None:
+    for role in ("ax", "ay", "az"):
+        if role not in cols:
+            raise ImucalError(f"missing column for {role}", file=str(path), field=f"data.columns.{role}",
+                              fix=f"add a column named {role} or map it in data.columns")
+    if "t" not in cols and spec.sample_rate is None:
+        raise ImucalError("no time column and no sample rate", file=str(path), field="data.sample_rate",
+                          fix="add a t column or set data.sample_rate in Hz")
+    gyro_roles = [r for r in ("gx", "gy", "gz") if r in cols]
+    if gyro_roles and len(gyro_roles) != 3:
+        raise ImucalError(f"only {', '.join(gyro_roles)} of gx, gy, gz mapped", file=str(path),
+                          field="data.columns", fix="map all three gyroscope columns or none")
+
+
+def layout(lines: list[str], spec: DataSpec, path: Path) -> Layout:
+    """Header, delimiter and column roles from the lines after ``spec.skip_rows`` (the whole file,
+    or its head: the first data line and MAX_SCAN_LINES after the first non-comment line)."""
+    first_lineno = spec.skip_rows + 1
+    # Find the first non-empty, non-comment line.
+    k0 = next((i for i, ln in enumerate(lines) if ln.strip() and not ln.lstrip().startswith("#")), None)
+    if k0 is None:
+        raise ImucalError("is empty", file=str(path), field="data.path",
+                          fix="record samples into the file")
+    header_idx = _find_header(lines, k0, spec, path)
+    names: list[str] = []
+    if header_idx is not None:
+        delim = spec.delimiter or sniff_delimiter(lines[header_idx])
+        names = [t.strip().strip('"').strip("'") for t in split(lines[header_idx], delim)]
+        cols = _header_columns(names, spec, path)
+        wide = [r for r, c in cols.items() if not 0 <= c < len(names)]
+        if wide:
+            raise ImucalError(f"column {cols[wide[0]]} of {wide[0]} is beyond the header's {len(names)} columns",
+                              file=str(path), field=f"data.columns.{wide[0]}",
+                              fix=f"give a 0-based index below {len(names)}, or the column's name")
+        body = header_idx + 1
+    else:
+        if not all(is_number(t) for t in split(lines[k0], spec.delimiter)):
+            raise ImucalError(f"line {first_lineno + k0} is neither a header with known column names nor numbers",
+                              file=str(path), field="data.columns",
+                              fix="name columns t, ax, ay, az (temp) or map them in data.columns")
+        delim = spec.delimiter or sniff_delimiter(lines[k0])
+        cols = {r: int(v) for r, v in spec.columns.items() if isinstance(v, int)}
+        if any(isinstance(v, str) for v in spec.columns.values()):
+            raise ImucalError("column names given but the file has no header", file=str(path),
+                              field="data.columns", fix="map roles to 0-based column indices")
+        if not cols:
+            cols = _no_header_layout(len(split(lines[k0], delim)), path)
+        body = k0
+    _check_roles(cols, spec, path)
+    roles = [r for r in ROLES if r in cols]
+    tname = names[cols["t"]] if header_idx is not None and "t" in roles else "t"
+    return Layout(delimiter=delim, columns=cols, roles=roles, body=body, body_first=first_lineno + body,
+                  time_column=tname)
+
+
+def file_head(f: BinaryIO, spec: DataSpec, path: Path) -> tuple[Layout, int]:
+    """The layout from the head of an open file (read from its start) and the byte offset of its body."""
+    skip = spec.skip_rows
+    head = f.read(BINARY_PROBE)
+    if b"\x00" in head:
+        raise binary_file(path)
+    size = 1 << 20
+    while True:
+        head += f.read(size - len(head))
+        check_text(head, path, lambda: 1)
+        eof = len(head) < size
+        cut = len(head) if eof else head.rfind(b"\n") + 1
+        try:
+            text = head[:cut].decode("utf-8-sig")
+        except UnicodeDecodeError:
+            raise not_utf8(path) from None
+        rest = text.splitlines()[skip:]
+        k0 = next((i for i, ln in enumerate(rest) if ln.strip() and not ln.lstrip().startswith("#")), None)
+        if eof or (k0 is not None and len(rest) > k0 + MAX_SCAN_LINES + 1):
+            break
+        if size >= MAX_HEAD_BYTES:
+            raise ImucalError(f"no header or data line in the first {MAX_HEAD_BYTES} bytes", file=str(path),
+                              field="data.path", fix="remove the leading text, or give data.stream: never")
+        size *= 4
+    lay = layout(rest, spec, path)
+    bom = 3 if head.startswith(b"\xef\xbb\xbf") else 0
+    kept = text.splitlines(keepends=True)  # the same lines with their line breaks
+    return lay, bom + sum(len(ln.encode("utf-8")) for ln in kept[:skip + lay.body])
+
+
+def head_layout(spec: DataSpec, path: Path) -> Layout:
+    """The layout of a recording's head (whether it has gyroscope columns, before it is read)."""
+    fd, _ = open_regular(path, field="data.path", max_bytes=MAX_STREAM_BYTES,
+                         fix="check the path (relative paths are relative to the YAML file)")
+    with os.fdopen(fd, "rb") as f:
+        return file_head(f, spec, path)[0]

@@ -1,0 +1,123 @@
+"""The whole-file reader of a text recording: every row in memory, one Recording.
+
+The file is refused as a whole before it is parsed (imucal.data.lines: NUL bytes, an over-long
+line, not UTF-8); the common recording (ASCII, every line after the header a row) is parsed by
+numpy's C reader from the bytes, anything else line by line, which names the line at fault.
+The time base is imucal.data.timebase's, as for every reader.
+"""
+from __future__ import annotations
+
+import hashlib
+import io
+import os
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from imucal.data.layout import MAX_SCAN_LINES, Layout, layout
+from imucal.data.lines import (BINARY_PROBE, binary_file, corrupt_value, decode, line_too_long, lineno, long_line,
+                               no_rows, not_increasing, parse_block, plain_text)
+from imucal.data.recording import MAX_ABS_VALUE, Recording
+from imucal.data.spec import DataSpec, gyro_unit
+from imucal.data.timebase import rate_time_base, stamped_times
+from imucal.errors import ImucalError
+from imucal.files.inputs import first_hole, max_data_bytes, open_regular
+
+
+def _read_bytes(path: Path) -> tuple[bytes, str]:
+    """Bytes and SHA-256 of a recording: a regular file, within the size limit, text (no NUL byte,
+    no line longer than MAX_LINE_BYTES). A sparse file is read only up to its first hole."""
+    fd, size = open_regular(path, field="data.path", max_bytes=max_data_bytes(),
+                            fix="check the path (relative paths are relative to the YAML file)")
+    hole = first_hole(fd, size)  # a sparse file's NUL tail is never read
+    try:
+        with os.fdopen(fd, "rb") as f:
+            if b"\x00" in f.read(BINARY_PROBE):  # a binary file is refused before it is read whole
+                raise binary_file(path)
+            f.seek(0)
+            blob = f.read(hole)
+    except OSError as exc:
+        raise ImucalError(f"cannot read: {exc.strerror or exc}", file=str(path), field="data.path") from None
+    nul = blob.find(b"\x00")
+    if nul >= 0 or hole < size:
+        raise binary_file(path, blob.count(b"\n", 0, nul if nul >= 0 else len(blob)) + 1)
+    start = long_line(blob)
+    if start is not None:
+        raise line_too_long(path, blob.count(b"\n", 0, start) + 1)
+    return blob, hashlib.sha256(blob).hexdigest()
+
+
+def _fast_table(blob: bytes, spec: DataSpec, path: Path) -> tuple[Layout, np.ndarray] | None:
+    """The common recording read without a Python string per line: ASCII, lines ended by "\n" or
+    "\r\n", every line after the header a finite row. None for anything else, which the line by line
+    reader (parse_block) reads and, when it is wrong, names the line at fault. Same numbers: the same
+    numpy parser reads the same bytes."""
+    if not plain_text(blob):
+        return None
+    n_lines = blob.count(b"\n") + (len(blob) > 0 and not blob.endswith(b"\n"))
+    end = -1  # the head: the lines the layout looks at (its first data line and MAX_SCAN_LINES more)
+    for _ in range(spec.skip_rows + 2 * MAX_SCAN_LINES):
+        end = blob.find(b"\n", end + 1)
+        if end < 0:
+            end = len(blob)
+            break
+    head = blob[:end].decode("ascii").splitlines()[spec.skip_rows:]
+    try:
+        lay = layout(head, spec, path)
+    except ImucalError:
+        return None
+    first = spec.skip_rows + lay.body  # 0-based line of the first row
+    if (lay.body + MAX_SCAN_LINES >= len(head) and end < len(blob)) or n_lines <= first:
+        return None  # the layout may depend on lines past the head; or no row at all
+    try:
+        with warnings.catch_warnings():  # "input contained no data": blank lines only, read below
+            warnings.simplefilter("ignore")
+            arr = np.loadtxt(io.BytesIO(blob), delimiter=lay.delimiter, usecols=lay.usecols, ndmin=2,
+                             dtype=float, comments="#", skiprows=first)
+    except (ValueError, IndexError):
+        return None
+    if arr.shape[0] != n_lines - first or not np.isfinite(arr).all():
+        return None  # a blank or comment line, or a bad value: the line by line reader decides
+    return lay, arr
+
+
+def read_text(spec: DataSpec, path: Path) -> Recording:
+    """Every row of the text recording at ``path`` (read as ``spec`` says), in memory."""
+    blob, sha = _read_bytes(path)
+    fast = _fast_table(blob, spec, path)
+    if fast is not None:  # every line after the header is a row
+        (lay, arr), body = fast, None
+    else:
+        lines = decode(blob, path).splitlines()[spec.skip_rows:]
+        lay = layout(lines, spec, path)
+        body = lines[lay.body:]
+        arr = parse_block(body, lay.body_first, lay.delimiter, lay.usecols, path)
+    del blob
+    body_first = lay.body_first
+
+    def line_of(k: int) -> int:  # the file's line number of row k
+        return body_first + k if body is None else lineno(body, k, body_first)
+
+    big = np.abs(arr) > MAX_ABS_VALUE
+    if big.any():
+        raise corrupt_value(line_of(int(np.flatnonzero(big.any(axis=1))[0])), path)
+    data = {r: arr[:, i] for i, r in enumerate(lay.roles)}
+    n = arr.shape[0]
+    stamps = data.get("t")
+    if stamps is not None and n > 1:
+        d = np.diff(stamps)
+        if not (d > 0).all():
+            raise not_increasing(line_of(int(np.flatnonzero(~(d > 0))[0]) + 1), path)
+    if stamps is None:
+        unit, note, tb = rate_time_base(spec.sample_rate)
+        t = np.arange(n) / float(spec.sample_rate)
+    elif n:  # a given sample rate beside the stamps is checked against them (imucal.data.timebase)
+        t, unit, note, tb = stamped_times(stamps, spec.time_unit, spec.sample_rate, lay.time_column, path, line_of)
+    else:
+        raise no_rows(path)
+    raw = np.column_stack([data["ax"], data["ay"], data["az"]])
+    gyro = np.column_stack([data["gx"], data["gy"], data["gz"]]) if lay.has_gyro else None
+    return Recording(t=t, raw=raw, temp=data.get("temp"), unit=spec.unit, source=str(path), sha256=sha,
+                     gyro=gyro, t_source=stamps, time_unit=unit, time_note=note, time_column=lay.time_column,
+                     gyro_unit=gyro_unit(spec), time_base=tb)
