@@ -146,7 +146,7 @@ VARIANTS = [("gen", "generated imucal_apply (L (raw - s))", "imucal_apply_batch"
 
 
 def _calibration(path: str | None, work: Path):
-    from imucal.calibration.fileformat import load_calibration
+    from imucal.calibration.frozen import load_calibration
 
     if path:
         return load_calibration(path)

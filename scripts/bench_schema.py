@@ -28,7 +28,7 @@ sys.path.insert(0, str(ROOT))
 
 from imucal.analysis.plan_file import read_plan  # noqa: E402
 from imucal.analysis.simulate import load_simulation_config  # noqa: E402
-from imucal.calibration.fileformat import load_calibration  # noqa: E402
+from imucal.calibration.frozen import load_calibration  # noqa: E402
 from imucal.calibration.gyro import GyroCalibration  # noqa: E402
 from imucal.config.run import load_config  # noqa: E402
 from imucal.export.kalibr import read_kalibr_yaml  # noqa: E402

@@ -29,7 +29,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from imucal.calibration.fileformat import load_calibration  # noqa: E402
+from imucal.calibration.frozen import load_calibration  # noqa: E402
 from imucal.calibration.frozen import Calibration  # noqa: E402
 from imucal.export.codegen import float_error_bound, generate_c, gyro_float_error_bound, write_c  # noqa: E402
 

@@ -10,7 +10,8 @@ import pytest
 import yaml
 
 import imucal
-from imucal.calibration.fileformat import FORMAT, FORMAT_VERSION, from_dict, load_calibration
+from imucal.calibration.fileformat import FORMAT, FORMAT_VERSION
+from imucal.calibration.frozen import from_dict, load_calibration
 from imucal.constants import SI_ACCEL_UNIT
 from imucal.errors import ImucalError
 from imucal.model.parameters import BASE_NAMES

@@ -30,7 +30,9 @@ from hypothesis import given, settings, strategies as st
 
 from imucal.calibration.frozen import Calibration
 
-from imucal.calibration.fileformat import OUTPUT_FRAME, load_calibration, validate_parameters
+from imucal.calibration.fileformat import OUTPUT_FRAME, validate_parameters
+
+from imucal.calibration.frozen import load_calibration
 from imucal.cli.main import main
 from imucal.export.codegen import (apply_baked_function, apply_coeffs_function, c_literal, check_prefix,
                             float_error_bound, generate_c, write_c)

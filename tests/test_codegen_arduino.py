@@ -16,7 +16,7 @@ import pytest
 import yaml
 
 from imucal.analysis.simulate import mems_counts_sensor
-from imucal.calibration.fileformat import load_calibration
+from imucal.calibration.frozen import load_calibration
 from imucal.export.arduino import arduino_files, sketch
 from imucal.export.codegen import float_error_bound, generate_c, gyro_float_error_bound
 from test_codegen import STRICT, EffectCalibration, TempBias, _truth_calibration

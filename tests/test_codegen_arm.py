@@ -20,7 +20,7 @@ import pytest
 
 from imucal.calibration.frozen import Calibration
 
-from imucal.calibration.fileformat import load_calibration
+from imucal.calibration.frozen import load_calibration
 from imucal.export.codegen import write_c
 
 ROOT = Path(__file__).resolve().parents[1]

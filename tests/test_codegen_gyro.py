@@ -25,7 +25,7 @@ import numpy as np
 import pytest
 
 from conftest import real_file
-from imucal.calibration.fileformat import load_calibration
+from imucal.calibration.frozen import load_calibration
 from imucal.calibration.frozen import Calibration
 from imucal.calibration.gyro import GyroCalibration
 from imucal.cli.main import main

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from imucal.calibration.frozen import Calibration
 
-from imucal.calibration.fileformat import from_dict
+from imucal.calibration.frozen import from_dict
 from imucal.config.run import config_from_dict
 from imucal.model.effects import (EFFECTS, MIN_TEMPERATURE_SPREAD, REFERENCE_TEMPERATURE, ScaleNonlinearity,
                             check_effects, effects_from_coefficients, make_effect, prepare_parameters,

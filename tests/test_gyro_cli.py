@@ -44,7 +44,7 @@ def test_the_calibration_file_applies_the_gyro_as_the_fit_did(two_files_run):
     """Saved and loaded, the gyro part gives the fit's calibrated rates (the model written independently:
     conftest.gyro_rate)."""
     from conftest import gyro_rate
-    from imucal.calibration.fileformat import load_calibration
+    from imucal.calibration.frozen import load_calibration
     from imucal.model.gyroscope import misalignment_entries
 
     _, d = two_files_run
@@ -120,7 +120,7 @@ def test_a_gyro_that_does_not_describe_the_motions_is_refused(run_cli, tmp_path,
 
 
 def test_apply_writes_calibrated_rates_beside_acceleration(two_files_run, run_cli, tmp_path):
-    from imucal.calibration.fileformat import load_calibration
+    from imucal.calibration.frozen import load_calibration
 
     _, d = two_files_run
     out = tmp_path / "a.csv"
@@ -139,7 +139,7 @@ def test_apply_writes_calibrated_rates_beside_acceleration(two_files_run, run_cl
 
 def test_apply_interpolates_a_gyro_at_another_rate(two_files_run, run_cli, tmp_path):
     """A gyro file at half the rate is interpolated linearly onto the accelerometer's stamps."""
-    from imucal.calibration.fileformat import load_calibration
+    from imucal.calibration.frozen import load_calibration
 
     _, d = two_files_run
     acc_all, g_all = np.loadtxt(real_file(*ACC)), np.loadtxt(real_file(*GYR))
@@ -172,7 +172,7 @@ def test_apply_interpolates_a_gyro_at_another_rate(two_files_run, run_cli, tmp_p
     (lambda g: g["units"].__setitem__("input", "rad/s */ int x; /*"), "gyroscope.units.input"),
 ])
 def test_an_edited_gyro_section_is_refused(two_files_run, tmp_path, edit, field):
-    from imucal.calibration.fileformat import load_calibration
+    from imucal.calibration.frozen import load_calibration
     from imucal.errors import ImucalError
 
     _, d = two_files_run

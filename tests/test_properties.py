@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 
 from imucal.calibration.frozen import Calibration
 
-from imucal.calibration.fileformat import load_calibration
+from imucal.calibration.frozen import load_calibration
 from imucal.config.run import load_config
 from imucal.data.load import load_recording
 from imucal.data.spec import DataSpec

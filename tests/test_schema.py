@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import yaml
 
-from imucal.calibration.fileformat import load_calibration
+from imucal.calibration.frozen import load_calibration
 from imucal.calibration.gyro import GyroCalibration
 from imucal.config.run import RunConfig, config_from_dict
 from imucal.errors import ImucalError

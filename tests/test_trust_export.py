@@ -28,7 +28,8 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 
 from conftest import write_simulation
 from imucal.analysis.simulate import cube_directions, mems_counts_sensor, si_sensor
-from imucal.calibration.fileformat import GRAVITY_MAX, GRAVITY_MIN, from_dict, load_calibration, to_dict
+from imucal.calibration.fileformat import GRAVITY_MAX, GRAVITY_MIN, to_dict
+from imucal.calibration.frozen import from_dict, load_calibration
 from imucal.calibration.frozen import Calibration
 from imucal.calibration.gyro import GyroCalibration
 from imucal.constants import STANDARD_GRAVITY

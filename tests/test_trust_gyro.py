@@ -120,7 +120,7 @@ def _csv(d: GyroData, path) -> None:
 
 
 def test_the_report_json_and_calibration_file_name_the_rejected_interval(run_cli, tmp_path):
-    from imucal.calibration.fileformat import load_calibration
+    from imucal.calibration.frozen import load_calibration
 
     d = session()
     _csv(d, tmp_path / "rec.csv")

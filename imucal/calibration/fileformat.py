@@ -1,5 +1,10 @@
 """The calibration file: YAML, format version 2 (version 1 still read), validated on load.
 
+Below the Calibration it stores (imucal.calibration.frozen builds, saves and loads one through
+this module): ``to_dict``/``save`` read a calibration's fields, ``read_mapping`` validates a file's
+mapping into the Calibration's values, and ``check_built`` checks the built calibration against
+what the file derived from them.
+
 The file stores the fitted parameters (the source of truth) and, for people and other tools,
 values derived from them (the apply map), which must agree with the parameters on load: a hand
 edit of a derived value is refused. Every text field that can reach generated C is checked
@@ -10,12 +15,11 @@ from __future__ import annotations
 import datetime as _dt
 import math
 import os
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Literal, Mapping
 
 import numpy as np
 
-import imucal.calibration.frozen as frozen
 from imucal.calibration.fields import (ACCELEROMETER, DATE_PATTERN, GYROSCOPE, NAME_PATTERN, SHA256_PATTERN,
                                       VERSION_PATTERN, check_raw_unit, check_unit)
 from imucal.constants import SI_ACCEL_UNIT
@@ -28,6 +32,7 @@ from imucal.model.channels import TEMPERATURE, TIME
 from imucal.model.parameters import ANGLE_NAMES, BASE_NAMES, Parameter, Parameters, model_label
 
 if TYPE_CHECKING:  # the gyroscope's modules load only for a file that has one (docs/architecture.md)
+    from imucal.calibration.frozen import Calibration
     from imucal.calibration.gyro import GyroCalibration
 
 
@@ -49,7 +54,7 @@ OUTPUT_FRAME = ("orthonormal frame f of the Theorem: f1 along sensor axis x, f2 
                 "axes x and y, f3 = f1 x f2")
 
 
-def to_dict(cal: "frozen.Calibration") -> dict[str, Any]:
+def to_dict(cal: "Calibration") -> dict[str, Any]:
     """The file's mapping for ``cal`` (what ``save`` writes)."""
     A, c = cal.linear_map()
     return {
@@ -76,7 +81,7 @@ def to_dict(cal: "frozen.Calibration") -> dict[str, Any]:
     }
 
 
-def save(cal: "frozen.Calibration", path: str | os.PathLike) -> None:
+def save(cal: "Calibration", path: str | os.PathLike) -> None:
     """Write ``cal`` atomically (never a partial file)."""
     write_text_atomic(path, dump_yaml(to_dict(cal), sort_keys=False, width=100))
 
@@ -193,8 +198,18 @@ def _parameters(entries: Mapping[str, ParameterEntry], path: str) -> tuple[Param
     return Parameters(plist), std
 
 
-def from_dict(d: Mapping[str, Any], path: str = "<calibration>") -> "frozen.Calibration":
-    """Validate a calibration mapping (CalibrationFile) and rebuild the Calibration."""
+@dataclass(frozen=True)
+class FileContent:
+    """A calibration file's mapping, validated field by field: the Calibration's values, and the
+    values the file derived from them (model label, apply map), checked against the built one."""
+
+    values: dict[str, Any]  #: imucal.calibration.frozen.Calibration's keyword arguments
+    model: Any  #: the file's model label
+    apply: Any  #: the file's apply map
+
+
+def read_mapping(d: Mapping[str, Any], path: str = "<calibration>") -> FileContent:
+    """Validate a calibration mapping (CalibrationFile) into the Calibration's values."""
     if not isinstance(d, Mapping):
         raise ImucalError("is not a calibration file (top level is not a mapping)", file=path,
                           field="format", fix="pass a calibration.yaml written by `imucal calibrate`")
@@ -202,22 +217,29 @@ def from_dict(d: Mapping[str, Any], path: str = "<calibration>") -> "frozen.Cali
     params, std = _parameters(f.parameters, path)
     validate_parameters(params, path)
     effects = tuple((e.name, tuple("xyz".index(a) for a in e.axes)) for e in f.effects)
-    cal = frozen.Calibration(params=params, std=std, gravity=float(f.gravity), raw_unit=f.units.input,
-                             effects=effects, fit=dict(f.fit), data=dict(f.data), created=f.created,
-                             software_version=f.software.version)
-    gyro = _gyro_section(f, path)
-    if gyro is not None:
-        cal = replace(cal, gyro=gyro)
+    values = dict(params=params, std=std, gravity=float(f.gravity), raw_unit=f.units.input, effects=effects,
+                  fit=dict(f.fit), data=dict(f.data), created=f.created, software_version=f.software.version,
+                  gyro=_gyro_section(f, path))
+    return FileContent(values, f.model, f.apply)
+
+
+def check_built(cal: "Calibration", content: FileContent, path: str = "<calibration>") -> None:
+    """The checks of a calibration built from a file: its text fields, parameter names, bounds and
+    fit numbers, and the model label and apply map the file derived (a hand edit is refused)."""
     check_text_fields(cal, path)
     _check_parameter_names(cal, path)
     _check_bounds(cal, path)
     _check_fit_numbers(cal.fit, path)
-    _check_model_name(f.model, cal, path)
-    _check_derived(f.apply, cal, path)
-    return cal
+    _check_model_name(content.model, cal, path)
+    _check_derived(content.apply, cal, path)
 
 
-def _check_parameter_names(cal: "frozen.Calibration", path: str) -> None:
+def read_file(path: str | os.PathLike) -> Any:
+    """The mapping of a calibration YAML file (read safely; validated by ``read_mapping``)."""
+    return read_yaml(path, "calibration", "pass the calibration.yaml written by `imucal calibrate`")
+
+
+def _check_parameter_names(cal: "Calibration", path: str) -> None:
     """The parameters must be exactly the model's (base + each effect's)."""
     names = tuple(cal.params.names)
     if cal.effects:
@@ -252,7 +274,7 @@ def _gyro_section(f: CalibrationFile, path: str) -> GyroCalibration | None:
     return GyroCalibration.from_dict(f.gyroscope, path)
 
 
-def check_text_fields(cal: "frozen.Calibration", path: str = "<calibration>") -> None:
+def check_text_fields(cal: "Calibration", path: str = "<calibration>") -> None:
     """Refuse text that does not look like what it claims to be (dates as ISO 8601 dates, units,
     versions, names, SHA-256 digests). These fields reach generated C and reports."""
     def bad(field_: str, value: Any, what: str, fix: str) -> ImucalError:
@@ -286,7 +308,7 @@ def check_text_fields(cal: "frozen.Calibration", path: str = "<calibration>") ->
         raise bad("data.file", name, "a file name", regen)
 
 
-def _check_model_name(model: Any, cal: "frozen.Calibration", path: str) -> None:
+def _check_model_name(model: Any, cal: "Calibration", path: str) -> None:
     """``model:`` must name this model: the label (nakov-ivanov-6 ...) or the plain model name."""
     if model is None:
         return
@@ -299,7 +321,7 @@ def _check_model_name(model: Any, cal: "frozen.Calibration", path: str) -> None:
                           field="model", fix="regenerate the file with `imucal calibrate`")
 
 
-def _check_derived(apply: Any, cal: "frozen.Calibration", path: str) -> None:
+def _check_derived(apply: Any, cal: "Calibration", path: str) -> None:
     """apply.matrix / apply.offset are derived from the parameters: an edit of either is refused
     (the parameters are what imucal applies, so a disagreement means the file was altered)."""
     if apply is None:
@@ -327,7 +349,7 @@ def _check_derived(apply: Any, cal: "frozen.Calibration", path: str) -> None:
                               f"{dev / ref if ref else math.inf:.3g})", file=path, field=f"apply.{key}", fix=fix)
 
 
-def _check_bounds(cal: "frozen.Calibration", path: str) -> None:
+def _check_bounds(cal: "Calibration", path: str) -> None:
     """Every value within the file's own bounds, and an effect's within the model's (a warm-up's tau
     in [1, 1e5] s, a scale coefficient that keeps the scale positive): a value outside them was never
     fitted, and the apply map or the generated C would return NaN or inf with it."""
@@ -373,9 +395,3 @@ def validate_parameters(params: Parameters, path: str = "<calibration>") -> None
     if not det > 1e-12:
         raise ImucalError("the angles phi, psi, theta give no valid frame (Gram determinant <= 0)",
                           file=path, field="parameters", fix="check the angles; they must be near pi/2")
-
-
-def load_calibration(path: str | os.PathLike) -> "frozen.Calibration":
-    """Read a calibration YAML written by :meth:`Calibration.save`; refuses unknown versions."""
-    d = read_yaml(path, "calibration", "pass the calibration.yaml written by `imucal calibrate`")
-    return from_dict(d, str(path))

@@ -135,7 +135,7 @@ class Calibration:
     @classmethod
     def load(cls, path: str | os.PathLike) -> "Calibration":
         """Read a calibration file written by :meth:`save` (refuses unknown versions)."""
-        return fileformat.load_calibration(path)
+        return load_calibration(path)
 
     def to_dict(self) -> dict[str, Any]:
         """The calibration file's mapping (imucal.calibration.fileformat)."""
@@ -144,6 +144,19 @@ class Calibration:
     def save(self, path: str | os.PathLike) -> None:
         """Write the calibration file atomically (imucal.calibration.fileformat)."""
         fileformat.save(self, path)
+
+
+def from_dict(d: Mapping[str, Any], path: str = "<calibration>") -> Calibration:
+    """Validate a calibration file's mapping (imucal.calibration.fileformat) and rebuild the Calibration."""
+    content = fileformat.read_mapping(d, path)
+    cal = Calibration(**content.values)
+    fileformat.check_built(cal, content, path)
+    return cal
+
+
+def load_calibration(path: str | os.PathLike) -> Calibration:
+    """Read a calibration YAML written by :meth:`Calibration.save`; refuses unknown versions."""
+    return from_dict(fileformat.read_file(path), str(path))
 
 
 def now_utc() -> str:

@@ -9,7 +9,7 @@ import re
 from pathlib import Path
 from typing import Any, Callable
 
-from imucal.calibration.fileformat import load_calibration
+from imucal.calibration.frozen import load_calibration
 from imucal.calibration.frozen import Calibration
 from imucal.errors import ImucalError, short
 from imucal.export.autopilot import read_ardupilot_params, read_px4_params, to_ardupilot, to_px4

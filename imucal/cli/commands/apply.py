@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from imucal.analysis.rest import rest_check
-    from imucal.calibration.fileformat import load_calibration
+    from imucal.calibration.frozen import load_calibration
     from imucal.data.static import detect_static
     from imucal.errors import ImucalError
     from imucal.data.load import load_recording

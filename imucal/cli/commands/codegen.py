@@ -26,7 +26,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from imucal.calibration.fileformat import load_calibration
+    from imucal.calibration.frozen import load_calibration
     from imucal.export.arduino import arduino_paths, check_layout, write_arduino
     from imucal.export.codegen import check_prefix, write_c
 

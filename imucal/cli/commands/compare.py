@@ -28,7 +28,7 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from imucal.analysis.compare import compare
-    from imucal.calibration.fileformat import load_calibration
+    from imucal.calibration.frozen import load_calibration
     from imucal.data.load import load_recording
     from imucal.data.static import detect_static
     from imucal.export.registry import guess_format, read_peer

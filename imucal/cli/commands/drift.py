@@ -46,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
                           fix="give the magnitude of the acceleration error")
     cal = None
     if args.calibration:
-        from imucal.calibration.fileformat import load_calibration
+        from imucal.calibration.frozen import load_calibration
 
         cal = load_calibration(args.calibration)
     gravity = args.gravity if args.gravity is not None else (cal.gravity if cal else STANDARD_GRAVITY)

@@ -37,7 +37,7 @@ def gyro_out_name(out: str) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from imucal.calibration.fileformat import load_calibration
+    from imucal.calibration.frozen import load_calibration
     from imucal.errors import ImucalError
     from imucal.export.formats import ExportOptions
     from imucal.export.registry import FORMATS, export

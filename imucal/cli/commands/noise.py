@@ -22,7 +22,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from imucal.calibration.fileformat import load_calibration
+    from imucal.calibration.frozen import load_calibration
     from imucal.data.load import load_recording
     from imucal.analysis.noise import allan_deviation, estimate
     from imucal.files.output import check_outputs, write_json_atomic

@@ -64,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
     gravity = args.gravity
     source: dict = {}
     if args.calibration:
-        from imucal.calibration.fileformat import load_calibration
+        from imucal.calibration.frozen import load_calibration
 
         cal = load_calibration(args.calibration)
         names = ("phi", "psi", "theta")
