@@ -33,7 +33,6 @@ from imucal.model.effects import EFFECTS, prepare_parameters
 if TYPE_CHECKING:  # imported only when used: the gyroscope's modules, the noise-model reader (fit.noise),
     from imucal.analysis.noise_model import NoiseModel  # the chunked reader (a file above STREAM_BYTES)
     from imucal.data.stream import StreamedRecording
-    from imucal.gyro.result import GyroResult
 
 
 @dataclass(frozen=True)
@@ -51,7 +50,7 @@ class CalibrationRun:
     #: |a| - g for every sample inside an interval [m/s^2]; None when the file was read in chunks
     sample_residuals: np.ndarray | None
     gravity_source: str
-    gyro: GyroResult | None = None  #: the gyroscope fit, when the recording has one
+    gyro: FitResult | None = None  #: the gyroscope fit, when the recording has one
 
     @property
     def rms_residual_samples(self) -> float:
@@ -320,7 +319,7 @@ def observability(model: SensorModel, params: Parameters, means: FitData, direct
     varying = [n for e in model.effects if EFFECTS[e.name].covariates for n in (*e.coefficient_names, *e.shape_names)]
     sizes = {n: params[n].value / params[n].scale for e in model.effects for n in e.coefficient_names
              if n in params.free_names}
-    return analyse(directions, J, params.free_names, Jw, thresholds(params.free_names, angle_tolerance, sizes),
+    return analyse(directions, J, params.free_names, Jw, thresholds(params, params.free_names, angle_tolerance, sizes),
                    varying)
 
 

@@ -42,6 +42,7 @@ from imucal.gyro import GyroOptions, fit_gyro  # noqa: E402
 from imucal.gyro import attitude  # noqa: E402
 from imucal.gyro.fit import _grid_argmin, _search_scale, _segment_sigma, _steps  # noqa: E402
 from imucal.gyro.gsens import fit_static  # noqa: E402
+from imucal.gyro.result import arrays  # noqa: E402
 from imucal.model.gyroscope import gyro_model, gyro_parameters, misalignment_entries  # noqa: E402
 from imucal.gyro.segments import motion_segments  # noqa: E402
 from imucal.gyro.run import gyro_data  # noqa: E402
@@ -91,7 +92,7 @@ def parts(runs: int) -> list[tuple[str, float, float]]:
                     *_timed_fit(data, GyroOptions(gsens=gs))))
         out.append((f"fit_gyro, g-sensitivity {gs}, later calls",
                     *med([_timed_fit(data, GyroOptions(gsens=gs)) for _ in range(runs)])))
-    scale = fit_gyro(data, GyroOptions(gsens="auto")).scale.mean()
+    scale = arrays(fit_gyro(data, GyroOptions(gsens="auto"))).scale.mean()
     given = med([_timed_fit(data, GyroOptions(gsens="auto", nominal_scale=float(scale))) for _ in range(runs)])
     out.append(("fit_gyro, g-sensitivity auto, later calls, nominal scale given (no search, as imu_tk)", *given))
     return out
@@ -121,8 +122,8 @@ def same_optimum(data) -> list[str]:
     solver = ca.nlpsol("chained", "ipopt", {"x": x, "f": 0.5 * ca.sumsqr(ca.substitute(rv, xs, p0 + d * x) * ca.DM(w))},
                        {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "ipopt.tol": 1e-12})
     ref = p0 + d * np.asarray(solver(x0=np.zeros(len(free)))["x"]).ravel()
-    ours = np.r_[res.scale, misalignment_entries(res.misalignment)]
-    sd = np.r_[res.scale_std, misalignment_entries(res.misalignment_std)]
+    ours = np.r_[arrays(res).scale, misalignment_entries(arrays(res).misalignment)]
+    sd = np.r_[arrays(res).scale_std, misalignment_entries(arrays(res).misalignment_std)]
     names = ["scale_x", "scale_y", "scale_z", "m_xy", "m_xz", "m_yx", "m_yz", "m_zx", "m_zy"]
     L = ["## Same optimum as the exact-Hessian NLP it replaced", "",
          "Xsens recording, g-sensitivity auto: our fit (products of RK4 increments, Gauss-Newton Hessian) and "

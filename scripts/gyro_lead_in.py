@@ -25,6 +25,7 @@ from imucal.gyro import GyroOptions, fit_gyro  # noqa: E402
 from imucal.gyro.evaluate import direction_errors_deg, rms  # noqa: E402
 from imucal.gyro.gsens import fit_static  # noqa: E402
 from imucal.gyro.lead_in import EDGE_RATIO, LEAD_IN_S, edge_motion, lead_in_for  # noqa: E402
+from imucal.gyro.result import arrays  # noqa: E402
 from imucal.gyro.segments import GyroData, motion_segments  # noqa: E402
 from imucal.gyro.simulate import GyroTruth, hand_held  # noqa: E402
 
@@ -113,7 +114,7 @@ def rule_rows(name: str, data: GyroData, truth: GyroTruth | None = None) -> str:
         z = []
         for L in (picks[1], 0.0 if picks[1] else LEAD_IN_S):
             f = fit_gyro(data, GyroOptions(lead_in_s=L))
-            z.append(float(np.max(np.abs(f.scale - truth.scale) / f.scale_std)))
+            z.append(float(np.max(np.abs(arrays(f).scale - truth.scale) / arrays(f).scale_std)))
         cells.append(f"{z[0]:.1f} (other choice: {z[1]:.1f})")
     else:
         cells.append("")

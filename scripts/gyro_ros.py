@@ -37,7 +37,9 @@ from gyro_xsens import imutk_in_our_convention  # noqa: E402
 from imucal.config.run import load_config  # noqa: E402
 from imucal.export.peers import AffineCalibration, read_imutk_calib  # noqa: E402
 from imucal.files.output import write_text_atomic  # noqa: E402
-from imucal.gyro import GyroOptions, GyroResult, fit_gyro  # noqa: E402
+from imucal.gyro import GyroOptions, fit_gyro  # noqa: E402
+from imucal.gyro.result import arrays, motions  # noqa: E402
+from imucal.solve.fit import FitResult  # noqa: E402
 from imucal.gyro.evaluate import direction_errors_deg, rms  # noqa: E402
 from imucal.gyro.fit import cross_validate  # noqa: E402
 from imucal.gyro.gsens import fit_static  # noqa: E402
@@ -109,7 +111,7 @@ def score(target: Rec, acc_map: AccMap, gyro_map: GyroMap, refresh_bias: bool = 
     return direction_errors_deg(d.t, rate, motion_segments(g, lead_in))
 
 
-def ours(rec: Rec, res: GyroResult) -> tuple[AccMap, GyroMap]:
+def ours(rec: Rec, res: FitResult) -> tuple[AccMap, GyroMap]:
     return rec.run.calibration.apply, res.apply
 
 
@@ -117,16 +119,16 @@ def imutk(rec: Rec) -> tuple[AccMap, GyroMap]:
     return rec.tk_acc.apply, lambda g, a: rec.tk_gyro.apply(g)
 
 
-def nominal(rec: Rec, res: GyroResult) -> tuple[AccMap, GyroMap]:
+def nominal(rec: Rec, res: FitResult) -> tuple[AccMap, GyroMap]:
     """Before calibration: the fit's static bias, unit scale, no misalignment or g-sensitivity."""
-    return rec.run.calibration.apply, lambda g, a: g - res.bias
+    return rec.run.calibration.apply, lambda g, a: g - arrays(res).bias
 
 
 def per_recording(recs: list[Rec], fits: dict, cvs: dict, pooled: dict[str, float]) -> list[str]:
     L = ["## 1. Each recording: imu_tk's published calibration against ours", "",
          "rms direction error [deg] over the recording's motion segments (ratio to imu_tk in brackets).",
          "imu_tk's published calibration was fitted on the whole recording: its numbers are in sample.", "",
-         "| calibration | " + " | ".join(f"{r.name} ({len(fits[r.name]['off'].segments)} motions)" for r in recs)
+         "| calibration | " + " | ".join(f"{r.name} ({len(motions(fits[r.name]['off']).segments)} motions)" for r in recs)
          + " | all three (pooled) |", "|---|" + "---|" * (len(recs) + 1)]
     rows: dict[str, list[np.ndarray]] = {}
     for r in recs:
@@ -146,8 +148,8 @@ def per_recording(recs: list[Rec], fits: dict, cvs: dict, pooled: dict[str, floa
     L += ["", "g-sensitivity test (likelihood ratio on the static means, kept per axis when p < 0.01):", ""]
     for r in recs:
         f = fits[r.name]["auto"]
-        kept = ", ".join("xyz"[i] for i in range(3) if f.gsens_selected[i]) or "none"
-        L.append(f"- {r.name}: p = {', '.join(f'{v:.2g}' for v in f.gsens_p_value)} (x, y, z); kept: {kept}; "
+        kept = ", ".join("xyz"[i] for i in range(3) if motions(f).gsens_selected[i]) or "none"
+        L.append(f"- {r.name}: p = {', '.join(f'{v:.2g}' for v in motions(f).gsens_p_value)} (x, y, z); kept: {kept}; "
                  f"IPOPT {f.status}, {f.iterations} iterations, reduced chi-square {f.redchi:.3g}.")
     return L + [""]
 
@@ -198,20 +200,20 @@ def across(recs: list[Rec], fits: dict, pooled: dict[str, float]) -> list[str]:
     return L + [""]
 
 
-def _params(res: GyroResult) -> dict[str, tuple[float, float]]:
+def _params(res: FitResult) -> dict[str, tuple[float, float]]:
     """Named parameter values and standard errors of a fit (bias, scale, misalignment, G_s rows kept)."""
     out = {}
     for j, a in enumerate("xyz"):
-        out[f"s_{a} [mrad/s]"] = (1e3 * res.bias[j], 1e3 * res.bias_std[j])
+        out[f"s_{a} [mrad/s]"] = (1e3 * arrays(res).bias[j], 1e3 * arrays(res).bias_std[j])
     for j, a in enumerate("xyz"):
-        out[f"b_{a} - 1 [1e-3]"] = (1e3 * (res.scale[j] - 1), 1e3 * res.scale_std[j])
-    m, ms = misalignment_entries(res.misalignment), misalignment_entries(res.misalignment_std)
+        out[f"b_{a} - 1 [1e-3]"] = (1e3 * (arrays(res).scale[j] - 1), 1e3 * arrays(res).scale_std[j])
+    m, ms = misalignment_entries(arrays(res).misalignment), misalignment_entries(arrays(res).misalignment_std)
     for name, v, s in zip(("m_xy", "m_xz", "m_yx", "m_yz", "m_zx", "m_zy"), m, ms):
         out[f"{name} [1e-3]"] = (1e3 * v, 1e3 * s)
     for i, a in enumerate("xyz"):
-        if res.gsens_selected[i]:
+        if motions(res).gsens_selected[i]:
             for j, c in enumerate("xyz"):
-                out[f"G_{a}{c} [1e-6 (rad/s)/(m/s^2)]"] = (1e6 * res.gsens[i, j], 1e6 * res.gsens_std[i, j])
+                out[f"G_{a}{c} [1e-6 (rad/s)/(m/s^2)]"] = (1e6 * arrays(res).gsens[i, j], 1e6 * arrays(res).gsens_std[i, j])
     return out
 
 

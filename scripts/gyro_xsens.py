@@ -25,6 +25,8 @@ from imucal.config.run import load_config  # noqa: E402
 from imucal.gyro import GyroOptions, fit_gyro, gyro_data_from_run  # noqa: E402
 from imucal.gyro.evaluate import direction_errors_deg, rms  # noqa: E402
 from imucal.gyro.fit import cross_validate  # noqa: E402
+from imucal.gyro.result import arrays, motions  # noqa: E402
+from imucal.report.gyro import gyro_report  # noqa: E402
 from imucal.gyro.gsens import fit_static  # noqa: E402
 from imucal.gyro.lead_in import EDGE_RATIO, lead_in_for, edge_motion  # noqa: E402
 from imucal.gyro.segments import GyroData, motion_segments  # noqa: E402
@@ -94,14 +96,14 @@ def param_table(res, tk) -> list[str]:
     ax = "xyz"
     L = ["| parameter | ours | std | imu_tk (our convention) | (imu_tk - ours) / std |", "|---|---|---|---|---|"]
     for j in range(3):
-        L.append(f"| s_{ax[j]} [raw] | {res.bias[j]:.6g} | {res.bias_std[j]:.2g} | {b[j]:.6g} | {(b[j]-res.bias[j])/res.bias_std[j]:+.1f} |")
+        L.append(f"| s_{ax[j]} [raw] | {arrays(res).bias[j]:.6g} | {arrays(res).bias_std[j]:.2g} | {b[j]:.6g} | {(b[j]-arrays(res).bias[j])/arrays(res).bias_std[j]:+.1f} |")
     for j in range(3):
-        L.append(f"| b_{ax[j]} [raw per rad/s] | {res.scale[j]:.6g} | {res.scale_std[j]:.2g} | {B[j]:.6g} | {(B[j]-res.scale[j])/res.scale_std[j]:+.1f} |")
+        L.append(f"| b_{ax[j]} [raw per rad/s] | {arrays(res).scale[j]:.6g} | {arrays(res).scale_std[j]:.2g} | {B[j]:.6g} | {(B[j]-arrays(res).scale[j])/arrays(res).scale_std[j]:+.1f} |")
     for i in range(3):
         for j in range(3):
             if i != j:
-                s = res.misalignment_std[i, j]
-                L.append(f"| m_{ax[i]}{ax[j]} | {res.misalignment[i, j]:+.5f} | {s:.2g} | {M[i, j]:+.5f} | {(M[i, j]-res.misalignment[i, j])/s:+.1f} |")
+                s = arrays(res).misalignment_std[i, j]
+                L.append(f"| m_{ax[i]}{ax[j]} | {arrays(res).misalignment[i, j]:+.5f} | {s:.2g} | {M[i, j]:+.5f} | {(M[i, j]-arrays(res).misalignment[i, j])/s:+.1f} |")
     return L
 
 
@@ -155,11 +157,11 @@ def section(s: dict) -> list[str]:
          f"{s['data'].n_intervals} static intervals, {len(s['tk'])} motion segments, "
          f"{s['data'].t.size} samples.", "",
          "| calibration | rms direction error [deg] | ratio to imu_tk |", "|---|---|---|",
-         f"| before (static bias, nominal scale, no misalignment) | {rms(f_off.error_before_deg):.3f} | {rms(f_off.error_before_deg)/tk:.2f} |",
+         f"| before (static bias, nominal scale, no misalignment) | {rms(motions(f_off).error_before_deg):.3f} | {rms(motions(f_off).error_before_deg)/tk:.2f} |",
          f"| imu_tk published | {tk:.3f} | 1.00 |",
-         f"| ours, no g-sensitivity, in sample | {rms(f_off.error_deg):.3f} | {rms(f_off.error_deg)/tk:.2f} |",
+         f"| ours, no g-sensitivity, in sample | {rms(motions(f_off).error_deg):.3f} | {rms(motions(f_off).error_deg)/tk:.2f} |",
          f"| ours, no g-sensitivity, cross-validated | {rms(s['cv']['off']):.3f} | {rms(s['cv']['off'])/tk:.2f} |",
-         f"| ours, g-sensitivity by test, in sample | {rms(f_on.error_deg):.3f} | {rms(f_on.error_deg)/tk:.2f} |",
+         f"| ours, g-sensitivity by test, in sample | {rms(motions(f_on).error_deg):.3f} | {rms(motions(f_on).error_deg)/tk:.2f} |",
          f"| ours, g-sensitivity by test, cross-validated | {rms(s['cv']['auto']):.3f} | {rms(s['cv']['auto'])/tk:.2f} |",
          "", f"The same, every segment integrated from {LEAD_IN} s before the end of its start pose to {LEAD_IN} s after the "
          "start of its end pose (`GyroOptions(lead_in_s=0.5)`; at most a quarter of a pose): the accelerometer's static "
@@ -167,18 +169,18 @@ def section(s: dict) -> list[str]:
          "then miss. Directions stay the whole poses' means.", "",
          "| calibration | rms direction error [deg] | ratio to imu_tk |", "|---|---|---|",
          f"| imu_tk published | {ltk:.3f} | 1.00 |",
-         f"| ours, no g-sensitivity, in sample | {rms(ld['off'].error_deg):.3f} | {rms(ld['off'].error_deg)/ltk:.2f} |",
+         f"| ours, no g-sensitivity, in sample | {rms(motions(ld['off']).error_deg):.3f} | {rms(motions(ld['off']).error_deg)/ltk:.2f} |",
          f"| ours, no g-sensitivity, cross-validated | {rms(ld['cv off']):.3f} | {rms(ld['cv off'])/ltk:.2f} |",
-         f"| ours, g-sensitivity by test, in sample | {rms(ld['auto'].error_deg):.3f} | {rms(ld['auto'].error_deg)/ltk:.2f} |",
+         f"| ours, g-sensitivity by test, in sample | {rms(motions(ld['auto']).error_deg):.3f} | {rms(motions(ld['auto']).error_deg)/ltk:.2f} |",
          f"| ours, g-sensitivity by test, cross-validated | {rms(ld['cv auto']):.3f} | {rms(ld['cv auto'])/ltk:.2f} |",
-         "", f"g-sensitivity test p-values per gyro axis: {', '.join(f'{v:.2g}' for v in f_on.gsens_p_value)} "
-         f"(kept: {', '.join('xyz'[i] for i in range(3) if f_on.gsens_selected[i]) or 'none'}).",
+         "", f"g-sensitivity test p-values per gyro axis: {', '.join(f'{v:.2g}' for v in motions(f_on).gsens_p_value)} "
+         f"(kept: {', '.join('xyz'[i] for i in range(3) if motions(f_on).gsens_selected[i]) or 'none'}).",
          f"Fit time (whole recording, incl. static fit, scale search, NLP build and solve): "
          f"{t_off:.2f} s without, {t_on:.2f} s with g-sensitivity; IPOPT {f_on.status}, {f_on.iterations} iterations.",
          "", "Parameters without g-sensitivity against imu_tk's (converted: A = (R^T T K)^-1 with R the rotation "
          "from our accelerometer frame to imu_tk's, B_g = diag(A), M_g = B_g^-1 A):", ""]
     L += param_table(f_off, s["conv"])
-    L += ["", "With g-sensitivity:", "", "```", f_on.report(), "```", ""]
+    L += ["", "With g-sensitivity:", "", "```", gyro_report(f_on), "```", ""]
     return L
 
 

@@ -9,6 +9,7 @@ from imucal.gyro import GyroOptions, fit_gyro
 from conftest import gyro_rate, rk4_directions
 from imucal.gyro.evaluate import direction_errors_deg
 from imucal.gyro.fit import _steps
+from imucal.gyro.result import arrays, motions
 from imucal.model.gyroscope import gyro_model, gyro_parameters, misalignment_entries, misalignment_matrix
 from imucal.solve.vectorize import apply_values
 from imucal.gyro.segments import motion_segments
@@ -22,29 +23,31 @@ TRUTH = GyroTruth(bias=np.array([32768.0, 32450.0, 32510.0]), scale=np.array([47
 
 def test_recovers_scale_and_misalignment_within_three_std() -> None:
     data = simulate(TRUTH, TURNS, seed=1)
-    r = fit_gyro(data, GyroOptions(gsens="off"))
+    res = fit_gyro(data, GyroOptions(gsens="off"))
+    r = arrays(res)
     assert np.all(np.abs(r.scale - TRUTH.scale) <= 3 * r.scale_std), (r.scale, r.scale_std)
     m = misalignment_entries(r.misalignment)
     ms = misalignment_entries(r.misalignment_std)
     assert np.all(np.abs(m - TRUTH.mis) <= 3 * ms), (m, ms)
     assert np.all(np.abs(r.bias - TRUTH.bias) <= 3 * r.bias_std + 1e-9)
-    assert r.rms_direction_error_deg["after"] < r.rms_direction_error_deg["before"]
+    assert motions(res).rms_direction_error_deg["after"] < motions(res).rms_direction_error_deg["before"]
 
 
 def test_gsensitivity_selected_and_recovered() -> None:
     G = np.array([[0.0, 2e-4, -1e-4], [3e-4, 0.0, 1e-4], [-2e-4, 1e-4, 0.0]])
     truth = GyroTruth(TRUTH.bias, TRUTH.scale, TRUTH.mis, G, noise=1.0)
     data = simulate(truth, TURNS, seed=2)
-    r = fit_gyro(data, GyroOptions(gsens="auto"))
-    assert r.gsens_selected.all()
+    res = fit_gyro(data, GyroOptions(gsens="auto"))
+    r = arrays(res)
+    assert motions(res).gsens_selected.all()
     assert np.all(np.abs(r.gsens - G) <= 3 * r.gsens_std + 1e-12), (r.gsens, r.gsens_std)
     off = fit_gyro(data, GyroOptions(gsens="off"))
-    assert r.rms_direction_error_deg["after"] < off.rms_direction_error_deg["after"]
+    assert motions(res).rms_direction_error_deg["after"] < motions(off).rms_direction_error_deg["after"]
 
 
 def test_no_gsensitivity_when_there_is_none() -> None:
     r = fit_gyro(simulate(TRUTH, TURNS, seed=3), GyroOptions(gsens="auto"))
-    assert not r.gsens_selected.any()
+    assert not motions(r).gsens_selected.any()
 
 
 def test_refuses_when_an_axis_is_never_turned_about() -> None:

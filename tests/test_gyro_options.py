@@ -16,6 +16,7 @@ from imucal.errors import ImucalError
 from imucal.gyro import GyroOptions, fit_gyro
 from imucal.gyro import run as gyro_run
 from imucal.gyro.lead_in import LEAD_IN_S, lead_in_for
+from imucal.gyro.result import arrays, motions
 from imucal.gyro.simulate import GyroTruth, hand_held
 
 TRUTH = GyroTruth(bias=np.array([0.01, -0.02, 0.005]), scale=np.array([1.01, 0.99, 1.005]),
@@ -76,7 +77,8 @@ def test_the_default_rule_picks_the_lead_in_with_g_sensitivity_when_the_edges_tu
     assert lead_in_for(late, "off", "auto") == 0.0  # the g-sensitivity found is left out
     assert lead_in_for(late, "auto", "auto") == LEAD_IN_S
     r = fit_gyro(late)
-    assert r.gsens_selected.all() and r.lead_in_s == LEAD_IN_S
-    assert np.all(np.abs(r.scale - TRUTH.scale) <= 3 * r.scale_std)  # the turns missed at the edges recovered
-    fixed = fit_gyro(late, GyroOptions(lead_in_s=0.0))
+    assert motions(r).gsens_selected.all() and motions(r).lead_in_s == LEAD_IN_S
+    a = arrays(r)
+    assert np.all(np.abs(a.scale - TRUTH.scale) <= 3 * a.scale_std)  # the turns missed at the edges recovered
+    fixed = arrays(fit_gyro(late, GyroOptions(lead_in_s=0.0)))
     assert np.max(np.abs(fixed.scale - TRUTH.scale) / fixed.scale_std) > 3  # without: the scales come out short

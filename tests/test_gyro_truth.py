@@ -12,6 +12,7 @@ from imucal.errors import ImucalError
 from imucal.gyro import GyroOptions, fit_gyro
 from imucal.gyro.coverage import Z95, binomial_band, monte_carlo, scores
 from imucal.gyro.evaluate import direction_errors_deg
+from imucal.gyro.result import arrays, motions
 from imucal.gyro.segments import motion_segments
 from imucal.gyro.simulate import GyroTruth, Motion, hand_held, record
 
@@ -38,11 +39,11 @@ def test_hand_held_session_recovered_within_three_std() -> None:
     """One session, all 21 parameters (with 21, one beyond 3 std happens in about 5 % of sessions; the
     coverage test below checks the standard errors' size)."""
     r = fit_gyro(hand_held(TRUTH, seed=0, unit="rad/s"), GyroOptions(gsens="auto"))
-    assert r.success and r.gsens_selected.all()
+    assert r.success and motions(r).gsens_selected.all()
     for group, z in scores(r, TRUTH).items():
         assert np.all(np.abs(z) <= 3), (group, z)
     assert 0.5 < r.redchi < 2  # noise is the only misfit
-    assert r.rms_direction_error_deg["after"] < 0.05 * r.rms_direction_error_deg["before"]
+    assert motions(r).rms_direction_error_deg["after"] < 0.05 * motions(r).rms_direction_error_deg["before"]
 
 
 def test_monte_carlo_coverage_of_the_standard_errors() -> None:
@@ -108,7 +109,8 @@ def test_lead_in_integrates_motions_a_detector_counted_as_still() -> None:
     assert np.all(seg.first - seg_in.first == 50) and np.all(seg_in.last - seg.last == 50)
     plain = fit_gyro(late, GyroOptions(gsens="auto", lead_in_s=0.0))
     inside = fit_gyro(late, GyroOptions(gsens="auto"))
-    assert inside.lead_in_s == 0.5
+    assert motions(inside).lead_in_s == 0.5
+    plain, inside = arrays(plain), arrays(inside)
     assert np.max(np.abs(plain.scale - TRUTH.scale) / plain.scale_std) > 4
     assert np.all(np.abs(inside.scale - TRUTH.scale) < 3 * inside.scale_std)
 

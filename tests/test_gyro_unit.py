@@ -52,5 +52,7 @@ def test_a_gyro_in_rad_per_s_is_fitted_without_a_scale_search(ros_data2, monkeyp
     assert searched == []
     counts = gyro_fit.fit_gyro(dataclasses.replace(ros_data2, unit="raw"), gyro_fit.GyroOptions(gsens="off"))
     assert searched == [1]  # counts keep the search
-    assert rms(nominal.error_deg) <= rms(counts.error_deg) + 1e-6
-    assert np.all(np.abs(nominal.scale - 1) < 0.02)  # rad/s: scale near 1 rad/s per rad/s
+    from imucal.gyro.result import arrays, motions
+
+    assert rms(motions(nominal).error_deg) <= rms(motions(counts).error_deg) + 1e-6
+    assert np.all(np.abs(arrays(nominal).scale - 1) < 0.02)  # rad/s: scale near 1 rad/s per rad/s

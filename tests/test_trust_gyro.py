@@ -17,6 +17,7 @@ from conftest import real_file
 from imucal.errors import ImucalError
 from imucal.gyro.check import still_check
 from imucal.gyro.fit import GyroOptions, cross_validate, fit_gyro
+from imucal.gyro.result import arrays, excess, motions
 from imucal.gyro.segments import GyroData
 from imucal.gyro.simulate import GyroTruth, hand_held
 from imucal.gyro.still import MIN_INTERVALS, StillTest, _half_means, judge
@@ -37,22 +38,25 @@ def session(seed: int = 3, turn: float = TURN, truth: GyroTruth = TRUTH, n_poses
 # --- case 1: the bias from poses that are not still for the gyro ---------------------------------
 def test_a_slow_turn_about_the_vertical_pulled_the_bias_and_no_longer_does():
     d = session()
-    before = fit_gyro(d, GyroOptions(still="off"))  # every static interval taken as still: the old behaviour
-    after = fit_gyro(d)
+    before_fit = fit_gyro(d, GyroOptions(still="off"))  # every static interval taken as still: the old behaviour
+    after_fit = fit_gyro(d)
+    before, after = arrays(before_fit), arrays(after_fit)
     turn = np.radians(TURN) / d.n_intervals  # the pull of one interval's turn rate on a mean of n [rad/s]
     assert np.linalg.norm(before.bias - TRUTH.bias) > 0.7 * turn  # pulled ...
     assert np.linalg.norm(before.bias - TRUTH.bias) > 5 * np.linalg.norm(after.bias_std)
     assert np.all(np.abs(after.bias - TRUTH.bias) < 4 * after.bias_std)  # ... and no longer
-    (r,) = after.still.rejected
-    assert r.interval == POSE and r.test is StillTest.MEAN and r.p_value < after.still.threshold_p
+    still = motions(after_fit).still
+    (r,) = still.rejected
+    assert r.interval == POSE and r.test is StillTest.MEAN and r.p_value < still.threshold_p
     assert (r.t_start, r.t_end) == (d.t[d.start[POSE]], d.t[d.end[POSE] - 1])
     rate = np.array(r.rate_deg_s)
     assert np.linalg.norm(rate) == pytest.approx(TURN, rel=0.03)  # the turn rate, in deg/s
     up = d.acc[d.start[POSE]:d.end[POSE]].mean(0)  # about the vertical: along the specific force at rest
     assert np.degrees(np.arccos(abs(rate @ up) / np.linalg.norm(rate) / np.linalg.norm(up))) < 3.0
     # no still pose: the motions on both sides of it are one, the other poses all kept
-    assert after.segments.size == d.n_intervals - 2 and before.segments.size == d.n_intervals - 1
-    assert after.still.keep.sum() == d.n_intervals - 1 and not after.still.keep[POSE]
+    assert motions(after_fit).segments.size == d.n_intervals - 2
+    assert motions(before_fit).segments.size == d.n_intervals - 1
+    assert still.keep.sum() == d.n_intervals - 1 and not still.keep[POSE]
 
 
 def test_the_default_is_no_worse_than_the_fit_without_the_rejected_interval():
@@ -174,7 +178,7 @@ def _unmodelled(d: GyroData, size: float = np.radians(0.3)) -> GyroData:
 def test_a_gyro_fit_beyond_its_noise_warns_as_the_accelerometer_does(run_cli, tmp_path):
     d = _unmodelled(session(turn=0.0))
     res = fit_gyro(d)
-    assert res.excess is not None and res.excess.redchi == pytest.approx(res.redchi) and res.redchi > 10
+    assert excess(res) is not None and excess(res).redchi == pytest.approx(res.redchi) and res.redchi > 10
     _csv(d, tmp_path / "rec.csv")
     r = run_cli(["calibrate", "--data", tmp_path / "rec.csv", "--unit", "m/s^2", "--gyro-unit", "rad/s",
                  "--gravity", "9.81", "--out", tmp_path / "o", "--no-figures", "--quiet", "--json", tmp_path / "s.json"])
@@ -195,7 +199,7 @@ def test_a_clean_gyro_fit_does_not_warn():
     from imucal.report.gyro import gyro_warnings
 
     res = fit_gyro(session(turn=0.0))
-    assert res.excess is None and res.redchi < 2 and gyro_warnings(res) == []
+    assert excess(res) is None and res.redchi < 2 and gyro_warnings(res) == []
 
 
 def test_one_rule_decides_for_both_sensors(monkeypatch, si_run):

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 import yaml
 
+from imucal.gyro.result import arrays, motions
 from imucal.gyro.fit import GyroOptions, fit_gyro
 from imucal.gyro.segments import GyroData, gap_spans, motion_segments
 from imucal.gyro.simulate import GyroTruth, hand_held
@@ -118,10 +119,10 @@ def test_the_gap_skewed_the_fit_when_integrated_across():
                   start=np.searchsorted(rows, d.start), end=np.searchsorted(rows, d.end))
     gap = int(np.flatnonzero(np.diff(rows) > 1)[0]) + 1
     blind, kept = fit_gyro(cut, GyroOptions()), fit_gyro(replace(cut, gaps=gap_spans(cut.t, [gap])), GyroOptions())
-    assert blind.gapped == () and [g.segment for g in kept.gapped] == [MOTION]
-    assert np.max(np.abs(blind.scale - TRUTH.scale) / kept.scale_std) > 10
-    assert np.all(np.abs(kept.scale - TRUTH.scale) < 4 * kept.scale_std)
-    assert blind.rms_direction_error_deg["after"] > 5 * kept.rms_direction_error_deg["after"]
+    assert motions(blind).gapped == () and [g.segment for g in motions(kept).gapped] == [MOTION]
+    assert np.max(np.abs(arrays(blind).scale - TRUTH.scale) / arrays(kept).scale_std) > 10
+    assert np.all(np.abs(arrays(kept).scale - TRUTH.scale) < 4 * arrays(kept).scale_std)
+    assert motions(blind).rms_direction_error_deg["after"] > 5 * motions(kept).rms_direction_error_deg["after"]
 
 
 def test_a_gap_in_a_second_gyro_file_leaves_its_motion_out(run_cli, tmp_path):
@@ -167,7 +168,7 @@ def test_an_axis_turned_only_in_motions_with_gaps_is_refused_naming_the_gaps():
     turns = [(1, q), (2, q), (2, -q), (1, -q)] + [(0, q), (0, -q)] * 3
     d = simulate(TRUTH, turns, unit="rad/s")
     first = [int(d.end[k] + d.start[k + 1]) // 2 for k in range(4)]
-    assert fit_gyro(d, GyroOptions(still="off")).segments.size == 10  # every axis turned: fits
+    assert motions(fit_gyro(d, GyroOptions(still="off"))).segments.size == 10  # every axis turned: fits
     with pytest.raises(ImucalError) as e:
         fit_gyro(replace(d, gaps=gap_spans(d.t, first)), GyroOptions(still="off"))
     msg = str(e.value)

@@ -20,7 +20,8 @@ from imucal.files.schema import fill, rule
 from imucal.model.gyroscope import gyro_model, gyro_parameters, misalignment_entries
 from imucal.model.parameters import Parameters
 from imucal.solve.vectorize import apply_values
-from imucal.gyro.result import GyroResult
+from imucal.gyro.result import arrays, motions, to_dict
+from imucal.solve.fit import FitResult
 
 KIND = GYROSCOPE
 OUTPUT_UNIT = "rad/s"
@@ -43,15 +44,17 @@ class GyroCalibration:
     fit: Mapping[str, Any] = field(default_factory=dict)
 
     @classmethod
-    def from_result(cls, res: GyroResult) -> "GyroCalibration":
-        return cls(unit=res.unit, bias=res.bias, scale=res.scale, misalignment=res.misalignment,
-                   gsens=res.gsens if res.uses_gsens else np.zeros((3, 3)),
-                   std={"bias": res.bias_std, "scale": res.scale_std, "misalignment": res.misalignment_std,
-                        "gsens": res.gsens_std if res.uses_gsens else np.zeros((3, 3))},
-                   fit={**res.to_dict()["fit"], "rms_direction_error_deg": res.rms_direction_error_deg,
-                        "gsens_p_value": [float(v) for v in res.gsens_p_value],
-                        **({"not_still": res.to_dict()["not_still"]} if res.still and res.still.rejected else {}),
-                        **({"gap_motions": res.to_dict()["gap_motions"]} if res.gapped else {})})
+    def from_result(cls, res: FitResult) -> "GyroCalibration":
+        a, m, d = arrays(res), motions(res), to_dict(res)
+        uses = bool(np.any(m.gsens_selected))
+        return cls(unit=m.unit, bias=a.bias, scale=a.scale, misalignment=a.misalignment,
+                   gsens=a.gsens if uses else np.zeros((3, 3)),
+                   std={"bias": a.bias_std, "scale": a.scale_std, "misalignment": a.misalignment_std,
+                        "gsens": a.gsens_std if uses else np.zeros((3, 3))},
+                   fit={**d["fit"], "rms_direction_error_deg": m.rms_direction_error_deg,
+                        "gsens_p_value": [float(v) for v in m.gsens_p_value],
+                        **({"not_still": d["not_still"]} if m.still and m.still.rejected else {}),
+                        **({"gap_motions": d["gap_motions"]} if m.gapped else {})})
 
     @property
     def uses_gsens(self) -> bool:

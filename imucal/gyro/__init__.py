@@ -2,7 +2,7 @@
 
 Model (``model``), motion segments between static intervals (``segments``), the g-sensitivity
 selection on the static intervals (``gsens``), the rotation fit (``fit``), its typed result
-(``result``) and a simulator with known truth (``simulate``).
+(``result``: the motions' summary the one result carries) and a simulator with known truth (``simulate``).
 
 The names below load their module on first use (PEP 562), so importing ``imucal.gyro.model``
 (the calibration file does) does not import the fit: `imucal calibrate` without a gyroscope
@@ -13,7 +13,7 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
-_EXPORTS = {"GyroData": "segments", "GyroOptions": "fit", "GyroResult": "result", "fit_gyro": "fit",
+_EXPORTS = {"GyroData": "segments", "GyroOptions": "fit", "MotionSummary": "result", "fit_gyro": "fit",
             "gyro_data_from_run": "segments"}
 
 __all__ = sorted(_EXPORTS)

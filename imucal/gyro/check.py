@@ -16,7 +16,8 @@ import numpy as np
 
 from imucal.gyro.evaluate import direction_errors_deg, rms
 from imucal.gyro.fit import GyroOptions, fit_gyro
-from imucal.gyro.result import GyroResult
+from imucal.gyro.result import motions
+from imucal.solve.fit import FitResult
 from imucal.gyro.run import gyro_data
 from imucal.gyro.segments import GyroData, motion_segments
 from imucal.gyro.still import NotStill
@@ -44,19 +45,20 @@ class StillCheck:
         return bool(self.default_deg <= self.removed_deg * (1 + SAME_RTOL))
 
 
-def _score(data: GyroData, res: GyroResult, scored: GyroData, lead_in: float) -> float:
+def _score(data: GyroData, res: FitResult, scored: GyroData, lead_in: float) -> float:
     return rms(direction_errors_deg(data.t, res.apply(data.gyro, data.acc), motion_segments(scored, lead_in)))
 
 
 def still_check(data: GyroData, options: GyroOptions = GyroOptions()) -> StillCheck:
     """The three fits of ``data`` (``options`` as the run's, stillness judged as its ``still`` says)."""
     default = fit_gyro(data, replace(options, still="auto"))
-    keep = default.still.keep if default.still is not None else np.ones(data.n_intervals, bool)
+    still = motions(default).still
+    keep = still.keep if still is not None else np.ones(data.n_intervals, bool)
     kept = data.without(keep)
     removed = fit_gyro(kept, replace(options, still="off"))
     every = fit_gyro(data, replace(options, still="off"))
-    lead = default.lead_in_s
-    return StillCheck(data.source, data.n_intervals, () if default.still is None else default.still.rejected,
+    lead = motions(default).lead_in_s
+    return StillCheck(data.source, data.n_intervals, () if still is None else still.rejected,
                       int(keep.sum()) - 1, _score(data, default, kept, lead), _score(data, removed, kept, lead),
                       _score(data, every, kept, lead))
 

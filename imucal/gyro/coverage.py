@@ -16,7 +16,8 @@ import numpy as np
 
 from imucal.gyro.fit import GyroOptions, fit_gyro
 from imucal.gyro.model import MIS_NAMES, misalignment_entries
-from imucal.gyro.result import GyroResult
+from imucal.gyro.result import arrays, motions
+from imucal.solve.fit import FitResult
 from imucal.gyro.simulate import GyroTruth, hand_held
 from imucal.report.text import t_quantile_975
 
@@ -24,14 +25,15 @@ from imucal.report.text import t_quantile_975
 Z95 = 1.959963984540054
 
 
-def scores(res: GyroResult, truth: GyroTruth) -> dict[str, np.ndarray]:
+def scores(res: FitResult, truth: GyroTruth) -> dict[str, np.ndarray]:
     """(estimate - truth) / reported standard error, per parameter, grouped (G_s: selected rows only)."""
-    out = {"bias": (res.bias - truth.bias) / res.bias_std,
-           "scale": (res.scale - truth.scale) / res.scale_std,
-           "misalignment": (misalignment_entries(res.misalignment) - truth.mis)
-           / misalignment_entries(res.misalignment_std)}
-    rows = res.gsens_selected
-    out["gsens"] = ((res.gsens[rows] - truth.gsens[rows]) / res.gsens_std[rows]).ravel()
+    a = arrays(res)
+    out = {"bias": (a.bias - truth.bias) / a.bias_std,
+           "scale": (a.scale - truth.scale) / a.scale_std,
+           "misalignment": (misalignment_entries(a.misalignment) - truth.mis)
+           / misalignment_entries(a.misalignment_std)}
+    rows = motions(res).gsens_selected
+    out["gsens"] = ((a.gsens[rows] - truth.gsens[rows]) / a.gsens_std[rows]).ravel()
     return out
 
 
@@ -93,15 +95,16 @@ def monte_carlo(truth: GyroTruth, seeds: range, options: GyroOptions = GyroOptio
         for g in ("bias", "scale", "misalignment"):
             z[g].append(sc[g])
         G = np.full((3, 3), np.nan)
-        G[res.gsens_selected] = sc["gsens"].reshape(-1, 3)
+        selected = motions(res).gsens_selected
+        G[selected] = sc["gsens"].reshape(-1, 3)
         z["gsens"].append(G.ravel())
-        q_static = np.array([t_quantile_975(data.n_intervals - (4 if k else 1)) for k in res.gsens_selected])
+        q_static = np.array([t_quantile_975(data.n_intervals - (4 if k else 1)) for k in selected])
         t["bias"].append(q_static)
         t["gsens"].append(np.repeat(q_static, 3))
         t["scale"].append(np.full(3, t_quantile_975(res.dof)))
         t["misalignment"].append(np.full(6, t_quantile_975(res.dof)))
         red.append(res.redchi)
         conv += res.success
-        rows += res.gsens_selected
+        rows += selected
     return Coverage({g: np.array(v) for g, v in z.items()}, {g: np.array(v) for g, v in t.items()}, np.array(red),
                     conv, rows)

@@ -9,7 +9,8 @@ from imucal.data.load import load_recording
 from imucal.data.recording import Recording
 from imucal.errors import ImucalError
 from imucal.gyro.fit import GyroOptions, fit_gyro
-from imucal.gyro.result import GyroResult
+from imucal.gyro.result import motions
+from imucal.solve.fit import FitResult
 from imucal.gyro.segments import GyroData, gyro_data_from_run
 
 
@@ -57,17 +58,17 @@ def gyro_data(run, gyro_file: str | None = None, unit: str | None = None) -> tup
         raise ImucalError(exc.message, file=exc.file or source, field=exc.field, fix=exc.fix) from None
 
 
-def calibrate_gyro(run, gyro_file: str | None = None, options: GyroOptions = GyroOptions()) -> GyroResult | None:
+def calibrate_gyro(run, gyro_file: str | None = None, options: GyroOptions = GyroOptions()) -> FitResult | None:
     """Fit the gyroscope of ``run`` (imucal.pipeline.CalibrationRun); None when it has none."""
     got = gyro_data(run, gyro_file)
     if got is None:
         return None
     data, source = got
     res = fit_gyro(data, options)
-    after = res.rms_direction_error_deg["after"]
+    after = motions(res).rms_direction_error_deg["after"]
     if not after <= MAX_DIRECTION_ERROR_DEG:
         raise ImucalError(f"the calibrated gyroscope leaves the gravity direction {after:.3g} deg rms off over "
-                          f"{res.segments.size} motions: it does not describe them", file=source, field="gyro",
+                          f"{motions(res).segments.size} motions: it does not describe them", file=source, field="gyro",
                           fix="check the gyroscope columns (gx, gy, gz) or file, and that it shares the time base")
     return res
 

@@ -85,13 +85,13 @@ def gyro_model() -> SensorModel:
 
 def gyro_parameters(unit: str, bias: Iterable[float], scale: Iterable[float], mis: Iterable[float] = (0.0,) * 6,
                     gsens: Iterable[float] = (0.0,) * 9, *, free_bias: bool = False, nominal: float | None = None,
-                    gsens_free: Iterable[bool] = (False,) * 3) -> Parameters:
+                    gsens_free: Iterable[bool] = (False,) * 3, min_angle_deg: float = MIN_ANGLE_DEG) -> Parameters:
     """The gyroscope's 21 named parameters, as the rotation fit frees them.
 
     Scale and misalignment free; the bias and the g-sensitivity H (row-major, ``gsens``) held at the still
     poses' values (imucal.gyro.gsens), the bias freed with ``free_bias``. The solver's units: ``nominal``
     [unit per rad/s] (default: the mean scale) for a scale, 1 for an entry of M_g, BIAS_STEP ``nominal`` for
-    a bias. A scale is undetermined beyond 1/rad(MIN_ANGLE_DEG) of ``nominal``; an entry of M_g beyond 1.
+    a bias. A scale is undetermined beyond 1/rad(``min_angle_deg``) of ``nominal``; an entry of M_g beyond 1.
     ``gsens_free``: per gyro axis, whether its row of H is a fitted value (the file's fixed flag reads it).
     """
     bias, scale, mis, H = (np.asarray(list(v), float) for v in (bias, scale, mis, gsens))
@@ -100,7 +100,7 @@ def gyro_parameters(unit: str, bias: Iterable[float], scale: Iterable[float], mi
     rows = list(gsens_free)
     out = [Parameter(n, float(v), unit=unit, fixed=not free_bias, scale=BIAS_STEP * k,
                      description=f"bias of gyro axis {a}") for n, v, a in zip(BIAS_NAMES, bias, AXES)]
-    out += [Parameter(n, float(v), lower=0.0, unit=raw_rate, scale=k, undetermined=1.0 / np.radians(MIN_ANGLE_DEG),
+    out += [Parameter(n, float(v), lower=0.0, unit=raw_rate, scale=k, undetermined=1.0 / np.radians(min_angle_deg),
                       description=f"scale (sensitivity) of gyro axis {a}") for n, v, a in zip(SCALE_NAMES, scale, AXES)]
     out += [Parameter(n, float(v), unit="1", scale=1.0, undetermined=1.0,
                       description=f"misalignment: gyro axis {AXES[i]}'s response to a rate about frame axis {AXES[j]}")

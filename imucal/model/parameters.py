@@ -13,6 +13,11 @@ BASE_NAMES = ("s1", "s2", "s3", "b1", "b2", "b3", "phi", "psi", "theta")
 ANGLE_NAMES = ("phi", "psi", "theta")
 
 
+#: Predicted standard error, in units of the parameter's scale, above which the poses leave a shift or a
+#: scale undetermined: 1 % of g of bias, 1 % of the sensitivity (an angle's is its tolerance: the half-width
+#: of its bound box, since the bounds alone pin it that well). imucal.solve.observability reads them.
+UNDETERMINED_SHIFT, UNDETERMINED_SCALE = 0.01, 0.01
+
 #: Slack of a bound check, relative to the bound or the parameter's scale (Parameter.admits).
 BOUND_SLACK = 1e-6
 
@@ -88,6 +93,9 @@ class Parameters(Mapping[str, Parameter]):
     def __iter__(self) -> Iterator[str]:
         return iter(self._p)
 
+    def __contains__(self, name: object) -> bool:
+        return name in self._p
+
     def __len__(self) -> int:
         return len(self._p)
 
@@ -145,17 +153,17 @@ def base_parameters(s0: Iterable[float], b0: Iterable[float],
     for i in range(3):
         # Scale for a shift: one g worth of raw units, so x = s/scale is O(1..10).
         params.append(Parameter(f"s{i+1}", float(s0[i]), unit=raw_unit,
-                                scale=max(abs(b0[i]) * gravity, 1e-12),
+                                scale=max(abs(b0[i]) * gravity, 1e-12), undetermined=UNDETERMINED_SHIFT,
                                 description=f"shift (zero-g output) of axis {i+1}"))
     for i in range(3):
         params.append(Parameter(f"b{i+1}", float(b0[i]), lower=0.0, unit=f"{raw_unit}/(m/s^2)",
-                                scale=max(abs(b0[i]), 1e-12),
+                                scale=max(abs(b0[i]), 1e-12), undetermined=UNDETERMINED_SCALE,
                                 description=f"scale (sensitivity) of axis {i+1}"))
     descr = {"phi": "angle between axes x and y", "psi": "angle between axes x and z",
              "theta": "angle between axes y and z"}
     for name, a0 in zip(ANGLE_NAMES, angles0):
         params.append(Parameter(name, float(min(max(a0, lo), hi)), lower=lo, upper=hi, unit="rad",
-                                scale=RIGHT_ANGLE, description=descr[name]))
+                                scale=RIGHT_ANGLE, undetermined=angle_tol, description=descr[name]))
     return Parameters(params)
 
 

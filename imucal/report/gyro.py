@@ -1,46 +1,44 @@
 """The gyroscope's words: its fit report, the static intervals it did not find still, its warnings."""
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
+from imucal.gyro.result import arrays, excess, motions
 from imucal.gyro.segments import GapMotion
 from imucal.gyro.still import MIN_INTERVALS, NotStill, Stillness
 from imucal.report.misfit import excess_words
-
-if TYPE_CHECKING:
-    from imucal.gyro.result import GyroResult
+from imucal.solve.fit import FitResult
 
 AXES = "xyz"
 
 
-def gyro_report(res: GyroResult) -> str:
+def gyro_report(res: FitResult) -> str:
     """Parameters with standard errors, lmfit style, the direction errors and the poses not still for it."""
     ax = AXES
-    L = [f"gyro calibration (raw unit {res.unit}; omega = M_g^-1 (B_g^-1 (raw - s_g) - G_s a))"]
+    g, m = arrays(res), motions(res)
+    L = [f"gyro calibration (raw unit {m.unit}; omega = M_g^-1 (B_g^-1 (raw - s_g) - G_s a))"]
     for j in range(3):
-        L.append(f"  s_{ax[j]} = {res.bias[j]:.6g} +/- {res.bias_std[j]:.2g} [{res.unit}]   "
-                 f"b_{ax[j]} = {res.scale[j]:.6g} +/- {res.scale_std[j]:.2g} [{res.unit} per rad/s]")
+        L.append(f"  s_{ax[j]} = {g.bias[j]:.6g} +/- {g.bias_std[j]:.2g} [{m.unit}]   "
+                 f"b_{ax[j]} = {g.scale[j]:.6g} +/- {g.scale_std[j]:.2g} [{m.unit} per rad/s]")
     for i in range(3):
         for j in range(3):
             if i != j:
-                L.append(f"  m_{ax[i]}{ax[j]} = {res.misalignment[i, j]:+.5f} +/- {res.misalignment_std[i, j]:.2g}")
+                L.append(f"  m_{ax[i]}{ax[j]} = {g.misalignment[i, j]:+.5f} +/- {g.misalignment_std[i, j]:.2g}")
     for i in range(3):
-        if res.gsens_selected[i]:
-            row = ", ".join(f"{v:+.3g} +/- {s:.2g}" for v, s in zip(res.gsens[i], res.gsens_std[i]))
-            L.append(f"  G_s row {ax[i]} [(rad/s)/(m/s^2)]: {row}  (p = {res.gsens_p_value[i]:.2g})")
+        if m.gsens_selected[i]:
+            row = ", ".join(f"{v:+.3g} +/- {s:.2g}" for v, s in zip(g.gsens[i], g.gsens_std[i]))
+            L.append(f"  G_s row {ax[i]} [(rad/s)/(m/s^2)]: {row}  (p = {m.gsens_p_value[i]:.2g})")
         else:
-            L.append(f"  G_s row {ax[i]}: not selected (p = {res.gsens_p_value[i]:.2g})")
-    r = res.rms_direction_error_deg
-    inside = f" (each from {res.lead_in_s:g} s inside its still poses)" if res.lead_in_s > 0 else ""
-    L.append(f"  gravity-direction error over {res.segments.size} motions{inside}: "
+            L.append(f"  G_s row {ax[i]}: not selected (p = {m.gsens_p_value[i]:.2g})")
+    r = m.rms_direction_error_deg
+    inside = f" (each from {m.lead_in_s:g} s inside its still poses)" if m.lead_in_s > 0 else ""
+    L.append(f"  gravity-direction error over {m.segments.size} motions{inside}: "
              f"rms {r['before']:.3f} deg before, "
              f"{r['after']:.3f} deg after;  IPOPT {res.status}, {res.iterations} iterations, "
              f"redchi {res.redchi:.3g}")
     for a, b, c in res.correlations():
         L.append(f"  correlation({a}, {b}) = {c:+.3f}")
-    if res.still is not None:
-        L += still_lines(res.still)
-    L += gap_lines(res.gapped)
+    if m.still is not None:
+        L += still_lines(m.still)
+    L += gap_lines(m.gapped)
     return "\n".join(L)  # its warnings (gyro_warnings) join the run's: printed, in the files, in the verdict
 
 
@@ -78,9 +76,9 @@ def _not_still(r: NotStill) -> str:
             f"{r.test.value} test (chi-square {r.statistic:.3g} on 3 dof, p = {r.p_value:.2g})")
 
 
-def gyro_warnings(res: GyroResult) -> list[str]:
+def gyro_warnings(res: FitResult) -> list[str]:
     """What the user must know about the gyro fit, one sentence each (as the accelerometer's)."""
-    e = res.excess
+    e = excess(res)
     if e is None:
         return []
     return [f"gyroscope: {excess_words(e)}; the gyro's standard errors are scaled by it "

@@ -22,7 +22,7 @@ from imucal.report.html import calibration_html, render_png
 from imucal.report.text import fit_report, summary
 
 if TYPE_CHECKING:
-    from imucal.gyro.result import GyroResult
+    from imucal.solve.fit import FitResult
 
 CALIBRATION_FILE, REPORT_FILE, HTML_FILE = "calibration.yaml", "report.txt", "report.html"
 
@@ -36,7 +36,7 @@ class RunFiles:
     summary: dict  #: the JSON summary (--json)
 
     @property
-    def gyro(self) -> GyroResult | None:
+    def gyro(self) -> FitResult | None:
         """The gyroscope fit; None when the recording has no gyroscope."""
         return self.run.gyro
 
@@ -66,7 +66,9 @@ def stage_files(o: OutputSet, out: Path, files: RunFiles, figures: bool, json_pa
     gyro = files.gyro
     o.call(out / CALIBRATION_FILE, files.run.calibration.save)
     o.text(out / REPORT_FILE, files.text)
-    o.text(out / HTML_FILE, calibration_html(files.run, pngs, None if gyro is None else {"Gyroscope": gyro.report()}))
+    if gyro is not None:
+        from imucal.report.gyro import gyro_report  # measured start-up: only a run with a gyroscope
+    o.text(out / HTML_FILE, calibration_html(files.run, pngs, None if gyro is None else {"Gyroscope": gyro_report(gyro)}))
     for name, png in pngs.items():
         o.bytes(out / name, png)
     if json_path is not None:

@@ -234,13 +234,21 @@ def _interval_lines(run: CalibrationRun) -> list[str]:
     return L
 
 
+def _gyro_json(res) -> dict:
+    from imucal.gyro.result import to_dict  # measured start-up: only a run with a gyroscope
+
+    return to_dict(res)
+
+
 def _gyro_lines(run: CalibrationRun) -> list[str]:
     """The gyroscope's report and apply map, when there is one."""
     cal = run.calibration
     L: list[str] = []
     if run.gyro is not None:
         L.append("[[Gyroscope]]")
-        L.append(run.gyro.report())
+        from imucal.report.gyro import gyro_report  # measured start-up: only a run with a gyroscope
+
+        L.append(gyro_report(run.gyro))
         C, c, D = cal.gyro.rate_map()
         L.append("[[Gyro apply map]]  omega = C raw + c - D a  (rad/s, the accelerometer's frame; "
                  "a: calibrated acceleration)")
@@ -287,5 +295,5 @@ def summary(run: CalibrationRun) -> dict:
         "warnings": list(cal.fit.get("warnings", [])),
         "sensors": list(cal.sensors),
         "equation": cal.equation,
-        **({"gyro": run.gyro.to_dict()} if run.gyro is not None else {}),
+        **({"gyro": _gyro_json(run.gyro)} if run.gyro is not None else {}),
     }

@@ -12,6 +12,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 from functools import lru_cache
+from typing import Mapping
 
 import casadi as ca
 import numpy as np
@@ -19,6 +20,10 @@ import numpy as np
 from imucal.solve import ipopt
 from imucal.solve import least_squares as lsq
 from imucal.solve import stochastic
+from imucal.solve.covariance import unscaled_covariance
+from imucal.solve.evidence import Evidence, EvidenceSummary, FitEvidence
+from imucal.solve.observability import determination
+from imucal.solve.vectorize import apply_values
 from imucal.solve.stats import between_excess, chi2_sf, projected_chi2
 from imucal.solve.vectorize import Vectorized
 from imucal.errors import ImucalError
@@ -54,18 +59,21 @@ class FitData:
 
 @dataclass(frozen=True)
 class FitResult:
-    """A fitted calibration: values, uncertainties, goodness of fit and solver status."""
+    """A fitted sensor, whatever the sensor (one result type for every description, issue 26): values,
+    uncertainties, goodness of fit and solver status, and what its kind of evidence says beyond them.
+
+    The accelerometer's rows (interval means or samples) fill ``gravity``, ``mode`` and the fields from
+    ``excess`` on; any other evidence attaches its own typed ``summary`` (the gyroscope's motions:
+    imucal.gyro.result.MotionSummary)."""
 
     params: Parameters
     initial: Parameters
-    std: dict[str, float]
+    std: dict[str, float]  #: every parameter's; NaN where not determined
     covariance: np.ndarray  #: over the free parameters, in ``free_names`` order
     correlation: np.ndarray
     free_names: tuple[str, ...]
-    gravity: float
-    mode: str
-    residuals: np.ndarray  #: |a| - g per row [m/s^2]
-    sigma: np.ndarray  #: noise of each residual [m/s^2]
+    residuals: np.ndarray  #: of the evidence (|a| - g per row [m/s^2]; R^T u0 - u1 per motion [rad])
+    sigma: np.ndarray  #: noise of each residual, same unit
     chi2: float
     dof: int
     status: str
@@ -74,6 +82,12 @@ class FitResult:
     solve_time: float
     model_name: str
     at_bound: dict[str, str] = field(default_factory=dict)
+    #: the sensor's description (its map: ``apply``); None for a result built without one
+    model: SensorModel | None = field(default=None, compare=False, repr=False)
+    #: the evidence's own summary (typed: imucal.gyro.result.MotionSummary for the gyroscope's motions)
+    summary: EvidenceSummary | None = None
+    gravity: float = float("nan")  #: the accelerometer's local gravity [m/s^2]
+    mode: str = "means"  #: the accelerometer's rows: "means" or "samples"
     #: between-interval excess variance added to every row's sigma^2 in the standard errors [(m/s^2)^2]
     #: (weights="auto": Paule-Mandel's, or REML's beside a named random walk)
     excess: float = 0.0
@@ -127,27 +141,35 @@ class FitResult:
     def status_words(self) -> str:
         return _STATUS_WORDS.get(self.status, self.status)
 
+    @property
+    def kind(self) -> str:
+        """The sensor's kind (its description's)."""
+        return self.model.kind if self.model is not None else "accelerometer"
+
+    def apply(self, raw: np.ndarray, inputs: np.ndarray | None = None) -> np.ndarray:
+        """The calibrated readings (N, 3) or (3,) of raw ones through the description's map at the fitted
+        values; ``inputs`` (N, k) its other inputs (the gyroscope's: the calibrated acceleration)."""
+        one = np.ndim(raw) == 1
+        if inputs is None and self.model.inputs and _reads_inputs(self.model, self.params.values()):
+            raise ImucalError(f"this {self.kind} calibration reads {', '.join(self.model.inputs)}", field="inputs",
+                              fix=f"pass them ({', '.join(self.model.inputs)}) for the same samples")
+        out = apply_values(self.model, self.params.values(), raw, None if inputs is None else np.atleast_2d(inputs))
+        return out[0] if one else out
+
+    def correlations(self, threshold: float = 0.5) -> list[tuple[str, str, float]]:
+        """Pairs of free parameters whose correlation exceeds ``threshold`` in size."""
+        n, C = self.free_names, self.correlation
+        return [(n[i], n[j], float(C[i, j])) for i in range(len(n)) for j in range(i + 1, len(n))
+                if abs(C[i, j]) > threshold]
+
     def values(self) -> dict[str, float]:
         return self.params.value_dict()
 
 
-def unscaled_covariance(Jw: np.ndarray, rcond: float = 1e-12) -> np.ndarray:
-    """(Jw^T Jw)^-1 by the SVD of the column-equilibrated Jacobian.
-
-    ``Jw`` may be the weighted Jacobian itself or any R with R^T R = Jw^T Jw (the block QR of
-    imucal.solve.least_squares): both have the same column norms and singular values.
-
-    Columns are divided by their norms first, so the result does not depend on the units of
-    the parameters (a shift in counts x 1e12 and an angle in rad differ by 1e15 in scale, and a
-    cut relative to the largest singular value would drop the small columns). Directions the
-    data do not determine (relative singular value below ``rcond``) get zero variance here and
-    are named by imucal.solve.observability before any fit.
-    """
-    c = np.linalg.norm(Jw, axis=0)
-    c = np.where(c > 0, c, 1.0)
-    _, sv, Vt = np.linalg.svd(Jw / c, full_matrices=False)
-    inv = np.where(sv > sv.max(initial=0) * rcond, 1.0 / np.maximum(sv, 1e-300) ** 2, 0.0)
-    return ((Vt.T * inv) @ Vt) / np.outer(c, c)
+def _reads_inputs(model: SensorModel, p: list[float]) -> bool:
+    """The map depends on its inputs at these values (an affine map's B is not zero; any other map: yes)."""
+    aff = model.affine
+    return aff is None or bool(np.any(np.asarray(aff(p)[2])))
 
 
 def _step_scale(Jw: np.ndarray, scale: np.ndarray) -> np.ndarray:
@@ -160,6 +182,61 @@ def _step_scale(Jw: np.ndarray, scale: np.ndarray) -> np.ndarray:
         d = np.sqrt(np.clip(np.diag(unscaled_covariance(Jw)), 0, None))
     d = np.where(np.isfinite(d) & (d > 0), d, scale)
     return np.clip(d, 1e-9 * scale, scale)
+
+
+def solve_scaled(evidence: Evidence, pfix: np.ndarray, p_now: np.ndarray, sigma: np.ndarray, scale: np.ndarray,
+                 lo: np.ndarray, hi: np.ndarray, exact: bool = False, step=None) -> tuple[np.ndarray, dict]:
+    """One IPOPT solve of ``evidence`` weighted by 1/sigma^2, from ``p_now`` within [lo, hi]: the unknowns
+    are scaled by each free parameter's predicted standard error (p = p_now + d x, ``_step_scale``), so
+    IPOPT sees numbers near one and a Hessian near the identity. Returns (free parameters, IPOPT's stats)."""
+    d = _step_scale(evidence.r_factor(p_now, pfix, sigma), scale)
+    problem = lsq.Problem(evidence, 1.0 / sigma**2, pfix, p_now, d, exact=exact, step=step)
+    x, stats = lsq.solve(problem, (lo - p_now) / d, (hi - p_now) / d)
+    return np.clip(p_now + d * x, lo, hi), stats
+
+
+def fit_evidence(model: SensorModel, evidence: FitEvidence, params: Parameters,
+                 known_std: Mapping[str, float] | None = None, summary: EvidenceSummary | None = None) -> FitResult:
+    """The one fit of a sensor's evidence (issue 26): the observability check, IPOPT on the residuals
+    weighted by their noise, the covariance, one result.
+
+    1. What the evidence determines (imucal.solve.observability.determination on its observability rows,
+       each parameter's threshold Parameter.undetermined x scale): the evidence refuses, naming what to record.
+    2. IPOPT through imucal.solve.least_squares, unknowns scaled by their predicted standard errors
+       (``solve_scaled``), within each parameter's bounds.
+    3. The covariance from the R factor of the weighted Jacobian at the solution, scaled by chi2/dof
+       (lmfit's scale_covar; the noise-only one without degrees of freedom).
+    A fixed parameter's standard error is ``known_std``'s (what the evidence's preparation measured it to,
+    NaN otherwise); a free one found there too was corrected by the fit from that value, and the two
+    independent errors add in quadrature.
+    """
+    free = params.free_names
+    pfix = np.array(params.values(), float)
+    p0 = np.array([params[n].value for n in free])
+    scale = np.array([params[n].scale for n in free])
+    lo, hi = np.array([params[n].lower for n in free]), np.array([params[n].upper for n in free])
+    limits = np.array([params[n].scale * (params[n].undetermined or 1.0) for n in free])
+    evidence.require_determined(determination(evidence.observability_rows(p0, pfix), free, limits))
+    t0 = time.perf_counter()
+    p, stats = solve_scaled(evidence, pfix, p0, evidence.sigma, scale, lo, hi)
+    solve_time = time.perf_counter() - t0
+    r = evidence.residuals(p, pfix)
+    chi2, dof = float(np.sum((r / evidence.sigma) ** 2)), int(evidence.dof)
+    cov = unscaled_covariance(evidence.r_factor(p, pfix, evidence.sigma)) * (chi2 / dof if dof > 0 else 1.0)
+    sd = np.sqrt(np.clip(np.diag(cov), 0, None))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        corr = cov / np.outer(sd, sd)
+    known = dict(known_std or {})
+    std = {n: float(known.get(n, float("nan"))) for n in params.names}
+    std.update({n: float(np.hypot(v, known.get(n, 0.0))) for n, v in zip(free, sd)})
+    fitted = params.with_values(dict(zip(free, p)))
+    status = str(stats.get("return_status", "unknown"))
+    return FitResult(params=fitted, initial=params, std=std, covariance=cov, correlation=corr, free_names=free,
+                     residuals=r, sigma=evidence.sigma, chi2=chi2, dof=dof, status=status,
+                     success=status in _CONVERGED, iterations=int(stats.get("iter_count", 0)), solve_time=solve_time,
+                     model_name=model_label(model.name, params),
+                     at_bound={n: b for n in free if (b := fitted[n].at_bound()) is not None}, model=model,
+                     summary=summary)
 
 
 def fit(data: FitData, params: Parameters, model: SensorModel, gravity: float,
@@ -209,7 +286,7 @@ def fit(data: FitData, params: Parameters, model: SensorModel, gravity: float,
     return FitResult(params=fitted, initial=params, std=std, covariance=cov, correlation=corr,
                      free_names=free, gravity=gravity, mode=data.mode, residuals=r, sigma=sigma,
                      chi2=chi2, dof=dof, status=status, success=status in _CONVERGED, iterations=it.iterations,
-                     solve_time=solve_time, model_name=model_label(model.name, params), at_bound=at_bound,
+                     solve_time=solve_time, model_name=model_label(model.name, params), at_bound=at_bound, model=model,
                      excess=it.excess, chi2_noise=chi2_noise, random_walk=it.q2,
                      stochastic=it.sto if it.q2 > 0 else None, bias_drift=drift,
                      scatter_term=None if it.samples is None else it.samples.term,
@@ -281,12 +358,9 @@ def _iterate(fns, rows, data: FitData, params: Parameters, model: SensorModel, p
             else:
                 srows = _samples_rows(fns, model, free, scatter, p_now, pfix, gravity, values_weights)
                 g, sigma0 = srows.g, srows.sigma0
-            R = lsq.weighted_r_factor(fns, rows, sigma0, p_now, pfix, g)
-            d = _step_scale(R, scale)  # p = p0 + d * x
-            problem = lsq.Problem(fns, rows, 1.0 / sigma0**2, pfix, g, p_now, d, exact=hessian == "exact", step=step)
-            x, stats = lsq.solve(problem, (lo - p_now) / d, (hi - p_now) / d)
+            p_now, stats = solve_scaled(lsq.RowEvidence(fns, rows, g), pfix, p_now, sigma0, scale, lo, hi,
+                                        exact=hessian == "exact", step=step)
             iters += int(stats.get("iter_count", 0))
-            p_now = np.clip(p_now + d * x, lo, hi)
     excess, q2, sto = 0.0, 0.0, None
     if auto:  # the noise at the solution, and what the residuals show beyond it
         sigma0 = lsq.noise_sigma(fns, rows, data.raw_var, p_now, pfix, gravity, "noise")

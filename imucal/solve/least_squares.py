@@ -179,13 +179,36 @@ def normal_equations(fns: RowFunctions, rows: Rows, w: np.ndarray, pfree, pfix, 
     return f, grad, H
 
 
-class Problem:
-    """One weighted least-squares problem in scaled unknowns x: pfree = off + scale * x."""
+@dataclass(frozen=True)
+class RowEvidence:
+    """The accelerometer's evidence as the one fit sees it: rows (interval means or samples), each residual
+    r = |a| - g from ``fns`` (imucal.solve.evidence.Evidence, accumulated block by block)."""
 
-    def __init__(self, fns: RowFunctions, rows: Rows, w: np.ndarray, pfix: np.ndarray, gravity: float | np.ndarray,
-                 off: np.ndarray, scale: np.ndarray, exact: bool = False,
-                 step: Callable[[], None] | None = None) -> None:
-        self.fns, self.rows, self.w, self.pfix, self.g = fns, rows, w, pfix, gravity
+    fns: RowFunctions
+    rows: Rows
+    g: float | np.ndarray  #: gravity of every row, or each row's own [m/s^2]
+
+    @property
+    def n_free(self) -> int:
+        return self.fns.n_free
+
+    def residuals(self, pfree, pfix) -> np.ndarray:
+        return residuals(self.fns, self.rows, pfree, pfix, self.g)
+
+    def normal_equations(self, pfree, pfix, w: np.ndarray, exact: bool = False) -> tuple[float, np.ndarray, np.ndarray]:
+        return normal_equations(self.fns, self.rows, w, pfree, pfix, self.g, exact)
+
+    def r_factor(self, pfree, pfix, sigma: np.ndarray) -> np.ndarray:
+        return weighted_r_factor(self.fns, self.rows, sigma, pfree, pfix, self.g)
+
+
+class Problem:
+    """One weighted least-squares problem in scaled unknowns x: pfree = off + scale * x, over any evidence
+    (imucal.solve.evidence.Evidence: the accelerometer's rows, the gyroscope's motion segments)."""
+
+    def __init__(self, evidence, w: np.ndarray, pfix: np.ndarray, off: np.ndarray, scale: np.ndarray,
+                 exact: bool = False, step: Callable[[], None] | None = None) -> None:
+        self.evidence, self.w, self.pfix = evidence, w, pfix
         self.off, self.scale, self.exact = off, scale, exact
         self.step = step  #: called after every pass over the rows (a progress bar, imucal.report.progress)
         self._key: bytes | None = None
@@ -193,7 +216,7 @@ class Problem:
 
     @property
     def n_free(self) -> int:
-        return self.fns.n_free
+        return self.evidence.n_free
 
     def p_of(self, x) -> np.ndarray:
         return self.off + self.scale * np.asarray(x, float).ravel()
@@ -202,7 +225,7 @@ class Problem:
         x = np.asarray(x, float)  # IPOPT's point arrives as a CasADi DM: converted once
         if self._key == x.tobytes():
             return self._val[0]
-        r = residuals(self.fns, self.rows, self.p_of(x), self.pfix, self.g)
+        r = self.evidence.residuals(self.p_of(x), self.pfix)
         if self.step is not None:
             self.step()
         return 0.5 * float(r @ (self.w @ r if self.w.ndim == 2 else self.w * r))
@@ -212,8 +235,7 @@ class Problem:
         x = np.asarray(x, float)
         key = x.tobytes()
         if self._key != key:
-            f, g, H = normal_equations(self.fns, self.rows, self.w, self.p_of(x), self.pfix, self.g,
-                                       self.exact)
+            f, g, H = self.evidence.normal_equations(self.p_of(x), self.pfix, self.w, self.exact)
             if self.step is not None:
                 self.step()
             self._key, self._val = key, (f, g * self.scale, H * np.outer(self.scale, self.scale))
@@ -314,7 +336,7 @@ def solve(problem: Problem, lb: np.ndarray, ub: np.ndarray) -> tuple[np.ndarray,
     """Minimise the problem from x = 0 within [lb, ub]; returns (x, IPOPT's stats).
 
     ``problem`` has ``n_free``, ``value(x)`` and ``derivatives(x)`` -> (f, gradient, Hessian), as
-    ``Problem`` (the gyroscope's segment fit, imucal.gyro.fit, is another).
+    ``Problem`` over any evidence.
     """
     nf = problem.n_free
     solver, slot, _ = _solver(nf)

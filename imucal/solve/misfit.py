@@ -3,7 +3,7 @@
 A typed value, decided here; its words are written in imucal.report.misfit. The accelerometer
 tests its chi-square against the noise of the interval means (imucal.pipeline.fit_warnings), the
 gyroscope its chi-square against the static directions' noise and the angle random walk
-(imucal.gyro.result.GyroResult.excess); the HTML verdict applies the same rule.
+(imucal.gyro.result.excess); the HTML verdict applies the same rule.
 """
 from __future__ import annotations
 

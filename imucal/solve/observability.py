@@ -1,8 +1,14 @@
-"""Observability: refuse fits the poses cannot determine, and say what to add.
+"""Observability: refuse fits the evidence cannot determine, and say what to add.
 
-Two checks before the fit: the number of distinct gravity directions (repeated poses add no
-rank), and the rank of the residual Jacobian with one row per distinct direction. Parameters
-that load on the Jacobian's (near) null space are named as undetermined.
+One check for every sensor (``determination``): each free parameter's predicted standard error from the
+evidence's information, against its threshold (Parameter.undetermined, in units of its scale): alone
+(every other parameter known), together (all estimated at once), and the information's null and weak
+directions. What to refuse and how to say it is the evidence's (the accelerometer's poses below:
+``analyse`` and ``require_observable``; the gyroscope's motions: imucal.gyro.evidence).
+
+The accelerometer's poses add two checks before it: the number of distinct gravity directions
+(repeated poses add no rank), and the rank of the residual Jacobian with one row per distinct
+direction. Parameters that load on the Jacobian's (near) null space are named as undetermined.
 """
 from __future__ import annotations
 
@@ -12,8 +18,8 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from imucal.errors import ImucalError
-from imucal.solve.fit import unscaled_covariance
-from imucal.model.parameters import ANGLE_NAMES
+from imucal.solve.covariance import unscaled_covariance
+from imucal.model.parameters import ANGLE_NAMES, UNDETERMINED_SCALE, UNDETERMINED_SHIFT, Parameters
 
 #: Two interval directions closer than this are the same pose [deg].
 DISTINCT_ANGLE_DEG = 10.0
@@ -23,7 +29,7 @@ RANK_TOL = 1e-6
 #: the parameter's scale (b_i for a scale, one g of raw output for a shift, pi/2 for an angle):
 #: 1 % of the sensitivity, 1 % of g of bias; for an angle, the half-width of its bound box
 #: (the angle tolerance), since the bounds alone already pin it that well.
-UNDETERMINED_Z = {"s": 0.01, "b": 0.01}
+UNDETERMINED_Z = {"s": UNDETERMINED_SHIFT, "b": UNDETERMINED_SCALE}
 #: A coefficient larger than its generous magnitude is determined when it is at least this many
 #: (noise-only) standard errors from zero: the detection level, chi-square(1) at p = 1e-3.
 LARGE_EFFECT_Z = 3.29
@@ -31,9 +37,11 @@ LARGE_EFFECT_Z = 3.29
 POOR_FRACTION = 0.1
 
 
-def thresholds(free_names: tuple[str, ...], angle_tol: float,
+def thresholds(params: Parameters, free_names: tuple[str, ...], angle_tol: float,
                sizes: Mapping[str, float] | None = None) -> np.ndarray:
-    """Per-parameter undetermined thresholds in scaled units.
+    """Per-parameter undetermined thresholds in scaled units: each parameter's own (Parameter.undetermined:
+    UNDETERMINED_Z of a shift or a scale, the angle tolerance of an angle, as base_parameters sets them;
+    by name for parameters read from a file).
 
     An effect parameter's is 1 (its generous magnitude), or its own size over LARGE_EFFECT_Z when a
     start puts it larger (``sizes``: |value| / scale, e.g. a term discover found): a coefficient ten
@@ -42,13 +50,60 @@ def thresholds(free_names: tuple[str, ...], angle_tol: float,
     sizes = sizes or {}
     out = []
     for n in free_names:
-        if n in ANGLE_NAMES:
+        own = params[n].undetermined
+        if own is not None:
+            out.append(own)
+        elif n in ANGLE_NAMES:
             out.append(angle_tol)
         elif n[:1] in UNDETERMINED_Z and n[1:] in ("1", "2", "3"):
             out.append(UNDETERMINED_Z[n[:1]])
         else:
             out.append(max(1.0, abs(float(sizes.get(n, 0.0))) / LARGE_EFFECT_Z))
     return np.array(out)
+
+
+#: A direction of the information is null below this fraction of its largest eigenvalue.
+NULL_RTOL = 1e-9
+
+
+@dataclass(frozen=True)
+class Determination:
+    """What the evidence determines of the free parameters: predicted standard errors (noise only, or the
+    evidence's own whitening) in units of each parameter's threshold (> 1: undetermined)."""
+
+    names: tuple[str, ...]
+    alone: np.ndarray  #: each with every other parameter known: 1 / sqrt(I_kk)
+    together: np.ndarray  #: all estimated together: sqrt((I^+)_kk), undetermined directions dropped
+    eigenvalues: np.ndarray  #: of the information I, ascending
+    eigenvectors: np.ndarray  #: its unit eigenvectors (columns), in threshold units
+
+    @property
+    def null(self) -> np.ndarray:
+        """Which eigen-directions the evidence leaves without information (bool per eigenvalue)."""
+        lam = self.eigenvalues
+        return lam <= NULL_RTOL * max(lam[-1] if lam.size else 0.0, 1e-300)
+
+    @property
+    def weak(self) -> tuple[str, ...]:
+        """The parameters loading (> 0.5) on the directions whose predicted standard error exceeds the threshold."""
+        bad = 1.0 / np.sqrt(np.maximum(self.eigenvalues, 1e-300)) > 1.0
+        if not bad.any():
+            return ()
+        load = np.sqrt((self.eigenvectors[:, bad] ** 2).sum(axis=1))
+        return tuple(n for n, v in zip(self.names, load) if v > 0.5)
+
+
+def determination(J: np.ndarray, names: tuple[str, ...], limits: np.ndarray) -> Determination:
+    """The one observability check's numbers: J (rows, free) in the parameters' units, its rows whitened by
+    the evidence; ``limits`` each parameter's threshold in the same units (scale x undetermined)."""
+    Jt = np.asarray(J, float) * np.asarray(limits, float)
+    info = Jt.T @ Jt
+    with np.errstate(divide="ignore"):
+        alone = 1.0 / np.sqrt(np.clip(np.diag(info), 0, None))
+    lam, V = np.linalg.eigh(info)
+    with np.errstate(invalid="ignore"):
+        together = np.sqrt(np.clip(np.diag(unscaled_covariance(Jt)), 0, None))
+    return Determination(tuple(names), alone, together, lam, V)
 
 
 @dataclass(frozen=True)
@@ -127,14 +182,9 @@ def analyse(directions: np.ndarray, jac_rows: np.ndarray, free_names: tuple[str,
         # degeneracies show up at noise level in the singular values, so a rank test alone
         # misses them.)
         lim = np.ones(nf) if limits is None else np.asarray(limits, float)
-        Jt = weighted_rows * lim
-        lam, V = np.linalg.eigh(Jt.T @ Jt)
-        bad = 1.0 / np.sqrt(np.maximum(lam, 1e-300)) > 1.0
-        if bad.any():
-            load = np.sqrt((V[:, bad] ** 2).sum(axis=1))
-            und += [free_names[j] for j in range(nf) if load[j] > 0.5 and free_names[j] not in und]
-        with np.errstate(invalid="ignore"):
-            zt = np.sqrt(np.clip(np.diag(unscaled_covariance(Jt)), 0, None))
+        det = determination(weighted_rows, free_names, lim)
+        und += [n for n in det.weak if n not in und]
+        zt = det.together
         z = {n: float(v * l) for n, v, l in zip(free_names, zt, lim)}  # std / scale
         poor = [n for n, v in zip(free_names, zt) if v > POOR_FRACTION and n not in und]
     return Observability(n_distinct, labels, svf, tuple(sorted(und, key=free_names.index)), z, tuple(poor))

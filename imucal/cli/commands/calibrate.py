@@ -61,7 +61,9 @@ def run(args: argparse.Namespace) -> int:
     if not args.quiet:
         print(text.split("[[Static intervals]]")[0].rstrip())
     if gyro is not None and not args.quiet:
-        print(gyro.report())
+        from imucal.report.gyro import gyro_report
+
+        print(gyro_report(gyro))
     print(f"wrote {out / 'calibration.yaml'}" + (" (accelerometer and gyroscope)" if gyro else "")
           + f", {out / 'report.txt'}, {out / 'report.html'}"
           + (", figures" if figures else "") + (f", {args.json}" if args.json else ""))
