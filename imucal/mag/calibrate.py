@@ -1,0 +1,191 @@
+"""Calibrate a magnetometer from a log turned through many orientations (still or moving).
+
+  1. noise of both sensors from the log (imucal.mag.evidence.sample_variance)
+  2. initial guess: the accelerometer's linear ellipsoid fit (imucal.solve.initial) on the readings
+  3. coverage: refuse directions that leave the hard and soft iron undetermined (imucal.mag.checks)
+  4. with an accelerometer: the lag, the poses (still intervals, else quiet windows), the mounting
+     (imucal.mag.frame: the 24 signed permutations, refined in closed form)
+  5. the fit of every row (imucal.mag.fit), with and without the rotation, and the F test between them
+  6. the field's steps between poses, and the figures before and after (imucal.mag.result)
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from imucal.errors import ImucalError
+from imucal.mag import evidence as ev
+from imucal.mag.checks import FieldSteps, field_steps, require_coverage
+from imucal.mag.fit import MagFitResult, fit_rows, soft_iron_test
+from imucal.mag.frame import AxesSearch, dip_angles, euler_angles, search_axes
+from imucal.mag.model import (DIP, IDENTITY, NORM, ROTATION_BOUND, ROTATION_NAMES, MagModel, build_mag_model,
+                              mag_parameters)
+from imucal.mag.result import MagCalibration, MagReport, PoseFigures, Scatter
+from imucal.mag.units import field_magnitude
+from imucal.model.parameters import BASE_NAMES, Parameters
+from imucal.solve.initial import ellipsoid_guess
+
+SOFT_IRON_CHOICES = ("auto", "symmetric", "full")
+#: Samples the initial ellipsoid fit looks at (evenly spaced): a linear fit, its cost linear in them.
+GUESS_ROWS = 20000
+#: Still intervals used for the dip when there are at least this many; else quiet windows of a moving log.
+MIN_STILL_POSES = 6
+#: A pose whose accelerometer magnitude is off the poses' median by more than this fraction is moving
+#: (linear acceleration tilts the apparent gravity): not a DIP row.
+MAX_ACC_DEVIATION = 0.05
+#: DIP rows needed for the rotation and the dip (4 unknowns, and the scatter that weighs them).
+MIN_DIP_ROWS = 8
+
+
+@dataclass(frozen=True)
+class MagSettings:
+    """How to calibrate (the run file's ``mag:`` section fills it)."""
+
+    field: float | None = None  #: the field's magnitude F (None: fitted, the scales' overall size held)
+    field_unit: str | None = None  #: F's unit (None: the sensor's); uT, nT, gauss, mG ...
+    dip_deg: float | None = None  #: the dip angle asin(a . h / |a||h|) held [deg] (None: fitted)
+    size: float = 1.0  #: the scales' geometric mean held when F is fitted [raw per field unit]
+    soft_iron: str = "auto"  #: auto (the F test), symmetric or full
+    window: int = 25  #: samples per window of a moving log (the dip's poses)
+    lag: float | None = None  #: the magnetometer's delay [samples] (None: estimated)
+
+    def __post_init__(self) -> None:
+        if self.soft_iron not in SOFT_IRON_CHOICES:
+            raise ImucalError(f"soft_iron {self.soft_iron!r} is not a choice", field="mag.soft_iron",
+                              fix=f"use one of {', '.join(SOFT_IRON_CHOICES)}")
+        if not (isinstance(self.window, int) and self.window >= 4):
+            raise ImucalError(f"window {self.window!r} must be at least 4 samples", field="mag.window")
+        if not (self.size > 0 and math.isfinite(self.size)):
+            raise ImucalError(f"size {self.size!r} must be positive", field="mag.size")
+
+
+def _guess(mag: np.ndarray, F: float | None, size: float, source: str | None):
+    """(s, b, angles, F) from the linear ellipsoid fit; F fitted: the scales' geometric mean at ``size``."""
+    pick = np.linspace(0, len(mag) - 1, min(len(mag), GUESS_ROWS)).astype(int)
+    g = ellipsoid_guess(mag[pick], 1.0 if F is None else F, source=source)
+    b = np.asarray(g.b, float)
+    if F is None:  # |h| = 1 with b: with b k, |h| = 1 / k
+        k = size / float(np.prod(b)) ** (1 / 3)
+        return g.s, b * k, g.angles, 1.0 / k
+    return g.s, b, g.angles, F
+
+
+def _held(params: Parameters, names) -> Parameters:
+    return params.with_fixed([n for n in names if n in params])
+
+
+def _dip_setup(mag: np.ndarray, acc: np.ndarray, still: ev.Poses | None, p0: np.ndarray, settings: MagSettings,
+               var_m: np.ndarray, var_a: np.ndarray, source: str | None):
+    """The lag, the poses, their DIP rows and the mounting found from them."""
+    s0 = p0[:3]
+    lag = ev.Lag(float(settings.lag), 0.0, False) if settings.lag is not None else ev.estimate_lag(mag - s0, acc)
+    mag_d = ev.shift(mag, lag.samples)
+    if still is not None and still.n >= MIN_STILL_POSES:
+        poses = still
+    else:
+        poses = ev.quiet_windows(mag_d - s0, settings.window)
+    an = np.linalg.norm(poses.means(acc), axis=1)
+    poses = poses.subset(np.abs(an / np.median(an) - 1) <= MAX_ACC_DEVIATION)
+    if poses.n < MIN_DIP_ROWS:
+        raise ImucalError(f"only {poses.n} poses for the dip angle", file=source, field="ax, ay, az",
+                          fix=f"hold the sensor still in at least {MIN_DIP_ROWS} orientations, or turn it slowly")
+    rows = ev.dip_rows(mag_d, acc, poses, var_m, var_a)
+    h0 = np.asarray(build_mag_model().vectorized("apply")(rows.raw.T, p0)[0]).T
+    search = search_axes(rows.cov[:, 1:], h0)
+    P = np.array(search.best.axes, float).reshape(3, 3)
+    r0 = euler_angles(search.closed_form.rotation @ P.T) if search.agrees else (0.0, 0.0, 0.0)
+    r0 = tuple(float(np.clip(v, -ROTATION_BOUND, ROTATION_BOUND)) for v in r0)
+    return lag, poses, rows, search, r0
+
+
+def _fits(model: MagModel, rows: ev.MagRows, params: Parameters, settings: MagSettings, source: str | None):
+    """The full and the symmetric fit, the test between them, and the chosen one."""
+    full = fit_rows(model, rows, params, source=source)
+    sym = fit_rows(model, ev.MagRows.stack(rows, ev.skew_rows()), full.params, factors=full.factors, source=source)
+    test = soft_iron_test(full, sym)
+    use_full = test.full if settings.soft_iron == "auto" else settings.soft_iron == "full"
+    return (full if use_full else sym), sym, test
+
+
+def calibrate_mag(mag: np.ndarray, acc: np.ndarray | None = None, *, still: ev.Poses | None = None,
+                  settings: MagSettings = MagSettings(), raw_unit: str = "raw", source: str | None = None
+                  ) -> MagCalibration:
+    """Hard and soft iron, the field, and (with the calibrated accelerometer ``acc``) the rotation to the
+    accelerometer's frame and the dip. ``still``: the accelerometer's still intervals, if any."""
+    mag = np.asarray(mag, float)
+    acc = None if acc is None else np.asarray(acc, float)
+    ev.check_lengths(mag, acc, source)
+    given = settings.field is not None
+    F, field_unit = (field_magnitude(settings.field, settings.field_unit, raw_unit, source) if given
+                     else (None, raw_unit))
+    var_m = ev.sample_variance(mag)
+    s0, b0, ang0, F0 = _guess(mag, F, settings.size, source)
+    dip0 = 0.0 if settings.dip_deg is None else math.radians(settings.dip_deg)
+    params = mag_parameters(s0, b0, ang0, F0, dip0=dip0, raw_unit=raw_unit, field_unit=field_unit)
+    nrows = ev.norm_rows(mag, var_m)
+    require_coverage(build_mag_model(), nrows, _held(params, [n for n in params.names if n not in BASE_NAMES]),
+                     source)
+    held = [] if not given else ["F"]
+    extra = [] if given else [ev.size_row(settings.size)]
+    if acc is None:
+        model, rows = build_mag_model(), ev.MagRows.stack(nrows, *extra)
+        fit = fit_rows(model, rows, _held(params, held + [*ROTATION_NAMES, "dip"]), source=source)
+        return _result(fit, None, None, None, None, None, mag, acc, settings, raw_unit, field_unit, given)
+    var_a = ev.sample_variance(acc)
+    lag, poses, drows, search, r0 = _dip_setup(mag, acc, still, np.array(params.values()), settings, var_m, var_a,
+                                               source)
+    params = params.with_values(dict(zip(ROTATION_NAMES, r0)) | {"dip": float(np.mean(dip_angles(
+        drows.cov[:, 1:], np.asarray(build_mag_model(search.best.axes).vectorized("apply")(
+            drows.raw.T, np.array(params.values()))[0]).T))) if settings.dip_deg is None else dip0})
+    params = _held(params, held + (["dip"] if settings.dip_deg is not None else []))
+    model = build_mag_model(search.best.axes)
+    fit, sym, test = _fits(model, ev.MagRows.stack(nrows, drows, *extra), params, settings, source)
+    return _result(fit, sym, test, search, lag, poses, mag, acc, settings, raw_unit, field_unit, given,
+                   ev.shift(mag, lag.samples))
+
+
+def _norm_pct(fit: MagFitResult, raw: np.ndarray) -> np.ndarray:
+    p = np.array(fit.params.values(), float)
+    F = fit.params["F"].value
+    return 100.0 * (fit.model.vectorized("norm")(raw.T, p)[0][0] - F) / F
+
+
+def _dips(fit: MagFitResult, raw: np.ndarray, acc: np.ndarray) -> np.ndarray:
+    """Each pose's dip minus the fitted dip [deg]."""
+    p = np.array(fit.params.values(), float)
+    return np.degrees(fit.model.vectorized("dip")(raw.T, acc.T, p)[0][0] - fit.params["dip"].value)
+
+
+def _result(fit, sym, test, search, lag, poses, mag, acc, settings, raw_unit, field_unit, given, mag_d=None
+            ) -> MagCalibration:
+    after = _norm_pct(fit, mag)
+    before = 100.0 * (np.linalg.norm(mag, axis=1) / np.mean(np.linalg.norm(mag, axis=1)) - 1.0)
+    F = fit.params["F"].value
+    noise_only = fit.sigma / np.array([fit.factors.get(int(k), 1.0) for k in fit.kinds])
+    norm = fit.kinds == NORM
+    norm_pct = Scatter(_rms(before), _rms(after), 100.0 * _rms(noise_only[norm]) / F)
+    step_poses = poses if poses is not None else ev.windows(len(mag), settings.window)
+    steps = field_steps(step_poses.means(after[:, None])[:, 0] / 100.0, step_poses)
+    if poses is None:
+        figures = tuple(PoseFigures(int(a), int(b), float(x), float(y), None, None, None) for a, b, x, y in zip(
+            step_poses.start, step_poses.end, step_poses.means(before[:, None])[:, 0], step_poses.means(after[:, None])[:, 0]))
+        return MagCalibration(fit, None, None, None, None, None, steps, MagReport(norm_pct, None, figures), raw_unit,
+                              field_unit, given)
+    mp, ap = poses.means(mag_d), poses.means(acc)
+    d_before = np.degrees(dip_angles(ap, mp))
+    d_before -= d_before.mean()
+    d_sym, d_after = _dips(sym, mp, ap), _dips(fit, mp, ap)
+    dip = fit.kinds == DIP
+    dip_deg = Scatter(float(np.std(d_before)), float(np.std(d_after)), float(np.degrees(_rms(noise_only[dip]))),
+                      float(np.std(d_sym)))
+    nb, na = poses.means(before[:, None])[:, 0], poses.means(after[:, None])[:, 0]
+    figures = tuple(PoseFigures(int(poses.start[j]), int(poses.end[j]), float(nb[j]), float(na[j]), float(d_before[j]),
+                                float(d_sym[j]), float(d_after[j])) for j in range(poses.n))
+    return MagCalibration(fit, sym, test, search, lag, poses, steps, MagReport(norm_pct, dip_deg, figures), raw_unit,
+                          field_unit, given)
+
+
+def _rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.asarray(x, float) ** 2)))

@@ -1,0 +1,171 @@
+"""The magnetometer fit: its rows on the one least-squares path (imucal.solve.least_squares).
+
+Minimise 1/2 sum_k (r_k / sigma_k)^2 over the free parameters, r_k the residual of row k's evidence
+(imucal.mag.model: |h| - F, the dip, the SIZE and SKEW constraints) and sigma_k its noise propagated from the readings
+(the model's ``noise``), times one factor per kind of evidence: each kind's own reduced chi-square,
+re-estimated between passes (variance components, Helmert), so that a thousand samples of the field's
+magnitude and a hundred poses' dip angles weigh as their scatter says, whatever the noise estimate
+missed. The row evaluators, IPOPT and the covariance are the accelerometer's: generated from the
+residual by ``row_functions``, solved by ``solve``, the covariance from the block QR of the weighted
+Jacobian (imucal.solve.fit.unscaled_covariance).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Mapping
+
+import numpy as np
+
+from imucal.errors import ImucalError
+from imucal.mag.evidence import MagRows
+from imucal.mag.model import DIP, NORM, SKEW_KINDS, MagModel
+from imucal.model.parameters import Parameters
+from imucal.solve import ipopt
+from imucal.solve import least_squares as lsq
+from imucal.solve.f_test import f_sf
+from imucal.solve.fit import _step_scale, unscaled_covariance
+
+#: Passes of the fit, the variance components refreshed between them (they settle in two).
+PASSES = 3
+#: Kinds whose noise is scaled by their own reduced chi-square.
+SCALED_KINDS = (NORM, DIP)
+
+
+@dataclass(frozen=True)
+class MagFitResult:
+    """A fitted magnetometer: values, uncertainties, residuals by kind, the solver's status."""
+
+    model: MagModel
+    params: Parameters
+    std: Mapping[str, float]
+    covariance: np.ndarray  #: over ``free_names``
+    free_names: tuple[str, ...]
+    residuals: np.ndarray  #: per row, in the row's unit (field unit or rad)
+    sigma: np.ndarray  #: per row, the noise times its kind's factor
+    kinds: np.ndarray  #: per row
+    factors: Mapping[int, float]  #: per kind: sqrt of its reduced chi-square against the noise alone
+    chi2: float
+    dof: int
+    status: str
+    iterations: int
+
+    @property
+    def success(self) -> bool:
+        return self.status in ipopt.CONVERGED
+
+    @property
+    def correlation(self) -> np.ndarray:
+        sd = np.sqrt(np.clip(np.diag(self.covariance), 0, None))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return self.covariance / np.outer(sd, sd)
+
+    def values(self) -> dict[str, float]:
+        return self.params.value_dict()
+
+    def chi2_of(self, kind: int, sigma: np.ndarray | None = None) -> float:
+        m = self.kinds == kind
+        s = self.sigma if sigma is None else sigma
+        return float(np.sum((self.residuals[m] / s[m]) ** 2))
+
+
+def _full(params: Parameters, free: tuple[str, ...], p_free: np.ndarray) -> np.ndarray:
+    v = dict(zip(params.names, params.values())) | dict(zip(free, p_free))
+    return np.array([v[n] for n in params.names], float)
+
+
+def row_noise(model: MagModel, rows: MagRows, p: np.ndarray) -> np.ndarray:
+    """sigma of every row's residual at the full parameter vector p (the model's ``noise``)."""
+    out = np.empty(rows.n)
+    f = model.vectorized("noise")
+    for s in range(0, rows.n, lsq.BLOCK):
+        sl = slice(s, s + lsq.BLOCK)
+        out[sl] = f(rows.raw[sl].T, rows.cov[sl].T, p, rows.target[sl][None, :], rows.var_raw[sl].T,
+                    rows.var_acc[sl].T)[0][0]
+    floor = max(float(np.median(out[out > 0])) * 1e-3 if np.any(out > 0) else 1e-12, 1e-12)
+    return np.maximum(out, floor)
+
+
+def _factors(r: np.ndarray, sigma0: np.ndarray, kinds: np.ndarray, dof: int) -> dict[int, float]:
+    """Per kind, sqrt(chi2_k / dof_k) with dof_k the kind's share of the fit's degrees of freedom."""
+    n = len(r)
+    out = {}
+    for k in SCALED_KINDS:
+        m = kinds == k
+        if m.sum() and dof > 0:
+            out[k] = float(np.sqrt(np.sum((r[m] / sigma0[m]) ** 2) / (m.sum() * dof / n)))
+    return out
+
+
+def _row_factors(kinds: np.ndarray, factors: Mapping[int, float]) -> np.ndarray:
+    return np.array([factors.get(k, 1.0) for k in range(int(kinds.max(initial=0)) + 1)])[kinds]
+
+
+def fit_rows(model: MagModel, rows: MagRows, params: Parameters, factors: Mapping[int, float] | None = None,
+             source: str | None = None) -> MagFitResult:
+    """Fit the free parameters of ``params`` to ``rows``; ``factors`` given: held (not re-estimated)."""
+    free = params.free_names
+    dof = rows.n - len(free)
+    if dof < 1:
+        raise ImucalError(f"{rows.n} rows cannot determine {len(free)} free parameters", file=source,
+                          field="mx, my, mz", fix="record the magnetometer through more orientations")
+    fns, lrows = lsq.row_functions(model, free), lsq.Rows(rows.raw, rows.cov)
+    pfix = np.array(params.values(), float)
+    scale = np.array([params[n].scale for n in free])
+    lo, hi = np.array([params[n].lower for n in free]), np.array([params[n].upper for n in free])
+    p_now = np.array([params[n].value for n in free])
+    kinds, held = rows.kind, factors is not None
+    fac: dict[int, float] = dict(factors or {})
+    iters, stats = 0, {}
+    for _ in range(1 if held else PASSES):
+        sigma0 = row_noise(model, rows, _full(params, free, p_now))
+        sigma = sigma0 * _row_factors(kinds, fac)
+        R = lsq.weighted_r_factor(fns, lrows, sigma, p_now, pfix, rows.target)
+        d = _step_scale(R, scale)
+        problem = lsq.Problem(fns, lrows, 1.0 / sigma**2, pfix, rows.target, p_now, d)
+        x, stats = lsq.solve(problem, (lo - p_now) / d, (hi - p_now) / d)
+        iters += int(stats.get("iter_count", 0))
+        p_now = np.clip(p_now + d * x, lo, hi)
+        if not held:
+            r = lsq.residuals(fns, lrows, p_now, pfix, rows.target)
+            fac = _factors(r, row_noise(model, rows, _full(params, free, p_now)), kinds, dof)
+    r = lsq.residuals(fns, lrows, p_now, pfix, rows.target)
+    sigma = row_noise(model, rows, _full(params, free, p_now)) * _row_factors(kinds, fac)
+    chi2 = float(np.sum((r / sigma) ** 2))
+    R = lsq.weighted_r_factor(fns, lrows, sigma, p_now, pfix, rows.target)
+    cov = unscaled_covariance(R) * (chi2 / dof)
+    sd = np.sqrt(np.clip(np.diag(cov), 0, None))
+    std = {n: float("nan") for n in params.names}  # held parameters: no standard error
+    std.update(dict(zip(free, map(float, sd))))
+    return MagFitResult(model, params.with_values(dict(zip(free, p_now))), MappingProxyType(std), cov, free, r,
+                        sigma, kinds, MappingProxyType(fac), chi2, dof, str(stats.get("return_status", "unknown")),
+                        iters)
+
+
+@dataclass(frozen=True)
+class SoftIronTest:
+    """Symmetric soft iron (the SKEW rows: the magnetometer's permuted axes are the accelerometer's) against
+    the full 3x3 (without them: a rotation between the two frames).
+
+    The rotation is seen only through the dip rows: F = (delta chi2 / 3) / (chi2_full / dof), both
+    chi-squares with the full fit's weights; the full form is kept when p < ``level``."""
+
+    f: float
+    p: float
+    level: float
+    full: bool
+
+
+#: The full soft iron (a rotation to the accelerometer's frame) is kept at this significance.
+SOFT_IRON_LEVEL = 1e-3
+
+
+def soft_iron_test(full: MagFitResult, symmetric: MagFitResult, level: float = SOFT_IRON_LEVEL) -> SoftIronTest:
+    """The F test of the three SKEW constraints (``SoftIronTest``); ``symmetric`` fitted to the full fit's
+    rows with the SKEW rows appended."""
+    keep = ~np.isin(symmetric.kinds, SKEW_KINDS)
+    k = int(np.sum(~keep))
+    chi2_sym = float(np.sum((symmetric.residuals[keep] / full.sigma) ** 2))
+    f = max(chi2_sym - full.chi2, 0.0) / k / (full.chi2 / full.dof)
+    p = f_sf(f, k, full.dof)
+    return SoftIronTest(float(f), float(p), level, p < level)

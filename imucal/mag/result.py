@@ -1,0 +1,99 @@
+"""A magnetometer calibration's results as typed values (words are made in report/, never here).
+
+Figures of merit, each before and after:
+  field-norm residual   RMS of |h| - F over the samples, in % of the field; "before" the readings as read,
+                        relative to their own mean magnitude; beside it the noise floor (the readings'
+                        noise propagated to |h|)
+  dip-angle scatter     standard deviation over the poses of asin(a . h / |a||h|) [deg]: as read, with the
+                        hard and soft iron only (no rotation: the symmetric soft iron) and aligned (the
+                        rotation fitted); beside it the floor the readings' noise alone gives
+and the same per pose.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from imucal.mag.checks import FieldSteps
+from imucal.mag.evidence import Lag, Poses
+from imucal.mag.fit import MagFitResult, SoftIronTest
+from imucal.mag.frame import AxesSearch, rotation_angle
+from imucal.model.parameters import Parameters
+
+
+@dataclass(frozen=True)
+class PoseFigures:
+    """One pose: where it is in the log and its figures."""
+
+    start: int
+    end: int
+    norm_before_pct: float  #: mean |raw| over the log's mean |raw|, minus one [%]
+    norm_after_pct: float  #: mean (|h| - F) / F [%]
+    dip_before_deg: float | None  #: the dip as read, minus its mean over the poses [deg]
+    dip_unaligned_deg: float | None  #: hard and soft iron only, minus the fitted dip [deg]
+    dip_after_deg: float | None  #: aligned, minus the fitted dip [deg]
+
+
+@dataclass(frozen=True)
+class Scatter:
+    """One figure before and after, and the floor the readings' noise alone gives."""
+
+    before: float
+    after: float
+    floor: float
+    unaligned: float = math.nan  #: dip only: after hard and soft iron, before the rotation
+
+
+@dataclass(frozen=True)
+class MagReport:
+    norm_pct: Scatter  #: RMS of |h| - F over the samples [% of the field]
+    dip_deg: Scatter | None  #: standard deviation of the dip over the poses [deg]; None without accelerometer
+    poses: tuple[PoseFigures, ...]
+
+
+@dataclass(frozen=True)
+class MagCalibration:
+    """Everything a magnetometer calibration found."""
+
+    fit: MagFitResult  #: the chosen fit (symmetric or full soft iron)
+    symmetric: MagFitResult | None  #: no rotation beyond the axis permutation (None: no accelerometer)
+    soft_iron: SoftIronTest | None  #: the test that chose
+    axes: AxesSearch | None  #: the mounting found (None: no accelerometer, or given)
+    lag: Lag | None
+    poses: Poses | None  #: the poses of the dip rows
+    steps: FieldSteps | None  #: a field that steps between poses
+    report: MagReport
+    raw_unit: str
+    field_unit: str
+    field_given: bool  #: F given by the user (else fitted, the scales' size held)
+
+    @property
+    def params(self) -> Parameters:
+        return self.fit.params
+
+    @property
+    def full_soft_iron(self) -> bool:
+        return self.soft_iron is not None and self.soft_iron.full
+
+    @property
+    def misalignment(self) -> float:
+        """The rotation beyond the symmetric soft iron [rad]: the angle of Q in the polar decomposition
+        M = Q S of the soft iron in the magnetometer's permuted axes, M = P^T A (0 for the symmetric fit)."""
+        M = self.fit.model.permutation.T @ self.linear_map()[0]
+        U, _, Vt = np.linalg.svd(M)
+        return rotation_angle(U @ Vt)
+
+    def linear_map(self) -> tuple[np.ndarray, np.ndarray]:
+        """(A, c) with h = A raw + c: the calibrated field in the accelerometer's frame."""
+        p = np.array(self.params.values(), float)
+        apply = self.fit.model.functions["apply"]
+        c = np.asarray(apply(np.zeros(3), p)).ravel()
+        A = np.column_stack([np.asarray(apply(e, p)).ravel() - c for e in np.eye(3)])
+        return A, c
+
+    def apply(self, raw: np.ndarray) -> np.ndarray:
+        """Calibrated field (N x 3) in the accelerometer's frame, from the model's CasADi map."""
+        p = np.array(self.params.values(), float)
+        return np.asarray(self.fit.model.vectorized("apply")(np.asarray(raw, float).T, p)[0]).T

@@ -1,0 +1,55 @@
+"""Magnetic field units and the field magnitude F a user gives.
+
+A magnetometer reads in counts or in a field unit. F (the local field's magnitude, e.g. from the
+WMM/IGRF for the place and date) may be given in the sensor's own unit or in any field unit below;
+when both are field units it is converted, otherwise the calibrated field is in F's unit.
+"""
+from __future__ import annotations
+
+import math
+
+from imucal.errors import ImucalError
+
+#: Field units and their factor to microtesla (SI: 1 gauss = 1e-4 T = 100 uT).
+FIELD_UNITS = {"uT": 1.0, "nT": 1e-3, "mT": 1e3, "T": 1e6, "gauss": 100.0, "G": 100.0, "mG": 0.1,
+               "mgauss": 0.1, "Oe": 100.0}
+#: Earth's field magnitude spans about 22 to 67 uT (IGRF-13 main field, 2020, at the surface); a value
+#: outside this range by more than this factor is refused as a unit mix-up.
+EARTH_FIELD_UT = (22.0, 67.0)
+EARTH_FIELD_SLACK = 3.0
+
+
+def is_field_unit(unit: str) -> bool:
+    return unit in FIELD_UNITS
+
+
+def convert(value: float, unit: str, to: str) -> float:
+    """``value`` in ``unit`` expressed in ``to`` (both field units)."""
+    return value * FIELD_UNITS[unit] / FIELD_UNITS[to]
+
+
+def field_magnitude(value: float, unit: str | None, sensor_unit: str, source: str | None = None
+                    ) -> tuple[float, str]:
+    """(F, the calibrated field's unit) from a magnitude the user gives.
+
+    ``unit`` None: F is in the sensor's unit. A field unit beside a sensor in a field unit: F is converted
+    to the sensor's unit; beside a sensor in counts: the calibrated field comes out in F's unit. A value
+    in a field unit far outside Earth's range is refused (a unit mix-up, e.g. nT given as uT).
+    """
+    if not (isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) and value > 0):
+        raise ImucalError(f"field magnitude {value!r} must be a positive number", file=source,
+                          field="mag.field", fix="give the local field's magnitude, e.g. 48.2 uT (WMM for your place)")
+    unit = unit or sensor_unit
+    if unit not in FIELD_UNITS:
+        if unit != sensor_unit:
+            raise ImucalError(f"unknown field unit {unit!r}", file=source, field="mag.field_unit",
+                              fix=f"use one of {', '.join(FIELD_UNITS)}")
+        return float(value), unit
+    ut = convert(value, unit, "uT")
+    lo, hi = EARTH_FIELD_UT
+    if not lo / EARTH_FIELD_SLACK <= ut <= hi * EARTH_FIELD_SLACK:
+        raise ImucalError(f"field magnitude {value:g} {unit} ({ut:.4g} uT) is not Earth's field", file=source,
+                          field="mag.field", fix=f"Earth's field is {lo:g} to {hi:g} uT: check the unit")
+    if is_field_unit(sensor_unit):
+        return convert(value, unit, sensor_unit), sensor_unit
+    return float(value), unit
