@@ -11,14 +11,14 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
 from imucal.errors import ImucalError
 from imucal.mag import evidence as ev
-from imucal.mag.checks import FieldSteps, field_steps, require_coverage
-from imucal.mag.fit import MagFitResult, fit_rows, soft_iron_test
+from imucal.mag.checks import PoseOffset, coverage_error, field_steps, require_coverage
+from imucal.mag.fit import MagFitResult, SoftIronTest, fit_rows, soft_iron_test
 from imucal.mag.frame import AxesSearch, dip_angles, euler_angles, search_axes
 from imucal.mag.model import (DIP, IDENTITY, NORM, ROTATION_BOUND, ROTATION_NAMES, MagModel, build_mag_model,
                               mag_parameters)
@@ -35,6 +35,8 @@ MIN_STILL_POSES = 6
 #: A pose whose accelerometer magnitude is off the poses' median by more than this fraction is moving
 #: (linear acceleration tilts the apparent gravity): not a DIP row.
 MAX_ACC_DEVIATION = 0.05
+#: Poses whose field stands out that are left out of the fit, the worst first, one a round.
+MAX_EXCLUDED = 3
 #: DIP rows needed for the rotation and the dip (4 unknowns, and the scatter that weighs them).
 MIN_DIP_ROWS = 8
 
@@ -64,7 +66,11 @@ class MagSettings:
 def _guess(mag: np.ndarray, F: float | None, size: float, source: str | None):
     """(s, b, angles, F) from the linear ellipsoid fit; F fitted: the scales' geometric mean at ``size``."""
     pick = np.linspace(0, len(mag) - 1, min(len(mag), GUESS_ROWS)).astype(int)
-    g = ellipsoid_guess(mag[pick], 1.0 if F is None else F, source=source)
+    try:
+        g = ellipsoid_guess(mag[pick], 1.0 if F is None else F, source=source)
+    except ImucalError:  # no ellipsoid at all: name the directions (about the readings' mid-range)
+        mid = 0.5 * (mag.min(axis=0) + mag.max(axis=0))
+        raise coverage_error(mag[pick] - mid, "leave the hard and soft iron", source) from None
     b = np.asarray(g.b, float)
     if F is None:  # |h| = 1 with b: with b k, |h| = 1 / k
         k = size / float(np.prod(b)) ** (1 / 3)
@@ -76,32 +82,47 @@ def _held(params: Parameters, names) -> Parameters:
     return params.with_fixed([n for n in names if n in params])
 
 
-def _dip_setup(mag: np.ndarray, acc: np.ndarray, still: ev.Poses | None, p0: np.ndarray, settings: MagSettings,
-               var_m: np.ndarray, var_a: np.ndarray, source: str | None):
-    """The lag, the poses, their DIP rows and the mounting found from them."""
-    s0 = p0[:3]
-    lag = ev.Lag(float(settings.lag), 0.0, False) if settings.lag is not None else ev.estimate_lag(mag - s0, acc)
+@dataclass(frozen=True)
+class _DipSetup:
+    """What the dip needs: the lag, the poses and their DIP rows, the mounting, the start of the rotation."""
+
+    lag: ev.Lag
+    poses: ev.Poses
+    rows: ev.MagRows
+    search: AxesSearch
+    params: Parameters  #: with the rotation and dip started from the closed form
+
+
+def _dip_setup(mag: np.ndarray, acc: np.ndarray, still: ev.Poses | None, params: Parameters, settings: MagSettings,
+               var_m: np.ndarray, source: str | None) -> _DipSetup:
+    """The lag, the poses (still intervals, else quiet windows), their DIP rows and the mounting."""
+    p0 = np.array(params.values(), float)
+    lag = ev.Lag(float(settings.lag), 0.0, False) if settings.lag is not None else ev.estimate_lag(mag - p0[:3], acc)
     mag_d = ev.shift(mag, lag.samples)
-    if still is not None and still.n >= MIN_STILL_POSES:
-        poses = still
-    else:
-        poses = ev.quiet_windows(mag_d - s0, settings.window)
+    poses = still if still is not None and still.n >= MIN_STILL_POSES else ev.quiet_windows(mag_d - p0[:3],
+                                                                                             settings.window)
     an = np.linalg.norm(poses.means(acc), axis=1)
     poses = poses.subset(np.abs(an / np.median(an) - 1) <= MAX_ACC_DEVIATION)
     if poses.n < MIN_DIP_ROWS:
         raise ImucalError(f"only {poses.n} poses for the dip angle", file=source, field="ax, ay, az",
                           fix=f"hold the sensor still in at least {MIN_DIP_ROWS} orientations, or turn it slowly")
-    rows = ev.dip_rows(mag_d, acc, poses, var_m, var_a)
+    rows = ev.dip_rows(mag_d, acc, poses, var_m, ev.sample_variance(acc))
     h0 = np.asarray(build_mag_model().vectorized("apply")(rows.raw.T, p0)[0]).T
     search = search_axes(rows.cov[:, 1:], h0)
     P = np.array(search.best.axes, float).reshape(3, 3)
     r0 = euler_angles(search.closed_form.rotation @ P.T) if search.agrees else (0.0, 0.0, 0.0)
-    r0 = tuple(float(np.clip(v, -ROTATION_BOUND, ROTATION_BOUND)) for v in r0)
-    return lag, poses, rows, search, r0
+    start = dict(zip(ROTATION_NAMES, (float(np.clip(v, -ROTATION_BOUND, ROTATION_BOUND)) for v in r0)))
+    if params["dip"].free:  # the poses' mean dip in the found frame
+        start["dip"] = float(np.mean(dip_angles(rows.cov[:, 1:], h0 @ P.T)))
+    return _DipSetup(lag, poses, rows, search, params.with_values(start))
 
 
-def _fits(model: MagModel, rows: ev.MagRows, params: Parameters, settings: MagSettings, source: str | None):
-    """The full and the symmetric fit, the test between them, and the chosen one."""
+def _fits(model: MagModel, rows: ev.MagRows, params: Parameters, settings: MagSettings, dip: bool,
+          source: str | None) -> tuple[MagFitResult, MagFitResult | None, SoftIronTest | None]:
+    """The full and the symmetric fit, the test between them, and the chosen one (without DIP rows: the
+    ellipsoid alone, its rotation and dip held)."""
+    if not dip:
+        return fit_rows(model, rows, _held(params, [*ROTATION_NAMES, "dip"]), source=source), None, None
     full = fit_rows(model, rows, params, source=source)
     sym = fit_rows(model, ev.MagRows.stack(rows, ev.skew_rows()), full.params, factors=full.factors, source=source)
     test = soft_iron_test(full, sym)
@@ -109,41 +130,65 @@ def _fits(model: MagModel, rows: ev.MagRows, params: Parameters, settings: MagSe
     return (full if use_full else sym), sym, test
 
 
+def _start(mag: np.ndarray, settings: MagSettings, raw_unit: str, source: str | None) -> tuple[Parameters, str]:
+    """The initial parameters (F held when given) and the calibrated field's unit."""
+    given = settings.field is not None
+    F, field_unit = (field_magnitude(settings.field, settings.field_unit, raw_unit, source) if given
+                     else (None, raw_unit))
+    s0, b0, ang0, F0 = _guess(mag, F, settings.size, source)
+    dip0 = 0.0 if settings.dip_deg is None else math.radians(settings.dip_deg)
+    params = mag_parameters(s0, b0, ang0, F0, dip0=dip0, raw_unit=raw_unit, field_unit=field_unit)
+    return _held(params, (["F"] if given else []) + (["dip"] if settings.dip_deg is not None else [])), field_unit
+
+
 def calibrate_mag(mag: np.ndarray, acc: np.ndarray | None = None, *, still: ev.Poses | None = None,
                   settings: MagSettings = MagSettings(), raw_unit: str = "raw", source: str | None = None
                   ) -> MagCalibration:
     """Hard and soft iron, the field, and (with the calibrated accelerometer ``acc``) the rotation to the
-    accelerometer's frame and the dip. ``still``: the accelerometer's still intervals, if any."""
+    accelerometer's frame and the dip. ``still``: the accelerometer's still intervals, if any.
+
+    Poses whose field stands out from the rest (``FieldSteps.outliers``: a magnet passing by) are left out,
+    the worst first, and the fit repeated (up to MAX_EXCLUDED); they are named in ``excluded``. A step of
+    the field (``FieldSteps.step_after``) is named, not undone: which side is the true field is unknown."""
     mag = np.asarray(mag, float)
     acc = None if acc is None else np.asarray(acc, float)
     ev.check_lengths(mag, acc, source)
-    given = settings.field is not None
-    F, field_unit = (field_magnitude(settings.field, settings.field_unit, raw_unit, source) if given
-                     else (None, raw_unit))
+    params, field_unit = _start(mag, settings, raw_unit, source)
     var_m = ev.sample_variance(mag)
-    s0, b0, ang0, F0 = _guess(mag, F, settings.size, source)
-    dip0 = 0.0 if settings.dip_deg is None else math.radians(settings.dip_deg)
-    params = mag_parameters(s0, b0, ang0, F0, dip0=dip0, raw_unit=raw_unit, field_unit=field_unit)
     nrows = ev.norm_rows(mag, var_m)
     require_coverage(build_mag_model(), nrows, _held(params, [n for n in params.names if n not in BASE_NAMES]),
                      source)
-    held = [] if not given else ["F"]
-    extra = [] if given else [ev.size_row(settings.size)]
-    if acc is None:
-        model, rows = build_mag_model(), ev.MagRows.stack(nrows, *extra)
-        fit = fit_rows(model, rows, _held(params, held + [*ROTATION_NAMES, "dip"]), source=source)
-        return _result(fit, None, None, None, None, None, mag, acc, settings, raw_unit, field_unit, given)
-    var_a = ev.sample_variance(acc)
-    lag, poses, drows, search, r0 = _dip_setup(mag, acc, still, np.array(params.values()), settings, var_m, var_a,
-                                               source)
-    params = params.with_values(dict(zip(ROTATION_NAMES, r0)) | {"dip": float(np.mean(dip_angles(
-        drows.cov[:, 1:], np.asarray(build_mag_model(search.best.axes).vectorized("apply")(
-            drows.raw.T, np.array(params.values()))[0]).T))) if settings.dip_deg is None else dip0})
-    params = _held(params, held + (["dip"] if settings.dip_deg is not None else []))
-    model = build_mag_model(search.best.axes)
-    fit, sym, test = _fits(model, ev.MagRows.stack(nrows, drows, *extra), params, settings, source)
-    return _result(fit, sym, test, search, lag, poses, mag, acc, settings, raw_unit, field_unit, given,
-                   ev.shift(mag, lag.samples))
+    extra = [] if params["F"].fixed else [ev.size_row(settings.size)]
+    setup = None if acc is None else _dip_setup(mag, acc, still, params, settings, var_m, source)
+    model = build_mag_model(IDENTITY if setup is None else setup.search.best.axes)
+    params = params if setup is None else setup.params
+    rows = ev.MagRows.stack(nrows, *([] if setup is None else [setup.rows]), *extra)
+    step_poses = setup.poses if setup is not None else (still if still is not None and still.n >= MIN_STILL_POSES
+                                                        else ev.windows(len(mag), settings.window))
+    fits = _fits(model, rows, params, settings, setup is not None, source)
+    steps = field_steps(step_poses.means(_norm_pct(fits[0], mag)[:, None])[:, 0] / 100.0, step_poses)
+    excluded: tuple[PoseOffset, ...] = ()
+    for _ in range(MAX_EXCLUDED):  # the worst pose out, the fit again (a pose far off pulls its neighbours)
+        new = [o for o in steps.outliers if o.pose not in {e.pose for e in excluded}]
+        if not new:
+            break
+        excluded += (max(new, key=lambda o: abs(o.offset)),)
+        keep = _outside(rows, excluded, None if setup is None else setup.poses)
+        fits = _fits(model, rows.subset(keep), params, settings, setup is not None, source)
+        steps = field_steps(step_poses.means(_norm_pct(fits[0], mag)[:, None])[:, 0] / 100.0, step_poses)
+    return _result(*fits, setup, steps, excluded, step_poses, mag, acc, raw_unit, field_unit,
+                   not params["F"].free)
+
+
+def _outside(rows: ev.MagRows, offsets, dip_poses: ev.Poses | None) -> np.ndarray:
+    """Rows whose samples lie outside the poses ``offsets`` (NORM rows by sample, DIP rows by overlap)."""
+    keep = np.ones(rows.n, bool)
+    for o in offsets:
+        keep &= ~((rows.kind == NORM) & (rows.pose >= o.start) & (rows.pose < o.end))
+        if dip_poses is not None:
+            hit = np.flatnonzero((dip_poses.start < o.end) & (dip_poses.end > o.start))
+            keep &= ~((rows.kind == DIP) & np.isin(rows.pose, hit))
+    return keep
 
 
 def _norm_pct(fit: MagFitResult, raw: np.ndarray) -> np.ndarray:
@@ -158,34 +203,33 @@ def _dips(fit: MagFitResult, raw: np.ndarray, acc: np.ndarray) -> np.ndarray:
     return np.degrees(fit.model.vectorized("dip")(raw.T, acc.T, p)[0][0] - fit.params["dip"].value)
 
 
-def _result(fit, sym, test, search, lag, poses, mag, acc, settings, raw_unit, field_unit, given, mag_d=None
-            ) -> MagCalibration:
+def _rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.asarray(x, float) ** 2)))
+
+
+def _report(fit: MagFitResult, sym: MagFitResult | None, setup: "_DipSetup | None", poses: ev.Poses,
+            mag: np.ndarray, acc: np.ndarray | None) -> MagReport:
+    """The figures before and after, over the log and per pose."""
     after = _norm_pct(fit, mag)
     before = 100.0 * (np.linalg.norm(mag, axis=1) / np.mean(np.linalg.norm(mag, axis=1)) - 1.0)
-    F = fit.params["F"].value
     noise_only = fit.sigma / np.array([fit.factors.get(int(k), 1.0) for k in fit.kinds])
-    norm = fit.kinds == NORM
-    norm_pct = Scatter(_rms(before), _rms(after), 100.0 * _rms(noise_only[norm]) / F)
-    step_poses = poses if poses is not None else ev.windows(len(mag), settings.window)
-    steps = field_steps(step_poses.means(after[:, None])[:, 0] / 100.0, step_poses)
-    if poses is None:
-        figures = tuple(PoseFigures(int(a), int(b), float(x), float(y), None, None, None) for a, b, x, y in zip(
-            step_poses.start, step_poses.end, step_poses.means(before[:, None])[:, 0], step_poses.means(after[:, None])[:, 0]))
-        return MagCalibration(fit, None, None, None, None, None, steps, MagReport(norm_pct, None, figures), raw_unit,
-                              field_unit, given)
-    mp, ap = poses.means(mag_d), poses.means(acc)
+    norm = Scatter(_rms(before), _rms(after), 100.0 * _rms(noise_only[fit.kinds == NORM]) / fit.params["F"].value)
+    nb, na = poses.means(before[:, None])[:, 0], poses.means(after[:, None])[:, 0]
+    if setup is None or sym is None or acc is None:
+        return MagReport(norm, None, tuple(PoseFigures(int(a), int(b), float(x), float(y), None, None, None)
+                                           for a, b, x, y in zip(poses.start, poses.end, nb, na)))
+    mp, ap = poses.means(ev.shift(mag, setup.lag.samples)), poses.means(acc)
     d_before = np.degrees(dip_angles(ap, mp))
     d_before -= d_before.mean()
     d_sym, d_after = _dips(sym, mp, ap), _dips(fit, mp, ap)
-    dip = fit.kinds == DIP
-    dip_deg = Scatter(float(np.std(d_before)), float(np.std(d_after)), float(np.degrees(_rms(noise_only[dip]))),
-                      float(np.std(d_sym)))
-    nb, na = poses.means(before[:, None])[:, 0], poses.means(after[:, None])[:, 0]
-    figures = tuple(PoseFigures(int(poses.start[j]), int(poses.end[j]), float(nb[j]), float(na[j]), float(d_before[j]),
-                                float(d_sym[j]), float(d_after[j])) for j in range(poses.n))
-    return MagCalibration(fit, sym, test, search, lag, poses, steps, MagReport(norm_pct, dip_deg, figures), raw_unit,
-                          field_unit, given)
+    dip = Scatter(float(np.std(d_before)), float(np.std(d_after)),
+                  float(np.degrees(_rms(noise_only[fit.kinds == DIP]))), float(np.std(d_sym)))
+    return MagReport(norm, dip, tuple(PoseFigures(int(poses.start[j]), int(poses.end[j]), float(nb[j]), float(na[j]),
+                                                  float(d_before[j]), float(d_sym[j]), float(d_after[j]))
+                                      for j in range(poses.n)))
 
 
-def _rms(x: np.ndarray) -> float:
-    return float(np.sqrt(np.mean(np.asarray(x, float) ** 2)))
+def _result(fit, sym, test, setup, steps, excluded, poses, mag, acc, raw_unit, field_unit, given) -> MagCalibration:
+    return MagCalibration(fit, sym, test, None if setup is None else setup.search, None if setup is None else setup.lag,
+                          None if setup is None else setup.poses, steps, _report(fit, sym, setup, poses, mag, acc),
+                          raw_unit, field_unit, given, excluded)

@@ -44,14 +44,16 @@ CANDIDATES = tuple(np.array(v, float) for v in itertools.product((-1, 0, 1), rep
 
 
 def missing_directions(directions: np.ndarray) -> list[str]:
-    """The cube directions (faces, edges, corners) no recorded field direction comes within COVERED_DEG of."""
+    """The cube directions no recorded field direction comes within COVERED_DEG of: the faces (the axes both
+    ways) when any is missing, else the edges, else the corners (what to add first)."""
     u = directions / np.linalg.norm(directions, axis=1, keepdims=True)
     cos_min = math.cos(math.radians(COVERED_DEG))
-    out = []
-    for c in sorted(CANDIDATES, key=lambda v: np.count_nonzero(v)):  # faces first, then edges, corners
-        if np.max(u @ (c / np.linalg.norm(c))) < cos_min:
-            out.append(_direction_words(c))
-    return out
+    for order in (1, 2, 3):  # faces, edges, corners
+        out = [_direction_words(c) for c in CANDIDATES
+               if np.count_nonzero(c) == order and np.max(u @ (c / np.linalg.norm(c))) < cos_min]
+        if out:
+            return out
+    return []
 
 
 def require_coverage(model: MagModel, rows: MagRows, params: Parameters, source: str | None = None
@@ -77,13 +79,18 @@ def require_coverage(model: MagModel, rows: MagRows, params: Parameters, source:
     angle_tol = params["phi"].upper / (math.pi / 2) - 1.0
     obs = observability.analyse(directions, J, free, weighted, observability.thresholds(free, angle_tol))
     if obs.undetermined or obs.n_distinct < len(free):
-        und = ", ".join(obs.undetermined) or "the hard and soft iron"
-        add = missing_directions(directions)
-        where = (f"turn the sensor so that the field also lies along {', '.join(add)} of its axes"
-                 if add else "turn the sensor through more orientations, the field along every axis both ways")
-        raise ImucalError(f"the field's directions ({obs.n_distinct} distinct) leave {und} undetermined",
-                          file=source, field="mx, my, mz", fix=where)
+        raise coverage_error(directions, f"({obs.n_distinct} distinct) leave "
+                             f"{', '.join(obs.undetermined) or 'the hard and soft iron'}", source)
     return obs
+
+
+def coverage_error(directions: np.ndarray, what: str, source: str | None) -> ImucalError:
+    """The one message for a log whose field directions do not determine the calibration: what they leave
+    undetermined and the directions to add (``missing_directions``)."""
+    add = missing_directions(directions)
+    where = (f"turn the sensor so that the field also lies along {', '.join(add)} of its axes"
+             if add else "turn the sensor through more orientations, the field along every axis both ways")
+    return ImucalError(f"the field's directions {what} undetermined", file=source, field="mx, my, mz", fix=where)
 
 
 @dataclass(frozen=True)
@@ -119,29 +126,43 @@ def _kolmogorov_sf(x: float) -> float:
     return float(min(1.0, 2 * sum((-1) ** (j - 1) * math.exp(-2 * j * j * x * x) for j in range(1, 101))))
 
 
+def _outliers(r: np.ndarray, level: np.ndarray, among: np.ndarray) -> np.ndarray:
+    """Poses off their level by more than OUTLIER_Z robust standard deviations of the poses ``among`` (and
+    by more than MIN_STEP_FRACTION): their spread, not successive differences (the windows of a moving log
+    are alike, so differences would understate it)."""
+    d = r - level
+    spread = max(MAD_TO_STD * float(np.median(np.abs(d[among] - np.median(d[among])))), 1e-12)
+    return (np.abs(d) / spread > OUTLIER_Z) & (np.abs(d) > MIN_STEP_FRACTION)
+
+
 def field_steps(offsets: np.ndarray, poses: Poses) -> FieldSteps:
-    """Test the poses' mean |h| - F (over F, in time order) for a step and for single poses off the rest."""
+    """Test the poses' mean |h| - F (over F, in time order) for a step and for single poses off the rest.
+
+    Single poses are found about the median first and left out of the step test (one pose far off would
+    otherwise read as a step beside it); with a step, they are found again about each side's level."""
     r = np.asarray(offsets, float)
     n = len(r)
     if n < 4:
         return FieldSteps(0.0, 1.0, None, 0.0, (), ())
-    s = MAD_TO_STD * float(np.median(np.abs(np.diff(r) - np.median(np.diff(r))))) / math.sqrt(2)
-    s = max(s, 1e-12)
-    cs = np.cumsum(r - r.mean())
+    everyone = np.ones(n, bool)
+    rest = np.flatnonzero(~_outliers(r, np.full(n, np.median(r)), everyone))
+    q = r[rest]
+    s = MAD_TO_STD * float(np.median(np.abs(np.diff(q) - np.median(np.diff(q))))) / math.sqrt(2)
+    s = max(s, 1e-12)  # successive differences: a step does not inflate them
+    cs = np.cumsum(q - q.mean())
     k = int(np.argmax(np.abs(cs[:-1])))
-    stat = float(np.abs(cs[k]) / (s * math.sqrt(n)))
+    stat = float(np.abs(cs[k]) / (s * math.sqrt(len(q))))
     p = _kolmogorov_sf(stat)
-    step = float(r[k + 1:].mean() - r[:k + 1].mean())
+    step = float(q[k + 1:].mean() - q[:k + 1].mean())
     found = p < STEP_LEVEL and abs(step) > MIN_STEP_FRACTION
+    last = int(rest[k])  # the last pose before the step
 
     def offset(j: int) -> PoseOffset:
         return PoseOffset(j, int(poses.start[j]), int(poses.end[j]), float(r[j]))
 
-    level = np.where(np.arange(n) > k, r[k + 1:].mean(), r[:k + 1].mean()) if found else np.full(n, np.median(r))
-    # single poses against the poses' own spread about their level (successive windows of a moving log
-    # are alike, so their differences would understate it)
-    spread = max(MAD_TO_STD * float(np.median(np.abs(r - level - np.median(r - level)))), 1e-12)
-    z = np.abs(r - level) / spread
-    out = tuple(offset(j) for j in range(n) if z[j] > OUTLIER_Z and abs(r[j] - level[j]) > MIN_STEP_FRACTION)
-    after = tuple(offset(j) for j in range(k + 1, n)) if found else ()
-    return FieldSteps(stat, p, k if found else None, step if found else 0.0, out, after)
+    level = (np.where(np.arange(n) > last, q[k + 1:].mean(), q[:k + 1].mean()) if found
+             else np.full(n, np.median(r)))
+    out = _outliers(r, level, np.isin(np.arange(n), rest))
+    after = tuple(offset(j) for j in range(last + 1, n) if not out[j]) if found else ()
+    return FieldSteps(stat, p, last if found else None, step if found else 0.0,
+                      tuple(offset(j) for j in np.flatnonzero(out)), after)

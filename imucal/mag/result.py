@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from imucal.mag.checks import FieldSteps
+from imucal.mag.checks import FieldSteps, PoseOffset
 from imucal.mag.evidence import Lag, Poses
 from imucal.mag.fit import MagFitResult, SoftIronTest
 from imucal.mag.frame import AxesSearch, rotation_angle
@@ -68,6 +68,7 @@ class MagCalibration:
     raw_unit: str
     field_unit: str
     field_given: bool  #: F given by the user (else fitted, the scales' size held)
+    excluded: tuple[PoseOffset, ...] = ()  #: poses whose field stood out, left out of the fit
 
     @property
     def params(self) -> Parameters:

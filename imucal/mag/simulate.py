@@ -19,7 +19,8 @@ import numpy as np
 
 from imucal.constants import RIGHT_ANGLE
 from imucal.mag.evidence import Poses, shift
-from imucal.mag.model import IDENTITY, NAMES, build_mag_model
+from imucal.mag.frame import euler_angles
+from imucal.mag.model import IDENTITY, NAMES, build_mag_model, rotation
 
 
 @dataclass(frozen=True)
@@ -50,6 +51,28 @@ class MagSimulation:
     truth: MagTruth
     holds: Poses  #: the still holds (sample ranges)
     orientations: np.ndarray = field(repr=False)  #: (poses, 3, 3) body to world at each hold
+
+
+def truth_from_soft_iron(M: np.ndarray, s=(0.2, -0.1, 0.05), field: float = 0.5, dip: float = math.radians(-60.0),
+                         axes: tuple[int, ...] = IDENTITY, misalignment=(0.0, 0.0, 0.0), **kw) -> MagTruth:
+    """The truth whose soft iron, in the magnetometer's own axes, is Q M: M the map from raw - s to the field
+    (symmetric: the symmetric soft iron), Q the rotation by the Euler angles ``misalignment`` [rad].
+
+    The paper's scales and angles come from H^-1 = (M^T M)^-1 = diag(b) G diag(b) (imucal.solve.initial),
+    their lower-triangular map T from the model, and the model's rotation R = P Q M T^-1 P^T."""
+    M = np.asarray(M, float)
+    Hinv = np.linalg.inv(M.T @ M)
+    b = np.sqrt(np.diag(Hinv))
+    cosm = Hinv / np.outer(b, b)
+    angles = tuple(float(v) for v in np.arccos([cosm[0, 1], cosm[0, 2], cosm[1, 2]]))
+    model = build_mag_model()
+    p = np.array(list(MagTruth(s=(0.0, 0.0, 0.0), b=tuple(b), angles=angles).values().values()))
+    T = np.column_stack([np.asarray(model.functions["apply"](e, p)).ravel() for e in np.eye(3)])
+    Q = np.asarray(rotation(*misalignment))
+    P = np.array(axes, float).reshape(3, 3)
+    R = P @ Q @ M @ np.linalg.inv(T) @ P.T
+    return MagTruth(s=tuple(s), b=tuple(map(float, b)), angles=angles, axes=axes, rotation=euler_angles(R),
+                    field=field, dip=dip, **kw)
 
 
 def _random_rotations(rng: np.random.Generator, n: int) -> np.ndarray:
