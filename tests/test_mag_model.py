@@ -140,3 +140,31 @@ def test_rows_and_shift():
     assert rows.count(NORM) == 10 and rows.count(DIP) == 2
     assert np.allclose(rows.raw[10], raw[:5].mean(axis=0)) and np.allclose(rows.var_raw[10], 0.2)
     assert np.allclose(shift(raw, 1.0)[:-1], raw[1:]) and np.allclose(shift(raw, 0.5)[0], raw[:2].mean(axis=0))
+
+
+def test_reader_takes_mx_my_mz_by_default(tmp_path):
+    from imucal.data.load import DataSpec, load_recording
+    from imucal.model.channels import MAGNETIC_FIELD, require
+
+    path = tmp_path / "log.csv"
+    path.write_text("ax,ay,az,mx,my,mz\n" + "".join(f"0,0,1,{k},{2 * k},{3 * k}\n" for k in range(5)))
+    rec = load_recording(DataSpec(path=str(path), sample_rate=25.0))
+    assert np.array_equal(rec.mag[:, 1], 2 * np.arange(5.0)) and MAGNETIC_FIELD in rec.channels
+    plain = tmp_path / "plain.csv"
+    plain.write_text("ax,ay,az\n" + "0,0,1\n" * 5)
+    with pytest.raises(ImucalError) as e:
+        require((MAGNETIC_FIELD,), load_recording(DataSpec(path=str(plain), sample_rate=25.0)).channels,
+                source=str(plain), what="the magnetometer")
+    assert str(e.value) == (f"{plain}: data.columns.mx: the magnetometer reads magnetic field but the data have no mx "
+                            "column (fix: add mx/my/mz (raw) or drop what needs magnetic_field)")
+
+
+def test_reader_refuses_part_of_the_magnetometer(tmp_path):
+    from imucal.data.load import DataSpec, load_recording
+
+    path = tmp_path / "log.csv"
+    path.write_text("ax,ay,az,mx,my\n" + "0,0,1,1,2\n" * 5)
+    with pytest.raises(ImucalError) as e:
+        load_recording(DataSpec(path=str(path), sample_rate=25.0))
+    assert str(e.value) == (f"{path}: data.columns: only mx, my of mx, my, mz mapped "
+                            "(fix: map all three magnetometer columns or none)")

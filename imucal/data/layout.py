@@ -33,7 +33,8 @@ def sniff_delimiter(line: str) -> str | None:
 _DEFAULT_NAMES = {"t": ("t", "time", "timestamp"), "ax": ("ax", "acc_x", "accx", "x"),
                   "ay": ("ay", "acc_y", "accy", "y"), "az": ("az", "acc_z", "accz", "z"),
                   "gx": ("gx", "gyro_x", "gyrx", "wx"), "gy": ("gy", "gyro_y", "gyry", "wy"),
-                  "gz": ("gz", "gyro_z", "gyrz", "wz"), "temp": ("temp", "temperature", "t_c")}
+                  "gz": ("gz", "gyro_z", "gyrz", "wz"), "temp": ("temp", "temperature", "t_c"),
+                  "mx": ("mx", "mag_x", "magx"), "my": ("my", "mag_y", "magy"), "mz": ("mz", "mag_z", "magz")}
 
 
 @dataclass(frozen=True)
@@ -146,10 +147,11 @@ def _check_roles(cols: dict[str, int], spec: DataSpec, path: Path) -> None:
     if "t" not in cols and spec.sample_rate is None:
         raise ImucalError("no time column and no sample rate", file=str(path), field="data.sample_rate",
                           fix="add a t column or set data.sample_rate in Hz")
-    gyro_roles = [r for r in ("gx", "gy", "gz") if r in cols]
-    if gyro_roles and len(gyro_roles) != 3:
-        raise ImucalError(f"only {', '.join(gyro_roles)} of gx, gy, gz mapped", file=str(path),
-                          field="data.columns", fix="map all three gyroscope columns or none")
+    for axes, what in ((("gx", "gy", "gz"), "gyroscope"), (("mx", "my", "mz"), "magnetometer")):
+        given = [r for r in axes if r in cols]
+        if given and len(given) != 3:
+            raise ImucalError(f"only {', '.join(given)} of {', '.join(axes)} mapped", file=str(path),
+                              field="data.columns", fix=f"map all three {what} columns or none")
 
 
 def layout(lines: list[str], spec: DataSpec, path: Path) -> Layout:

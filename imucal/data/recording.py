@@ -7,7 +7,7 @@ from enum import Enum
 
 import numpy as np
 
-from imucal.model.channels import ACCELERATION, ANGULAR_RATE, TEMPERATURE, TIME, Channel
+from imucal.model.channels import ACCELERATION, ANGULAR_RATE, MAGNETIC_FIELD, TEMPERATURE, TIME, Channel
 
 #: Plausible IMU sample rates [Hz]: anything outside is a wrong time unit or a wrong rate.
 MIN_RATE_HZ, MAX_RATE_HZ = 1.0, 1.0e5
@@ -76,6 +76,7 @@ class Recording:
     #: how ``t`` was made and the recording's one sample rate (None: built without one; the rate
     #: is then that of t's span)
     time_base: TimeBase | None = None
+    mag: np.ndarray | None = None  #: (N, 3) magnetometer readings when mapped (mx, my, mz), in their own unit
 
     @property
     def n(self) -> int:
@@ -89,6 +90,8 @@ class Recording:
             out.append(ANGULAR_RATE.with_unit(self.gyro_unit))
         if self.temp is not None:
             out.append(TEMPERATURE)
+        if self.mag is not None:
+            out.append(MAGNETIC_FIELD)
         return tuple(out)
 
     @property

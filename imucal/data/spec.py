@@ -25,8 +25,8 @@ FORMATS = ("auto", "csv", "whitespace")
 #: How a recording is read: in chunks (imucal.data.stream) above imucal.data.load.STREAM_BYTES
 #: ("auto"), always, never.
 STREAM_CHOICES = ("auto", "always", "never")
-#: Column roles: time, acceleration, angular rate, temperature.
-ROLES = ("t", "ax", "ay", "az", "gx", "gy", "gz", "temp")
+#: Column roles: time, acceleration, angular rate, temperature, magnetic field.
+ROLES = ("t", "ax", "ay", "az", "gx", "gy", "gz", "temp", "mx", "my", "mz")
 
 
 def gyro_unit(spec: DataSpec, bag: bool = False) -> str:

@@ -118,6 +118,7 @@ def read_text(spec: DataSpec, path: Path) -> Recording:
         raise no_rows(path)
     raw = np.column_stack([data["ax"], data["ay"], data["az"]])
     gyro = np.column_stack([data["gx"], data["gy"], data["gz"]]) if lay.has_gyro else None
+    mag = np.column_stack([data["mx"], data["my"], data["mz"]]) if "mx" in lay.roles else None
     return Recording(t=t, raw=raw, temp=data.get("temp"), unit=spec.unit, source=str(path), sha256=sha,
-                     gyro=gyro, t_source=stamps, time_unit=unit, time_note=note, time_column=lay.time_column,
+                     gyro=gyro, mag=mag, t_source=stamps, time_unit=unit, time_note=note, time_column=lay.time_column,
                      gyro_unit=gyro_unit(spec), time_base=tb)

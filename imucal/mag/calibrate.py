@@ -94,13 +94,14 @@ class _DipSetup:
 
 
 def _dip_setup(mag: np.ndarray, acc: np.ndarray, still: ev.Poses | None, params: Parameters, settings: MagSettings,
-               var_m: np.ndarray, source: str | None) -> _DipSetup:
+               var_m: np.ndarray, use: np.ndarray, source: str | None) -> _DipSetup:
     """The lag, the poses (still intervals, else quiet windows), their DIP rows and the mounting."""
     p0 = np.array(params.values(), float)
     lag = ev.Lag(float(settings.lag), 0.0, False) if settings.lag is not None else ev.estimate_lag(mag - p0[:3], acc)
     mag_d = ev.shift(mag, lag.samples)
     poses = still if still is not None and still.n >= MIN_STILL_POSES else ev.quiet_windows(mag_d - p0[:3],
                                                                                              settings.window)
+    poses = poses.subset(poses.inside(use))
     an = np.linalg.norm(poses.means(acc), axis=1)
     poses = poses.subset(np.abs(an / np.median(an) - 1) <= MAX_ACC_DEVIATION)
     if poses.n < MIN_DIP_ROWS:
@@ -142,10 +143,11 @@ def _start(mag: np.ndarray, settings: MagSettings, raw_unit: str, source: str | 
 
 
 def calibrate_mag(mag: np.ndarray, acc: np.ndarray | None = None, *, still: ev.Poses | None = None,
-                  settings: MagSettings = MagSettings(), raw_unit: str = "raw", source: str | None = None
-                  ) -> MagCalibration:
+                  settings: MagSettings = MagSettings(), raw_unit: str = "raw", source: str | None = None,
+                  use: np.ndarray | None = None) -> MagCalibration:
     """Hard and soft iron, the field, and (with the calibrated accelerometer ``acc``) the rotation to the
-    accelerometer's frame and the dip. ``still``: the accelerometer's still intervals, if any.
+    accelerometer's frame and the dip. ``still``: the accelerometer's still intervals, if any; ``use``: the
+    samples the fit may use (a mask; the rest can judge it: cross-validation), default all.
 
     Poses whose field stands out from the rest (``FieldSteps.outliers``: a magnet passing by) are left out,
     the worst first, and the fit repeated (up to MAX_EXCLUDED); they are named in ``excluded``. A step of
@@ -153,13 +155,14 @@ def calibrate_mag(mag: np.ndarray, acc: np.ndarray | None = None, *, still: ev.P
     mag = np.asarray(mag, float)
     acc = None if acc is None else np.asarray(acc, float)
     ev.check_lengths(mag, acc, source)
-    params, field_unit = _start(mag, settings, raw_unit, source)
+    use = np.ones(len(mag), bool) if use is None else np.asarray(use, bool)
+    params, field_unit = _start(mag[use], settings, raw_unit, source)
     var_m = ev.sample_variance(mag)
-    nrows = ev.norm_rows(mag, var_m)
+    nrows = ev.norm_rows(mag, var_m).subset(use)
     require_coverage(build_mag_model(), nrows, _held(params, [n for n in params.names if n not in BASE_NAMES]),
                      source)
     extra = [] if params["F"].fixed else [ev.size_row(settings.size)]
-    setup = None if acc is None else _dip_setup(mag, acc, still, params, settings, var_m, source)
+    setup = None if acc is None else _dip_setup(mag, acc, still, params, settings, var_m, use, source)
     model = build_mag_model(IDENTITY if setup is None else setup.search.best.axes)
     params = params if setup is None else setup.params
     rows = ev.MagRows.stack(nrows, *([] if setup is None else [setup.rows]), *extra)

@@ -56,6 +56,11 @@ class Poses:
     def subset(self, keep: np.ndarray) -> "Poses":
         return Poses(self.start[keep], self.end[keep], self.source)
 
+    def inside(self, mask: np.ndarray) -> np.ndarray:
+        """Which poses lie wholly within the samples of ``mask``."""
+        out = np.concatenate([[0], np.cumsum(~np.asarray(mask, bool))])
+        return out[self.end] == out[self.start]
+
 
 @dataclass(frozen=True)
 class MagRows:

@@ -2,10 +2,10 @@
 
 Minimise 1/2 sum_k (r_k / sigma_k)^2 over the free parameters, r_k the residual of row k's evidence
 (imucal.mag.model: |h| - F, the dip, the SIZE and SKEW constraints) and sigma_k its noise propagated from the readings
-(the model's ``noise``), times one factor per kind of evidence: each kind's own reduced chi-square,
-re-estimated between passes (variance components, Helmert), so that a thousand samples of the field's
-magnitude and a hundred poses' dip angles weigh as their scatter says, whatever the noise estimate
-missed. The row evaluators, IPOPT and the covariance are the accelerometer's: generated from the
+(the model's ``noise``), times one factor per kind of evidence: the square root of each kind's own reduced
+chi-square, re-estimated between passes (variance components, Helmert), so that a thousand samples of the
+field's magnitude and a hundred poses' dip angles weigh as their scatter says, whatever the noise estimate
+missed; and of its batch inflation (residuals that move together in time count for less). The row evaluators, IPOPT and the covariance are the accelerometer's: generated from the
 residual by ``row_functions``, solved by ``solve``, the covariance from the block QR of the weighted
 Jacobian (imucal.solve.fit.unscaled_covariance).
 """
@@ -30,6 +30,9 @@ from imucal.solve.fit import _step_scale, unscaled_covariance
 PASSES = 3
 #: Kinds whose noise is scaled by their own reduced chi-square.
 SCALED_KINDS = (NORM, DIP)
+#: Batches of the batch-means test of correlated residuals (``batch_inflation``): its estimate has about
+#: this many degrees of freedom.
+BATCHES = 20
 
 
 @dataclass(frozen=True)
@@ -86,14 +89,29 @@ def row_noise(model: MagModel, rows: MagRows, p: np.ndarray) -> np.ndarray:
     return np.maximum(out, floor)
 
 
+def batch_inflation(z: np.ndarray, batches: int = BATCHES) -> float:
+    """Variance of the means of ``batches`` consecutive batches of z (rows in time order) over what
+    independent rows give, at least 1: residuals that move together (a field or hard iron that drifts, one
+    pose's common error) carry less information than their number says (batch means, as the
+    accelerometer's noise_inflation)."""
+    m = len(z) // batches
+    if m < 2:
+        return 1.0
+    zz = np.asarray(z[: m * batches], float)
+    v = float(np.var(zz))
+    return max(1.0, float(np.var(zz.reshape(batches, m).mean(axis=1))) * m / v) if v > 0 else 1.0
+
+
 def _factors(r: np.ndarray, sigma0: np.ndarray, kinds: np.ndarray, dof: int) -> dict[int, float]:
-    """Per kind, sqrt(chi2_k / dof_k) with dof_k the kind's share of the fit's degrees of freedom."""
+    """Per kind, sqrt(chi2_k / dof_k times its batch inflation), dof_k the kind's share of the fit's
+    degrees of freedom (rows of one kind are in time order)."""
     n = len(r)
     out = {}
     for k in SCALED_KINDS:
         m = kinds == k
         if m.sum() and dof > 0:
-            out[k] = float(np.sqrt(np.sum((r[m] / sigma0[m]) ** 2) / (m.sum() * dof / n)))
+            z = r[m] / sigma0[m]
+            out[k] = float(np.sqrt(np.sum(z**2) / (m.sum() * dof / n) * batch_inflation(z - z.mean())))
     return out
 
 
@@ -133,7 +151,7 @@ def fit_rows(model: MagModel, rows: MagRows, params: Parameters, factors: Mappin
     sigma = row_noise(model, rows, _full(params, free, p_now)) * _row_factors(kinds, fac)
     chi2 = float(np.sum((r / sigma) ** 2))
     R = lsq.weighted_r_factor(fns, lrows, sigma, p_now, pfix, rows.target)
-    cov = unscaled_covariance(R) * (chi2 / dof)
+    cov = unscaled_covariance(R)  # the factors already scale each kind's noise to its residuals
     sd = np.sqrt(np.clip(np.diag(cov), 0, None))
     std = {n: float("nan") for n in params.names}  # held parameters: no standard error
     std.update(dict(zip(free, map(float, sd))))
@@ -147,8 +165,9 @@ class SoftIronTest:
     """Symmetric soft iron (the SKEW rows: the magnetometer's permuted axes are the accelerometer's) against
     the full 3x3 (without them: a rotation between the two frames).
 
-    The rotation is seen only through the dip rows: F = (delta chi2 / 3) / (chi2_full / dof), both
-    chi-squares with the full fit's weights; the full form is kept when p < ``level``."""
+    The rotation is seen only through the DIP rows, whose noise the fit scaled to their own scatter
+    (variance components): F = (chi2_symmetric - chi2_full) / 3 with the full fit's weights, against
+    F(3, DIP rows - 4), the degrees of freedom that scale came from; the full form is kept when p < ``level``."""
 
     f: float
     p: float
@@ -158,6 +177,8 @@ class SoftIronTest:
 
 #: The full soft iron (a rotation to the accelerometer's frame) is kept at this significance.
 SOFT_IRON_LEVEL = 1e-3
+#: Parameters the DIP rows alone determine: the rotation and the dip.
+DIP_PARAMETERS = 4
 
 
 def soft_iron_test(full: MagFitResult, symmetric: MagFitResult, level: float = SOFT_IRON_LEVEL) -> SoftIronTest:
@@ -166,6 +187,6 @@ def soft_iron_test(full: MagFitResult, symmetric: MagFitResult, level: float = S
     keep = ~np.isin(symmetric.kinds, SKEW_KINDS)
     k = int(np.sum(~keep))
     chi2_sym = float(np.sum((symmetric.residuals[keep] / full.sigma) ** 2))
-    f = max(chi2_sym - full.chi2, 0.0) / k / (full.chi2 / full.dof)
-    p = f_sf(f, k, full.dof)
+    f = max(chi2_sym - full.chi2, 0.0) / k
+    p = f_sf(f, k, max(int(np.sum(full.kinds == DIP)) - DIP_PARAMETERS, 1))
     return SoftIronTest(float(f), float(p), level, p < level)

@@ -33,6 +33,7 @@ class Channel:
 
 ACCELERATION = Channel("acceleration", ("ax", "ay", "az"), "raw", "specific force, the accelerometer's reading")
 ANGULAR_RATE = Channel("angular_rate", ("gx", "gy", "gz"), "raw", "angular rate, the gyroscope's reading")
+MAGNETIC_FIELD = Channel("magnetic_field", ("mx", "my", "mz"), "raw", "magnetic field, the magnetometer's reading")
 TEMPERATURE = Channel("temperature", ("temp",), "degC", "sensor temperature")
 TIME = Channel("time", ("t",), "s", "time from the first sample")
 
@@ -57,7 +58,8 @@ def missing(reads: tuple[Channel, ...], has: tuple[Channel, ...]) -> list[Channe
 
 def absent(ch: Channel, source: str | None, what: str) -> ImucalError:
     """The one message for a channel a model needs and the data lack."""
-    needs = f"reads {ch.role.replace('_', ' ')}" if ch in (ACCELERATION, ANGULAR_RATE) else f"has a {ch.role} effect"
+    needs = (f"reads {ch.role.replace('_', ' ')}" if ch in (ACCELERATION, ANGULAR_RATE, MAGNETIC_FIELD)
+             else f"has a {ch.role} effect")
     return ImucalError(f"{what} {needs} but the data have no {ch.columns[0]} column", file=source,
                        field=f"data.columns.{ch.columns[0]}",
                        fix=f"add {'/'.join(ch.columns)} ({ch.unit}) or drop what needs {ch.role}")

@@ -33,7 +33,7 @@ def add_data_options(p: argparse.ArgumentParser, data_required: bool = False, gy
                    help="ROS bags: a sensor_msgs/Temperature topic, interpolated onto the IMU stamps")
     g.add_argument("--columns", metavar="MAP",
                    help="column roles, 0-based indices or header names: t=0,ax=4,ay=5,az=6 "
-                        "(roles t, ax, ay, az, gx, gy, gz, temp)")
+                        "(roles t, ax, ay, az, gx, gy, gz, temp, mx, my, mz)")
     g.add_argument("--time-unit", choices=TIME_UNIT_CHOICES,
                    help="unit of the time column (default auto: s, ms, us or ns inferred from the stamps and "
                         "reported; min only when given)")
