@@ -23,6 +23,7 @@ from imucal.mag.frame import AxesSearch, dip_angles, euler_angles, search_axes
 from imucal.mag.model import (DIP, IDENTITY, NORM, ROTATION_BOUND, ROTATION_NAMES, MagModel, build_mag_model,
                               mag_parameters)
 from imucal.mag.result import MagCalibration, MagReport, PoseFigures, Scatter
+from imucal.mag.field_model import EarthField, Place
 from imucal.mag.units import field_magnitude
 from imucal.model.parameters import BASE_NAMES, Parameters
 from imucal.solve.initial import ellipsoid_guess
@@ -52,6 +53,7 @@ class MagSettings:
     soft_iron: str = "auto"  #: auto (the F test), symmetric or full
     window: int = 25  #: samples per window of a moving log (the dip's poses)
     lag: float | None = None  #: the magnetometer's delay [samples] (None: estimated)
+    place: Place | None = None  #: where and when: F from the IGRF when ``field`` is not given (optional extra)
 
     def __post_init__(self) -> None:
         if self.soft_iron not in SOFT_IRON_CHOICES:
@@ -131,11 +133,13 @@ def _fits(model: MagModel, rows: ev.MagRows, params: Parameters, settings: MagSe
     return (full if use_full else sym), sym, test
 
 
-def _start(mag: np.ndarray, settings: MagSettings, raw_unit: str, source: str | None) -> tuple[Parameters, str]:
-    """The initial parameters (F held when given) and the calibrated field's unit."""
-    given = settings.field is not None
-    F, field_unit = (field_magnitude(settings.field, settings.field_unit, raw_unit, source) if given
-                     else (None, raw_unit))
+def _start(mag: np.ndarray, settings: MagSettings, earth: EarthField | None, raw_unit: str, source: str | None
+           ) -> tuple[Parameters, str]:
+    """The initial parameters (F held when given, or from the field model) and the calibrated field's unit."""
+    value, unit = ((settings.field, settings.field_unit) if settings.field is not None else
+                   (earth.intensity_uT, "uT") if earth is not None else (None, None))
+    given = value is not None
+    F, field_unit = field_magnitude(value, unit, raw_unit, source) if given else (None, raw_unit)
     s0, b0, ang0, F0 = _guess(mag, F, settings.size, source)
     dip0 = 0.0 if settings.dip_deg is None else math.radians(settings.dip_deg)
     params = mag_parameters(s0, b0, ang0, F0, dip0=dip0, raw_unit=raw_unit, field_unit=field_unit)
@@ -156,7 +160,8 @@ def calibrate_mag(mag: np.ndarray, acc: np.ndarray | None = None, *, still: ev.P
     acc = None if acc is None else np.asarray(acc, float)
     ev.check_lengths(mag, acc, source)
     use = np.ones(len(mag), bool) if use is None else np.asarray(use, bool)
-    params, field_unit = _start(mag[use], settings, raw_unit, source)
+    earth = settings.place.field() if settings.place is not None else None
+    params, field_unit = _start(mag[use], settings, earth, raw_unit, source)
     var_m = ev.sample_variance(mag)
     nrows = ev.norm_rows(mag, var_m).subset(use)
     require_coverage(build_mag_model(), nrows, _held(params, [n for n in params.names if n not in BASE_NAMES]),
@@ -180,7 +185,7 @@ def calibrate_mag(mag: np.ndarray, acc: np.ndarray | None = None, *, still: ev.P
         fits = _fits(model, rows.subset(keep), params, settings, setup is not None, source)
         steps = field_steps(step_poses.means(_norm_pct(fits[0], mag)[:, None])[:, 0] / 100.0, step_poses)
     return _result(*fits, setup, steps, excluded, step_poses, mag, acc, raw_unit, field_unit,
-                   not params["F"].free)
+                   not params["F"].free, earth)
 
 
 def _outside(rows: ev.MagRows, offsets, dip_poses: ev.Poses | None) -> np.ndarray:
@@ -232,7 +237,8 @@ def _report(fit: MagFitResult, sym: MagFitResult | None, setup: "_DipSetup | Non
                                       for j in range(poses.n)))
 
 
-def _result(fit, sym, test, setup, steps, excluded, poses, mag, acc, raw_unit, field_unit, given) -> MagCalibration:
+def _result(fit, sym, test, setup, steps, excluded, poses, mag, acc, raw_unit, field_unit, given, earth
+            ) -> MagCalibration:
     return MagCalibration(fit, sym, test, None if setup is None else setup.search, None if setup is None else setup.lag,
                           None if setup is None else setup.poses, steps, _report(fit, sym, setup, poses, mag, acc),
-                          raw_unit, field_unit, given, excluded)
+                          raw_unit, field_unit, given, excluded, earth)

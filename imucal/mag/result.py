@@ -19,8 +19,14 @@ import numpy as np
 from imucal.mag.checks import FieldSteps, PoseOffset
 from imucal.mag.evidence import Lag, Poses
 from imucal.mag.fit import MagFitResult, SoftIronTest
+from imucal.mag.field_model import EarthField
 from imucal.mag.frame import AxesSearch, rotation_angle
 from imucal.model.parameters import Parameters
+
+
+#: The field model's inclination above which its sign is trusted for the handedness check [deg] (near the
+#: magnetic equator a local anomaly can tip a field of a few degrees either way).
+HANDEDNESS_MIN_DIP_DEG = 5.0
 
 
 @dataclass(frozen=True)
@@ -69,6 +75,17 @@ class MagCalibration:
     field_unit: str
     field_given: bool  #: F given by the user (else fitted, the scales' size held)
     excluded: tuple[PoseOffset, ...] = ()  #: poses whose field stood out, left out of the fit
+    earth: EarthField | None = None  #: the field model's values at the user's place and date
+
+    @property
+    def left_handed(self) -> bool | None:
+        """The fitted dip has the opposite sign of the field model's: the magnetometer's axes are probably
+        left-handed (one inverted), which the dip's constancy cannot see (None: no model, no dip, or a
+        field too near horizontal to tell)."""
+        if self.earth is None or self.report.dip_deg is None or abs(self.earth.inclination_deg) < \
+                HANDEDNESS_MIN_DIP_DEG:
+            return None
+        return (self.params["dip"].value > 0) != (self.earth.dip > 0)
 
     @property
     def params(self) -> Parameters:
