@@ -102,16 +102,29 @@ def batch_inflation(z: np.ndarray, batches: int = BATCHES) -> float:
     return max(1.0, float(np.var(zz.reshape(batches, m).mean(axis=1))) * m / v) if v > 0 else 1.0
 
 
-def _factors(r: np.ndarray, sigma0: np.ndarray, kinds: np.ndarray, dof: int) -> dict[int, float]:
-    """Per kind, sqrt(chi2_k / dof_k times its batch inflation), dof_k the kind's share of the fit's
-    degrees of freedom (rows of one kind are in time order)."""
-    n = len(r)
+def _kind_dof(fns: lsq.RowFunctions, rows: MagRows, sigma: np.ndarray, p_free: np.ndarray, pfix: np.ndarray
+              ) -> dict[int, float]:
+    """Each kind's degrees of freedom: its rows less the trace of its share of the hat matrix,
+    n_k - tr(C H_k) with H_k = R_k^T R_k its rows' J^T W J and C = (sum_k H_k)^-1 (its leverage: the DIP
+    rows alone carry the rotation and the dip, so their scatter is that of n_k - 4 degrees of freedom)."""
+    R = {}
+    for k in np.unique(rows.kind):
+        m = rows.kind == k
+        R[int(k)] = lsq.weighted_r_factor(fns, lsq.Rows(rows.raw[m], rows.cov[m]), sigma[m], p_free, pfix,
+                                          rows.target[m])
+    C = unscaled_covariance(np.vstack(list(R.values())))
+    return {k: float(np.sum(rows.kind == k)) - float(np.trace(C @ (Rk.T @ Rk))) for k, Rk in R.items()}
+
+
+def _factors(r: np.ndarray, sigma0: np.ndarray, kinds: np.ndarray, dof: Mapping[int, float]) -> dict[int, float]:
+    """Per kind, sqrt(chi2_k / dof_k times its batch inflation), dof_k from its leverage (``_kind_dof``;
+    rows of one kind are in time order)."""
     out = {}
     for k in SCALED_KINDS:
         m = kinds == k
-        if m.sum() and dof > 0:
+        if m.sum() and dof.get(k, 0.0) > 0:
             z = r[m] / sigma0[m]
-            out[k] = float(np.sqrt(np.sum(z**2) / (m.sum() * dof / n) * batch_inflation(z - z.mean())))
+            out[k] = float(np.sqrt(np.sum(z**2) / dof[k] * batch_inflation(z - z.mean())))
     return out
 
 
@@ -146,7 +159,8 @@ def fit_rows(model: MagModel, rows: MagRows, params: Parameters, factors: Mappin
         p_now = np.clip(p_now + d * x, lo, hi)
         if not held:
             r = lsq.residuals(fns, lrows, p_now, pfix, rows.target)
-            fac = _factors(r, row_noise(model, rows, _full(params, free, p_now)), kinds, dof)
+            sigma0 = row_noise(model, rows, _full(params, free, p_now))
+            fac = _factors(r, sigma0, kinds, _kind_dof(fns, rows, sigma0, p_now, pfix))
     r = lsq.residuals(fns, lrows, p_now, pfix, rows.target)
     sigma = row_noise(model, rows, _full(params, free, p_now)) * _row_factors(kinds, fac)
     chi2 = float(np.sum((r / sigma) ** 2))
