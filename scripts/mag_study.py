@@ -174,7 +174,7 @@ def whole_log(mag: np.ndarray, acc: np.ndarray) -> tuple[list[str], object]:
          f"correlation {cal.lag.correlation:.2f}, below {ev.MIN_LAG_CORRELATION}: the two sensors' motion "
          "does not show one; section 4)",
          f"- soft iron: **{'full 3x3' if cal.full_soft_iron else 'symmetric'}** (F = {cal.soft_iron.f:.1f} "
-         f"on 3 and {cal.fit.dof} dof, p = {cal.soft_iron.p:.2g}): the magnetometer is turned "
+         f"on 3 and {cal.poses.n - 4} dof, p = {cal.soft_iron.p:.2g}): the magnetometer is turned "
          f"**{math.degrees(cal.misalignment):.2f} deg** from the accelerometer beyond the symmetric soft iron",
          f"- field F = {cal.params['F'].value:.5f} +/- {cal.fit.std['F']:.1g} gauss (on the held size), dip "
          f"{deg['dip']:.2f} deg (the field points {'up' if deg['dip'] > 0 else 'down'} from the horizontal "
