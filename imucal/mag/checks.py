@@ -77,7 +77,7 @@ def require_coverage(model: MagModel, rows: MagRows, params: Parameters, source:
     directions = sub.raw - s0
     directions /= np.linalg.norm(directions, axis=1, keepdims=True)
     angle_tol = params["phi"].upper / (math.pi / 2) - 1.0
-    obs = observability.analyse(directions, J, free, weighted, observability.thresholds(free, angle_tol))
+    obs = observability.analyse(directions, J, free, weighted, observability.thresholds(params, free, angle_tol))
     if obs.undetermined or obs.n_distinct < len(free):
         raise coverage_error(directions, f"({obs.n_distinct} distinct) leave "
                              f"{', '.join(obs.undetermined) or 'the hard and soft iron'}", source)

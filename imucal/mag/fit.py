@@ -5,9 +5,9 @@ Minimise 1/2 sum_k (r_k / sigma_k)^2 over the free parameters, r_k the residual 
 (the model's ``noise``), times one factor per kind of evidence: the square root of each kind's own reduced
 chi-square, re-estimated between passes (variance components, Helmert), so that a thousand samples of the
 field's magnitude and a hundred poses' dip angles weigh as their scatter says, whatever the noise estimate
-missed; and of its batch inflation (residuals that move together in time count for less). The row evaluators, IPOPT and the covariance are the accelerometer's: generated from the
-residual by ``row_functions``, solved by ``solve``, the covariance from the block QR of the weighted
-Jacobian (imucal.solve.fit.unscaled_covariance).
+missed; and of its batch inflation (residuals that move together in time count for less). The row evaluators, IPOPT and the covariance are the accelerometer's: the rows are a RowEvidence whose
+evaluators ``row_functions`` generates from the residual, solved by ``solve_scaled`` (imucal.solve.fit), the
+covariance from the block-QR R factor by the one routine (imucal.solve.covariance.unscaled_covariance).
 """
 from __future__ import annotations
 
@@ -24,7 +24,8 @@ from imucal.model.parameters import Parameters
 from imucal.solve import ipopt
 from imucal.solve import least_squares as lsq
 from imucal.solve.f_test import f_sf
-from imucal.solve.fit import _step_scale, unscaled_covariance
+from imucal.solve.covariance import unscaled_covariance
+from imucal.solve.fit import solve_scaled
 
 #: Passes of the fit, the variance components refreshed between them (they settle in two).
 PASSES = 3
@@ -140,7 +141,8 @@ def fit_rows(model: MagModel, rows: MagRows, params: Parameters, factors: Mappin
     if dof < 1:
         raise ImucalError(f"{rows.n} rows cannot determine {len(free)} free parameters", file=source,
                           field="mx, my, mz", fix="record the magnetometer through more orientations")
-    fns, lrows = lsq.row_functions(model, free), lsq.Rows(rows.raw, rows.cov)
+    fns = lsq.row_functions(model, free)
+    evidence = lsq.RowEvidence(fns, lsq.Rows(rows.raw, rows.cov), rows.target)  # the accelerometer's row evidence
     pfix = np.array(params.values(), float)
     scale = np.array([params[n].scale for n in free])
     lo, hi = np.array([params[n].lower for n in free]), np.array([params[n].upper for n in free])
@@ -149,23 +151,16 @@ def fit_rows(model: MagModel, rows: MagRows, params: Parameters, factors: Mappin
     fac: dict[int, float] = dict(factors or {})
     iters, stats = 0, {}
     for _ in range(1 if held else PASSES):
-        sigma0 = row_noise(model, rows, _full(params, free, p_now))
-        sigma = sigma0 * _row_factors(kinds, fac)
-        R = lsq.weighted_r_factor(fns, lrows, sigma, p_now, pfix, rows.target)
-        d = _step_scale(R, scale)
-        problem = lsq.Problem(fns, lrows, 1.0 / sigma**2, pfix, rows.target, p_now, d)
-        x, stats = lsq.solve(problem, (lo - p_now) / d, (hi - p_now) / d)
+        sigma = row_noise(model, rows, _full(params, free, p_now)) * _row_factors(kinds, fac)
+        p_now, stats = solve_scaled(evidence, pfix, p_now, sigma, scale, lo, hi)
         iters += int(stats.get("iter_count", 0))
-        p_now = np.clip(p_now + d * x, lo, hi)
         if not held:
-            r = lsq.residuals(fns, lrows, p_now, pfix, rows.target)
             sigma0 = row_noise(model, rows, _full(params, free, p_now))
-            fac = _factors(r, sigma0, kinds, _kind_dof(fns, rows, sigma0, p_now, pfix))
-    r = lsq.residuals(fns, lrows, p_now, pfix, rows.target)
+            fac = _factors(evidence.residuals(p_now, pfix), sigma0, kinds, _kind_dof(fns, rows, sigma0, p_now, pfix))
+    r = evidence.residuals(p_now, pfix)
     sigma = row_noise(model, rows, _full(params, free, p_now)) * _row_factors(kinds, fac)
     chi2 = float(np.sum((r / sigma) ** 2))
-    R = lsq.weighted_r_factor(fns, lrows, sigma, p_now, pfix, rows.target)
-    cov = unscaled_covariance(R)  # the factors already scale each kind's noise to its residuals
+    cov = unscaled_covariance(evidence.r_factor(p_now, pfix, sigma))  # the factors scale each kind's noise already
     sd = np.sqrt(np.clip(np.diag(cov), 0, None))
     std = {n: float("nan") for n in params.names}  # held parameters: no standard error
     std.update(dict(zip(free, map(float, sd))))

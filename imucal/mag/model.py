@@ -183,9 +183,11 @@ def mag_parameters(s0, b0, angles0=(RIGHT_ANGLE,) * 3, field_magnitude: float = 
               for n in base.names]
     for name, v in zip(ROTATION_NAMES, rotation0):
         params.append(Parameter(name, float(v), -ROTATION_BOUND, ROTATION_BOUND, "rad", scale=ANGLE_SCALE,
+                                undetermined=1.0,
                                 description=f"rotation to the accelerometer's frame about {name[1]}"))
-    params.append(Parameter("F", float(field_magnitude), 0.0, math.inf, field_unit,
+    params.append(Parameter("F", float(field_magnitude), 0.0, math.inf, field_unit, undetermined=1.0,
                             scale=0.01 * abs(float(field_magnitude)) or 1.0, description="field magnitude"))
     params.append(Parameter("dip", float(dip0), -RIGHT_ANGLE, RIGHT_ANGLE, "rad", scale=ANGLE_SCALE,
+                            undetermined=1.0,
                             description="angle between field and gravity's plane: asin(a . h / |a||h|)"))
     return Parameters(params)
