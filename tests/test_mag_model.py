@@ -5,6 +5,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from imucal.errors import ImucalError
 from imucal.mag.evidence import MagRows, dip_rows, norm_rows, sample_variance, shift, windows
@@ -168,3 +170,19 @@ def test_reader_refuses_part_of_the_magnetometer(tmp_path):
         load_recording(DataSpec(path=str(path), sample_rate=25.0))
     assert str(e.value) == (f"{path}: data.columns: only mx, my of mx, my, mz mapped "
                             "(fix: map all three magnetometer columns or none)")
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.floats(-1.3, 1.3), min_size=3, max_size=3), st.sampled_from(SIGNED_PERMUTATIONS))
+def test_field_norm_does_not_see_the_rotation(r, axes):
+    """Property: |h| - F is invariant under the rotation to the accelerometer's frame and the mounting
+    (only the DIP rows determine them)."""
+    rng = np.random.default_rng(8)
+    p = _params(rng)
+    raw = rng.normal(size=(3, 6))
+    cov = np.zeros((4, 6))
+    base = build_mag_model().vectorized("residual")(raw, cov, p, [0.0])[0]
+    q = p.copy()
+    q[[NAMES.index(n) for n in ("rx", "ry", "rz")]] = r
+    turned = build_mag_model(axes).vectorized("residual")(raw, cov, q, [0.0])[0]
+    assert np.allclose(turned, base, rtol=0, atol=1e-12)
