@@ -3,7 +3,7 @@
 1000 times (0.5 M, 5 M, 51 M samples), the parse floor, and the CSV parsers compared (issue 13).
 Writes docs/benchmarks_memory.md.
 
-The tiled files are written to a temporary folder (--tmp, default /tmp/imucal-tiles), never into
+The tiled files are written to a temporary folder (--tmp, default imucal-tiles in the system temporary folder), never into
 the repository: tile i is the recording shifted by i times its span (time stamps written with
 5 decimals, the readings as in the file). Every measurement runs in a fresh process; its peak
 resident set (ru_maxrss) is that process's own.
@@ -276,7 +276,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--sizes", default="10,100,1000", help="tile counts, read in chunks")
     ap.add_argument("--whole", default="10,100", help="tile counts also read whole (--stream never)")
-    ap.add_argument("--tmp", default="/tmp/imucal-tiles", help="folder for the tiled files")
+    ap.add_argument("--tmp", default=str(Path(tempfile.gettempdir()) / "imucal-tiles"), help="folder for the tiled files")
     ap.add_argument("--parse-k", type=int, default=100, help="tile count of the parse-floor file")
     ap.add_argument("--shipped-runs", type=int, default=7)
     ap.add_argument("--resume", action="store_true", help="keep the measurements a stopped run saved in --tmp")

@@ -42,7 +42,7 @@ from imucal.model.parameters import BASE_NAMES, Parameter, Parameters, base_para
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "codegen"
-XSENS = Path("/work/shared/data/real/xsens-mti-imutk/xsens_acc.mat")
+XSENS = ROOT / "data" / "xsens-mti-imutk" / "xsens_acc.mat"  # shipped with the repository
 GCC = shutil.which("gcc")
 STRICT = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic"]
 #: What firmware builds commonly add; the generated code must be clean under these too.

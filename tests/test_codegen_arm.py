@@ -25,7 +25,7 @@ from imucal.export.codegen import write_c
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "codegen"
-XSENS = Path("/work/shared/data/real/xsens-mti-imutk/xsens_acc.mat")
+XSENS = ROOT / "data" / "xsens-mti-imutk" / "xsens_acc.mat"  # shipped with the repository
 XSENS_GYRO = XSENS.with_name("xsens_gyro.mat")
 ARM_CC = shutil.which("arm-none-eabi-gcc")
 QEMU = shutil.which("qemu-system-arm")

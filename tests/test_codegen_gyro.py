@@ -8,7 +8,7 @@ each sample to the a priori bound (``gyro_float_error_bound``, with the accelero
 double apply.
 
 Measured (Xsens, the 51175 recorded samples and 10^5 random 16-bit vectors; also written by
-scripts/codegen_gyro_accuracy.py into docs/codegen_gyro.md):
+studies/codegen_gyro_accuracy.py into docs/codegen_gyro.md):
   float apply_imu: max |omega - Python| 1.3e-06 rad/s, at most 0.41 of the bound per sample
   double apply_imu: max 3.6e-15 rad/s, at most 0.21 of the bound.
 """

@@ -19,7 +19,7 @@ from imucal.analysis.simulate import (PosePlan, TemperatureProfile, cube_directi
 ROOT = Path(__file__).resolve().parents[1]
 
 #: Scored cases: effect sizes drawn log-uniformly in this range of SNR (size / noise of one
-#: interval mean). docs/discover_study.md measures where detection becomes reliable.
+#: interval mean). studies/results/discover_study.md measures where detection becomes reliable.
 SNR_RANGE = (40.0, 120.0)
 N_EFFECT_CASES = 32
 N_CLEAN_CASES = 10

@@ -1,7 +1,7 @@
 """Discovery's power at SNR 10 (issue 12): hand-built recordings, each with one term whose size is
 10 x the noise of one interval mean, that the search before the min-p test and the axis price of
 p = 0.01 missed or named on the wrong axes (measured on the same seeds, docs/discover.md), are now
-named exactly. Seeds and sizes as scripts/discover_study.py draws them (0.3 mg per sample)."""
+named exactly. Seeds and sizes as studies/discover_study.py draws them (0.3 mg per sample)."""
 from __future__ import annotations
 
 import pytest
@@ -47,7 +47,7 @@ def test_a_round_runs_when_one_candidate_stands_out_though_the_omnibus_test_pass
 
 def test_a_warm_up_is_judged_determined_by_its_noise_not_by_the_misfit_it_leaves(tmp_path):
     """scale_warmup on x, y and z (tau 11.5 s on a 21-hold plan, the weakest coefficient 10 standard
-    errors: docs/discover_warmup_coefficient_study.md, seed 60081). Its fit leaves chi2/dof 2.25 on
+    errors: studies/results/discover_warmup_coefficient_study.md, seed 60081). Its fit leaves chi2/dof 2.25 on
     8 degrees of freedom; the undetermined check scaled the standard error of x by that misfit
     (1.5 x) past the coefficient's scale (1e-3), so the term was not counted and scale_warmup[y]
     was named. The calibration's own observability check uses the noise-only errors, as it now does."""
@@ -60,7 +60,7 @@ def test_a_warm_up_is_judged_determined_by_its_noise_not_by_the_misfit_it_leaves
 @pytest.mark.parametrize("seed,term,snr,axes", [(60223, "scale_warmup", 1447.45, (0,)),
                                                (60114, "bias_warmup", 51.69, (0, 1))])
 def test_a_warm_up_is_judged_determined_as_the_calibration_judges_it(seed, term, snr, axes, tmp_path):
-    """The weakest coefficient 10 standard errors (docs/discover_warmup_coefficient_study.md).
+    """The weakest coefficient 10 standard errors (studies/results/discover_warmup_coefficient_study.md).
     60223: scale_warmup_x = 0.028 with tau 5.2 s, 28 x the term's usual size (1e-3): its standard
     error (~0.003) was judged against that usual size, so it was refused as undetermined and the
     verdict was "a stochastic bias". A coefficient larger than its usual size is now judged against
@@ -79,7 +79,7 @@ def test_a_warm_up_is_judged_determined_as_the_calibration_judges_it(seed, term,
                                           (60064, "scale_warmup", 30.99)])
 def test_the_simulated_warm_up_is_the_model_discover_fits(seed, term, snr, tmp_path):
     """Three warm-ups on two axes that discover names on three at SNR 10 by the weakest coefficient
-    (a 48-case replicate of docs/discover_warmup_coefficient_study.md; the sizes it drew). With the noise at a tenth, the
+    (a 48-case replicate of studies/results/discover_warmup_coefficient_study.md; the sizes it drew). With the noise at a tenth, the
     true term on its true axes fits to the noise: a misfit worth one unit of chi-square at the
     study's noise would be worth 25 or more here, so the third axis found there is a noise
     excursion, not a difference between the simulator and the model."""

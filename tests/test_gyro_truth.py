@@ -1,6 +1,6 @@
 """Gyro calibration against synthetic truth from realistic hand-held sessions (issue 11, "must show"):
 the simulator itself, recovery within 3 standard errors, Monte-Carlo coverage of the reported
-standard errors (a small version of scripts/gyro_coverage.py), refusal of motions that leave axes
+standard errors (a small version of studies/gyro_coverage.py), refusal of motions that leave axes
 undetermined, naming them and the rotations to add."""
 from __future__ import annotations
 
@@ -49,7 +49,7 @@ def test_hand_held_session_recovered_within_three_std() -> None:
 def test_monte_carlo_coverage_of_the_standard_errors() -> None:
     """20 sessions (fixed timing, so one solver serves all): 95 % of |error| / std within the Student-t
     quantile of each fit's dof, within the binomial band of the number of estimates, pooled over bias,
-    scale, misalignment and G_s (scripts/gyro_coverage.py: 50 sessions in four settings)."""
+    scale, misalignment and G_s (studies/gyro_coverage.py: 50 sessions in four settings)."""
     cov = monte_carlo(TRUTH, range(100, 120), GyroOptions(gsens="auto"), unit="rad/s", n_poses=16, durations=None)
     assert cov.converged == 20 and (cov.gsens_rows_selected == 20).all()
     z = np.abs(np.concatenate([v.ravel() for v in cov.z.values()]))

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytest.importorskip("rosbags", reason="the ROS extra is not installed (pip install imucal-nlp[ros])")
+pytest.importorskip("rosbags", reason="the ROS extra is not installed (python -m pip install '.[ros]')")
 
 from rosbags.rosbag1 import Writer as Writer1  # noqa: E402
 from rosbags.rosbag2 import StoragePlugin, Writer as Writer2  # noqa: E402
@@ -289,7 +289,7 @@ def test_a_missing_rosbags_extra_is_named(tmp_path, run_cli, monkeypatch):
     monkeypatch.setattr(builtins, "__import__", no_rosbags)
     r = run_cli(["noise", "--data", bag, "--topic", "/imu"])
     assert r.code == 2 and len(r.err.strip().splitlines()) == 1
-    assert "install imucal-nlp[ros]" in r.err and "a.bag" in r.err
+    assert "python -m pip install rosbags" in r.err and "a.bag" in r.err
 
 
 def test_the_yaml_data_topic_reads_a_bag(si_bags, run_cli, tmp_path):

@@ -1,18 +1,14 @@
 """The standard errors the fit reports are true: a small seeded Monte-Carlo against the CRLB.
 
 The full study (500+ recordings per setting, several schemes and sensors) is
-scripts/mc_uncertainty.py -> docs/uncertainty.md. Here: 80 recordings per setting, bounds wide
+studies/mc_uncertainty.py -> studies/results/uncertainty.md. Here: 80 recordings per setting, bounds wide
 enough for that sample size (a std ratio is known to ~ +-0.15, a coverage to ~ +-5 points) but
 narrow enough to catch a wrong weight, a missing or doubled chi-square scaling, or a covariance
 in the wrong units (each moves the ratios by >= 40 % or the coverage by >= 10 points).
 """
 from __future__ import annotations
 
-import importlib.util
-import math
-import sys
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -23,19 +19,11 @@ from imucal.solve.initial import ellipsoid_guess
 from imucal.model.sensor import build_model
 from imucal.model.parameters import BASE_NAMES, base_parameters
 from imucal.analysis.simulate import frame_matrix, si_sensor
+from imucal.report.text import t_quantile_975
 
 G = 9.80665
 SIGMA_MEAN = 0.003  # m/s^2 per axis per interval mean (0.06 m/s^2 per sample, 400 samples)
 N_REC = 80
-
-
-def _mc_script():
-    path = Path(__file__).resolve().parents[1] / "scripts" / "mc_uncertainty.py"
-    spec = importlib.util.spec_from_file_location("mc_uncertainty", path)
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules["mc_uncertainty"] = mod
-    spec.loader.exec_module(mod)
-    return mod
 
 
 @dataclass(frozen=True)
@@ -119,7 +107,7 @@ def test_reported_std_matches_the_empirical_scatter(wedge: MC) -> None:
 
 
 def test_95_percent_intervals_cover(wedge: MC) -> None:
-    t = _mc_script().t_quantile(0.975, wedge.dof)
+    t = t_quantile_975(wedge.dof)  # the quantile the report prints
     cover = np.mean(np.abs(wedge.err) <= t * wedge.std, axis=0)
     assert np.all(cover >= 0.85), dict(zip(BASE_NAMES, cover.round(3)))
     assert 0.91 <= float(cover.mean()) <= 0.985
@@ -127,28 +115,9 @@ def test_95_percent_intervals_cover(wedge: MC) -> None:
 
 def test_student_t_quantiles_are_needed_at_few_poses(edges: MC) -> None:
     """12 poses leave dof = 3: 1.96 x the scaled std under-covers; the t quantile (3.18) does not."""
-    t = _mc_script().t_quantile(0.975, edges.dof)
+    t = t_quantile_975(edges.dof)
     cov_t = np.mean(np.abs(edges.err) <= t * edges.std)
     cov_z = np.mean(np.abs(edges.err) <= 1.96 * edges.std)
     assert cov_t > cov_z + 0.04
     assert 0.91 <= cov_t <= 0.985
     assert cov_z < 0.93
-
-
-def test_t_quantile_against_tables() -> None:
-    t_quantile = _mc_script().t_quantile
-    for dof, want in ((1, 12.7062047), (3, 3.18244631), (15, 2.13144955), (100, 1.98397152)):
-        assert t_quantile(0.975, dof) == pytest.approx(want, rel=1e-6)
-    assert t_quantile(0.975, math.inf) == pytest.approx(1.959964, rel=1e-4)
-
-
-def test_mc_script_replicate_runs_and_is_deterministic() -> None:
-    mc = _mc_script()
-    s = mc.Setting("edges", "counts")
-    a, b = mc.one_replicate(s, 3, 0), mc.one_replicate(s, 3, 0)
-    np.testing.assert_array_equal(a["err"], b["err"])
-    assert a["free"] == BASE_NAMES and a["crlb"].shape == (9,)
-    assert a["newton"] < 1e-3  # the reported estimate sits at the optimum
-    six = mc.one_replicate(mc.Setting("cube-24", "si", orthogonal=True), 0, 0)
-    assert six["free"] == D.SIX_NAMES
-    assert "only 6 distinct gravity directions" in mc.refusal_message(mc.Setting("cube-24", "si"))

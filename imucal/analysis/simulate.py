@@ -423,7 +423,7 @@ def sensor_from_values(values: dict, effects: tuple = (), noise: tuple[float, fl
                       noise=tuple(noise), quantum=0.0, unit=unit, effects=eff)
 
 
-# --- seeded cases with one hidden effect (tests and scripts/discover_study.py) ---------------
+# --- seeded cases with one hidden effect (tests and studies/discover_study.py) ---------------
 @dataclass(frozen=True)
 class EffectCase:
     """A simulated recording with at most one hidden effect, drawn from a seed."""

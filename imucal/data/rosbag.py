@@ -1,7 +1,7 @@
 """ROS bags in: ``sensor_msgs/msg/Imu`` (and ``sensor_msgs/msg/Temperature``) from ROS 1 ``.bag``
 files, ROS 2 bag folders (metadata.yaml + .db3/.mcap) and bare ROS 2 ``.mcap`` files (the one file of a
 folder recorded with ``ros2 bag record -s mcap``, as users share it), read with the optional ``rosbags``
-library (``pip install imucal-nlp[ros]``) into the same Recording the text loader builds.
+library (the ``ros`` extra: ``python -m pip install rosbags``) into the same Recording the text loader builds.
 
 Units are ROS's (REP 103): linear_acceleration [m/s^2], angular_velocity [rad/s]. A driver that
 has no gyroscope marks it as REP 145 says, angular_velocity_covariance[0] = -1; the recording then
@@ -22,7 +22,8 @@ from imucal.files.inputs import max_data_bytes, open_regular
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
 TEMP_TYPE = "sensor_msgs/msg/Temperature"
-_INSTALL = "install the ROS extra: pip install imucal-nlp[ros]"
+#: imucal-nlp is installed from its repository (not PyPI): its `ros` extra is the rosbags library.
+_INSTALL = "install the ROS extra: python -m pip install rosbags (the repository's '.[ros]')"
 
 
 def is_bag(path: str | os.PathLike) -> bool:

@@ -326,7 +326,8 @@ class _DaskPool:
             from distributed import Client, KilledWorker
         except ImportError:
             raise ImucalError("dask.distributed is not installed", field="--scheduler",
-                              fix="pip install 'imucal-nlp[fleet]', or drop --scheduler to use local processes") from None
+                              fix="python -m pip install 'dask[distributed]' (the repository's '.[fleet]'), "
+                                  "or drop --scheduler to use local processes") from None
         try:
             self.client = Client(address, timeout=SCHEDULER_TIMEOUT)
         except (OSError, TimeoutError, ValueError) as exc:

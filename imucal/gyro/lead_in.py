@@ -5,7 +5,7 @@ segments between the detected intervals then miss that rotation. Integrating fro
 inside each pose recovers it, at the price of integrating the static model's residual bias for
 2 ``LEAD_IN_S`` more per segment. That residual varies from pose to pose when the static means
 depend on gravity and the fit leaves the g-sensitivity out (Xsens MTi: 2.2 mrad/s rms without,
-0.66 with it), and the lead-in then costs more than it recovers (docs/gyro_lead_in.md). The rule:
+0.66 with it), and the lead-in then costs more than it recovers (studies/results/gyro_lead_in.md). The rule:
 
 1. the poses' edges turn: per pose, the rate integrated over its first and last ``LEAD_IN_S``
    (the pose's inner mean removed) has a mean square at least ``EDGE_RATIO`` times that of

@@ -18,7 +18,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="shared settings: an `imucal calibrate` run file (its data.path is not used)")
     p.add_argument("--workers", type=int, metavar="N", help="worker processes (default: one per CPU)")
     p.add_argument("--scheduler", metavar="ADDRESS",
-                   help="run on a dask.distributed cluster, e.g. tcp://host:8786 (extra imucal-nlp[fleet]); "
+                   help="run on a dask.distributed cluster, e.g. tcp://host:8786 (the fleet extra: dask[distributed]); "
                         "every worker must see the recordings and DIR at the same paths")
     p.add_argument("--no-figures", action="store_true",
                    help="skip the fleet histograms (unit figures follow the settings' output.figures)")
