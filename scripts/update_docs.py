@@ -15,6 +15,7 @@ file path (`<!-- begin:summary -->`) is a source block, written by a script, and
     python scripts/update_docs.py --check    # exit 1, naming each stale block, if any differs (CI)
     python scripts/update_docs.py examples   # run the README's example commands, write docs/examples/
     python scripts/update_docs.py examples --check   # run them, compare the numbers they print
+    python scripts/update_docs.py screenshots  # docs/images/ from the browser test of report.html
 
 The examples are listed in docs/examples/examples.yaml: each runs its commands in a fresh folder
 holding a copy of the repository's configs/ and data/, and keeps the output lines its `show`
@@ -197,13 +198,27 @@ def cmd_examples(check: bool) -> int:
     return 1 if bad else 0
 
 
+def cmd_screenshots() -> int:
+    """The browser test of report.html (tests/test_html_browser.py) leaves its screenshot in docs/images."""
+    images = ROOT / "docs" / "images"
+    images.mkdir(exist_ok=True)
+    env = dict(os.environ, IMUCAL_DOCS_SCREENSHOTS=str(images),
+               PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    p = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+                        str(ROOT / "tests" / "test_html_browser.py"), "-k", "loads_cleanly"], cwd=ROOT, env=env)
+    print(f"wrote {(images / 'report-desktop.png').relative_to(ROOT)}" if p.returncode == 0 else "no screenshot")
+    return p.returncode
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("what", nargs="?", choices=["splice", "examples"], default="splice")
+    ap.add_argument("what", nargs="?", choices=["splice", "examples", "screenshots"], default="splice")
     ap.add_argument("--check", action="store_true", help="compare instead of writing; exit 1 on a difference")
     ap.add_argument("--root", type=Path, default=ROOT, help="the repository (default: this script's)")
     a = ap.parse_args(argv)
     set_root(a.root.resolve())
+    if a.what == "screenshots":
+        return cmd_screenshots()
     return cmd_examples(a.check) if a.what == "examples" else cmd_splice(a.check)
 
 

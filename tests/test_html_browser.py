@@ -4,6 +4,7 @@ the fitted numbers in the rendered DOM. Skips with the reason when no chromium i
 (.ci/run installs it: apt-get install chromium)."""
 from __future__ import annotations
 
+import os
 import shutil
 import subprocess
 from pathlib import Path
@@ -22,6 +23,9 @@ pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="no chromium found (Deb
 #: Pixel standard deviation (0..1 per channel) below which a screenshot counts as blank.
 BLANK_STD = 0.02
 WINDOW = "1200,1800"
+#: Set by `python scripts/update_docs.py screenshots`: the folder that receives this test's screenshot,
+#: which the documentation shows (docs/images/report-desktop.png).
+KEEP_SCREENSHOT = "IMUCAL_DOCS_SCREENSHOTS"
 
 
 def _chromium(page: Path, tmp: Path, *args: str) -> subprocess.CompletedProcess:
@@ -57,6 +61,8 @@ def test_report_loads_cleanly_and_shows_its_numbers(calibrated, tmp_path):
     assert shot.exists(), r.stderr[-2000:]
     assert _console_errors(r.stderr) == []
     assert _screenshot_std(shot) > BLANK_STD
+    if os.environ.get(KEEP_SCREENSHOT):
+        shutil.copyfile(shot, Path(os.environ[KEEP_SCREENSHOT]) / "report-desktop.png")
     d = _chromium(page, tmp_path, "--dump-dom")
     assert _console_errors(d.stderr) == []
     dom = d.stdout
@@ -65,6 +71,15 @@ def test_report_loads_cleanly_and_shows_its_numbers(calibrated, tmp_path):
         assert f"{p.value:.10g}" in dom and f"{run.result.std[n]:.4g}" in dom, n
     assert f"{run.calibration.fit['rms_residual'] * 1e3:.4g} mm/s²" in dom
     assert ("PASS" in dom) or ("CHECK" in dom)
+
+
+def test_the_screenshot_goes_to_the_docs_when_asked(calibrated, tmp_path, monkeypatch):
+    """`python scripts/update_docs.py screenshots` sets the variable: the docs show this test's screenshot."""
+    keep = tmp_path / "images"
+    keep.mkdir()
+    monkeypatch.setenv(KEEP_SCREENSHOT, str(keep))
+    test_report_loads_cleanly_and_shows_its_numbers(calibrated, tmp_path)
+    assert _screenshot_std(keep / "report-desktop.png") > BLANK_STD
 
 
 def test_the_checks_catch_a_broken_page(calibrated, tmp_path):
