@@ -28,7 +28,7 @@ def _z(cal, truth: MagTruth) -> np.ndarray:
 
 def test_monte_carlo_spread_matches_the_standard_errors():
     """Over seeds, (value - truth) / std has unit variance for every parameter (pooled): the standard
-    errors are those of the estimates (a fuller check with more seeds: scripts/mag_study.py)."""
+    errors are those of the estimates (a fuller check with more seeds: studies/mag_study.py)."""
     truth = _truth()
     z = []
     for seed in range(12):

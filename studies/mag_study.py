@@ -1,6 +1,6 @@
-"""The magnetometer study (issue 26): the real CK-Explorer log and simulated logs; writes docs/magnetometer.md.
+"""The magnetometer study (issue 26): the real CK-Explorer log and simulated logs; writes studies/results/magnetometer_study.md.
 
-    python scripts/mag_study.py [--seeds 100]      (needs scipy, for the independent check)
+    python studies/mag_study.py [--seeds 100]      (needs scipy, for the independent check)
 
 1. The accelerometer of the log, calibrated by imucal (acc_log.csv), and whether it fits acc_mag_log.csv.
 2. The magnetometer on the whole log: values, mounting, lag, the soft-iron test, figures before and after.
@@ -47,50 +47,6 @@ BLOCKS = (250, 500, 1000, 2000)
 AK8963 = (0, 1, 0, 1, 0, 0, 0, 0, -1)
 SOFT = np.array([[1.05, 0.03, -0.02], [0.03, 0.97, 0.01], [-0.02, 0.01, 1.01]])
 MISALIGNMENT_DEG = (1.0, -0.5, 1.5)
-
-
-MODEL_TEXT = [
-    "The paper's model read for a field instead of gravity, once in CasADi (`imucal/mag/model.py`):", "",
-    "    h = R(r) P E^-T diag(1/b) (raw - s)", "",
-    "- **s**: the hard iron (the paper's shifts), **b** the scales and **phi, psi, theta** the paper's angles: "
-    "E^-T diag(1/b) is the soft iron as a lower-triangular matrix, which spans every ellipsoid "
-    "(raw - s)^T H (raw - s) = F^2 (Proposition 2): the field-norm residual |h| - F *is* the accelerometer's "
-    "|a| - g with F for g (`tests/test_mag_model.py` checks the two functions agree).",
-    "- **P**: how the chip is mounted, one of the 24 signed axis permutations (right-handed to right-handed), "
-    "found from the data (`imucal/mag/frame.py`); **R(r)**: a rotation by Euler angles rx, ry, rz, exact "
-    "(Rz Ry Rx, no small-angle approximation), to the accelerometer's frame.",
-    "- **F**: the field's magnitude: given (`MagSettings.field`, in the sensor's unit or in uT, nT, gauss, mG), "
-    "from the IGRF at a place and date (`MagSettings.place`, optional extra `imucal-nlp[mag]`: the `ppigrf` "
-    "package), or fitted with the scales' geometric mean held (`MagSettings.size`, 1 by default: a sensor "
-    "already in gauss keeps its factory scale on average).",
-    "- **dip**: the angle asin(a . h / |a||h|) between the field and the plane normal to gravity, fitted "
-    "(or held: `MagSettings.dip_deg`).", "",
-    "Evidence, one residual function whose first covariate says which kind a row is (`imucal/mag/evidence.py`):", "",
-    "| kind | residual | rows |", "|---|---|---|",
-    "| NORM | \\|h\\| - F | every sample (still or moving) |",
-    "| DIP | asin(a . h / \\|a\\|\\|h\\|) - dip, a the calibrated accelerometer | a pose's means: still intervals, "
-    "or short windows of a moving log in which the field turns less than 10 deg |",
-    "| SIZE | (ln b1 + ln b2 + ln b3)/3 - ln size | one, when F is fitted |",
-    "| SKEW | the skew part of the soft iron in the magnetometer's own axes | three, in the symmetric fit |", "",
-    "The fit is the accelerometer's least-squares path (`row_functions`, IPOPT, the block-QR covariance); "
-    "each row's noise is propagated from the readings' scatter by CasADi (`noise`), times one factor per "
-    "kind: its reduced chi-square (variance components) and its batch-means inflation (residuals that move "
-    "together in time count for less). **Symmetric or full soft iron**: the symmetric fit holds the soft iron "
-    "symmetric in the magnetometer's permuted axes (three SKEW rows; the magnetometer's axes are the "
-    "accelerometer's), the full fit frees the rotation between the frames, which only the DIP rows see; "
-    "an F test of the three constraints against the DIP rows' own degrees of freedom keeps the full form at "
-    "p < 0.001 (`SoftIronTest`). Without an accelerometer, only the ellipsoid is fitted.", "",
-    "What real 9-axis logs do, said rather than hidden (`imucal/mag/checks.py`): too few field directions "
-    "are refused, naming the cube directions to add (the observability check of the field-norm fit); a field "
-    "that steps between poses is named (CUSUM of the poses' |h| - F, p < 0.001 and above 0.5 %), and a pose "
-    "far off the rest is named and left out of the fit (up to three); the magnetometer's lag behind the "
-    "accelerometer is found by cross-correlating how fast each sensor's direction turns and shifted out; "
-    "a left-handed magnetometer (one axis wired inverted) is named when the field model's inclination has "
-    "the opposite sign of the fitted dip (the dip's constancy alone cannot tell a frame from its mirror).", "",
-    "Results are typed values (`imucal/mag/result.py`): the field-norm residual in % of F, before and after, "
-    "with the noise floor; the dip scatter as read, with the symmetric soft iron and aligned, with its floor; "
-    "the same per pose; the mounting in words (\"mx = ay, my = ax, mz = -az\"); the misalignment beyond the "
-    "symmetric soft iron (the rotation of the polar decomposition, in degrees).", ""]
 
 
 def _rms(x) -> float:
@@ -326,15 +282,16 @@ def main() -> int:
     acc_lines, acc = accelerometer_section(acc, mag)
     whole, cal = whole_log(mag, acc)
     s_full = np.array([cal.params[f"s{i}"].value for i in (1, 2, 3)])
-    text = ["# The magnetometer (issue 26)", "", *MODEL_TEXT,
-            f"# Study (`python scripts/mag_study.py --seeds {args.seeds}`, {{T}} s on this machine)", "",
+    text = ["# The magnetometer study", "",
+            f"Generated by `python studies/mag_study.py --seeds {args.seeds}` ({{T}} s on this machine). The model "
+            "and its choices: docs/magnetometer.md.", "",
             "The data: `../shared/data/real/magnetometer-ckexplorer` (CK-Explorer, Apache-2.0): `acc_mag_log.csv`, "
             "12,000 rows of ax, ay, az [g] and mx, my, mz [gauss], the board turned by hand through many "
             "orientations and never still for long; no time column and no stated rate.", "",
             *acc_lines, *whole, *cross_validation(mag, acc, s_full), *lag_section(mag, acc, cal),
             *monte_carlo(args.seeds)]
     out = "\n".join(text).replace("{T}", f"{time.perf_counter() - t0:.0f}")
-    write_text_atomic(ROOT / "docs" / "magnetometer.md", out)
+    write_text_atomic(ROOT / "studies" / "results" / "magnetometer_study.md", out)
     print(out)
     return 0
 
