@@ -1,8 +1,11 @@
-"""mkdocs hook: the Studies section of the site, from the studies' registry (studies/studies.yaml).
+"""mkdocs hook: the Studies section of the site, from the studies' registry (studies/studies.yaml), and a
+place in the navigation for every page.
 
 A study is listed once, in the registry; this hook puts every result page into the navigation under
 its group and writes the section's overview page (studies/index.md) with one line per study. The
 pages themselves are studies/results/*.md, which the site reads through the link docs/studies.
+A page under docs/ that mkdocs.yml does not list yet (a feature's new page) is added to the
+`In depth` section, so a reader finds it from the navigation; listing it in mkdocs.yml places it.
 """
 from __future__ import annotations
 
@@ -15,6 +18,8 @@ ROOT = Path(__file__).resolve().parents[1]
 REGISTRY = ROOT / "studies" / "studies.yaml"
 #: The nav entry mkdocs.yml leaves for this hook to fill.
 PLACEHOLDER = "Studies"
+#: The section that receives the pages mkdocs.yml does not list.
+UNLISTED_SECTION = "In depth"
 INDEX = "studies/index.md"
 
 
@@ -54,6 +59,30 @@ def overview() -> str:
     return "\n".join(lines)
 
 
+def _listed(nav) -> set[str]:
+    """Every page path the navigation names."""
+    if isinstance(nav, str):
+        return {nav}
+    if isinstance(nav, dict):
+        return set().union(*(_listed(v) for v in nav.values()))
+    if isinstance(nav, list):
+        return set().union(*(_listed(v) for v in nav)) if nav else set()
+    return set()
+
+
+def _place_unlisted(files: Files, config) -> None:
+    listed = _listed(config["nav"])
+    unlisted = sorted(f.src_uri for f in files.documentation_pages() if f.src_uri not in listed)
+    if not unlisted:
+        return
+    for item in config["nav"]:
+        if isinstance(item, dict) and UNLISTED_SECTION in item:
+            item[UNLISTED_SECTION] = list(item[UNLISTED_SECTION]) + unlisted
+            return
+    config["nav"].append({UNLISTED_SECTION: unlisted})
+
+
 def on_files(files: Files, config, **kwargs) -> Files:
     files.append(File.generated(config, INDEX, content=overview()))
+    _place_unlisted(files, config)
     return files

@@ -61,6 +61,21 @@ def test_the_strict_settings_refuse_a_broken_link(tmp_path):
     assert r.returncode != 0 and "guide.md" in r.stderr
 
 
+def test_a_page_missing_from_mkdocs_yml_is_still_in_the_navigation(tmp_path):
+    """A feature's new page under docs/ lands in the `In depth` section until mkdocs.yml places it, so a
+    reader finds it and the strict build stays green (scripts/mkdocs_studies.py)."""
+    (tmp_path / "docs").mkdir()
+    for name, title in (("index.md", "Home"), ("a.md", "Listed"), ("thermal.md", "Thermal calibration")):
+        (tmp_path / "docs" / name).write_text(f"# {title}\n")
+    cfg = {"site_name": "t", "hooks": [str(ROOT / "scripts" / "mkdocs_studies.py")],
+           "nav": [{"Home": "index.md"}, {"In depth": [{"Listed": "a.md"}]}, {"Studies": "studies/index.md"}]}
+    (tmp_path / "mkdocs.yml").write_text(yaml.safe_dump(cfg))
+    r = run("-m", "mkdocs", "build", "-f", str(tmp_path / "mkdocs.yml"), "-d", str(tmp_path / "site"))
+    assert r.returncode == 0, r.stderr[-2000:]
+    home = (tmp_path / "site" / "index.html").read_text(encoding="utf-8")
+    assert "thermal/" in home and "Thermal calibration" in home
+
+
 def test_every_inserted_block_equals_its_result_file():
     r = run(str(TOOL), "--check")
     assert r.returncode == 0, r.stdout
