@@ -301,7 +301,7 @@ def _statistics(fns, rows, data: FitData, params: Parameters, it: "_Iterated", p
         V, drift = _auto_rows_covariance(fns, rows, data, params, it, pfix, gravity)
         J = lsq.jacobians(fns, rows, it.p, pfix, gravity)[1]
         X = J[:, _movable(params, it.p)]
-        sigma = np.sqrt(np.diag(V))
+        sigma = np.sqrt(V if V.ndim == 1 else np.diag(V))
         # V's own chi-square is the V-weighted fit's (projected_chi2: about dof when V is right, whatever
         # weights gave the values): it scales the sandwich as lmfit's scale_covar, except for a walk's V,
         # the residuals' own (REML). The chi-square reported is at the values (a walk's V is full: V's own).
@@ -393,14 +393,15 @@ def _scales(params: Parameters, p_now, pfix) -> np.ndarray:
 
 def _auto_rows_covariance(fns, rows, data: FitData, params: Parameters, it: _Iterated, pfix, gravity: float
                           ) -> tuple[np.ndarray, "stochastic.BiasDrift | None"]:
-    """weights="auto": the covariance V of the interval means' residuals, and how far a walking bias moved.
+    """weights="auto": the covariance V of the interval means' residuals (its diagonal, as a vector, when
+    the bias does not walk), and how far a walking bias moved.
 
     V is each mean's noise plus the between-interval excess; with a bias random walk, plus the walk about
     its mean over the intervals (``Components.about_mean``, REML's variances), so that the offsets' errors
     are those of the bias averaged over the intervals: their epoch.
     """
-    if it.q2 <= 0:
-        return np.diag(it.sigma**2), None
+    if it.q2 <= 0:  # diagonal: its variances alone (an n x n matrix would be O(intervals^2) memory)
+        return it.sigma**2, None
     c = _components(fns, rows, data, params, it.p, pfix, gravity, it.sigma0)
     tau2, q2 = it.sto.chosen.tau2, it.sto.chosen.q2
     return c.about_mean(tau2, q2), stochastic.bias_drift(c, tau2, q2, _scales(params, it.p, pfix))
@@ -414,10 +415,13 @@ def _sandwich(J: np.ndarray, V: np.ndarray, k: float) -> np.ndarray:
     calibration fitting its own still poses up to 1.23 x worse than the uniform fit (the MPU-6050),
     with no better accuracy on the other recordings of the same sensor (ROS data2-4, each applied to
     the others). k scales V as lmfit's scale_covar does (V's own chi-square over dof), or is 1 when V
-    is the residuals' own (a walk's, REML).
+    is the residuals' own (a walk's, REML). ``V``: n x n, or its diagonal as a vector.
     """
     bread = unscaled_covariance(J)  # (J^T J)^-1
-    cov = bread @ (J.T @ V @ J) @ bread * k
+    # V diagonal: J^T diag(V), laid out as the product with the matrix was (C order), then J: the same
+    # numbers in O(n) memory
+    meat = (np.ascontiguousarray(J.T * V) if V.ndim == 1 else J.T @ V) @ J
+    cov = bread @ meat @ bread * k
     return 0.5 * (cov + cov.T)
 
 
