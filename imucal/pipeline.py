@@ -1,7 +1,7 @@
 """One calibration run: load, detect static intervals, guess, check observability, fit."""
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 import math
 from dataclasses import asdict, dataclass, replace
@@ -333,17 +333,50 @@ def _refuse_absurd(res: FitResult, params: Parameters, source: str) -> None:
                           + "check that the log holds still poses of one sensor and the data columns")
 
 
+#: Static samples whose residuals are computed at a time for the report's RMS over samples: the
+#: same pieces whether the file was read whole or in chunks, so the two give the same RMS to the bit.
+RMS_ROWS = 1 << 16
+
+
+def _fixed_pieces(blocks: Iterable[StaticSamples]) -> Iterator[StaticSamples]:
+    """The static samples of ``blocks``, in order, cut again into pieces of RMS_ROWS rows."""
+    held: list[StaticSamples] = []
+    count = 0
+    for blk in blocks:
+        held.append(blk)
+        count += blk.raw.shape[0]
+        if count >= RMS_ROWS:
+            joined, whole = _join_samples(held), count - count % RMS_ROWS
+            for i in range(0, whole, RMS_ROWS):
+                yield joined.rows(i, i + RMS_ROWS)
+            held, count = ([joined.rows(whole, count)] if count > whole else []), count - whole
+    if count:
+        yield _join_samples(held)
+
+
+def _join_samples(parts: list[StaticSamples]) -> StaticSamples:
+    if len(parts) == 1:
+        return parts[0]
+    temp = None if parts[0].temp is None else np.concatenate([p.temp for p in parts])
+    return StaticSamples(np.concatenate([p.raw for p in parts]), np.concatenate([p.t for p in parts]), temp)
+
+
 def _samples_rms(cal: Calibration, pb: _Problem, rec: Recording | RecordingSummary, iv: Intervals,
                  streamed: StreamedRecording | None, gravity: float) -> tuple[np.ndarray | None, float]:
-    """|a| - g of every static sample (None when streamed) and their RMS."""
+    """|a| - g of every static sample (None when streamed: not kept) and their RMS, summed over the
+    same pieces of RMS_ROWS samples either way."""
     if streamed is None:
-        r = sample_residuals(cal, pb.model, pb.samples if pb.samples is not None else static_samples(iv, rec), gravity)
-        return r, float(np.sqrt(float(np.dot(r, r)) / r.size))  # as the streamed sum
-    ss, m = 0.0, 0  # a block at a time: the samples were not kept (or are, in samples mode)
-    for blk in streamed.static_blocks():
-        r = sample_residuals(cal, pb.model, blk, gravity)
+        blocks: Iterable[StaticSamples] = [pb.samples if pb.samples is not None else static_samples(iv, rec)]
+    else:
+        blocks = streamed.static_blocks()
+    ss, m, kept = 0.0, 0, []
+    for piece in _fixed_pieces(blocks):
+        r = sample_residuals(cal, pb.model, piece, gravity)
         ss, m = ss + float(np.dot(r, r)), m + r.size
-    return None, float(np.sqrt(ss / m))
+        if streamed is None:
+            kept.append(r)
+    rms = float(np.sqrt(ss / m)) if m else float("nan")
+    return (np.concatenate(kept) if kept else np.empty(0)) if streamed is None else None, rms
 
 
 def calibrate(config: RunConfig, recording: Recording | None = None) -> CalibrationRun:

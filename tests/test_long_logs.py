@@ -3,12 +3,23 @@ their square. Memory is bounded by counting allocations (tracemalloc: numpy repo
 it), never by timing; the speed lives in scripts/bench_memory.py."""
 from __future__ import annotations
 
+import tempfile
 import tracemalloc
+from pathlib import Path
 
 import numpy as np
+import pytest
 
-from imucal.analysis.simulate import frame_matrix, mems_counts_sensor, random_directions
+import imucal.data.blocks as blocks_mod
+import imucal.data.spill as spill_mod
+from conftest import calibrate_file, write_simulation
+from imucal.analysis.simulate import cube_directions, frame_matrix, mems_counts_sensor, random_directions
+from imucal.calibration.fileformat import to_dict
 from imucal.constants import STANDARD_GRAVITY
+from imucal.data.load import load_recording
+from imucal.data.spec import DataSpec
+from imucal.data.static import detect_static
+from imucal.errors import ImucalError
 from imucal.model.parameters import base_parameters
 from imucal.model.sensor import build_model
 from imucal.solve.fit import FitData, _sandwich, fit
@@ -50,3 +61,120 @@ def test_the_sandwich_of_a_diagonal_is_that_of_its_matrix() -> None:
     rng = np.random.default_rng(1)
     J, v = rng.normal(size=(50, 9)), rng.uniform(0.5, 2.0, 50)
     assert _sandwich(J, v, 1.7).tobytes() == _sandwich(J, np.diag(v), 1.7).tobytes()
+
+
+# --- the reader in chunks: one parse, a binary spill, memory flat in the samples -------------------
+def _tiled(tmp_path: Path, k: int, jitter: bool = False) -> Path:
+    """A simulated 100 Hz counts recording of 26 poses, tiled ``k`` times (times continued), as
+    whitespace text; ``jitter``: stamps of a bursty logger (re-timed on a fitted clock)."""
+    r = write_simulation(tmp_path / "one.csv", mems_counts_sensor(np.random.default_rng(5)), cube_directions(), seed=5)
+    d = np.loadtxt(r.path, delimiter=",", skiprows=1)
+    span = d[-1, 0] - d[0, 0] + 0.01
+    rows = np.concatenate([d + [i * span, 0, 0, 0] for i in range(k)])
+    if jitter:  # arrival stamps: two samples read at once now and then, 0.4 ms apart
+        late = np.random.default_rng(1).uniform(size=len(rows)) < 0.2
+        rows[:, 0] += np.where(late, 0.0096, 0.0)
+        rows[1:, 0] = np.maximum(rows[1:, 0], rows[:-1, 0] + 4e-4)
+    path = tmp_path / f"tiled{k}{'j' if jitter else ''}.txt"
+    np.savetxt(path, rows, fmt=["%.5f", "%.0f", "%.0f", "%.0f"])
+    return path
+
+
+@pytest.fixture
+def small_blocks(monkeypatch):
+    """Blocks of a few thousand lines, read back from the spill in blocks of 5000 rows."""
+    monkeypatch.setattr(blocks_mod, "CHUNK_BYTES", 100_000)
+    monkeypatch.setattr(spill_mod, "SPILL_ROWS", 5000)
+
+
+@pytest.mark.parametrize("jitter", [False, True])
+def test_the_text_is_parsed_once(tmp_path, small_blocks, monkeypatch, jitter):
+    """Every block of text is parsed once, also when the stamps are jitter (their gaps found and the
+    times made again on the fitted clock, from the spill): the passes after the parse read numbers."""
+    from imucal.data.blocks import TextBlocks
+    from imucal.data.stream import StreamedRecording
+
+    path = _tiled(tmp_path, 2, jitter)
+    seen: list[int] = []
+    parse = TextBlocks.parse
+    monkeypatch.setattr(TextBlocks, "parse", lambda self, block, offset: seen.append(offset) or parse(self, block, offset))
+    s = StreamedRecording(DataSpec(path=str(path)))
+    assert s.recording.time_base.source.value == ("clock" if jitter else "stamps")
+    assert len(seen) > 5 and len(seen) == len(set(seen))
+    whole = detect_static(*_whole(path))
+    np.testing.assert_array_equal(s.intervals.mean, whole.mean)
+
+
+def _whole(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    rec = load_recording(str(path))
+    return rec.t, rec.raw
+
+
+def test_memory_is_flat_in_the_samples(tmp_path, small_blocks, monkeypatch):
+    """Ten times the samples, about the same peak allocation: the rows and the moving variance are
+    spilled, not kept (once 36 bytes a sample), so only a few numbers per interval grow. (The fixed
+    buffers, made small here, and the head the layout is read from, 1 MB, are reached by both sizes.)"""
+    import imucal.data.static as static_mod
+    from imucal.data.stream import StreamedRecording
+
+    monkeypatch.setattr(static_mod, "VAR_BLOCK", 997)
+    monkeypatch.setattr(static_mod, "_SWEEP", 4096)
+    StreamedRecording(DataSpec(path=str(_tiled(tmp_path, 1))))  # the modules it imports are no sample's
+    peaks = []
+    for k in (4, 40):
+        path = _tiled(tmp_path, k)
+        tracemalloc.start()
+        try:
+            s = StreamedRecording(DataSpec(path=str(path)))
+            for _ in s.static_blocks():
+                pass
+            peaks.append(tracemalloc.get_traced_memory()[1])
+        finally:
+            tracemalloc.stop()
+        n = s.recording.n
+    assert peaks[1] - peaks[0] < 1.0 * (n - n // 10), [p / 2**20 for p in peaks]  # under a byte a sample
+
+
+def test_the_spill_leaves_nothing_behind(tmp_path, small_blocks, monkeypatch):
+    """The spills have no name in the temporary folder, during the run and after it, also when the
+    run is refused late in the file."""
+    from imucal.data.stream import StreamedRecording
+
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp))
+    path = _tiled(tmp_path, 1)
+    s = StreamedRecording(DataSpec(path=str(path)))
+    assert list(tmp.iterdir()) == [] and s.intervals.n == 26
+    bad = tmp_path / "bad.txt"
+    bad.write_text(path.read_text() + "1e9 1 2 3\n0.5 1 2 3\n")
+    with pytest.raises(ImucalError, match="time is not strictly increasing"):
+        StreamedRecording(DataSpec(path=str(bad)))
+    assert list(tmp.iterdir()) == []
+
+
+def test_a_spill_that_cannot_be_made_is_one_line(tmp_path, monkeypatch, run_cli):
+    """No temporary folder to spill into: one line naming it and the way out, exit 2, nothing written."""
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "missing"))
+    path = _tiled(tmp_path, 1)
+    out = tmp_path / "out"
+    res = run_cli(["calibrate", "--data", str(path), "--out", str(out), "--stream", "always", "--no-figures"])
+    assert res.code == 2 and not out.exists()
+    lines = res.err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("imucal: error: data.stream: cannot write the parsed rows to a "
+                                                   f"temporary file in {tmp_path / 'missing'}"), res.err
+    assert "(fix: free space there or point TMPDIR to a folder" in lines[0]
+
+
+@pytest.mark.parametrize("mode", ["means", "samples"])
+def test_whole_and_in_chunks_give_the_same_calibration_file(tmp_path, small_blocks, mode):
+    """The calibration files of the two readers agree value by value (the residuals' RMS over
+    samples summed over the same pieces either way), but for the time they were written."""
+    path = _tiled(tmp_path, 2)
+    got = {}
+    for how in ("never", "always"):
+        run = calibrate_file(path, data={"stream": how}, fit={"mode": mode})
+        d = to_dict(run.calibration)
+        d.pop("created")
+        got[how] = d
+    assert got["never"] == got["always"]

@@ -13,7 +13,8 @@ from hypothesis import strategies as st
 
 import imucal.data.static as static_mod
 import imucal.data.load as load_mod
-import imucal.data.stream as stream_mod
+import imucal.data.blocks as blocks_mod
+import imucal.data.spill as spill_mod
 from conftest import real_file
 from imucal.data.load import load_recording
 from imucal.data.spec import DataSpec
@@ -29,7 +30,8 @@ INTERVAL_FIELDS = ("start", "end", "t_start", "t_end", "mean", "std", "mean_std"
 
 @pytest.fixture(autouse=True)
 def small_chunks(monkeypatch):
-    monkeypatch.setattr(stream_mod, "CHUNK_BYTES", 50_000)
+    monkeypatch.setattr(blocks_mod, "CHUNK_BYTES", 50_000)
+    monkeypatch.setattr(spill_mod, "SPILL_ROWS", 997)  # the spill read back in uneven blocks
     monkeypatch.setattr(static_mod, "VAR_BLOCK", 997)
 
 
@@ -177,7 +179,7 @@ def test_bad_value_deep_in_the_file_names_the_same_line(tmp_path, token, col, me
 
 
 def test_bad_field_at_row_three_million_exits_2_and_writes_nothing(tmp_path, run_cli, unchanged, monkeypatch):
-    monkeypatch.setattr(stream_mod, "CHUNK_BYTES", 16 * 1024**2)
+    monkeypatch.setattr(blocks_mod, "CHUNK_BYTES", 16 * 1024**2)
     p = tmp_path / "long.txt"
     n, bad = 3_000_010, 3_000_000
     t = np.char.mod("%.2f", np.arange(n) * 0.01)
@@ -214,7 +216,7 @@ _LINE = st.lists(_TOKENS, min_size=1, max_size=6).flatmap(
        eol=st.sampled_from(["\n", "\r\n", "\x0c"]))
 @settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 def test_odd_text_gives_the_loaders_answer(tmp_path, monkeypatch, lines, rate, eol):
-    monkeypatch.setattr(stream_mod, "CHUNK_BYTES", 16)  # a block a line or two
+    monkeypatch.setattr(blocks_mod, "CHUNK_BYTES", 16)  # a block a line or two
     p = tmp_path / "f.txt"
     p.write_text(eol.join(["0 1 2 3"] + lines) + "\n", newline="")
     spec = DataSpec(path=str(p), sample_rate=rate)

@@ -75,11 +75,13 @@ def test_a_slow_start_is_cut_where_it_began():
 
 
 def test_streamed_slow_recording_gives_the_same_intervals(tmp_path, monkeypatch):
-    import imucal.data.stream as stream_mod
+    import imucal.data.blocks as blocks_mod
+    import imucal.data.spill as spill_mod
     from imucal.data.spec import DataSpec
     from imucal.data.stream import StreamedRecording
 
-    monkeypatch.setattr(stream_mod, "CHUNK_BYTES", 50_000)
+    monkeypatch.setattr(blocks_mod, "CHUNK_BYTES", 50_000)
+    monkeypatch.setattr(spill_mod, "SPILL_ROWS", 997)
     _, sim = _slow_recording("counts", seed=2)
     path = tmp_path / "slow.csv"
     path.write_text(sim.to_csv_text())

@@ -217,9 +217,11 @@ def same_time_base(a, b) -> None:
 @pytest.fixture
 def small_chunks(monkeypatch):
     """Blocks of a few hundred lines: every file spans many of them (as tests/test_stream.py)."""
-    import imucal.data.stream as stream_mod
+    import imucal.data.blocks as blocks_mod
+    import imucal.data.spill as spill_mod
 
-    monkeypatch.setattr(stream_mod, "CHUNK_BYTES", 20_000)
+    monkeypatch.setattr(blocks_mod, "CHUNK_BYTES", 20_000)
+    monkeypatch.setattr(spill_mod, "SPILL_ROWS", 997)
 
 
 @pytest.fixture

@@ -116,6 +116,10 @@ class StaticSamples:
     t: np.ndarray  #: (m,) [s]
     temp: np.ndarray | None
 
+    def rows(self, a: int, b: int) -> "StaticSamples":
+        """Samples a to b - 1."""
+        return StaticSamples(self.raw[a:b], self.t[a:b], None if self.temp is None else self.temp[a:b])
+
 
 @dataclass(frozen=True)
 class RecordingSummary:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from typing import BinaryIO
 
 import numpy as np
 
@@ -180,33 +181,99 @@ def _f32(v: np.ndarray) -> np.ndarray:
     return np.minimum(v, _F32_MAX).astype(np.float32)  # a variance beyond float32 saturates
 
 
-class VarianceSeries:
-    """A moving-variance series (float32) held as pieces: one a block, never joined, so a long log
-    needs no second copy. Order statistics by a radix select over the float32 bit patterns."""
+class VarianceStore:
+    """Where a moving-variance series' blocks (float32) go as they are computed: a list in memory,
+    or (``spill``) an unnamed temporary file, so that a long log's series takes no memory
+    (imucal.data.stream). Read back in steps of at most _SWEEP values."""
 
-    def __init__(self, parts: list[np.ndarray]) -> None:
-        self.parts = [p for p in parts if p.size]
-        self.size = sum(p.size for p in self.parts)
+    def __init__(self, spill: BinaryIO | None = None) -> None:
+        self.spill = spill
+        self.parts: list[np.ndarray] = []
+        self.size = 0
+
+    def append(self, x: np.ndarray) -> None:
+        x = np.ascontiguousarray(x, np.float32)
+        if self.spill is None:
+            self.parts.append(x)
+        else:
+            self.spill.write(memoryview(x).cast("B"))
+        self.size += x.size
+
+    def first(self) -> float:
+        """The first value stored (a series' head padding)."""
+        if self.spill is None:
+            return float(self.parts[0][0])
+        self.spill.seek(0)
+        return float(np.frombuffer(self.spill.read(4), np.float32)[0])
+
+    def close(self) -> None:
+        """Release the spill (its file has no name: nothing is left behind)."""
+        if self.spill is not None:
+            self.spill.close()
 
     def steps(self) -> Iterator[np.ndarray]:
-        for p in self.parts:
-            for i in range(0, p.size, _SWEEP):
-                yield p[i:i + _SWEEP]
+        if self.spill is None:
+            for p in self.parts:
+                for i in range(0, p.size, _SWEEP):
+                    yield p[i:i + _SWEEP]
+            return
+        self.spill.flush()
+        self.spill.seek(0)
+        left = self.size
+        while left:
+            x = np.empty(min(left, _SWEEP), np.float32)
+            if self.spill.readinto(memoryview(x).cast("B")) != x.nbytes:  # pragma: no cover - the file is ours
+                raise OSError("the moving-variance spill ended early")
+            left -= x.size
+            yield x
+
+
+class VarianceSeries:
+    """A moving-variance series (float32): a head and a tail of padding around the computed values
+    (in memory or spilled: VarianceStore), never joined, so a long log needs no copy of it. Order
+    statistics by a radix select over the float32 bit patterns."""
+
+    def __init__(self, store: VarianceStore | None = None, head: np.ndarray | None = None,
+                 tail: np.ndarray | None = None) -> None:
+        empty = np.empty(0, np.float32)
+        self.store = store if store is not None else VarianceStore()
+        self.head = empty if head is None else head
+        self.tail = empty if tail is None else tail
+        self.size = self.head.size + self.store.size + self.tail.size
+
+    def steps(self) -> Iterator[np.ndarray]:
+        """The series in order, at most _SWEEP values a step."""
+        for i in range(0, self.head.size, _SWEEP):
+            yield self.head[i:i + _SWEEP]
+        yield from self.store.steps()
+        for i in range(0, self.tail.size, _SWEEP):
+            yield self.tail[i:i + _SWEEP]
 
     def array(self) -> np.ndarray:
-        return np.concatenate(self.parts) if self.parts else np.empty(0, np.float32)
+        parts = list(self.steps())
+        return np.concatenate(parts) if parts else np.empty(0, np.float32)
 
     def _order_statistics(self, ks: list[int]) -> list[float]:
-        """The values at 0-based ranks ``ks`` (exact): a histogram of the top 16 bits of the
-        (non-negative, so monotonic) bit patterns, then a sort of the bins holding them."""
+        """The values at 0-based ranks ``ks`` (exact) in two steps of 16 bits of the (non-negative,
+        so monotonic) bit patterns: a histogram of the top 16 bits finds each rank's bin, a
+        histogram of the low 16 bits of the values in that bin finds the value. Two passes, memory
+        a few histograms, whatever the length."""
         hist = np.zeros(1 << 16, np.int64)
         for x in self.steps():
             hist += np.bincount(x.view(np.uint32) >> 16, minlength=1 << 16)
         cum = np.cumsum(hist)
         bins = {k: int(np.searchsorted(cum, k, side="right")) for k in ks}
-        vals = {b: np.sort(np.concatenate([x[(x.view(np.uint32) >> 16) == b] for x in self.steps()]))
-                for b in set(bins.values())}
-        return [float(vals[bins[k]][k - (int(cum[bins[k] - 1]) if bins[k] else 0)]) for k in ks]
+        low = {b: np.zeros(1 << 16, np.int64) for b in set(bins.values())}
+        for x in self.steps():
+            bits = x.view(np.uint32)
+            for b, h in low.items():
+                h += np.bincount(bits[(bits >> 16) == b] & 0xFFFF, minlength=1 << 16)
+        out = []
+        for k in ks:
+            b = bins[k]
+            c = int(np.searchsorted(np.cumsum(low[b]), k - (int(cum[b - 1]) if b else 0), side="right"))
+            out.append(float(np.array([(b << 16) | c], np.uint32).view(np.float32)[0]))
+        return out
 
     def percentile(self, q: float) -> float:
         """The q-th percentile, linear between order statistics (numpy's default method)."""
@@ -217,17 +284,23 @@ class VarianceSeries:
 
 
 class MovingVariance:
-    """Centred moving variance of a recording fed in chunks of rows (float32, one value a sample).
+    """Centred moving variance of a recording fed in chunks of rows (float32, one value a sample),
+    into ``store`` (memory by default).
 
     The window of sample i is ``x[lo:lo + w]`` with ``lo = clip(i - w // 2, 0, n - w)``: the
     variance of the windows that fit, padded with the first and last at the ends.
     """
 
-    def __init__(self, w: int) -> None:
+    def __init__(self, w: int, store: VarianceStore | None = None) -> None:
         self.w = int(w)
         self.n = 0
         self._buf: np.ndarray | None = None  # samples from the next window start on
-        self._blocks: list[np.ndarray] = []
+        self._store = store if store is not None else VarianceStore()
+        self._last: np.ndarray | None = None  # the last block computed
+
+    def _put(self, block: np.ndarray) -> None:
+        self._store.append(block)
+        self._last = block
 
     def add(self, x: np.ndarray) -> None:
         self.n += x.shape[0]
@@ -235,7 +308,7 @@ class MovingVariance:
         span = VAR_BLOCK + self.w - 1
         k = 0
         while self._buf.shape[0] - k >= span:
-            self._blocks.append(_f32(_window_variance(self._buf[k:k + span], self.w)))
+            self._put(_f32(_window_variance(self._buf[k:k + span], self.w)))
             k += VAR_BLOCK
         if k:
             self._buf = self._buf[k:].copy()
@@ -243,18 +316,18 @@ class MovingVariance:
     def finish(self) -> VarianceSeries:
         n, buf = self.n, self._buf
         if buf is None or n == 0:
-            return VarianceSeries([])
+            return VarianceSeries()
         w = max(2, min(self.w, n))
         if w != self.w:  # fewer samples than a window: nothing was computed yet
-            self._blocks = []
+            self._store = VarianceStore(self._store.spill)
         for j0 in range(0, buf.shape[0] - w + 1, VAR_BLOCK):
-            self._blocks.append(_f32(_window_variance(buf[j0:j0 + VAR_BLOCK + w - 1], w)))
+            self._put(_f32(_window_variance(buf[j0:j0 + VAR_BLOCK + w - 1], w)))
         self._buf = None
-        blocks, self._blocks = self._blocks, []
         half = w // 2
-        tail = n - half - sum(b.size for b in blocks)
-        return VarianceSeries([np.full(half, blocks[0][0], np.float32), *blocks,
-                               np.full(tail, blocks[-1][-1], np.float32)])
+        store, self._store = self._store, VarianceStore()
+        tail = n - half - store.size
+        return VarianceSeries(store, np.full(half, store.first(), np.float32),
+                              np.full(tail, self._last[-1], np.float32))
 
 
 def moving_variance(x: np.ndarray, w: int) -> np.ndarray:
@@ -310,13 +383,20 @@ def window_samples(settings: StaticSettings, dt: float) -> int:
 
 def candidate_runs(var: VarianceSeries, threshold: float, trim: int) -> tuple[np.ndarray, np.ndarray]:
     """Runs of samples at or below the threshold, ``trim`` samples cut from each end, 3 or more
-    left: (first, one past last). The minimum duration is checked on their time stamps."""
-    still = np.concatenate([x <= np.float64(threshold) for x in var.parts])  # compared in double precision
-    zero = np.zeros(1, np.int8)
-    edges = np.diff(np.concatenate([zero, still.view(np.int8), zero]))
-    del still
-    a = np.flatnonzero(edges == 1) + trim
-    b = np.flatnonzero(edges == -1) - trim
+    left: (first, one past last). The minimum duration is checked on their time stamps. One pass
+    over the series in steps: memory a step and the runs."""
+    starts, ends = [], []
+    at, before = 0, np.zeros(1, np.int8)  # the sample before the step: still (1) or not (0)
+    for x in var.steps():
+        still = (x <= np.float64(threshold)).view(np.int8)  # compared in double precision
+        edges = np.diff(np.concatenate([before, still]))
+        starts.append(np.flatnonzero(edges == 1) + at)
+        ends.append(np.flatnonzero(edges == -1) + at)
+        at, before = at + x.size, still[-1:]
+    if before[0]:
+        ends.append(np.array([at]))
+    a = np.concatenate(starts or [np.empty(0, np.int64)]).astype(np.int64) + trim
+    b = np.concatenate(ends or [np.empty(0, np.int64)]).astype(np.int64) - trim
     ok = b - a >= 3
     return a[ok], b[ok]
 
@@ -324,6 +404,20 @@ def candidate_runs(var: VarianceSeries, threshold: float, trim: int) -> tuple[np
 def edge_samples(dt: float) -> int:
     """Rows of the edge test's shortest running mean for a sample step ``dt`` [s]."""
     return max(EDGE_MIN_SAMPLES, int(round(EDGE_WINDOW / dt)))
+
+
+def _mean_rows(x: np.ndarray) -> np.ndarray:
+    """``x.mean(axis=0)``, the same numbers without numpy's Python wrapper (tens of thousands of
+    intervals call it)."""
+    return np.add.reduce(x, axis=0) / x.shape[0]
+
+
+def _std_rows(x: np.ndarray, ddof: int = 0) -> np.ndarray:
+    """``x.std(axis=0, ddof=ddof)``, the same numbers (numpy's own steps) without its Python wrapper."""
+    n = x.shape[0]
+    d = x - np.add.reduce(x, axis=0, keepdims=True) / n
+    np.square(d, out=d)
+    return np.sqrt(np.add.reduce(d, axis=0) / max(n - ddof, 0))
 
 
 @dataclass(frozen=True)
@@ -345,9 +439,9 @@ class _Line:
         c = slice(n // 4, n - n // 4)
         core, rc = x[c], r[c]
         lever = float(rc @ rc)
-        mu = core.mean(axis=0)
+        mu = _mean_rows(core)
         beta = (rc @ (core - mu)) / lever
-        white = np.diff(core, axis=0).std(axis=0, ddof=1) / np.sqrt(2)
+        white = _std_rows(core[1:] - core[:-1], ddof=1) / np.sqrt(2)
         floor = np.maximum(q / np.sqrt(12), 64 * np.finfo(float).eps * (np.abs(mu) + 1))
         drift = np.abs(beta) * np.sqrt(lever) > EDGE_SLOPE_Z * np.maximum(white, floor)
         beta = np.where(drift, beta, 0.0)
@@ -375,7 +469,7 @@ def _edge_cut(line: _Line, m: int) -> tuple[int, int] | None:
     np.cumsum(res, axis=0, out=cs[1:])
     scales, rows, w = [], [], m
     while w * EDGE_CORE_WINDOWS <= line.nc or not scales:  # one row's noise at each scale
-        rows.append(np.maximum(_running(cs[c0:c1 + 1], w).std(axis=0) * np.sqrt(w),
+        rows.append(np.maximum(_std_rows(_running(cs[c0:c1 + 1], w)) * np.sqrt(w),
                                np.maximum(line.white, line.floor) if not rows else rows[-1]))
         scales.append(w)
         w *= 2
@@ -478,19 +572,19 @@ def segment(start: int, seg: np.ndarray, t: np.ndarray, temp: np.ndarray | None,
     temperatures; ``lows``/``highs``: the recording's extreme value of each axis. Few numpy calls
     per interval: a long log holds tens of thousands."""
     n = seg.shape[0]
-    mean = seg.mean(axis=0)
+    mean = _mean_rows(seg)
     std = _std(seg, mean)
     ratios: list = []
     nb = n // _BATCHES
     if nb >= 2:
-        bm = seg[: nb * _BATCHES].reshape(_BATCHES, nb, 3).mean(axis=1)
+        bm = np.add.reduce(seg[: nb * _BATCHES].reshape(_BATCHES, nb, 3), axis=1) / nb  # batch means
         white = std ** 2 / nb
         ok = white > 0
-        ratios = (_std(bm, bm.mean(axis=0))[ok] ** 2 / white[ok]).tolist()
+        ratios = (_std(bm, _mean_rows(bm))[ok] ** 2 / white[ok]).tolist()
     srt = np.sort(seg, axis=0)
     cut = int(np.floor(SATURATION_TRIM * n))
     core = srt[cut:n - cut]
-    scatter = _std(core, core.mean(axis=0)) if core.shape[0] > 1 else np.zeros(3)
+    scatter = _std(core, _mean_rows(core)) if core.shape[0] > 1 else np.zeros(3)
     lo_, hi_ = srt[0], srt[-1]
     at_low, at_high = np.zeros(3), np.zeros(3)
     for j in range(3):  # only an interval that reaches an extreme counts its samples there
@@ -501,7 +595,8 @@ def segment(start: int, seg: np.ndarray, t: np.ndarray, temp: np.ndarray | None,
     rl, rh = (declared or {}).get("low"), (declared or {}).get("high")
     no = np.zeros(3, bool)
     return Segment(start=start, end=start + n, t_start=float(t[0]), t_end=float(t[-1]), mean=mean, std=std,
-                   ratios=ratios, t_mid=float(t.mean()), temp=None if temp is None else float(temp.mean()),
+                   ratios=ratios, t_mid=float(np.add.reduce(t) / t.size),
+                   temp=None if temp is None else float(np.add.reduce(temp) / temp.size),
                    scatter=scatter, at_low=at_low, at_high=at_high,
                    hit_low=no if rl is None else lo_ <= rl, hit_high=no if rh is None else hi_ >= rh)
 

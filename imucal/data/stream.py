@@ -1,24 +1,24 @@
-"""Long recordings in bounded memory: read in blocks of lines, detect static intervals on the way,
-keep only what the fit needs.
+"""Long recordings in bounded memory: the text parsed once, static intervals detected from a binary
+spill of its numbers, only what the fit needs kept.
 
 The rules are the whole-file reader's (imucal.data.layout: header, column roles; imucal.data.lines:
 the same one-line errors for the same bad line; imucal.data.timebase: the time base) and
-imucal.data.static's (the same moving variance, threshold and per-interval
-statistics, computed by the same functions), so the intervals and the fit are those of the
-in-memory path. Numbers are parsed by pandas' C parser, a block of about CHUNK_BYTES at a time;
-a block it reads differently from numpy.loadtxt (anything unusual: quotes, NaN, too few columns,
-exotic line breaks) is parsed line by line (imucal.data.lines.parse_block), which names the bad line.
+imucal.data.static's (the same moving variance, threshold and per-interval statistics, computed by
+the same functions), so the intervals and the fit are those of the in-memory path. The text is read
+in blocks of about CHUNK_BYTES (imucal.data.blocks: pandas' C parser, or line by line for anything
+unusual, which names the bad line).
 
-Passes over the file: 1. parse, SHA-256, time base, moving variance (float32, 4 bytes a sample)
-and its threshold; 2. the statistics of each still interval (and its samples in samples mode);
-3. (means mode, after the fit) the residual of every static sample. Memory: the variance series,
-one block, and a few numbers per interval.
+One pass over the text: parse, SHA-256, value and time-stamp checks, the stamps' step statistics,
+and the moving variance with the window guessed from the first block; the numbers go to a binary
+spill (imucal.data.spill: float64, in an unnamed temporary file). Every later pass reads the spill:
+the gaps of the stamps (when they are jitter or have a long step), the moving variance again in the
+rare case the guessed window or time unit was wrong (or the stamps are jitter: the times are then
+made on the fitted clock), the statistics of each still interval, and after the fit the residual of
+every static sample. The moving-variance series is spilled too (float32). Memory: a block, the
+histograms of the threshold, and a few numbers per interval, whatever the length of the log.
 """
 from __future__ import annotations
 
-import csv
-import hashlib
-import io
 import os
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -27,159 +27,19 @@ from pathlib import Path
 import numpy as np
 
 from imucal.constants import TIME_UNITS
-from imucal.data.layout import Layout, file_head
-from imucal.data.lines import (MAX_STREAM_BYTES, check_lines, check_text, corrupt_value, lineno, no_rows,
-                               not_increasing, not_utf8, parse_block, plain_text, unparsed)
+from imucal.data.blocks import TextBlocks
+from imucal.data.lines import corrupt_value, no_rows, not_increasing
+from imucal.data.recording import MAX_ABS_VALUE, RecordingSummary, StaticSamples, TimeBase
 from imucal.data.spec import DataSpec, as_spec, resolve_path
+from imucal.data.spill import RowSpill, temporary_file
+from imucal.data.static import (QUANTUM_ROWS, Intervals, MovingVariance, Segment, StaticSettings, VarianceStore,
+                                auto_threshold, candidate_runs, edge_samples, intervals_from, quantum, still_segment,
+                                window_samples)
 from imucal.data.timebase import (CLOCK_SPAN, GAP_STEPS, Decision, GapFinder, LagDiffs, StepStats, ValueCounts,
                                   clock_times, decide, gap_excess, rate_time_base, refine, time_base,
                                   time_unit_from_step)
-from imucal.data.static import (QUANTUM_ROWS, Intervals, MovingVariance, Segment, StaticSettings, VarianceSeries,
-                                auto_threshold, candidate_runs, edge_samples, intervals_from, quantum, still_segment,
-                                window_samples)
-from imucal.data.recording import MAX_ABS_VALUE, RecordingSummary, StaticSamples, TimeBase
 from imucal.errors import ImucalError
 from imucal.solve.stats import median
-from imucal.files.inputs import open_regular
-from imucal.report.progress import progress
-
-#: Bytes parsed at a time (whole lines).
-CHUNK_BYTES = 16 * 1024**2
-#: Parsed samples kept after the first pass, so that the next ones need not parse the file again,
-#: while they fit in this many bytes (raw, t and temperature as float64).
-CACHE_BYTES = 256 * 1024**2
-
-
-class _File:
-    """A recording's body in blocks of whole lines (with their byte offsets and parsed rows); the
-    file is refused if it changes between passes."""
-
-    def __init__(self, spec: DataSpec, path: Path) -> None:
-        self.spec, self.path = spec, path
-        fd, self.size = open_regular(path, field="data.path", max_bytes=MAX_STREAM_BYTES,
-                                     fix="check the path (relative paths are relative to the YAML file)")
-        st = os.fstat(fd)
-        self.stamp = (st.st_size, st.st_mtime_ns, st.st_ino)
-        os.close(fd)
-        self.sha = ""
-        #: numbers numpy could not read in an earlier block, no line found wrong there: later
-        #: lines are checked one by one for a message naming one (as the loader does), else this
-        self.unparsed: ImucalError | None = None
-        self.lay, self.offset = self._head()
-        self._counted = (self.offset, self.lay.body_first)
-
-    def _open(self) -> io.BufferedReader:
-        fd, _ = open_regular(self.path, field="data.path", max_bytes=MAX_STREAM_BYTES)
-        st = os.fstat(fd)
-        if (st.st_size, st.st_mtime_ns, st.st_ino) != self.stamp:
-            os.close(fd)
-            raise ImucalError("changed while it was being read", file=str(self.path), field="data.path",
-                              fix="calibrate a copy that no program is writing to")
-        return os.fdopen(fd, "rb")
-
-    def _head(self) -> tuple[Layout, int]:
-        """Header and layout from the head of the file; byte offset of the body."""
-        with self._open() as f:
-            return file_head(f, self.spec, self.path)
-
-    def line_at(self, offset: int) -> int:
-        """Line number of the line starting at byte ``offset`` of the body (counted when a message
-        needs it, from the last one counted)."""
-        at, line = self._counted
-        if offset < at:
-            at, line = self.offset, self.lay.body_first
-        with self._open() as f:
-            f.seek(at)
-            while at < offset:
-                data = f.read(min(CHUNK_BYTES, offset - at))
-                if not data:
-                    break
-                line += data.count(b"\n")
-                at += len(data)
-        self._counted = (offset, line)
-        return line
-
-    def blocks(self, hash_it: bool = False) -> Iterator[tuple[int, bytes]]:
-        """(byte offset, bytes of whole lines) from the body on; the SHA-256 of the whole file is
-        left in ``self.sha`` when ``hash_it``."""
-        h = hashlib.sha256() if hash_it else None
-        at = self.offset
-        shown = progress(f"reading {self.path.name}", total=self.stamp[0], unit="B", scale=True)
-        with self._open() as f, shown as step:
-            if h is not None:
-                h.update(f.read(self.offset))
-            else:
-                f.seek(self.offset)
-            carry = b""
-            while True:
-                data = f.read(CHUNK_BYTES)
-                step(len(data))  # a bar on a terminal (imucal.report.progress)
-                if h is not None:
-                    h.update(data)
-                if not data:
-                    if carry.strip():
-                        yield at, carry
-                    break
-                buf = carry + data
-                check_text(buf, self.path, lambda: self.line_at(at))  # a sparse tail or a line without end stops here
-                cut = buf.rfind(b"\n") + 1
-                if cut == 0:
-                    carry = buf
-                    continue
-                block, carry = buf[:cut], buf[cut:]
-                yield at, block
-                at += cut
-            if f.tell() != self.stamp[0]:
-                raise ImucalError("changed while it was being read", file=str(self.path), field="data.path",
-                                  fix="calibrate a copy that no program is writing to")
-        if h is not None:
-            self.sha = h.hexdigest()
-
-    def parse(self, block: bytes, offset: int) -> np.ndarray:
-        """The used columns of a block's rows (roles order), or the loader's message for its first bad line."""
-        lay = self.lay
-        if self.unparsed is not None:
-            check_lines(self._lines(block), self.line_at(offset), lay.delimiter, lay.usecols, self.path)
-            return np.empty((0, len(lay.usecols)))
-        if plain_text(block):
-            # imported here: pandas adds about 0.3 s to start-up, which a short recording read whole
-            # never pays (the measured start-up of `imucal calibrate` in docs/benchmarks.md)
-            import pandas as pd
-
-            try:
-                df = pd.read_csv(io.BytesIO(block), sep=lay.delimiter or r"\s+", header=None, usecols=lay.usecols,
-                                 dtype=np.float64, comment="#", skip_blank_lines=True, quoting=csv.QUOTE_NONE,
-                                 engine="c")
-                arr = df[lay.usecols].to_numpy(dtype=np.float64)
-                if np.isfinite(arr).all():
-                    return arr
-            except (ValueError, IndexError, pd.errors.ParserError, pd.errors.EmptyDataError):
-                pass
-        lines = self._lines(block)
-        if not any(ln.strip() and not ln.lstrip().startswith("#") for ln in lines):
-            return np.empty((0, len(lay.usecols)))
-        try:
-            return parse_block(lines, self.line_at(offset), lay.delimiter, lay.usecols, self.path)
-        except ImucalError as exc:
-            if exc.message != unparsed(self.path).message:
-                raise
-            self.unparsed = exc
-            return np.empty((0, len(lay.usecols)))
-
-    def _lines(self, block: bytes) -> list[str]:
-        try:
-            return block.decode("utf-8").splitlines()
-        except UnicodeDecodeError:
-            raise not_utf8(self.path) from None
-
-    def rows(self, hash_it: bool = False) -> Iterator[tuple[int, bytes, np.ndarray]]:
-        """(byte offset, block, its rows) of every block."""
-        for offset, block in self.blocks(hash_it):
-            yield offset, block, self.parse(block, offset)
-
-    def line_of(self, block: bytes, offset: int, k: int) -> int:
-        """File line of data row ``k`` of the block at ``offset``."""
-        return lineno(block.decode("utf-8").splitlines(), k, self.line_at(offset))
 
 
 class _Steps(ValueCounts):
@@ -204,7 +64,6 @@ class _Clock:
     dec: Decision  #: refined (imucal.data.timebase.refine)
     gap_index: np.ndarray
     gap_step: np.ndarray  #: in the stamps' unit, on the refined clock
-    decided: Decision  #: before refinement: a later pass that decides the same reuses the gaps
 
     @property
     def cum(self) -> np.ndarray:
@@ -212,56 +71,52 @@ class _Clock:
 
 
 @dataclass
+class _Parsed:
+    """What the one pass over the text learnt, besides the numbers it spilled."""
+
+    n: int = 0
+    t_first: float = 0.0  #: first stamp as read (0 without stamps)
+    last_stamp: float | None = None
+    big: ImucalError | None = None  #: the first value beyond MAX_ABS_VALUE
+    order: ImucalError | None = None  #: the first stamp that does not increase
+    lows: np.ndarray = field(default_factory=lambda: np.full(3, np.inf))
+    highs: np.ndarray = field(default_factory=lambda: np.full(3, -np.inf))
+    stamp_steps: _Steps = field(default_factory=_Steps)
+    spans: LagDiffs = field(default_factory=LagDiffs)  #: its tail: the last CLOCK_SPAN stamps
+    head_stamps: list = field(default_factory=list)  #: the first CLOCK_SPAN stamps
+    head_raw: list = field(default_factory=list)  #: the first QUANTUM_ROWS readings
+    blocks: list = field(default_factory=list)  #: (byte offset, bytes, first row) of each block with rows
+
+
+@dataclass
+class _Timing:
+    """The times of every sample in one unit (on one clock) and the moving variance with one window,
+    accumulated block by block: the window is guessed from the first block when not given."""
+
+    unit: str | None
+    w: int | None
+    clock: _Clock | None
+    t_steps: _Steps = field(default_factory=_Steps)
+    t_last: float = 0.0
+    mv: MovingVariance | None = None
+
+
+@dataclass
 class _Scan:
-    """What pass 1 learnt."""
+    """The time base and the detector's inputs, decided from the whole file."""
 
     n: int
     unit: str
     note: str
-    t_first: float  #: first stamp as read (0 without stamps)
+    t_first: float
     t_last: float  #: last sample's time [s] from the first
     dt: float  #: median step of t [s]
     w: int
     q: float
     lows: np.ndarray
     highs: np.ndarray
-    unit_guess: str  #: the unit the times of this pass were computed in
-    w_guess: int  #: the window the moving variance of this pass used
-    mv: MovingVariance | None
     time_base: TimeBase
-    clock: _Clock | None = None  #: the clock the times are to be made on (jittered stamps)
-    clock_guess: _Clock | None = None  #: the clock the times of this pass were made on
-    var: VarianceSeries | None = None
-
-    @property
-    def consistent(self) -> bool:
-        return (self.unit, self.w) == (self.unit_guess, self.w_guess) and (self.clock is None) == (
-            self.clock_guess is None)
-
-
-@dataclass
-class _ScanState:
-    """Pass 1's running state, block to block."""
-
-    unit: str | None
-    w: int | None
-    clock: _Clock | None = None  #: the times are made on this clock (None: from the stamps as read)
-    n: int = 0
-    t_first: float = 0.0
-    t_last: float = 0.0
-    last_stamp: float | None = None
-    big: ImucalError | None = None  #: the first value beyond MAX_ABS_VALUE
-    order: ImucalError | None = None  #: the first stamp that does not increase
-    mv: MovingVariance | None = None
-    lows: np.ndarray = field(default_factory=lambda: np.full(3, np.inf))
-    highs: np.ndarray = field(default_factory=lambda: np.full(3, -np.inf))
-    stamp_steps: "_Steps" = field(default_factory=lambda: _Steps())
-    spans: LagDiffs = field(default_factory=lambda: LagDiffs())  #: its tail: the last CLOCK_SPAN stamps
-    head_stamps: list = field(default_factory=list)  #: the first CLOCK_SPAN stamps
-    t_steps: "_Steps" = field(default_factory=lambda: _Steps())
-    head_raw: list = field(default_factory=list)
-    blocks: list = field(default_factory=list)  #: (byte offset, bytes, first row) of each block with rows
-    cached: int = 0
+    clock: _Clock | None  #: the clock the times are made on (jittered stamps)
 
 
 class StreamedRecording:
@@ -273,25 +128,19 @@ class StreamedRecording:
         """``keep_samples``: keep the static samples (samples mode). Gyroscope columns are not read."""
         self.spec = as_spec(spec)
         self.settings, self.rails = settings, rails
-        self.file = _File(self.spec, resolve_path(self.spec, base_dir))
-        self.path = self.file.path
-        roles = self.file.lay.roles
-        self._it = {r: i for i, r in enumerate(roles)}
-        # The window comes from the median step of the whole file: guessed from the first block, and
-        # the pass repeated in the rare case the guess (or the time unit) was wrong, or when the
-        # stamps are jitter (the times are then made on the clock fitted in the first pass).
-        scan = self._scan(None, None, None)
-        for _ in range(2):
-            if scan.consistent:
-                break
-            scan = self._scan(scan.unit, scan.w, scan.clock)
-        self._finish_scan(scan)
+        self.file = TextBlocks(self.spec, resolve_path(self.spec, base_dir))
+        self.path: Path = self.file.path
+        self._it = {r: i for i, r in enumerate(self.file.lay.roles)}
+        self.spill = RowSpill(len(self._it))
+        parsed, timing = self._parse()
+        scan, timing = self._decide(parsed, timing)
+        self._scan = scan
         self.recording = RecordingSummary(n=scan.n, t_last=scan.t_last, unit=self.spec.unit, source=str(self.path),
                                           sha256=self.file.sha, time_unit=scan.unit, time_note=scan.note,
                                           time_column=self.file.lay.time_column, time_base=scan.time_base)
-        self.intervals, self.samples = self._intervals(scan, keep_samples)
+        self.intervals, self.samples = self._intervals(scan, timing.mv.finish(), keep_samples)
 
-    # --- pass 1 ---------------------------------------------------------------------------------
+    # --- columns of a block -------------------------------------------------------------------
     def _times(self, arr: np.ndarray, row0: int, unit: str, t_first: float, clock: _Clock | None) -> np.ndarray:
         if "t" in self._it:
             if clock is not None:
@@ -306,132 +155,128 @@ class StreamedRecording:
         i = self._it
         return np.column_stack([arr[:, i["ax"]], arr[:, i["ay"]], arr[:, i["az"]]])
 
-    def _scan(self, unit_given: str | None, w_given: int | None, clock: _Clock | None) -> _Scan:
-        """Pass 1: parse every block, hash, check values and time stamps, moving variance."""
-        st = _ScanState(unit=unit_given, w=w_given, clock=clock)
-        self._cache: list[tuple] | None = []
+    # --- the one pass over the text -----------------------------------------------------------
+    def _parse(self) -> tuple[_Parsed, _Timing]:
+        """Parse every block once: hash, check values and time stamps, step statistics, spill, and
+        the times and moving variance with the time unit and window guessed from the first block."""
+        p = _Parsed()
+        timing: _Timing | None = None
         for first, block, arr in self.file.rows(hash_it=True):
             if arr.shape[0] == 0:
                 continue
-            st.blocks.append((first, len(block), st.n))
-            self._check_block(st, first, block, arr)
-            if st.big is None and st.order is None:
-                self._accumulate(st, arr)
-            st.n += arr.shape[0]
-        return self._scan_result(st)
+            p.blocks.append((first, len(block), p.n))
+            self._check_block(p, first, block, arr)
+            if p.big is None and p.order is None:
+                self.spill.add(arr)
+                raw = self._raw(arr)
+                p.lows, p.highs = np.minimum(p.lows, raw.min(axis=0)), np.maximum(p.highs, raw.max(axis=0))
+                if sum(h.shape[0] for h in p.head_raw) < QUANTUM_ROWS:
+                    p.head_raw.append(raw[:QUANTUM_ROWS])
+                if timing is None:  # a guess from the first block, checked once the file is read
+                    unit = _guess_unit(self.spec, arr[:, self._it["t"]]) if "t" in self._it else "s"
+                    timing = _Timing(unit, None, None)
+                self._time_block(timing, p.n, arr, raw, p.t_first)
+            p.n += arr.shape[0]
+        if self.file.unparsed is not None:
+            raise self.file.unparsed
+        if p.n == 0:
+            raise no_rows(self.path)
+        for err in (p.big, p.order):
+            if err is not None:
+                raise err
+        return p, timing
 
-    def _check_block(self, st: "_ScanState", first: int, block: object, arr: np.ndarray) -> None:
-        """Values beyond MAX_ABS_VALUE and time stamps that do not increase (the first of each is kept)."""
-        if st.big is None:
+    def _check_block(self, p: _Parsed, first: int, block: bytes, arr: np.ndarray) -> None:
+        """Values beyond MAX_ABS_VALUE and time stamps that do not increase (the first of each is
+        kept); the stamps' step statistics."""
+        if p.big is None and (arr.max() > MAX_ABS_VALUE or arr.min() < -MAX_ABS_VALUE):  # no copy of the block
             bad = (np.abs(arr) > MAX_ABS_VALUE).any(axis=1)
-            if bad.any():
-                st.big = corrupt_value(self.file.line_of(block, first, int(np.flatnonzero(bad)[0])), self.path)
+            p.big = corrupt_value(self.file.line_of(block, first, int(np.flatnonzero(bad)[0])), self.path)
         if "t" not in self._it:
             return
         stamps = arr[:, self._it["t"]]
-        if st.n == 0:
-            st.t_first = float(stamps[0])
-        if st.order is None:
-            prev = st.last_stamp
+        if p.n == 0:
+            p.t_first = float(stamps[0])
+        if p.order is None:
+            prev = p.last_stamp
             d = np.diff(stamps) if prev is None else np.diff(np.concatenate([[prev], stamps]))
             bad = ~(d > 0)
             if bad.any():
                 k = int(np.flatnonzero(bad)[0]) + (1 if prev is None else 0)
-                st.order = not_increasing(self.file.line_of(block, first, k), self.path)
-        st.last_stamp = float(stamps[-1])
-        st.stamp_steps.feed(stamps)
-        st.spans.add(stamps)
-        if sum(h.size for h in st.head_stamps) < CLOCK_SPAN:
-            st.head_stamps.append(stamps[:CLOCK_SPAN].copy())
+                p.order = not_increasing(self.file.line_of(block, first, k), self.path)
+        p.last_stamp = float(stamps[-1])
+        p.stamp_steps.feed(stamps)
+        p.spans.add(stamps)
+        if sum(h.size for h in p.head_stamps) < CLOCK_SPAN:
+            p.head_stamps.append(stamps[:CLOCK_SPAN].copy())
 
-    def _accumulate(self, st: "_ScanState", arr: np.ndarray) -> None:
-        """Times in the (guessed) unit, moving variance, ranges, the quantum's head, the memory cache."""
-        if st.unit is None:  # a guess from the first block, checked at the end
-            st.unit = _guess_unit(self.spec, arr[:, self._it["t"]]) if "t" in self._it else "s"
-        t = self._times(arr, st.n, st.unit, st.t_first, st.clock)
-        st.t_steps.feed(t)
-        if st.w is None:
-            st.w = window_samples(self.settings, median(np.diff(t))) if t.size > 1 else 3
-        if st.mv is None:
-            st.mv = MovingVariance(st.w)
-        raw = self._raw(arr)
-        st.mv.add(raw)
-        st.lows, st.highs = np.minimum(st.lows, raw.min(axis=0)), np.maximum(st.highs, raw.max(axis=0))
-        if sum(h.shape[0] for h in st.head_raw) < QUANTUM_ROWS:
-            st.head_raw.append(raw[:QUANTUM_ROWS])
-        st.t_last = float(t[-1])
-        if self._cache is not None:  # the next passes read memory while the file fits in CACHE_BYTES
-            temp = self._temp(arr)
-            stamps = arr[:, self._it["t"]].copy() if "t" in self._it else None
-            st.cached += raw.nbytes + t.nbytes + sum(0 if x is None else x.nbytes for x in (temp, stamps))
-            if st.cached <= CACHE_BYTES:
-                self._cache.append((st.n, raw, t, temp, stamps))
-            else:
-                self._cache = None
+    def _time_block(self, timing: _Timing, row0: int, arr: np.ndarray, raw: np.ndarray, t_first: float) -> None:
+        """The times of a block in the timing's unit (on its clock) and its moving variance."""
+        t = self._times(arr, row0, timing.unit, t_first, timing.clock)
+        timing.t_steps.feed(t)
+        if timing.w is None:
+            timing.w = window_samples(self.settings, median(np.diff(t))) if t.size > 1 else 3
+        if timing.mv is None:
+            timing.mv = MovingVariance(timing.w, VarianceStore(temporary_file("the moving variance")))
+        timing.mv.add(raw)
+        timing.t_last = float(t[-1])
 
-    def _scan_result(self, st: "_ScanState") -> _Scan:
-        """The first error met, or what pass 1 learnt with the time base decided on every stamp."""
-        path, spec, n = self.path, self.spec, st.n
-        if self.file.unparsed is not None:
-            raise self.file.unparsed
-        if n == 0:
-            raise no_rows(path)
-        for err in (st.big, st.order):
-            if err is not None:
-                raise err
+    def _retime(self, unit: str, w: int, clock: _Clock | None, t_first: float) -> _Timing:
+        """The times and moving variance again, from the spill, in ``unit`` with window ``w``."""
+        timing = _Timing(unit, w, clock)
+        for row0, arr in self.spill.blocks():
+            self._time_block(timing, row0, arr, self._raw(arr), t_first)
+        return timing
+
+    # --- the time base --------------------------------------------------------------------------
+    def _decide(self, p: _Parsed, timing: _Timing) -> tuple[_Scan, _Timing]:
+        """The time base decided on every stamp; the times and moving variance redone from the spill
+        when the guessed unit or window was wrong, or on the fitted clock (jittered stamps)."""
+        n, spec = p.n, self.spec
         clock = None
         if "t" in self._it:
-            stats = StepStats(n=n, first=st.t_first, last=st.last_stamp, median_step=st.stamp_steps.median(),
-                              span_median=st.spans.counts.median(),
-                              head=np.concatenate(st.head_stamps)[:CLOCK_SPAN], tail=st.spans.tail[-CLOCK_SPAN:],
-                              short=st.stamp_steps.below, long=st.stamp_steps.above)
-            dec = decide(stats, spec.time_unit, spec.sample_rate, self.file.lay.time_column, path)
-            if st.clock is not None and st.clock.decided == dec:
-                clock = st.clock
-                dec, gi, gs = clock.dec, clock.gap_index, clock.gap_step
+            stats = StepStats(n=n, first=p.t_first, last=p.last_stamp, median_step=p.stamp_steps.median(),
+                              span_median=p.spans.counts.median(),
+                              head=np.concatenate(p.head_stamps)[:CLOCK_SPAN], tail=p.spans.tail[-CLOCK_SPAN:],
+                              short=p.stamp_steps.below, long=p.stamp_steps.above)
+            dec = decide(stats, spec.time_unit, spec.sample_rate, self.file.lay.time_column, self.path)
+            if dec.jittered or (n > 1 and stats.long(GAP_STEPS * dec.gap_ref) > 0):
+                gi, gs = self._gaps(dec)
             else:
-                if dec.jittered or (n > 1 and stats.long(GAP_STEPS * dec.gap_ref) > 0):
-                    gi, gs = self._gaps(dec)
-                else:
-                    gi, gs = np.empty(0, np.int64), np.empty(0)
-                decided = dec
-                dec, gs = refine(dec, stats, gi, gs, path)
-                clock = _Clock(dec, gi, gs, decided) if dec.jittered else None
-            unit_exact, note = dec.unit, dec.note
-            tb = time_base(dec, stats, gi, gs, lambda k: self._row_line(st.blocks, k))
+                gi, gs = np.empty(0, np.int64), np.empty(0)
+            dec, gs = refine(dec, stats, gi, gs, self.path)
+            clock = _Clock(dec, gi, gs) if dec.jittered else None
+            unit, note = dec.unit, dec.note
+            tb = time_base(dec, stats, gi, gs, lambda k: self._row_line(p.blocks, k))
         else:
-            unit_exact, note, tb = rate_time_base(spec.sample_rate)
+            unit, note, tb = rate_time_base(spec.sample_rate)
         if n < 3:  # as detect_static
-            raise ImucalError(f"only {n} samples", file=str(path), field="data",
+            raise ImucalError(f"only {n} samples", file=str(self.path), field="data",
                               fix="record several seconds in each orientation")
-        # the times of this pass are in the guessed unit (on the guessed clock); if either was wrong,
-        # the next pass's window comes from the stamps' step in the right one
-        same = unit_exact == st.unit and (clock is None) == (st.clock is None)
-        dt = st.t_steps.median() if same else tb.step
-        return _Scan(n=n, unit=unit_exact, note=note, t_first=st.t_first, t_last=st.t_last, dt=dt,
-                     w=window_samples(self.settings, dt), q=quantum(np.concatenate(st.head_raw)), lows=st.lows,
-                     highs=st.highs, unit_guess=st.unit, w_guess=st.w, mv=st.mv, time_base=tb, clock=clock,
-                     clock_guess=st.clock)
-
-    def _stamp_blocks(self) -> Iterator[np.ndarray]:
-        """The time stamps, a block at a time: from pass 1's cache when the file fitted in it."""
-        if self._cache is not None:
-            for entry in self._cache:
-                yield entry[4]
-            return
-        for _, _, arr in self.file.rows():
-            if arr.shape[0]:
-                yield arr[:, self._it["t"]]
+        # The window comes from the median step of the whole file's times: those of the parse, when they
+        # were made in the right unit (and clock); else from the stamps' step, and the times made again.
+        for attempt in range(3):
+            same = timing.unit == unit and (timing.clock is None) == (clock is None)
+            w = window_samples(self.settings, timing.t_steps.median() if same else tb.step)
+            if same and w == timing.w:
+                break
+            if attempt == 2:  # pragma: no cover - the times made in the right unit give their own window
+                raise ImucalError("the time step changed between passes", file=str(self.path), field="data.path")
+            timing = self._retime(unit, w, clock, p.t_first)
+        dt = timing.t_steps.median()
+        return _Scan(n=n, unit=unit, note=note, t_first=p.t_first, t_last=timing.t_last, dt=dt, w=timing.w,
+                     q=quantum(np.concatenate(p.head_raw)), lows=p.lows, highs=p.highs, time_base=tb,
+                     clock=clock), timing
 
     def _gaps(self, dec: Decision) -> tuple[np.ndarray, np.ndarray]:
-        """The gaps of the stamps (imucal.data.timebase.GapFinder), found in one more pass."""
+        """The gaps of the stamps (imucal.data.timebase.GapFinder), from the spill."""
         finder = GapFinder(dec)
-        for stamps in self._stamp_blocks():
+        for stamps in self.spill.column_blocks(self._it["t"]):
             finder.add(stamps)
         return finder.finish()
 
     def _row_line(self, blocks: list, k: int) -> int:
-        """The file's line of data row ``k`` (blocks: pass 1's (offset, bytes, first row))."""
+        """The file's line of data row ``k`` (blocks: the parse's (offset, bytes, first row))."""
         i = max(0, np.searchsorted([b[2] for b in blocks], k, side="right") - 1)
         offset, size, row0 = blocks[i]
         with self.file._open() as f:
@@ -439,23 +284,17 @@ class StreamedRecording:
             block = f.read(size)
         return self.file.line_of(block, offset, k - row0)
 
-    def _finish_scan(self, scan: _Scan) -> None:
-        if not scan.consistent:  # pragma: no cover - the third pass uses the exact unit and window
-            raise ImucalError("the time step changed between passes", file=str(self.path), field="data.path")
-        scan.var = scan.mv.finish()
-        scan.mv = None
-
-    # --- pass 2 ---------------------------------------------------------------------------------
-    def _intervals(self, scan: _Scan, keep_samples: bool) -> tuple[Intervals, StaticSamples | None]:
+    # --- intervals ------------------------------------------------------------------------------
+    def _intervals(self, scan: _Scan, var, keep_samples: bool) -> tuple[Intervals, StaticSamples | None]:
         st = self.settings
-        thr = st.threshold if st.threshold is not None else auto_threshold(scan.var, scan.q)
-        a, b = candidate_runs(scan.var, thr, int(round(st.trim / scan.dt)))
-        scan.var = None
+        thr = st.threshold if st.threshold is not None else auto_threshold(var, scan.q)
+        a, b = candidate_runs(var, thr, int(round(st.trim / scan.dt)))
+        var.store.close()
         has_temp = "temp" in self._it
         segs: list[Segment] = []
         kept: dict[int, tuple] = {}
         m = edge_samples(scan.dt)
-        for start, raw, t, temp in self._pieces(a, b, scan):
+        for start, raw, t, temp in self._pieces(a, b):
             g = (still_segment(start, raw, t, temp, scan.lows, scan.highs, self.rails, st, m, scan.q)
                  if t[-1] - t[0] >= st.min_duration else None)  # its edges cut to what is still
             if g is not None:
@@ -464,32 +303,24 @@ class StreamedRecording:
                     lo, hi = g.start - start, g.end - start
                     kept[g.start] = (raw[lo:hi], t[lo:hi], None if temp is None else temp[lo:hi])
         iv = intervals_from(segs, thr, scan.q, st, scan.lows, scan.highs, self.rails, has_temp)
-        self._scan_result = scan
         if not keep_samples:
             return iv, None
         parts = [kept[int(s)] for s in iv.start]
         return iv, _samples(parts, has_temp)
 
-    def _arrays(self, scan: _Scan) -> Iterator[tuple[int, np.ndarray, np.ndarray, np.ndarray | None]]:
-        """(first row, raw, t, temp) of every block: from pass 1's cache when the file fitted in it,
-        else parsed again."""
-        if self._cache is not None:
-            for entry in self._cache:
-                yield entry[:4]
-            return
-        row0 = 0
-        for _, _, arr in self.file.rows():
-            yield row0, self._raw(arr), self._times(arr, row0, scan.unit, scan.t_first, scan.clock), self._temp(arr)
-            row0 += arr.shape[0]
+    def _arrays(self) -> Iterator[tuple[int, np.ndarray, np.ndarray, np.ndarray | None]]:
+        """(first row, raw, t, temp) of every block of the spill."""
+        s = self._scan
+        for row0, arr in self.spill.blocks():
+            yield row0, self._raw(arr), self._times(arr, row0, s.unit, s.t_first, s.clock), self._temp(arr)
 
-    def _pieces(self, a: np.ndarray, b: np.ndarray, scan: _Scan
-                ) -> Iterator[tuple[int, np.ndarray, np.ndarray, np.ndarray | None]]:
+    def _pieces(self, a: np.ndarray, b: np.ndarray) -> Iterator[tuple[int, np.ndarray, np.ndarray, np.ndarray | None]]:
         """(first row, raw, t, temp) of each row range [a_i, b_i), in order, from one pass."""
         k = 0
         acc: list[tuple] = []
         if a.size == 0:
             return
-        for row0, raw, t, temp in self._arrays(scan):
+        for row0, raw, t, temp in self._arrays():
             row1 = row0 + raw.shape[0]
             while k < a.size and a[k] < row1:
                 lo, hi = max(a[k], row0) - row0, min(b[k], row1) - row0
@@ -502,16 +333,16 @@ class StreamedRecording:
             if k == a.size:
                 break
 
-    # --- pass 3 ---------------------------------------------------------------------------------
+    # --- after the fit --------------------------------------------------------------------------
     def static_blocks(self) -> Iterator[StaticSamples]:
-        """The static samples of ``self.intervals`` (in order), a block of the file at a time."""
+        """The static samples of ``self.intervals`` (in order), a block of the spill at a time."""
         if self.samples is not None:
             yield self.samples
             return
         iv = self.intervals
         if iv.n == 0:
             return
-        for row0, raw, t, temp in self._arrays(self._scan_result):
+        for row0, raw, t, temp in self._arrays():
             row1 = row0 + raw.shape[0]
             k0, k1 = np.searchsorted(iv.end, row0, "right"), np.searchsorted(iv.start, row1, "left")
             if k1 <= k0:
@@ -522,8 +353,8 @@ class StreamedRecording:
 
 
 def _guess_unit(spec: DataSpec, stamps: np.ndarray) -> str:
-    """The time unit from a first block's stamps: only a guess (the pass is repeated when the whole
-    file decides another), so a block the step cannot read is guessed s, not refused."""
+    """The time unit from a first block's stamps: only a guess (the times are made again when the
+    whole file decides another), so a block the step cannot read is guessed s, not refused."""
     if spec.time_unit != "auto":
         return spec.time_unit
     try:
