@@ -1,5 +1,6 @@
 #!/usr/bin/env python
-"""Fleet throughput on this machine (issue 13): `imucal batch` on simulated units.
+"""Fleet throughput on this machine (issues 13 and 30): `imucal batch` on simulated units: units per
+second and efficiency on 1, 2 and all cores, and the fixed cost of a batch.
 
 200 units from configs/simulate_fleet.yaml (3 defective, 2 corrupt files) are calibrated with
 `imucal batch` (a subprocess each, wall time from start to the report) on local processes with
@@ -99,6 +100,35 @@ def killed_and_resumed(manifest: Path, out: Path, n: int) -> tuple[int, int]:
     return done, skipped
 
 
+def fixed_cost(tmp: Path, cfg, runs: int) -> dict:
+    """A batch's fixed cost: the wall time of a one-unit batch on one worker less the unit's own time
+    on its worker (hash, fit, files): the command's start, the manifest, the worker's start and the
+    fleet report. ``runs`` batches, each into a new folder."""
+    manifest = write_fleet(draw_fleet(cfg, 1, 0, 0), tmp / "one", [], settings={"output": {"figures": False}})
+    got, walls = [], []
+    for i in range(runs + 1):
+        out = tmp / f"fixed{i}"
+        wall, _, _ = batch(manifest, out, "--workers", "1")
+        unit = next(iter(table(out).values()))
+        if i:  # the first warms the file cache
+            got.append(wall - float(unit["seconds"]))
+            walls.append(wall)
+    return {"median": statistics.median(got), "min": min(got), "max": max(got), "wall": statistics.median(walls),
+            "runs": runs}
+
+
+def fixed_lines(fixed: dict, one: tuple) -> list[str]:
+    label, wall, _, _, _, _, workers, unit_seconds = one
+    return [f"Fixed cost of a batch (target under 0.5 s): a one-unit batch on one worker takes "
+            f"{fixed['wall']:.2f} s, {fixed['median']:.2f} s of it (median of {fixed['runs']}; "
+            f"{fixed['min']:.2f} to {fixed['max']:.2f}) outside the unit's own work; in the {label} run below, "
+            f"{wall - unit_seconds:.1f} s of its {wall:.1f} s were outside the units' work (each unit's wall time on "
+            "its worker, summed). The batch's own process never loads the calibration path; its workers are "
+            "forked from a forkserver that has loaded it and fitted once (imucal.fleet.warm), started while the "
+            "manifest is read; the report's writers (pyarrow, matplotlib) load in a thread while the units run.",
+            ""]
+
+
 def busy_seconds() -> float:
     """CPU seconds the whole machine has spent busy since boot (/proc/stat), or NaN."""
     try:
@@ -120,6 +150,7 @@ def cpu_name() -> str:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--units", type=int, default=200)
+    ap.add_argument("--fixed-runs", type=int, default=5, help="one-unit batches timed for the fixed cost")
     args = ap.parse_args()
     n, n_def, n_bad = args.units, 3, 2
     from distributed import LocalCluster
@@ -138,10 +169,14 @@ def main() -> int:
             truth = {r["unit"]: r for r in csv.DictReader(f)}
         samples = sum(1 for _ in open(tmp / "sim" / "recordings" / f"{units[0].id}.csv")) - 1
         rows, tables = [], {}
-        for label, extra, man in (("processes, 1 worker", ("--workers", "1"), manifest),
-                                  ("processes, 2 workers", ("--workers", "2"), manifest),
-                                  ("LocalCluster, 2 workers", None, manifest),
-                                  ("processes, 2 workers, with unit figures", ("--workers", "2"), manifest_fig)):
+        cores = os.cpu_count() or 1
+        runs = [("processes, 1 worker", ("--workers", "1"), manifest),
+                (f"processes, 2 workers{' (all cores)' if cores == 2 else ''}", ("--workers", "2"), manifest)]
+        if cores > 2:
+            runs.append((f"processes, {cores} workers (all cores)", ("--workers", str(cores)), manifest))
+        runs += [("LocalCluster, 2 workers", None, manifest),
+                 ("processes, 2 workers, with unit figures", ("--workers", "2"), manifest_fig)]
+        for label, extra, man in runs:
             out = tmp / f"out{len(rows)}"
             if extra is None:
                 t0 = time.perf_counter()
@@ -160,7 +195,9 @@ def main() -> int:
             per_unit = statistics.median(float(r["seconds"]) for r in ok)
             cpu = statistics.median(float(r["cpu_seconds"]) for r in ok)
             units_cpu = sum(float(r["cpu_seconds"]) for r in t.values()) / wall  # the units' own, in CPUs
-            rows.append((label, wall, per_unit, cpu, units_cpu, busy))
+            workers = int(extra[1]) if extra is not None else 2
+            unit_seconds = sum(float(r["seconds"]) for r in t.values())
+            rows.append((label, wall, per_unit, cpu, units_cpu, busy, workers, unit_seconds))
             print(f"{label}: {wall:.1f} s, {per_unit * 1e3:.0f} ms per unit, {cpu * 1e3:.0f} ms CPU, "
                   f"units {units_cpu:.2f} CPUs, machine busy {busy:.2f} CPUs", flush=True)
         first = next(iter(tables.values()))
@@ -175,9 +212,12 @@ def main() -> int:
             assert [v[k] for k in BASE_NAMES] == [float(t[u.id][k]) for k in BASE_NAMES], u.id
         single = (time.perf_counter() - t0) / len(good)
         done, skipped = killed_and_resumed(manifest, tmp / "killed", n)
+        fixed = fixed_cost(tmp, cfg, args.fixed_runs)
         n_out = sum(bool(r["outlier"]) for r in t.values())
     print(f"{len(good)} good units identical to single runs; killed at {done} done, resumed skipping {skipped}")
-    lines = [f"{n} simulated units ({samples} samples each: 18 poses, 3 s holds at 100 Hz; {n_def} defective, "
+    one = rows[0]
+    lines = fixed_lines(fixed, one)
+    lines += [f"{n} simulated units ({samples} samples each: 18 poses, 3 s holds at 100 Hz; {n_def} defective, "
              f"{n_bad} with corrupt files) on {os.cpu_count()} CPUs ({cpu_name()}), Python "
              f"{platform.python_version()}; `python scripts/bench_fleet.py`. Wall time from the command's start "
              "to the written report; per unit: the median wall and CPU time a worker spends on one unit (hash, fit, "
@@ -185,12 +225,15 @@ def main() -> int:
              "wall time (/proc/stat): other jobs share this machine, and where the machine is busy on all its CPUs "
              "the wall times stretch while the CPU times stay.",
              "",
-             "| executor | wall time [s] | units per hour | per unit, wall [ms] | per unit, CPU [ms] "
+             "| executor | wall time [s] | units per second | efficiency | per unit, wall [ms] | per unit, CPU [ms] "
              "| units per CPU-hour | CPUs used by the units | CPUs busy, whole machine |",
-             "|---|---:|---:|---:|---:|---:|---:|---:|"]
-    for label, wall, per_unit, cpu, units_cpu, busy in rows:
-        lines.append(f"| {label} | {wall:.1f} | {n / wall * 3600:,.0f} | {per_unit * 1e3:.0f} | {cpu * 1e3:.0f} "
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for label, wall, per_unit, cpu, units_cpu, busy, workers, _ in rows:
+        eff = (n / wall) / (workers * n / one[1])  # units/s over the workers x one worker's units/s
+        lines.append(f"| {label} | {wall:.1f} | {n / wall:.2f} | {eff:.2f} | {per_unit * 1e3:.0f} | {cpu * 1e3:.0f} "
                      f"| {3600 / cpu:,.0f} | {units_cpu:.2f} | {busy:.2f} |")
+    lines += ["", "Efficiency: units per second over (workers x units per second of one worker); below 1 where the "
+                  "workers share cores with each other or with other jobs (CPUs busy, whole machine)."]
     lines += ["",
               f"Every run: the {n - n_bad} readable units calibrated, the {n_bad} corrupt ones refused with their "
               f"one-line error, the {n_def} defective ones failed and flagged as outliers ({alarms} good unit(s) flagged "

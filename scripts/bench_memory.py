@@ -1,7 +1,8 @@
 #!/usr/bin/env python
 """Long recordings: time and peak memory of `imucal calibrate` on the Xsens log tiled 10, 100 and
-1000 times (0.5 M, 5 M, 51 M samples), the parse floor, and the CSV parsers compared (issue 13).
-Writes docs/benchmarks_memory.md.
+1000 times (0.5 M, 5 M, 51 M samples), paired with imu_tk's accelerometer calibration on the same
+files, the parse floor, and the CSV parsers compared (issues 13 and 30). Writes
+docs/benchmarks_memory.md.
 
 The tiled files are written to a temporary folder (--tmp, default imucal-tiles in the system temporary folder), never into
 the repository: tile i is the recording shifted by i times its span (time stamps written with
@@ -107,12 +108,12 @@ def child(case: str, path: str) -> None:
     elif case.startswith("pyarrow"):
         import pyarrow as pa
         import pyarrow.csv as pc
-    from imucal.data.stream import CHUNK_BYTES
+    from imucal.data.blocks import CHUNK_BYTES
 
     t0 = time.perf_counter()
     n = 0
     if case in ("pandas", "pandas-csv"):
-        with open(path, "rb") as f:  # blocks of whole lines, as imucal.data.stream reads them
+        with open(path, "rb") as f:  # blocks of whole lines, as imucal.data.blocks reads them
             carry = b""
             while True:
                 data = f.read(CHUNK_BYTES)
@@ -180,7 +181,9 @@ def markdown(r: dict, cmdline: str) -> str:
          "The Xsens MTi recording (51,175 samples, 100 Hz, 38 poses) tiled k times, time stamps continued; "
          "`imucal calibrate --data FILE --gravity 9.81744 --no-figures --quiet`. Read whole (`--stream never`, "
          "the loader of issue 6) and in chunks (`--stream always`; `auto` chooses it above 64 MB); with "
-         "`--mode samples` the fit takes every static sample (kept in memory) instead of the interval means.", "",
+         "`--mode samples` the fit takes every static sample (kept in memory) instead of the interval means. "
+         "In chunks the text is parsed once and its numbers spilled to an unnamed temporary file that the later "
+         "passes read (imucal.data.stream; docs/streaming.md).", "",
          "<!-- begin:summary -->",
          "| tiles | samples | file [MB] | read | wall [s] | CPU [s] | peak RSS [MB] | bytes/sample | intervals | result |",
          "|---|---|---|---|---|---|---|---|---|---|"]
@@ -195,6 +198,7 @@ def markdown(r: dict, cmdline: str) -> str:
                  f"{row['cpu_s']:.1f} | "
                  f"{row['maxrss_mb']:.0f} | {row['maxrss_mb'] * 2**20 / row['samples']:.0f} | "
                  f"{row.get('intervals', '')} | {res} |")
+    L += flatness(r)
     if r.get("imutk"):
         L += side_by_side(r)
     s = r.get("shipped")
@@ -207,7 +211,7 @@ def markdown(r: dict, cmdline: str) -> str:
     if pf:
         L += ["", "## Parse floor and the parsers compared", "",
               f"The {r['parse_k']}-tile file ({r['parse_rows']:,} rows), all four columns to float64, nothing else; "
-              "pandas in 16 MB blocks of whole lines as `imucal.data.stream` reads. pyarrow's reader takes one "
+              "pandas in 16 MB blocks of whole lines as `imucal.data.blocks` reads. pyarrow's reader takes one "
               "single-character delimiter, so it cannot read whitespace-aligned logs like imu_tk's (leading and "
               "repeated spaces); it is timed on the same numbers written with commas.", "",
               "| parser | input | time [s] | rows/s | peak RSS [MB] |", "|---|---|---|---|---|"]
@@ -217,6 +221,21 @@ def markdown(r: dict, cmdline: str) -> str:
             else:
                 L.append(f"| {name} | {inp} | {x['s']:.2f} | {x['rows'] / x['s']:.3g} | {x['maxrss_mb']:.0f} |")
     return "\n".join(L) + "\n"
+
+
+def flatness(r: dict) -> list[str]:
+    """Issue 30's targets for the file read in chunks: the largest file's time and peak memory, and
+    the memory added per added sample between the two largest files (flat: O(intervals) plus a fixed
+    buffer)."""
+    rows = sorted((row for row in r["calibrate"] if row["how"] == "chunks" and row["code"] == 0), key=lambda x: x["k"])
+    if len(rows) < 2:
+        return []
+    a, b = rows[-2], rows[-1]
+    per = (b["maxrss_mb"] - a["maxrss_mb"]) * 2**20 / (b["samples"] - a["samples"])
+    return ["", f"Read in chunks, {b['samples']:,} samples: {b['wall_s']:.1f} s wall, {b['cpu_s']:.1f} s CPU, peak "
+                f"{b['maxrss_mb']:.0f} MB (targets: 40 s, 400 MB). From {a['samples']:,} to {b['samples']:,} samples "
+                f"the peak moved by {b['maxrss_mb'] - a['maxrss_mb']:+.0f} MB: {per:+.2f} bytes per added sample "
+                "(the intervals' numbers; the rows and the moving variance are spilled, not kept)."]
 
 
 def side_by_side(r: dict) -> list[str]:

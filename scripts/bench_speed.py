@@ -1,15 +1,20 @@
 #!/usr/bin/env python
-"""Speed and memory of imucal on this machine (issue 6); writes docs/benchmarks.md.
+"""Speed and memory of imucal on this machine (issues 6 and 30); writes docs/benchmarks.md.
 
 Cases, each in a fresh subprocess so that its peak resident memory (ru_maxrss) is its own:
   calibrate   end-to-end `imucal calibrate --no-figures` on the shipped Xsens recording
               (hyperfine when installed, else the median of repeated subprocess runs)
+  paired      whole processes paired with imu_tk in one run (--imutk DIR: scripts/build_imutk.sh's
+              folder), A B A B ..., the ratio pair by pair: the Xsens accelerometer (test_imu_acc),
+              accelerometer + gyroscope (test_imu_calib), and the default `imucal calibrate` with its
+              figures and report against test_imu_acc; with where the time of that run goes (imports
+              by package, reading, detection, fit, files, each figure's drawing, layout and PNG)
   fit-means   fit time against the number of interval means (10 .. 1000); first call builds the
               IPOPT solver for that problem shape, later calls reuse it
   fit-samples samples-mode fit time against the number of samples (10^4 .. 10^6)
   apply       Calibration.apply on 10^7 samples against a plain numpy matrix product
 
-    python scripts/bench_speed.py            # all cases, writes docs/benchmarks.md
+    python scripts/bench_speed.py --imutk /tmp/imutk-build   # all cases, writes docs/benchmarks.md
     python scripts/bench_speed.py --quick    # smaller sizes, fewer repeats
 """
 from __future__ import annotations
@@ -151,6 +156,9 @@ def case_apply(n: int, repeats: int) -> dict:
 
 def child(case: str, n: int, repeats: int) -> None:
     t0 = time.perf_counter()
+    if case == "parts":
+        print(json.dumps(case_parts()))
+        return
     out = {"fit-means": case_fit_means, "fit-samples": case_fit_samples, "apply": case_apply}[case](n, repeats)
     out["wall_s"] = time.perf_counter() - t0
     u = resource.getrusage(resource.RUSAGE_SELF)
@@ -251,10 +259,197 @@ def import_profile(cmd: list[str], top: int = 8) -> list[tuple[str, float]]:
     return rows[:top]
 
 
+# --- whole processes paired with imu_tk (issue 30) --------------------------------------------------
+GYRO = XSENS.with_name("xsens_gyro.mat")
+#: Each pair: (name, imucal's arguments after `imucal calibrate` (OUT replaced), imu_tk's program and files, target)
+PAIRS = [
+    ("Xsens accelerometer", ["--data", str(XSENS), "--gravity", "9.81744", "--out", "OUT", "--no-figures", "--quiet"],
+     ("test_imu_acc", [XSENS]), 0.75),
+    ("Xsens accelerometer + gyroscope", ["--data", str(XSENS), "--gyro-data", str(GYRO), "--gravity", "9.81744",
+                                         "--out", "OUT", "--no-figures", "--quiet"],
+     ("test_imu_calib", [XSENS, GYRO]), 0.8),
+    ("Xsens default `calibrate` (figures and report on) against imu_tk's accelerometer",
+     ["--data", str(XSENS), "--gravity", "9.81744", "--out", "OUT"], ("test_imu_acc", [XSENS]), 2.0),
+]
+#: Runs one command and prints its wall time, CPU time (user + system) and peak resident set as JSON:
+#: the numbers are the command's own, not this runner's.
+RUNNER = ("import json, resource, subprocess, sys, time; t0 = time.perf_counter(); "
+          "p = subprocess.run(sys.argv[1:], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL); "
+          "w = time.perf_counter() - t0; u = resource.getrusage(resource.RUSAGE_CHILDREN); "
+          "print(json.dumps({'wall': w, 'cpu': u.ru_utime + u.ru_stime, 'rss': u.ru_maxrss / 1024, 'code': p.returncode}))")
+
+
+def one_run(cmd: list[str], cwd: str) -> dict:
+    p = subprocess.run([sys.executable, "-c", RUNNER, *cmd], capture_output=True, text=True, env=ENV, cwd=cwd)
+    return json.loads(p.stdout)
+
+
+def paired(a: list[str], b: list[str], runs: int) -> dict:
+    """A and B in turn (one warm-up each, then A B A B ...): each one's median wall, CPU and peak
+    memory, and the median of the ratios A/B pair by pair (robust to the machine's drift)."""
+    tmp = tempfile.mkdtemp(prefix="imucal-pair-")  # imu_tk writes its .calib files into its working folder
+    out = []
+    for i in range(runs + 1):
+        shutil.rmtree(Path(tmp) / "out", ignore_errors=True)
+        ra = one_run([x if x != "OUT" else str(Path(tmp) / "out") for x in a], tmp)
+        rb = one_run(b, tmp)
+        if i:
+            out.append((ra, rb))
+    shutil.rmtree(tmp, ignore_errors=True)
+
+    def med(k: str, j: int) -> float:
+        return statistics.median(r[j][k] for r in out)
+
+    return {"runs": runs, "codes": sorted({r[j]["code"] for r in out for j in (0, 1)}),
+            **{f"{w}_{k}": med(k, j) for j, w in ((0, "a"), (1, "b")) for k in ("wall", "cpu", "rss")},
+            "ratio_wall": statistics.median(r[0]["wall"] / r[1]["wall"] for r in out),
+            "ratio_wall_range": (min(r[0]["wall"] / r[1]["wall"] for r in out),
+                                 max(r[0]["wall"] / r[1]["wall"] for r in out)),
+            "ratio_cpu": statistics.median(r[0]["cpu"] / r[1]["cpu"] for r in out)}
+
+
+def bench_paired(imutk: str, runs: int) -> list[dict]:
+    subprocess.run([sys.executable, "-m", "compileall", "-q", str(ROOT / "imucal")], capture_output=True, check=True)
+    rows = []
+    for name, args, (prog, files), target in PAIRS:
+        print(f"paired: {name} ...", file=sys.stderr)
+        a = [sys.executable, "-m", "imucal", "calibrate", *args]
+        b = [str(Path(imutk) / prog), *map(str, files)]
+        shown = " ".join(["imucal calibrate", *args]).replace(str(ROOT) + "/", "")
+        rows.append({"name": name, "imucal": shown, "imutk": " ".join([prog, *(Path(f).name for f in files)]),
+                     "target": target, **paired(a, b, runs)})
+    floor = paired([sys.executable, "-c", "import numpy, casadi"], [sys.executable, "-c", "pass"], runs)
+    rows.append({"name": "floor: `python -c 'import numpy, casadi'` against `python -c pass`", "floor": True, **floor})
+    return rows
+
+
+# --- where the time of one default run goes (a child process) ---------------------------------------
+class _ImportClock:
+    """CPU time (this thread) each module's own import takes, its submodules' not counted."""
+
+    def __init__(self) -> None:
+        import importlib.abc
+
+        self.self_time: dict[str, float] = {}
+        stack: list[float] = []
+        clock = self
+
+        class Loader(importlib.abc.Loader):
+            def __init__(self, inner):
+                self.inner = inner
+
+            def __getattr__(self, a):
+                return getattr(self.inner, a)
+
+            def create_module(self, spec):
+                return self.inner.create_module(spec)
+
+            def exec_module(self, module):
+                t0 = time.thread_time()
+                stack.append(0.0)
+                try:
+                    self.inner.exec_module(module)
+                finally:
+                    el, inner = time.thread_time() - t0, stack.pop()
+                    clock.self_time[module.__name__] = el - inner
+                    if stack:
+                        stack[-1] += el
+
+        class Finder(importlib.abc.MetaPathFinder):
+            def find_spec(self, name, path, target=None):
+                for f in sys.meta_path:
+                    if f is self or not hasattr(f, "find_spec"):
+                        continue
+                    spec = f.find_spec(name, path, target)
+                    if spec is not None:
+                        if spec.loader is not None and hasattr(spec.loader, "exec_module"):
+                            spec.loader = Loader(spec.loader)
+                        return spec
+                return None
+
+        sys.meta_path.insert(0, Finder())
+
+    def by_package(self) -> dict[str, float]:
+        out: dict[str, float] = {}
+        for name, t in self.self_time.items():
+            top = name.split(".")[0]
+            out[top] = out.get(top, 0.0) + t
+        return out
+
+
+def case_parts() -> dict:
+    """The default `imucal calibrate` on the Xsens recording, step by step in one process: CPU time
+    [s] of each step (imports counted apart, by package; matplotlib's with the figures)."""
+    clock = _ImportClock()
+    T = time.process_time
+    parts: dict[str, float] = {}
+    t0 = T()
+    from imucal.config.run import config_from_dict
+    from imucal.data.load import load_recording
+    from imucal.files.output import OutputSet
+    from imucal.pipeline import calibrate, read_intervals
+    from imucal.report.run_files import RunFiles, stage_files
+    from imucal.report.text import fit_report, summary as run_summary
+    parts["imports of the calibration path"] = T() - t0
+    imports_before = dict(clock.by_package())
+    cfg = config_from_dict({"data": {"path": str(XSENS)}, "gravity": {"value": 9.81744}})
+    t = T()
+    rec = load_recording(cfg.data)
+    parts["read (whole file)"] = T() - t
+    t = T()
+    read_intervals(cfg, rec)
+    parts["static intervals"] = T() - t
+    t = T()
+    run = calibrate(cfg, rec)
+    parts["calibrate (intervals again, guess, fit, covariance)"] = T() - t - parts["static intervals"]
+    t = T()
+    files = RunFiles(run=run, text=fit_report(run), summary=run_summary(run))
+    parts["report text and summary"] = T() - t
+    t = T()
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot  # noqa: F401
+    parts["import matplotlib (figures)"] = T() - t
+    from matplotlib.figure import Figure
+    spent = {"layout": 0.0, "png": 0.0}
+
+    def timed(name, fn):
+        def wrapper(*a, **k):
+            t1 = T()
+            try:
+                return fn(*a, **k)
+            finally:
+                spent[name] += T() - t1
+        return wrapper
+
+    Figure.tight_layout, Figure.savefig = timed("layout", Figure.tight_layout), timed("png", Figure.savefig)
+    from imucal.report.figures import FIGURES
+    from imucal.report.html import render_png
+    for name, fn in FIGURES.items():
+        before = dict(spent)
+        t = T()
+        render_png(fn, run)
+        total = T() - t
+        lay, png = spent["layout"] - before["layout"], spent["png"] - before["png"]
+        parts[f"figure {name}: plot calls"] = total - lay - png
+        parts[f"figure {name}: tight_layout"] = lay
+        parts[f"figure {name}: savefig (draw and PNG)"] = png
+    t = T()
+    out = tempfile.mkdtemp(prefix="imucal-parts-")
+    with OutputSet([str(XSENS)]) as o:
+        stage_files(o, Path(out) / "o", files, False)
+    shutil.rmtree(out, ignore_errors=True)
+    parts["files (YAML, text, HTML), without figures"] = T() - t
+    return {"parts": parts, "imports": imports_before, "total_cpu": T() - t0}
+
+
 # --- report ------------------------------------------------------------------------------------
 def summary(r: dict) -> list[str]:
     """The headline numbers, between markers that scripts/update_readme.py splices into the README."""
-    L = ["<!-- begin:summary -->", "| what | measured |", "|---|---|"]
+    L = ["<!-- begin:summary -->"]
+    L += paired_table(r.get("paired") or [])
+    L += ["| what | measured |", "|---|---|"]
     c = r.get("calibrate")
     if c:
         it = r.get("imutk")
@@ -278,6 +473,43 @@ def summary(r: dict) -> list[str]:
     return L
 
 
+def paired_table(rows: list[dict]) -> list[str]:
+    """Whole processes paired with imu_tk: medians, and the ratio pair by pair against the target."""
+    if not rows:
+        return []
+    L = ["Whole processes, imucal and imu_tk in turn in one run (A B A B ...), "
+         f"{rows[0]['runs']} pairs after a warm-up; the ratio is imucal's wall time over imu_tk's, pair by pair "
+         "(median, and its range).", "",
+         "| what | imucal wall [s] / CPU [s] / peak [MB] | imu_tk wall [s] / CPU [s] / peak [MB] | ratio (range) "
+         "| target |", "|---|---|---|---|---|"]
+    for x in rows:
+        met = "" if x.get("floor") else (" met" if x["ratio_wall"] <= x["target"] else " **not met**")
+        lo, hi = x["ratio_wall_range"]
+        target = "" if x.get("floor") else f"<= {x['target']:g}{met}"
+        what = x["name"] if x.get("floor") else f"{x['name']}: `{x['imucal']}` against `{x['imutk']}`"
+        L.append(f"| {what} | {x['a_wall']:.3f} / {x['a_cpu']:.3f} / {x['a_rss']:.0f} | {x['b_wall']:.3f} / "
+                 f"{x['b_cpu']:.3f} / {x['b_rss']:.0f} | {x['ratio_wall']:.2f} ({lo:.2f}-{hi:.2f}) | {target} |")
+    return L + [""]
+
+
+def parts_table(p: dict) -> list[str]:
+    """Where the default run's CPU time goes (one process, step by step)."""
+    if not p or "error" in p:
+        return [f"(parts: {p.get('error', 'not measured')})", ""] if p else []
+    L = ["## Where the default run's time goes", "",
+         "The default `imucal calibrate --data xsens_acc.mat --gravity 9.81744` (figures and report on), step by step "
+         "in one process (`bench_speed.py --child parts`), CPU time; the interpreter's own start (with this "
+         "machine's site hooks) is the floor `python -c pass` above.", "",
+         "| step | CPU [s] |", "|---|---|"]
+    L += [f"| {k} | {v:.3f} |" for k, v in p["parts"].items()]
+    L += ["", "Imports of the calibration path by package (each module's own CPU time, summed):", "",
+          "| package | CPU [s] |", "|---|---|"]
+    top = sorted(p["imports"].items(), key=lambda kv: -kv[1])
+    L += [f"| {k} | {v:.3f} |" for k, v in top[:8]]
+    rest = sum(v for _, v in top[8:])
+    return L + [f"| {len(top) - 8} others | {rest:.3f} |", ""]
+
+
 def markdown(r: dict, args) -> str:
     cpu = platform.processor() or platform.machine()
     try:
@@ -297,6 +529,7 @@ def markdown(r: dict, args) -> str:
          "cores: this machine is shared, so wall times carry the noise of other jobs; CPU time (user + system) "
          "is the steadier figure.", ""]
     L += summary(r) + [""]
+    L += parts_table(r.get("parts") or {})
     c = r.get("calibrate")
     if c:
         L += ["## End-to-end calibrate (Xsens MTi, 51,175 samples, 38 intervals)", "",
@@ -386,8 +619,10 @@ def markdown(r: dict, args) -> str:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--only", default="calibrate,fit-means,fit-samples,apply")
-    ap.add_argument("--imutk", help="imu_tk's test_imu_calib (scripts/build_imutk.sh), timed beside calibrate")
+    ap.add_argument("--only", default="paired,parts,calibrate,fit-means,fit-samples,apply")
+    ap.add_argument("--imutk", help="scripts/build_imutk.sh's folder (test_imu_acc, test_imu_calib), or its "
+                                    "test_imu_calib: paired with imucal")
+    ap.add_argument("--pairs", type=int, default=11, help="A B pairs per paired case (after one warm-up)")
     ap.add_argument("--samples-max", type=int, default=10_000_000, help="largest samples-mode fit (full run)")
     ap.add_argument("--out", default=str(ROOT / "docs" / "benchmarks.md"))
     ap.add_argument("--child", help=argparse.SUPPRESS)
@@ -399,11 +634,19 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     only = set(args.only.split(","))
     r: dict = {"load": os.getloadavg()}
+    imutk_dir = None if not args.imutk else (args.imutk if os.path.isdir(args.imutk) else str(Path(args.imutk).parent))
+    if "paired" in only and imutk_dir:
+        r["paired"] = bench_paired(imutk_dir, 3 if args.quick else args.pairs)
+    if "parts" in only:
+        print("parts ...", file=sys.stderr)
+        p = subprocess.run([sys.executable, __file__, "--child", "parts", "--size", "0"], capture_output=True,
+                           text=True, cwd=ROOT, env=ENV)
+        r["parts"] = json.loads(p.stdout.strip().splitlines()[-1]) if p.returncode == 0 else {"error": p.stderr[-300:]}
     if "calibrate" in only:
         print("calibrate ...", file=sys.stderr)
         r["calibrate"] = bench_calibrate(5 if args.quick else 20)
-        if args.imutk:
-            r["imutk"] = bench_imutk(args.imutk, 3 if args.quick else 10)
+        if imutk_dir:
+            r["imutk"] = bench_imutk(str(Path(imutk_dir) / "test_imu_calib"), 3 if args.quick else 10)
     if "fit-means" in only:
         sizes = (10, 100) if args.quick else (10, 30, 100, 300, 1000)
         r["fit-means"] = []
