@@ -117,11 +117,13 @@ class Example:
     name: str          # docs/examples/NAME.md
     commands: list     # shell-free command lines, run in order in one folder
     show: list         # regular expressions: the output lines kept
+    head: dict         # files written by the commands: path -> number of first lines shown
 
 
 def load_examples() -> list[Example]:
     raw = yaml.safe_load(EXAMPLES.read_text(encoding="utf-8"))
-    return [Example(e["name"], list(e["commands"]), list(e.get("show", []))) for e in raw]
+    return [Example(e["name"], list(e.get("commands", [])), list(e.get("show", [])), dict(e.get("head", {})))
+            for e in raw]
 
 
 def run_example(ex: Example, folder: Path) -> str:
@@ -138,6 +140,9 @@ def run_example(ex: Example, folder: Path) -> str:
             raise SystemExit(f"update_docs: example {ex.name}: `{line}` exited {p.returncode}:\n{p.stderr}")
         out.append(f"$ {line}")
         out += [ln.rstrip() for ln in (p.stdout + p.stderr).splitlines() if any(k.search(ln) for k in keep)]
+    for path, n in ex.head.items():  # the start of a file a command wrote, as `head` shows it
+        out.append(f"$ head -n {n} {path}")
+        out += (folder / path).read_text(encoding="utf-8").splitlines()[:n]
     return "```console\n" + "\n".join(out) + "\n```\n"
 
 
