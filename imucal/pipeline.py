@@ -24,7 +24,6 @@ from imucal.solve.observability import Observability, analyse, distinct_directio
 from imucal.constants import RIGHT_ANGLE
 from imucal.model.parameters import ANGLE_NAMES, BASE_NAMES, Parameters, base_parameters
 from imucal.data.static import Intervals, detect_static
-from imucal.data.unit_hint import unit_hint
 from imucal.solve.misfit import excess_residuals  # one rule for every sensor's fit
 from imucal.report.misfit import excess_words
 from imucal.model.effects_registry import effects_from_specs
@@ -255,8 +254,11 @@ def read_intervals(config: RunConfig, recording: Recording | None = None
         rec = recording if recording is not None else load_recording(config.data, config.base_dir)
         iv = detect_static(rec.t, rec.raw, config.static, rec.temp, source=rec.source, rails=declared)
     dropped = iv.meta.get("dropped", [])
-    if iv.n < 2 and (hint := unit_hint(config, rec, iv.n, declared)) is not None:
-        raise hint  # the poses are there with the stamps in another unit (minutes): say so (issue 25)
+    if iv.n < 2:
+        from imucal.data.unit_hint import unit_hint  # measured start-up: only a run that finds too few poses
+
+        if (hint := unit_hint(config, rec, iv.n, declared)) is not None:
+            raise hint  # the poses are there with the stamps in another unit (minutes): say so (issue 25)
     if dropped and iv.n < 2:
         raise ImucalError(f"{len(dropped)} static interval(s) dropped because an axis was clipped "
                           f"({_axes(dropped)}), {iv.n} left", file=rec.source, field="intervals",

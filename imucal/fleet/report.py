@@ -7,9 +7,11 @@ units that converged (the median and MAD are not pulled by the outliers themselv
 """
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import math
+import threading
 from dataclasses import dataclass
 from typing import Mapping
 from pathlib import Path
@@ -20,7 +22,7 @@ from imucal.fleet.manifest import Tolerances
 from imucal.files.output import OutputSet
 from imucal.fleet.run import ERROR, INTERNAL, NOT_CONVERGED, OK
 from imucal.model.parameters import ANGLE_NAMES, BASE_NAMES
-from imucal.report.html import esc, figures_html, num, page_html, table_html
+from imucal.report.page import esc, figures_html, num, page_html, table_html
 
 #: Robust z-score above which a parameter marks its unit as an outlier.
 OUTLIER_Z = 5.0
@@ -145,6 +147,25 @@ def to_csv(table: FleetTable) -> str:
     for r in table.rows:
         w.writerow({k: ("" if v is None else repr(v) if isinstance(v, float) else v) for k, v in r.items()})
     return buf.getvalue()
+
+
+def load_writers(figures: bool) -> threading.Thread:
+    """Load the report's writers in a thread, while the units run: pyarrow (fleet.parquet) and the
+    pandas it loads on its first table, matplotlib for the histograms. Most of a batch's fixed cost
+    is their loading (about a second), which then runs beside the units; join the thread before the
+    report is written."""
+    def load() -> None:
+        with contextlib.suppress(ImportError):
+            import pyarrow  # noqa: F401
+            import pandas  # noqa: F401 - pyarrow loads it to build a table
+        if figures:
+            from imucal.report.figures import _plt
+
+            _plt()
+
+    thread = threading.Thread(target=load, name="imucal-report-writers")
+    thread.start()
+    return thread
 
 
 def parquet_writer(table: FleetTable):

@@ -33,7 +33,6 @@ from imucal.files.inputs import max_data_bytes, open_regular, read_input_text
 from imucal.files.output import OutputSet, remove_stale_staging, write_json_atomic
 from imucal.fleet.manifest import Manifest, Unit
 from imucal.report.progress import progress
-from imucal.report.run_files import calibrate_files, stage_files
 
 DONE_FILE, SUMMARY_FILE = "done.json", "summary.json"
 MARKER_FORMAT, MARKER_VERSION = "imucal-fleet-unit", 1
@@ -70,6 +69,21 @@ def read_marker(folder: Path) -> dict | None:
     if not isinstance(d, dict) or d.get("format") != MARKER_FORMAT or d.get("format_version") != MARKER_VERSION:
         return None
     return d
+
+
+def calibrate_files(*args: Any, **kw: Any) -> Any:
+    """imucal.report.run_files.calibrate_files, loaded when a unit runs: the batch's own process never
+    calibrates (measured start-up), and its workers have it loaded before they start (imucal.fleet.warm)."""
+    from imucal.report.run_files import calibrate_files as files
+
+    return files(*args, **kw)
+
+
+def stage_files(*args: Any, **kw: Any) -> None:
+    """imucal.report.run_files.stage_files, loaded as ``calibrate_files``."""
+    from imucal.report.run_files import stage_files as stage
+
+    stage(*args, **kw)
 
 
 def calibrate_unit(unit: Unit, out: str) -> dict:
@@ -123,6 +137,32 @@ def _lost(unit: Unit, error: str) -> dict:
     return {"unit": unit.id, "status": INTERNAL, "error": error, "inputs": unit.inputs, "input_sha256": {},
             "settings_hash": unit.settings_hash, "seconds": 0.0, "cpu_seconds": 0.0, "summary": None,
             "skipped": False}
+
+
+#: Modules the forkserver loads before it forks any worker: the calibration path and its generated
+#: code (imucal.fleet.warm), loaded once per batch instead of once per worker, while the batch reads
+#: its manifest.
+WORKER_PRELOAD = ["imucal.fleet.warm"]
+
+
+def worker_context() -> multiprocessing.context.BaseContext:
+    """forkserver (workers start clean: no threads or signal handlers of the batch copied, and warm:
+    forked from a server that has loaded WORKER_PRELOAD), else spawn."""
+    if "forkserver" not in multiprocessing.get_all_start_methods():
+        return multiprocessing.get_context("spawn")
+    ctx = multiprocessing.get_context("forkserver")
+    ctx.set_forkserver_preload(WORKER_PRELOAD)
+    return ctx
+
+
+def start_workers_early() -> None:
+    """Start the forkserver now (it loads WORKER_PRELOAD while the batch reads its manifest); the
+    workers are forked from it later. Nothing to do without forkserver."""
+    if "forkserver" in multiprocessing.get_all_start_methods():
+        from multiprocessing import forkserver
+
+        worker_context()
+        forkserver.ensure_running()
 
 
 def default_workers() -> int:
@@ -202,9 +242,7 @@ class _Processes:
 
     def __init__(self, workers: int) -> None:
         self.workers = workers
-        # forkserver: workers start clean (no threads or signal handlers of the parent copied)
-        self._ctx = multiprocessing.get_context("forkserver" if "forkserver" in multiprocessing.get_all_start_methods()
-                                                else "spawn")
+        self._ctx = worker_context()
         self._alive, self._alive_w = self._ctx.Pipe(duplex=False)  # the write end never leaves this process
         self._pool: list[_Worker] = []
         self._leaving: list[_Worker] = []  #: told to end (nothing left to give): joined by ``stop``

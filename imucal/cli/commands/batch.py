@@ -34,9 +34,9 @@ def run(args: argparse.Namespace) -> int:
     from imucal.files.inputs import same_file
     from imucal.files.output import check_outputs
     from imucal.fleet.manifest import load_manifest
-    from imucal.fleet.report import (REPORT_CSV, REPORT_HTML, REPORT_PARQUET, REPORT_TEXT, fleet_table, summary_text,
-                                     write_report)
-    from imucal.fleet.run import executor, progress_bar, run_units
+    from imucal.fleet.report import (REPORT_CSV, REPORT_HTML, REPORT_PARQUET, REPORT_TEXT, fleet_table, load_writers,
+                                     summary_text, write_report)
+    from imucal.fleet.run import executor, progress_bar, run_units, start_workers_early
 
     if args.workers is not None:
         check_count(args.workers, "--workers", 1, 4096)
@@ -49,17 +49,23 @@ def run(args: argparse.Namespace) -> int:
         raise ImucalError("is the folder of recordings", file=args.out, field="--out",
                           fix="write the results to another folder (its fleet.csv would become a unit)")
     check_outputs(inputs, [out / REPORT_CSV, out / REPORT_TEXT, out / REPORT_PARQUET, out / REPORT_HTML])
+    if args.scheduler is None:
+        start_workers_early()  # the workers' modules load while the manifest is read
     manifest = load_manifest(args.manifest, args.config)
     n = len(manifest.units)
+    writers = load_writers(figures=not args.no_figures)  # beside the units (fixed cost: docs/fleet.md)
     try:  # leaving the pool's block stops its workers, on an interrupt too (imucal.fleet.run)
         with executor(args.workers, args.scheduler) as pool, progress_bar(n) as step:
             records = run_units(manifest, out, pool, step)
         table = fleet_table(records, manifest.tolerances)
+        writers.join()
         written = write_report(table, out, [p for p in inputs if p is not None], figures=not args.no_figures)
     except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM, SIGHUP, ...: one line, EXIT_INTERRUPTED
         sys.stderr.write(interruption_line(exc, f"batch stopped: finished units are kept in {out}; "
                                                 "rerun the same command to resume") + "\n")
         return EXIT_INTERRUPTED
+    finally:
+        writers.join()  # (a thread that only loads modules: it ends on its own)
     print(summary_text(table), end="")
     print(f"wrote {n} unit folders and " + ", ".join(str(p) for p in written[:3])
           + (f" and {len(written) - 3} histograms" if len(written) > 3 else ""))
