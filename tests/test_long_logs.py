@@ -178,3 +178,50 @@ def test_whole_and_in_chunks_give_the_same_calibration_file(tmp_path, small_bloc
         d.pop("created")
         got[how] = d
     assert got["never"] == got["always"]
+
+
+def test_the_runs_are_computed_on_threads_in_order_and_few_at_a_time():
+    """The runs' statistics come back in the order of the runs whatever thread finished first, at most
+    RUNS_IN_FLIGHT of them read ahead; an error in one is raised and nothing after it is started."""
+    import threading
+    import time as _time
+
+    import imucal.data.stream as stream_mod
+
+    alive, peak, lock = [0], [0], threading.Lock()
+
+    def items():
+        for k in range(40):
+            with lock:
+                alive[0] += 1
+                peak[0] = max(peak[0], alive[0])
+            yield (k,)
+
+    def fn(item):
+        _time.sleep(0.002 * (item[0] % 3))  # later items may finish first
+        return item[0] * 10
+
+    got = []
+    for item, r in stream_mod._ordered_map(fn, items()):
+        got.append((item[0], r))
+        with lock:
+            alive[0] -= 1
+    assert got == [(k, 10 * k) for k in range(40)]
+    assert peak[0] <= stream_mod.RUNS_IN_FLIGHT + 1
+
+    def bad(item):
+        if item[0] == 5:
+            raise ValueError("run 5")
+        return item[0]
+
+    consumed = []
+
+    def many():
+        for k in range(100):
+            consumed.append(k)
+            yield (k,)
+
+    with pytest.raises(ValueError, match="run 5"):
+        for _ in stream_mod._ordered_map(bad, many()):
+            pass
+    assert len(consumed) <= 5 + stream_mod.RUNS_IN_FLIGHT + 2

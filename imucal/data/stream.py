@@ -19,8 +19,10 @@ histograms of the threshold, and a few numbers per interval, whatever the length
 """
 from __future__ import annotations
 
+import collections
+import concurrent.futures
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -294,9 +296,13 @@ class StreamedRecording:
         segs: list[Segment] = []
         kept: dict[int, tuple] = {}
         m = edge_samples(scan.dt)
-        for start, raw, t, temp in self._pieces(a, b):
-            g = (still_segment(start, raw, t, temp, scan.lows, scan.highs, self.rails, st, m, scan.q)
-                 if t[-1] - t[0] >= st.min_duration else None)  # its edges cut to what is still
+
+        def still(piece: tuple) -> Segment | None:  # a run's edges cut to what is still
+            start, raw, t, temp = piece
+            return (still_segment(start, raw, t, temp, scan.lows, scan.highs, self.rails, st, m, scan.q)
+                    if t[-1] - t[0] >= st.min_duration else None)
+
+        for (start, raw, t, temp), g in _ordered_map(still, self._pieces(a, b)):
             if g is not None:
                 segs.append(g)
                 if keep_samples:
@@ -350,6 +356,32 @@ class StreamedRecording:
             idx = np.concatenate([np.arange(max(a, row0), min(b, row1)) - row0
                                   for a, b in zip(iv.start[k0:k1], iv.end[k0:k1])])
             yield StaticSamples(raw[idx], t[idx], None if temp is None else temp[idx])
+
+
+#: Threads that compute the still runs' statistics (numpy releases the GIL inside its loops, so on a
+#: long log two threads keep a second core busy for part of the work) ...
+SEGMENT_THREADS = 2
+#: ... and the runs read ahead of the one being finished (memory: this many runs' samples at most).
+RUNS_IN_FLIGHT = 8
+
+
+def _ordered_map(fn: Callable[[tuple], object], items: Iterable[tuple]) -> Iterator[tuple[tuple, object]]:
+    """(item, fn(item)) for every item, in order, computed on SEGMENT_THREADS threads with at most
+    RUNS_IN_FLIGHT items held: the same results as in one thread (each item alone)."""
+    pending: collections.deque = collections.deque()
+    with concurrent.futures.ThreadPoolExecutor(max_workers=SEGMENT_THREADS, thread_name_prefix="imucal-runs") as pool:
+        try:
+            for item in items:
+                pending.append((item, pool.submit(fn, item)))
+                while len(pending) > RUNS_IN_FLIGHT:
+                    item0, fut = pending.popleft()
+                    yield item0, fut.result()
+            while pending:
+                item0, fut = pending.popleft()
+                yield item0, fut.result()
+        finally:
+            for _, fut in pending:  # an error or an interruption: nothing more is started
+                fut.cancel()
 
 
 def _guess_unit(spec: DataSpec, stamps: np.ndarray) -> str:
