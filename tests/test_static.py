@@ -197,3 +197,54 @@ def test_ferraris_intervals_are_the_annotated_static_parts():
         assert main in {"x_p", "x_a", "y_p", "y_a", "z_p", "z_a"} and counts.max() >= 0.8 * (b - a)
         seen.add(main)
     assert len(seen) == 6
+
+
+# --- low rates and long holds (issue 27: a 1 Hz, 74.5 h temperature sweep) -----------------------
+def test_a_1hz_log_finds_its_holds_with_the_default_settings():
+    """At 1 Hz the default 0.5 s window is under one sample: it is stretched to MIN_WINDOW_SAMPLES
+    samples, and the minimum duration and trim with it; every hold is found, inside its bounds."""
+    from imucal.analysis.simulate import PosePlan, simulate
+    from imucal.data.static import MIN_WINDOW_SAMPLES, at_rate
+
+    plan = PosePlan(cube_directions("faces"), hold=600.0, transition=20.0, rate=1.0)
+    sim = simulate(si_sensor(np.random.default_rng(3)), plan, seed=3)
+    iv = detect_static(sim.t, sim.raw)
+    _assert_matches_holds(iv, sim)
+    assert np.all(iv.t_end - iv.t_start > 500.0)
+    s = at_rate(StaticSettings(), 1.0)
+    assert (s.window, s.min_duration, s.trim) == (MIN_WINDOW_SAMPLES, 3 * MIN_WINDOW_SAMPLES, MIN_WINDOW_SAMPLES / 2)
+    assert at_rate(StaticSettings(), 0.01) == StaticSettings()  # 100 Hz: as given
+
+
+def test_a_hold_of_hours_that_drifts_with_temperature_is_kept_whole():
+    """A still hold whose reading follows temperature (a fast cool-down at its start, a warm-up at its
+    end: curves no line follows) is one interval: the edge test judges each edge in its own
+    neighbourhood, not against the line of the hold's central half."""
+    rng = np.random.default_rng(4)
+    rate, hours = 1.0, 6.0
+    n_move, n_hold = 60, int(hours * 3600 * rate)
+    t = np.arange(n_move + n_hold + n_move) / rate
+    raw = np.tile([0.0, 0.0, -9.81], (t.size, 1)) + rng.normal(0, 0.02, (t.size, 3))
+    th = np.arange(n_hold) / rate / 3600  # [h]
+    drift = 0.05 * np.exp(-th / 0.3) + 0.04 / (1 + np.exp(-(th - hours + 1.0) / 0.3))  # [m/s^2]
+    raw[n_move:n_move + n_hold, 0] += drift
+    for a, b in ((0, n_move), (n_move + n_hold, t.size)):
+        raw[a:b] += rng.normal(0, 3.0, (b - a, 3))  # handling before and after
+    iv = detect_static(t, raw)
+    assert iv.n == 1
+    assert iv.t_end[0] - iv.t_start[0] > 0.99 * hours * 3600
+
+
+def test_the_real_thermal_sweep_finds_its_four_long_holds():
+    """thermal-cats-skdivemove: z, x (twice: the knock at 38.3 h), then y along -g, found with the
+    default settings (before: "no static intervals found", or 3 intervals with hand-tuned ones)."""
+    rec = load_recording(DataSpec(path=str(real_file("thermal-cats-skdivemove", "cats_temperature_calib.nc"))))
+    iv = detect_static(rec.t, rec.raw, temp=rec.temp)
+    long = np.flatnonzero(iv.t_end - iv.t_start > 10 * 3600)
+    assert long.size == 4
+    axis = np.argmax(np.abs(iv.mean[long]), axis=1)
+    np.testing.assert_array_equal(axis, [2, 0, 0, 1])
+    hours = np.column_stack([iv.t_start[long], iv.t_end[long]]) / 3600
+    assert hours[0, 0] < 0.5 and hours[-1, 1] > 74.0  # the cool-down of the first hour is kept
+    assert 38.2 < hours[1, 1] < hours[2, 0] < 38.6  # split at the knock
+    assert np.sum(hours[:, 1] - hours[:, 0]) > 73.0

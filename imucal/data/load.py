@@ -1,6 +1,7 @@
 """The readers' front: which reader reads a recording.
 
-A ROS bag (imucal.data.rosbag) or a text file read whole (imucal.data.whole) gives a Recording;
+A ROS bag (imucal.data.rosbag), a netCDF-4/HDF5 file (imucal.data.netcdf) or a text file read whole
+(imucal.data.whole) gives a Recording;
 a text file above STREAM_BYTES is read in chunks (imucal.data.stream) when nothing needs every
 sample in memory (use_stream: the pipeline's choice, imucal.pipeline.read_intervals).
 """
@@ -9,6 +10,7 @@ from __future__ import annotations
 import os
 
 from imucal.data.layout import head_layout
+from imucal.data.netcdf import is_netcdf, read_netcdf
 from imucal.data.recording import Recording
 from imucal.data.rosbag import is_bag, read_bag
 from imucal.data.spec import DataSpec, as_spec, check_bag_spec, resolve_path
@@ -27,6 +29,8 @@ def load_recording(spec: DataSpec | str | os.PathLike, base_dir: str | os.PathLi
     if is_bag(path):
         check_bag_spec(spec, path)
         return read_bag(path, spec.topic, spec.temp_topic)
+    if is_netcdf(path):
+        return read_netcdf(spec, path)
     for name in ("topic", "temp_topic"):
         if getattr(spec, name) is not None:
             raise ImucalError(f"{name} applies to ROS bags only", file=str(path), field=f"data.{name}",
@@ -37,8 +41,8 @@ def load_recording(spec: DataSpec | str | os.PathLike, base_dir: str | os.PathLi
 def use_stream(spec: DataSpec, base_dir: str | os.PathLike | None = None) -> bool:
     """Whether ``spec`` is read in chunks: data.stream always, or auto and a file above STREAM_BYTES
     without gyroscope data (columns or a second file)."""
-    if is_bag(resolve_path(spec, base_dir)):
-        return False  # a ROS bag is read message by message (imucal.data.rosbag)
+    if is_bag(resolve_path(spec, base_dir)) or is_netcdf(resolve_path(spec, base_dir)):
+        return False  # a ROS bag is read message by message (imucal.data.rosbag), netCDF by variable
     if spec.stream != "auto":
         return spec.stream == "always"
     if spec.gyro_path is not None:

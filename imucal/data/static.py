@@ -6,12 +6,14 @@ so we split log-variance into two classes (Otsu) and never go below a multiple o
 floor. Unlike imu_tk we do not pick, among candidate thresholds, the one whose fit has the
 lowest summed cost: that rule favours fewer intervals and generalises worse. A run's edges are then
 cut where its readings leave the line of its own central half (still_span): the moving variance stays
-low for up to a second after a slow, smooth motion starts.
+low for up to a second after a slow, smooth motion starts; a run of hours (a temperature sweep) has
+each edge judged in its own neighbourhood instead (EDGE_HORIZON_WINDOWS). Below 20 Hz the default
+window holds too few samples to estimate a variance: it is stretched, and the durations with it (at_rate).
 """
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import BinaryIO
 
 import numpy as np
@@ -53,6 +55,17 @@ EDGE_BACK = 1.0
 EDGE_SLOPE_Z = 3.0
 #: Most cuts per run: one edge a round (the stronger), the line refitted on what is kept.
 EDGE_ROUNDS = 6
+#: A motion hides beneath the moving variance for about a window: a run longer than 4 x this many
+#: windows has each edge judged against its own neighbourhood (its first or last 2 x this many
+#: windows), not against the line of its central half. A hold of hours drifts with temperature in a
+#: way no line follows, and that drift is not motion. (Holds in the real recordings last at most
+#: 52 s, 4 x 40 windows = 80 s at the default 0.5 s window: judged whole, as before.)
+EDGE_HORIZON_WINDOWS = 40
+#: Fewest samples a moving-variance window holds: fewer cannot estimate a variance (3 samples give
+#: a chi-square of 6 degrees of freedom over 3 axes, whose 5 % floor lies 4x below its mean, so the
+#: automatic threshold cuts still samples). At low rates (1 Hz: 0.5 s is under one sample) the window
+#: is stretched to hold them, and the minimum duration and trim with it (``at_rate``).
+MIN_WINDOW_SAMPLES = 10
 
 
 @dataclass(frozen=True)
@@ -376,9 +389,20 @@ def auto_threshold(var: VarianceSeries, quantum: float) -> float:
     return float(min(max(split, 4 * floor), 100 * floor))
 
 
+def at_rate(settings: StaticSettings, dt: float) -> StaticSettings:
+    """The settings for a sample step ``dt`` [s]: a window of fewer than MIN_WINDOW_SAMPLES samples is
+    stretched to hold them, and the minimum duration and the trim by the same factor (at 1 Hz the
+    defaults 0.5 s, 1.5 s, 0.25 s become 10 s, 30 s, 5 s). Unchanged from 20 Hz up at the default window."""
+    r = MIN_WINDOW_SAMPLES * dt / settings.window if dt > 0 else 0.0
+    if not r > 1:
+        return settings
+    return replace(settings, window=settings.window * r, min_duration=settings.min_duration * r,
+                   trim=settings.trim * r)
+
+
 def window_samples(settings: StaticSettings, dt: float) -> int:
-    """Moving-variance window [samples] for a sample step ``dt`` [s]."""
-    return max(3, int(round(settings.window / dt)))
+    """Moving-variance window [samples] for a sample step ``dt`` [s] (``at_rate``)."""
+    return max(3, int(round(at_rate(settings, dt).window / dt)))
 
 
 def candidate_runs(var: VarianceSeries, threshold: float, trim: int) -> tuple[np.ndarray, np.ndarray]:
@@ -459,9 +483,10 @@ def _running(cs: np.ndarray, w: int) -> np.ndarray:
     return (cs[w:] - cs[:-w]) / w
 
 
-def _edge_cut(line: _Line, m: int) -> tuple[int, int] | None:
+def _edge_cut(line: _Line, m: int, sides: str = "both") -> tuple[int, int] | None:
     """The rows [lo, hi) kept after cutting the run's edge whose rows depart most from the line,
-    or None when neither departs by EDGE_Z standard errors."""
+    or None when neither departs by EDGE_Z standard errors. ``sides``: "both", or only the "start"
+    or the "end" edge (a long run's neighbourhood of one edge, ``still_span``)."""
     res, r = line.res, line.r
     n = res.shape[0]
     c0, c1 = n // 4, n - n // 4
@@ -483,7 +508,8 @@ def _edge_cut(line: _Line, m: int) -> tuple[int, int] | None:
     z_end = z(n - i, (r[i] + r[-1]) / 2, (cs[n] - cs[i]) / (n - i)[:, None])
     j = np.arange(1, c0 + 1)  # ... and rows 0..j-1
     z_start = z(j, (r[0] + r[j - 1]) / 2, cs[j] / j[:, None])
-    top_end, top_start = z_end.max(initial=0.0), z_start.max(initial=0.0)
+    top_end = z_end.max(initial=0.0) if sides != "start" else 0.0
+    top_start = z_start.max(initial=0.0) if sides != "end" else 0.0
     if max(top_end, top_start) <= EDGE_Z:
         return None
     dev = _running(cs, m)  # dev[k]: mean of rows k..k+m-1 less the line
@@ -498,14 +524,23 @@ def _edge_cut(line: _Line, m: int) -> tuple[int, int] | None:
     return (k + int(ahead[0]) if ahead.size else k), n
 
 
-def still_span(seg: np.ndarray, m: int, q: float = 0.0) -> tuple[int, int]:
+def still_span(seg: np.ndarray, m: int, q: float = 0.0, horizon: int | None = None) -> tuple[int, int]:
     """Rows [lo, hi) of a still run ``seg`` whose edges agree with its own central half (the EDGE_
     constants): a slow start of motion is cut off. ``m``: rows of the shortest running mean
-    (edge_samples); ``q``: the quantisation step (0: none)."""
+    (edge_samples); ``q``: the quantisation step (0: none); ``horizon``: a run longer than 4 x this
+    many rows has each edge judged within its first or last 2 x horizon rows (EDGE_HORIZON_WINDOWS)."""
     lo, hi = 0, seg.shape[0]
     for _ in range(EDGE_ROUNDS):
         if hi - lo < 4 * m:  # too short to tell a central half from its edges
             break
+        if horizon is not None and hi - lo > 4 * horizon:
+            k = 2 * horizon
+            head = _edge_cut(_Line.of(seg[lo:lo + k], q), m, "start")
+            tail = _edge_cut(_Line.of(seg[hi - k:hi], q), m, "end")
+            if head is None and tail is None:
+                break
+            lo, hi = lo + (head[0] if head else 0), hi - k + (tail[1] if tail else k)
+            continue
         cut = _edge_cut(_Line.of(seg[lo:hi], q), m)
         if cut is None:
             break
@@ -518,8 +553,10 @@ def still_segment(start: int, seg: np.ndarray, t: np.ndarray, temp: np.ndarray |
                   q: float) -> Segment | None:
     """The Segment of a candidate run (rows start..start+len) after its edges are cut to what is
     still (still_span), or None when less than the minimum duration is left."""
-    lo, hi = still_span(seg, m, q)
-    if hi - lo < 3 or t[hi - 1] - t[lo] < settings.min_duration:
+    n = seg.shape[0]
+    dt = float(t[-1] - t[0]) / (n - 1) if n > 1 else 0.0  # the run's step (a gap inside lengthens it)
+    lo, hi = still_span(seg, m, q, EDGE_HORIZON_WINDOWS * window_samples(settings, dt) if dt > 0 else None)
+    if hi - lo < 3 or t[hi - 1] - t[lo] < at_rate(settings, dt).min_duration:
         return None
     return segment(start + lo, seg[lo:hi], t[lo:hi], None if temp is None else temp[lo:hi], lows, highs, declared)
 
@@ -702,6 +739,7 @@ def detect_static(t: np.ndarray, raw: np.ndarray, settings: StaticSettings = Sta
         raise ImucalError(f"only {n} samples", file=source, field="data",
                           fix="record several seconds in each orientation")
     dt = median(np.diff(t))
+    settings = at_rate(settings, dt)  # a window of too few samples stretched, and the durations with it
     mv = MovingVariance(window_samples(settings, dt))
     mv.add(np.asarray(raw, float))
     var = mv.finish()

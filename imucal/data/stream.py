@@ -35,8 +35,8 @@ from imucal.data.recording import MAX_ABS_VALUE, RecordingSummary, StaticSamples
 from imucal.data.spec import DataSpec, as_spec, resolve_path
 from imucal.data.spill import RowSpill, temporary_file
 from imucal.data.static import (QUANTUM_ROWS, Intervals, MovingVariance, Segment, StaticSettings, VarianceStore,
-                                auto_threshold, candidate_runs, edge_samples, intervals_from, quantum, still_segment,
-                                window_samples)
+                                at_rate, auto_threshold, candidate_runs, edge_samples, intervals_from, quantum,
+                                still_segment, window_samples)
 from imucal.data.timebase import (CLOCK_SPAN, GAP_STEPS, Decision, GapFinder, LagDiffs, StepStats, ValueCounts,
                                   clock_times, decide, gap_excess, rate_time_base, refine, time_base,
                                   time_unit_from_step)
@@ -288,7 +288,7 @@ class StreamedRecording:
 
     # --- intervals ------------------------------------------------------------------------------
     def _intervals(self, scan: _Scan, var, keep_samples: bool) -> tuple[Intervals, StaticSamples | None]:
-        st = self.settings
+        st = at_rate(self.settings, scan.dt)  # as detect_static
         thr = st.threshold if st.threshold is not None else auto_threshold(var, scan.q)
         a, b = candidate_runs(var, thr, int(round(st.trim / scan.dt)))
         var.store.close()

@@ -26,8 +26,9 @@ def add_data_options(p: argparse.ArgumentParser, data_required: bool = False, gy
     """--data and how to read it; ``gyro``: --gyro-data; ``stream``: the command can read the file in chunks."""
     g = p.add_argument_group("data")
     g.add_argument("--data", required=data_required, metavar="FILE",
-                   help="recording (CSV with header, or whitespace text: t x y z), or a ROS bag "
-                        "(.bag file, ROS 2 bag folder or .mcap file) with --topic")
+                   help="recording (CSV with header, or whitespace text: t x y z), a ROS bag "
+                        "(.bag file, ROS 2 bag folder or .mcap file) with --topic, or a netCDF-4/HDF5 file "
+                        "(.nc; imucal-nlp[netcdf]) whose variables' units attributes name them")
     g.add_argument("--topic", metavar="TOPIC", help="ROS bags: the sensor_msgs/Imu topic (e.g. /imu)")
     g.add_argument("--temp-topic", metavar="TOPIC",
                    help="ROS bags: a sensor_msgs/Temperature topic, interpolated onto the IMU stamps")
