@@ -1,7 +1,7 @@
 """One calibration run: load, detect static intervals, guess, check observability, fit."""
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Mapping
 from contextlib import contextmanager
 import math
 from dataclasses import asdict, dataclass, replace
@@ -165,7 +165,8 @@ def fit_data(model: SensorModel, intervals: Intervals, samples: StaticSamples | 
                    raw_var=var, group=group, mode="samples", noise_source=src)
 
 
-def measured_noise(config: RunConfig, guess: InitialGuess, rate: float) -> tuple[NoiseModel, float] | None:
+def measured_noise(config: RunConfig, guess: InitialGuess, rate: float, unit: str | None = None
+                   ) -> tuple[NoiseModel, float] | None:
     """``fit.noise`` (a noise file, relative to the YAML file) in the raw unit, with the rate [Hz]."""
     if config.fit.noise is None:
         return None
@@ -173,7 +174,7 @@ def measured_noise(config: RunConfig, guess: InitialGuess, rate: float) -> tuple
 
     p = Path(config.fit.noise)
     p = p if p.is_absolute() or config.base_dir is None else config.base_dir / p
-    return load_noise_model(p).in_raw(config.data.unit, guess.b), float(rate)
+    return load_noise_model(p).in_raw(unit or config.data.unit, guess.b), float(rate)
 
 
 #: Reduced chi-square above which a fit is refused, not reported: no sensor model is that wrong.
@@ -287,23 +288,25 @@ class _Problem:
 
 
 def _problem(config: RunConfig, rec: Recording | RecordingSummary, iv: Intervals,
-             streamed: StreamedRecording | None, gravity: float) -> _Problem:
+             streamed: StreamedRecording | None, gravity: float, held: Mapping[str, float] | None = None) -> _Problem:
     model = build_model(effects_from_specs(config.fit.effects, config.source))
     angles_free = not set(ANGLE_NAMES) <= set(config.fit.fix)
     with _noting_drops(iv.meta.get("dropped", [])):  # too few poses left: the refusal says clipping took some
         guess, dirs, n_distinct = initial_guess(iv, gravity, angles_free, rec.source)
-        params = make_parameters(guess, config, gravity, model, config.data.unit)
+        params = make_parameters(guess, config, gravity, model, rec.unit)  # the file's unit (netCDF, bags)
         if model.effects:  # covariate spread, enough intervals, reference temperature (imucal.model.effects)
             params = prepare_parameters(model.effects, params, {"temp": iv.temp, "time": iv.t_mid}, iv.n,
                                         rec.source)
             params = effect_initial(params, config)  # a given start wins over the data's
             _check_initial_bounds(params, config)
+        if held:  # values another kind of evidence determined (imucal.thermal), held in this fit
+            params = params.with_fixed(held, values=held)
         samples = None
         if config.fit.mode == "samples":
             samples = streamed.samples if streamed is not None else static_samples(iv, rec)
-        noise = measured_noise(config, guess, rec.sample_rate)
+        noise = measured_noise(config, guess, rec.sample_rate, rec.unit)
         if noise is not None:  # a noise file in another unit than the recording's is refused
-            noise[0].check_scale(iv.n_samples, iv.mean_std, noise[1], rec.source, config.data.unit)
+            noise[0].check_scale(iv.n_samples, iv.mean_std, noise[1], rec.source, rec.unit)
         data = fit_data(model, iv, samples, config.fit.mode, rec.source, noise)
         # Observability on interval means (one row per interval), at the initial guess.
         mdata = fit_data(model, iv, None, "means", rec.source, noise) if data.mode != "means" else data
@@ -381,13 +384,16 @@ def _samples_rms(cal: Calibration, pb: _Problem, rec: Recording | RecordingSumma
     return (np.concatenate(kept) if kept else np.empty(0)) if streamed is None else None, rms
 
 
-def calibrate(config: RunConfig, recording: Recording | None = None) -> CalibrationRun:
+def calibrate(config: RunConfig, recording: Recording | None = None,
+              held: Mapping[str, float] | None = None) -> CalibrationRun:
     """Run the whole calibration described by ``config`` (on ``recording`` when given, else on
-    the file ``config.data`` names): read -> detect -> guess -> fit -> result -> calibration."""
+    the file ``config.data`` names): read -> detect -> guess -> fit -> result -> calibration.
+    ``held``: parameters of the model (effect coefficients and their references) held at these
+    values, determined by other evidence (a temperature sweep's poses, imucal.thermal.run)."""
     rec, iv, streamed = read_intervals(config, recording)
     dropped = iv.meta.get("dropped", [])
     gravity, gsource = config.gravity.resolve()
-    pb = _problem(config, rec, iv, streamed, gravity)
+    pb = _problem(config, rec, iv, streamed, gravity, held)
     res = fit(pb.data, pb.params, pb.model, gravity, source=rec.source, weights=config.fit.weights)
     _refuse_absurd(res, pb.params, rec.source)
     rm = res.residuals if res.mode == "means" else jacobian_rows(pb.means, res.params, pb.model, gravity,
@@ -400,14 +406,14 @@ def calibrate(config: RunConfig, recording: Recording | None = None) -> Calibrat
         "bias_instability": res.bias_instability,  # per-visit bias offsets [m/s^2 rms] (in the weights)
         "bias_random_walk": math.sqrt(res.random_walk),  # its density in the standard errors [m/s^2/sqrt(s)]
         # how far a walking bias moved, and the offsets' epoch: its mean over the still intervals
-        **({"bias_drift": res.bias_drift.to_json(config.data.unit)} if res.bias_drift is not None else {}),
+        **({"bias_drift": res.bias_drift.to_json(rec.unit)} if res.bias_drift is not None else {}),
         "n_intervals": iv.n, "n_distinct_orientations": pb.obs.n_distinct,
         "gravity_source": gsource,
         "warnings": fit_warnings(res, config, rec, dropped),
     }
     if iv.temp is not None:  # the range a temperature effect holds over (exports write it: INS_TCAL1_TMIN ...)
         cal_fit["temperature_range"] = [float(np.min(iv.temp)), float(np.max(iv.temp))]
-    cal = Calibration(params=res.params, std=res.std, gravity=gravity, raw_unit=config.data.unit,
+    cal = Calibration(params=res.params, std=res.std, gravity=gravity, raw_unit=rec.unit,
                       effects=tuple((e.name, e.axes) for e in pb.model.effects), fit=cal_fit,
                       data={"file": Path(rec.source).name, "sha256": rec.sha256, "samples": rec.n,
                             "time": rec.time_note,

@@ -196,6 +196,8 @@ class Discovery:
     #: the calibration to keep (``--out``): ``final`` refitted with the weights asked for when they are
     #: "auto" and the residual exceeds the noise (the excess then in its weights and standard errors)
     kept: CalibrationRun | None = None
+    #: a temperature sweep's calibration (imucal.thermal.run.ThermalCalibration), when the recording is one
+    thermal: object | None = None
 
     @property
     def calibration_run(self) -> CalibrationRun:
@@ -265,6 +267,7 @@ class Discovery:
             "settings": dataclasses.asdict(self.settings),
             "stochastic": self.stochastic.to_json() if self.stochastic is not None else None,
             "allan": self.allan.to_json() if self.allan is not None else None,
+            "thermal": _thermal_json(self.thermal),
         }
 
     def report(self) -> str:
@@ -281,6 +284,10 @@ class Discovery:
              f"    p (chi2)   = {self.p_before:<15.3g} {self.p_after:<15.3g} "
              f"(below {self.settings.alpha_noise:g}: disagrees with the noise)",
              f"    model      = {b.model_name}  ->  {f.model_name}"]
+        if self.thermal is not None:  # a sweep's gap is its poses' constancy (imucal.report.thermal)
+            from imucal.report.thermal import gap_lines
+
+            L[3:] = gap_lines(self.thermal, self.settings.alpha_noise) + [f"    model      = {f.model_name}"]
         L.append("[[Effects found]]" + ("" if self.effects else "  none"))
         for e in self.effects:
             amb = f"  (ambiguous with {', '.join(e.ambiguous_with)})" if e.ambiguous_with else ""
@@ -316,11 +323,23 @@ class Discovery:
                             if s.ambiguous_with else ""))
             else:
                 L.append("    -> no candidate is significant")
+        if self.thermal is not None:
+            from imucal.report.thermal import thermal_lines
+
+            L.extend(thermal_lines(self.thermal))
         L.extend(_stochastic_lines(self))
         if self.notes:
             L.append("[[Notes]]")
             L.extend(f"    - {n}" for n in self.notes)
         return "\n".join(L) + "\n"
+
+
+def _thermal_json(tc: object | None) -> dict | None:
+    if tc is None:
+        return None
+    from imucal.report.thermal import thermal_json
+
+    return thermal_json(tc)
 
 
 # --- the workflow ----------------------------------------------------------------------------
@@ -372,7 +391,7 @@ class _Problem:
 
     def parameters(self, effects: list[AxisEffect], start: dict[str, float], check: bool = True):
         model = build_model(effects)
-        params = make_parameters(self.run.guess, self.config, self.gravity, model, self.config.data.unit)
+        params = make_parameters(self.run.guess, self.config, self.gravity, model, self.rec.unit)
         if check:
             params = prepare_parameters(model.effects, params, self.cov, self.iv.n, self.rec.source)
         else:  # the screening model holds every candidate at once: only its Jacobian is used
@@ -789,8 +808,13 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings(),
     if config.fit.mode != "means":
         notes.append("discovery works on interval means; fit.mode: samples was ignored")
         config = dataclasses.replace(config, fit=dataclasses.replace(config.fit, mode="means"))
+    from imucal.thermal.discovery import TEMPERATURE_TERMS, sweep_discovery, sweep_of  # a sweep: its own evidence
+
     try:
-        base = calibrate(config)
+        sweep = sweep_of(config) if set(TEMPERATURE_TERMS) & set(settings.candidates) else None
+        if sweep is not None and sweep.rows is not None:  # still poses held over a temperature change
+            return sweep_discovery(asked, sweep, settings, progress)
+        base = calibrate(config, sweep.recording if sweep is not None else None)
     except ImucalError as exc:
         if exc.field != "intervals":
             raise

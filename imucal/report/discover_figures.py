@@ -247,6 +247,24 @@ def allan_figure(d: Discovery, path: str | Path) -> None:
     plt.close(fig)
 
 
+def temperature_figure(d: Discovery, path: str | Path) -> None:
+    """A temperature sweep's rows about their poses against temperature, before and after the terms
+    found (imucal.report.thermal); a note when the recording is no sweep."""
+    if d.thermal is not None:
+        from imucal.report.thermal import thermal_figure
+
+        thermal_figure(d.thermal, path)
+        return
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(8, 2.2), dpi=100)
+    ax.axis("off")
+    ax.text(0.5, 0.5, _wrap("No temperature sweep: no still pose of this recording spans half a degree or more "
+                            "(or it has no temperature column).", 80), ha="center", va="center", fontsize=10)
+    fig.savefig(path, format="png")
+    plt.close(fig)
+
+
 #: File name -> figure function, for `imucal discover --plot DIR`.
 FIGURES = {"discover_residuals.png": residuals_figure, "discover_candidates.png": candidates_figure,
-           "discover_gap.png": gap_figure, "discover_allan.png": allan_figure}
+           "discover_gap.png": gap_figure, "discover_allan.png": allan_figure,
+           "discover_temperature.png": temperature_figure}

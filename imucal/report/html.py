@@ -180,6 +180,8 @@ CAPTIONS = {
                               "after the effects found",
     "discover_candidates.png": "likelihood-ratio statistic of each candidate effect against the threshold",
     "discover_gap.png": "RMS and chi-square per dof before and after, against the noise",
+    "discover_temperature.png": "a temperature sweep's still poses: each axis's reading about its pose against "
+                                "temperature, before and after the temperature terms found",
 }
 
 

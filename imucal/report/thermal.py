@@ -1,0 +1,162 @@
+"""A temperature sweep's calibration in words and in a figure (imucal.thermal holds the values)."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from imucal.constants import STANDARD_GRAVITY
+from imucal.model.effects import AXIS_NAMES
+from imucal.thermal.evidence import TEMPERATURE_STEP
+
+if TYPE_CHECKING:
+    from imucal.thermal.lag import LagTest
+    from imucal.thermal.run import ThermalCalibration
+
+#: [m/s^2] one milli-g (standard gravity / 1000): the unit the words give residuals in.
+MG = STANDARD_GRAVITY / 1000.0
+
+
+def _mg(x: float) -> str:
+    return f"{x / MG:.3g} mg"
+
+
+def verdict(tc: ThermalCalibration) -> str:
+    """One sentence: the terms the sweep holds, and how far they bring the poses together."""
+    from imucal.thermal.run import found_label
+
+    lo, hi = tc.temperature_range
+    if not tc.effects:
+        return (f"no temperature term is significant: the rows of {tc.rows.poses.size} poses over {lo:.1f}..{hi:.1f} "
+                f"degC stay within {_mg(tc.rms_before)} RMS of their poses")
+    return (f"explained by temperature: {found_label(tc.effects)} bring the still poses' readings over "
+            f"{lo:.1f}..{hi:.1f} degC from {_mg(tc.rms_before)} to {_mg(tc.rms_after)} RMS about each pose; "
+            f"the rest (chi2/dof {tc.selection.fit.redchi:.3g} against the rows' noise) follows no temperature term")
+
+
+def lag_lines(lag: LagTest) -> list[str]:
+    tau = (f"first-order lag of the temperature sensor: tau = {lag.tau:.3g} +/- {lag.tau_std:.2g} s "
+           f"(Wald {lag.tau_lr:.3g}, p adjusted {lag.tau_p:.2g}): ")
+    tau += "named: the die leads the sensor" if lag.lag_named else "not shown by these data (none claimed)"
+    h = ", ".join(f"{AXIS_NAMES[i]} {lag.hysteresis[i] / MG:+.2f} +/- {lag.hysteresis_std[i] / MG:.2f}"
+                  for i in range(3))
+    hy = (f"hysteresis (warming minus cooling, half): {h} mg over {lag.n_warming} warming and {lag.n_cooling} "
+          f"cooling rows (Wald {lag.hysteresis_lr:.3g}, p adjusted {lag.hysteresis_p:.2g}): ")
+    hy += "named" if lag.hysteresis_named else "not shown by these data (none claimed)"
+    return [tau, hy]
+
+
+def determined_lines(tc: ThermalCalibration) -> list[str]:
+    """What the poses determine and what they do not, with what to record."""
+    from imucal.thermal.determine import advice
+
+    out = [f"poses over temperature: {'; '.join(tc.support.describe())}"]
+    for t in tc.selection.undetermined:
+        out.append(f"{t.label} is not determined by these poses (standard error {t.std:.3g} against its "
+                   f"magnitude {t.typical:.3g}): {advice(t.name.split('_')[0], t.axis, tc.support)}")
+    if tc.one_sided:
+        axes = ", ".join(AXIS_NAMES[i] for i in tc.one_sided)
+        held = f" (held by the run file: {', '.join(tc.held)})" if tc.held else ""
+        out.append(f"axes {axes} meet gravity in one direction only: the absolute bias and scale at the reference "
+                   f"temperature are not determined by this recording{held}, only their change with "
+                   "temperature; calibrate them from a multi-pose log (or hold each axis up and down)")
+    return out
+
+
+def gap_lines(tc: ThermalCalibration, alpha: float) -> list[str]:
+    """Discover's [[Gap]] for a sweep: the rows about their poses without and with the terms."""
+    b, f = tc.selection.none, tc.selection.fit
+    return ["[[Gap]]            before          after           (temperature rows about their poses)",
+            f"    RMS        = {b.rms:<15.6g} {f.rms:<15.6g} m/s^2 (noise of a row: {f.sigma:.3g})",
+            f"    chi2 / dof = {b.chi2:.4g} / {b.dof:<6d}  {f.chi2:.4g} / {f.dof}",
+            f"    chi2/dof   = {b.redchi:<15.4g} {f.redchi:<15.4g} (1 = residual at noise level)",
+            f"    p (chi2)   = {tc.p_noise(False):<15.3g} {tc.p_noise(True):<15.3g} "
+            f"(below {alpha:g}: disagrees with the noise)"]
+
+
+def thermal_lines(tc: ThermalCalibration) -> list[str]:
+    """The [[Temperature]] section of the discover report."""
+    from imucal.thermal.run import axis_rms
+
+    sel = tc.selection
+    L = ["[[Temperature]]  pose constancy: a still pose's calibrated reading does not change with temperature",
+         f"    rows       = {tc.rows.n} (at most {TEMPERATURE_STEP:g} degC each) in {tc.rows.poses.size} poses, "
+         f"{tc.temperature_range[0]:.2f}..{tc.temperature_range[1]:.2f} degC",
+         "    RMS about the poses, per axis (x, y, z): before "
+         + ", ".join(f"{v / MG:.3g}" for v in axis_rms(tc, False))
+         + " mg; after " + ", ".join(f"{v / MG:.3g}" for v in axis_rms(tc)) + " mg"]
+    for r in sel.rounds:
+        tried = [t for t in r.trials if t.dof > 0]
+        skipped = [t.label for t in r.trials if not t.determined]
+        what = (f"added {r.chosen.label} (LR {r.chosen.lr:.4g}, p adjusted {r.chosen.p_adjusted:.3g})" if r.chosen
+                else ("no candidate significant" + (f" (best {tried[0].label}: LR {tried[0].lr:.3g}, p adjusted "
+                                                    f"{tried[0].p_adjusted:.3g})" if tried else "")))
+        L.append(f"    round {r.index}: {what}" + (f"; not determined: {', '.join(skipped)}" if skipped else ""))
+    for n in sel.fit.free_names:
+        p = sel.fit.params[n]
+        L.append(f"    {n:<26s} = {p.value:.6g} +/- {sel.fit.std[n]:.3g} {p.unit}")
+    L.extend(f"    - {s}" for s in [*lag_lines(tc.lag), *determined_lines(tc)])
+    return L
+
+
+def thermal_json(tc: ThermalCalibration) -> dict[str, Any]:
+    from imucal.thermal.run import axis_rms
+
+    lag = tc.lag
+
+    def num(x: float) -> float | None:
+        return float(x) if math.isfinite(x) else None
+
+    return {"rows": tc.rows.n, "poses": int(tc.rows.poses.size), "temperature_range": list(tc.temperature_range),
+            "effects": {n: [AXIS_NAMES[a] for a in ax] for n, ax in tc.effects.items()},
+            "coefficients": {n: tc.selection.fit.params[n].value for n in tc.selection.fit.free_names},
+            "std": {n: num(v) for n, v in tc.selection.fit.std.items()},
+            "rms_before": tc.rms_before, "rms_after": tc.rms_after, "rms_unit": "m/s^2",
+            "rms_axis_before": axis_rms(tc, False).tolist(), "rms_axis_after": axis_rms(tc).tolist(),
+            "undetermined": [t.label for t in tc.selection.undetermined],
+            "lag": {"tau_s": num(lag.tau), "tau_std_s": num(lag.tau_std), "p": lag.tau_p, "named": lag.lag_named},
+            "hysteresis": {"half_warming_minus_cooling": lag.hysteresis.tolist(),
+                           "std": [num(v) for v in lag.hysteresis_std], "p": lag.hysteresis_p,
+                           "named": lag.hysteresis_named},
+            "one_sided_axes": [AXIS_NAMES[i] for i in tc.one_sided]}
+
+
+def residual_temperature_figure(temp: np.ndarray, before: np.ndarray, after: np.ndarray, pose: np.ndarray,
+                                path: str | Path | Any, title: str) -> None:
+    """Residual about each pose [mg] against temperature, per axis: without the temperature terms and
+    with them. ``before``/``after``: (n, 3) [m/s^2]; ``pose``: (n,) pose of each point (its colour)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(3, 2, figsize=(10, 7.5), dpi=100, sharex=True, sharey="row")
+    colours = plt.get_cmap("tab10")
+    poses = np.unique(pose)
+    for i in range(3):
+        for j, (vals, what) in enumerate(((before, "uncorrected"), (after, "corrected"))):
+            ax = axes[i, j]
+            for c, p in enumerate(poses):
+                m = pose == p
+                ax.plot(temp[m], vals[m, i] / MG, ".", ms=3, color=colours(c % 10), label=f"pose {int(p)}")
+            rms = float(np.sqrt(np.mean(vals[:, i] ** 2))) / MG
+            ax.set_title(f"axis {AXIS_NAMES[i]}, {what}: RMS {rms:.3g} mg", fontsize=9)
+            ax.grid(True, alpha=0.3)
+            if j == 0:
+                ax.set_ylabel("about the pose [mg]")
+    for ax in axes[-1]:
+        ax.set_xlabel("temperature [degC]")
+    axes[0, 1].legend(fontsize=7, loc="best", markerscale=2)
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, format="png")
+    plt.close(fig)
+
+
+def thermal_figure(tc: ThermalCalibration, path: str | Path | Any) -> None:
+    """The rows' residual about their poses against temperature, before and after the terms found."""
+    residual_temperature_figure(tc.rows.temp, tc.selection.none.residuals, tc.selection.fit.residuals, tc.rows.pose,
+                                path, f"still poses over temperature: rows at most {TEMPERATURE_STEP:g} degC wide, "
+                                      "residual about each pose's own reading")
