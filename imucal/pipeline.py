@@ -27,7 +27,8 @@ from imucal.data.static import Intervals, detect_static
 from imucal.solve.misfit import excess_residuals  # one rule for every sensor's fit
 from imucal.report.misfit import excess_words
 from imucal.model.effects_registry import effects_from_specs
-from imucal.model.effects import EFFECTS, prepare_parameters
+from imucal.model.effects import EFFECTS, fit_to_data, prepare_parameters
+from imucal.thermal.determine import interval_advice
 
 if TYPE_CHECKING:  # imported only when used: the gyroscope's modules, the noise-model reader (fit.noise),
     from imucal.analysis.noise_model import NoiseModel  # the chunked reader (a file above STREAM_BYTES)
@@ -71,15 +72,25 @@ def covariates_for(model: SensorModel, intervals: Intervals | None = None, sampl
     return covariate_matrix(model.covariates, values, np.asarray(time).size)
 
 
+#: An axis gravity reached both ways: its interval means lie beyond this fraction of g (in the
+#: recording's scale) on both sides of zero. One reached one way only (three one-axis-down poses)
+#: gives no shift from its range: its mid-range lies half of g off.
+TWO_SIDED = 0.5
+
+
 def _rough_guess(means: np.ndarray, gravity: float) -> InitialGuess:
-    """Mid-range shift and half-range scale; an axis that gravity barely reached (range below
-    half the largest) borrows the largest scale. Only used where no ellipsoid can be fitted,
-    to analyse observability."""
+    """Mid-range shift and half-range scale of an axis gravity reached both ways; an axis it reached
+    one way only takes the recording's scale (the median |mean| / g, shifts being small against g)
+    and no shift. Only used where no ellipsoid can be fitted: to analyse observability, and to start
+    a fit whose scales the run file holds (from the mid-range such a fit may reach the mirror image
+    of the shifts through the poses' plane, |raw - s| = g there too)."""
     lo, hi = means.min(axis=0), means.max(axis=0)
-    b = (hi - lo) / (2 * gravity)
-    ref = b.max() if b.max() > 0 else 1.0
-    b = np.where(b > 0.5 * ref, b, ref)
-    return InitialGuess(s=(lo + hi) / 2, b=b, angles=np.full(3, np.pi / 2), method="range")
+    scale = float(np.median(np.linalg.norm(means, axis=1))) / gravity
+    if not scale > 0:
+        scale = 1.0
+    two = (hi > TWO_SIDED * gravity * scale) & (lo < -TWO_SIDED * gravity * scale)
+    b = np.where(two, (hi - lo) / (2 * gravity), scale)
+    return InitialGuess(s=np.where(two, (lo + hi) / 2, 0.0), b=b, angles=np.full(3, np.pi / 2), method="range")
 
 
 def initial_guess(intervals: Intervals, gravity: float, angles_free: bool, source: str | None
@@ -294,13 +305,13 @@ def _problem(config: RunConfig, rec: Recording | RecordingSummary, iv: Intervals
     with _noting_drops(iv.meta.get("dropped", [])):  # too few poses left: the refusal says clipping took some
         guess, dirs, n_distinct = initial_guess(iv, gravity, angles_free, rec.source)
         params = make_parameters(guess, config, gravity, model, rec.unit)  # the file's unit (netCDF, bags)
-        if model.effects:  # covariate spread, enough intervals, reference temperature (imucal.model.effects)
-            params = prepare_parameters(model.effects, params, {"temp": iv.temp, "time": iv.t_mid}, iv.n,
-                                        rec.source)
+        covariates = {"temp": iv.temp, "time": iv.t_mid}
+        if held:  # values another kind of evidence determined (imucal.thermal): held, with their references
+            params = fit_to_data(model.effects, params, covariates).with_fixed(held, values=held)
+        elif model.effects:  # covariate spread, enough intervals, reference temperature (imucal.model.effects)
+            params = prepare_parameters(model.effects, params, covariates, iv.n, rec.source)
             params = effect_initial(params, config)  # a given start wins over the data's
             _check_initial_bounds(params, config)
-        if held:  # values another kind of evidence determined (imucal.thermal), held in this fit
-            params = params.with_fixed(held, values=held)
         samples = None
         if config.fit.mode == "samples":
             samples = streamed.samples if streamed is not None else static_samples(iv, rec)
@@ -311,7 +322,8 @@ def _problem(config: RunConfig, rec: Recording | RecordingSummary, iv: Intervals
         # Observability on interval means (one row per interval), at the initial guess.
         mdata = fit_data(model, iv, None, "means", rec.source, noise) if data.mode != "means" else data
         obs = observability(model, params, mdata, dirs, gravity, config.fit.angle_tolerance)
-        require_observable(obs, params.free_names, rec.source)
+        require_observable(obs, params.free_names, rec.source,
+                           lambda names: interval_advice(names, dirs, iv.temp))  # what pose, what temperature
     return _Problem(model, guess, params, data, mdata, samples, obs)
 
 

@@ -184,22 +184,29 @@ def gap_figure(d: Discovery, path: str | Path) -> None:
     """RMS and chi-square per dof before and after, with the noise level."""
     plt = _plt()
     b, f = d.base.result, d.final.result
+    rms_all, red_all, noise, dof = [d.rms_before, d.rms_after], [b.redchi, f.redchi], d.rms_noise, f.dof
+    what, noise_label = "RMS of |a| - g on interval means [mm/s^2]", "noise of the means alone"
+    if d.thermal is not None:  # a sweep: its gap is the temperature rows' constancy about their poses
+        none, fit = d.thermal.selection.none, d.thermal.selection.fit
+        rms_all, red_all, noise, dof = [none.rms, fit.rms], [none.redchi, fit.redchi], fit.sigma, fit.dof
+        what, noise_label = "RMS of the temperature rows about their poses [mm/s^2]", "noise of a row"
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(9, 3.8), dpi=100)
     if d.effects:
         labels, x = ["base model", "with " + ", ".join(e.label for e in d.effects)], [0, 1]
-        rms, red, colors = [d.rms_before, d.rms_after], [b.redchi, f.redchi], ["tab:red", "tab:blue"]
+        rms, red, colors = rms_all, red_all, ["tab:red", "tab:blue"]
     else:
         labels, x = ["base model (nothing added)"], [0]
-        rms, red, colors = [d.rms_before], [b.redchi], ["tab:red"]
+        rms, red, colors = rms_all[:1], red_all[:1], ["tab:red"]
+    red = [v if np.isfinite(v) else 0.0 for v in red]  # no degrees of freedom: nothing to show
     a1.bar(x, np.array(rms) * 1e3, color=colors, width=0.5)
-    a1.axhline(d.rms_noise * 1e3, color="k", ls="--", lw=1, label="noise of the means alone")
-    a1.set_ylabel("RMS of |a| - g on interval means [mm/s^2]")
+    a1.axhline(noise * 1e3, color="k", ls="--", lw=1, label=noise_label)
+    a1.set_ylabel(what)
     a2.bar(x, red, color=colors, width=0.5)
     a2.axhline(1.0, color="k", ls="--", lw=1, label="1 = at noise level")
-    crit = _critical_lr(max(f.dof, 1), d.settings.alpha_noise) / max(f.dof, 1)
-    a2.axhline(crit, color="tab:gray", ls=":", lw=1.2, label=f"p = {d.settings.alpha_noise:g} limit ({f.dof} dof)")
+    crit = _critical_lr(max(dof, 1), d.settings.alpha_noise) / max(dof, 1)
+    a2.axhline(crit, color="tab:gray", ls=":", lw=1.2, label=f"p = {d.settings.alpha_noise:g} limit ({dof} dof)")
     a2.set_ylabel("chi-square per degree of freedom  [1]")
-    for ax, top in ((a1, max(max(rms), d.rms_noise) * 1e3), (a2, max(max(red), crit))):
+    for ax, top in ((a1, max(max(rms), noise) * 1e3), (a2, max(max(red), crit))):
         ax.set_xticks(x)
         ax.set_xticklabels(labels, fontsize=8)
         ax.set_xlabel("model")

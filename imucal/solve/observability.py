@@ -13,7 +13,7 @@ direction. Parameters that load on the Jacobian's (near) null space are named as
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Mapping, Sequence
+from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -190,8 +190,11 @@ def analyse(directions: np.ndarray, jac_rows: np.ndarray, free_names: tuple[str,
     return Observability(n_distinct, labels, svf, tuple(sorted(und, key=free_names.index)), z, tuple(poor))
 
 
-def require_observable(obs: Observability, free_names: tuple[str, ...], source: str | None) -> None:
-    """Raise a one-line ImucalError naming undetermined parameters and the poses to add."""
+def require_observable(obs: Observability, free_names: tuple[str, ...], source: str | None,
+                       advice: Callable[[Sequence[str]], str | None] | None = None) -> None:
+    """Raise a one-line ImucalError naming undetermined parameters and the poses to add; ``advice``
+    names what to record for undetermined parameters of effects (a pose over a temperature range,
+    imucal.thermal.determine.interval_advice), or None to keep the words about orientations."""
     nf = len(free_names)
     angles_free = [a for a in ANGLE_NAMES if a in free_names]
     if obs.n_distinct < nf:
@@ -213,5 +216,8 @@ def require_observable(obs: Observability, free_names: tuple[str, ...], source: 
             fix += "; fixing the angles does not help here"
         else:
             fix += ", or fix those parameters"
+        said = advice(obs.undetermined) if advice is not None else None
+        if said:
+            fix = said
         raise ImucalError(f"the orientations leave {', '.join(obs.undetermined)} undetermined ({detail})",
                           file=source, field="intervals", fix=fix)

@@ -15,13 +15,17 @@ fit) tells s_i from b_i only when axis i meets gravity in both directions (``one
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
 
 from imucal.model.effects import AXIS_NAMES
 from imucal.thermal.evidence import ThermalRows
 
+#: A temperature coefficient's name: target, axis (imucal.model.effects: <target>_temperature[2|3]_<axis>).
+_COEFFICIENT = re.compile(r"(bias|scale)_temperature[23]?_([xyz])\Z")
 #: An axis reads "about g" in a pose when its share of gravity is above this, "about 0 g" below
 #: LEVEL_ZERO (a pose tilted between the two shows both, mixed).
 LEVEL_G, LEVEL_ZERO = 0.8, 0.3
@@ -86,3 +90,23 @@ def one_sided(directions: np.ndarray) -> list[int]:
         if not (d.max() > LEVEL_G and d.min() < -LEVEL_G):
             out.append(i)
     return out
+
+
+def interval_advice(names: Sequence[str], directions: np.ndarray, temps: np.ndarray | None) -> str | None:
+    """What to record for undetermined temperature coefficients of a fit on still intervals (|a| = g):
+    the axis held along gravity (scale) or across it (bias) over a temperature change, with the
+    range the intervals give now; None when no name is a temperature coefficient."""
+    out = []
+    for n in names:
+        m = _COEFFICIENT.match(n)
+        if m is None:
+            continue
+        target, axis = m.group(1), AXIS_NAMES.index(m.group(2))
+        share = np.abs(directions[:, axis])
+        sel = share >= LEVEL_G if target == "scale" else share <= LEVEL_ZERO
+        have = (f"the intervals with it so span {np.min(temps[sel]):.1f}..{np.max(temps[sel]):.1f} degC"
+                if temps is not None and sel.any() else "no interval holds it so")
+        how = "along gravity (up or down)" if target == "scale" else "horizontal (another axis along gravity)"
+        out.append(f"{n}: hold the sensor still with {AXIS_NAMES[axis]} {how} while the temperature changes over "
+                   f"the range to calibrate ({have})")
+    return "; ".join(out) or None
