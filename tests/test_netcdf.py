@@ -76,7 +76,7 @@ def test_a_netcdf_file_calibrates_as_its_csv(sim, run_cli, tmp_path):
     nc = write_nc(tmp_path / "acc.nc", csv.raw, csv.t)  # no gyroscope: the accelerometer alone
     b = run_cli(["calibrate", "--data", nc, "--out", tmp_path / "b", "--no-figures", "--quiet"])
     assert a.code == b.code == 0, (a.err, b.err)
-    from imucal.calibration.fileformat import load_calibration
+    from imucal.calibration.frozen import load_calibration
 
     ca, cb = (load_calibration(tmp_path / d / "calibration.yaml") for d in ("a", "b"))
     np.testing.assert_allclose(cb.values, ca.values, rtol=1e-9, atol=1e-12)

@@ -13,7 +13,7 @@ import pytest
 
 from conftest import real_file
 from imucal.analysis.discover import discover
-from imucal.calibration.fileformat import load_calibration
+from imucal.calibration.frozen import load_calibration
 from imucal.config.run import config_from_dict
 from imucal.constants import STANDARD_GRAVITY
 from imucal.errors import ImucalError

@@ -808,12 +808,13 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings(),
     if config.fit.mode != "means":
         notes.append("discovery works on interval means; fit.mode: samples was ignored")
         config = dataclasses.replace(config, fit=dataclasses.replace(config.fit, mode="means"))
-    from imucal.thermal.discovery import TEMPERATURE_TERMS, sweep_discovery, sweep_of  # a sweep: its own evidence
+    from imucal.thermal.run import sweep_of  # a temperature sweep: its own evidence (imucal.thermal)
+    from imucal.thermal.select import TEMPERATURE_TERMS
 
     try:
         sweep = sweep_of(config) if set(TEMPERATURE_TERMS) & set(settings.candidates) else None
         if sweep is not None and sweep.rows is not None:  # still poses held over a temperature change
-            return sweep_discovery(asked, sweep, settings, progress)
+            return _sweep_discovery(asked, sweep, settings, progress)
         base = calibrate(config, sweep.recording if sweep is not None else None)
     except ImucalError as exc:
         if exc.field != "intervals":
@@ -873,6 +874,37 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings(),
                      consistent_after=p_after >= settings.alpha_noise, p_before=p_before, p_after=p_after,
                      disagreement=tuple(st.disagreement), notes=tuple(notes) + (sto.notes if sto else ()),
                      settings=settings, stochastic=sto, allan=stoch.allan_view(final, sto))
+
+
+def _sweep_discovery(config: RunConfig, sweep, settings: DiscoverSettings,
+                     progress: Callable[[], None] | None) -> Discovery:
+    """A temperature sweep's Discovery: its thermal calibration (imucal.thermal.run), the order selection's
+    rounds as rounds, the terms as effects, the tests against the noise those of the rows about their poses."""
+    from imucal.report.thermal import verdict
+    from imucal.thermal.run import first_added, thermal_calibration
+
+    tc = thermal_calibration(dataclasses.replace(sweep, config=config), progress, settings.alpha_effect)
+    fit, added, steps = tc.selection.fit, first_added(tc), []
+    for r in tc.selection.rounds:
+        cands = tuple(Candidate(t.name, (t.axis,), (t.axis,), t.chi2_screen, chi2=t.chi2, dof=t.dof, lr=t.lr,
+                                p_value=t.p_adjusted, p_adjusted=t.p_adjusted, score=t.chi2, fitted=t.dof > 0,
+                                converged=t.dof > 0, significant=t.significant) for t in r.trials if t.determined)
+        chosen = next((c for c in cands if r.chosen is not None and c.label == r.chosen.label), None)
+        steps.append(Step(r.index, r.chi2_before, r.dof_before, cands, chosen,
+                          p_scan=min((c.p_adjusted for c in cands if c.fitted), default=math.nan)))
+    effects = tuple(_found(n, ax, dataclasses.replace(tc.final.result, params=fit.params, std=fit.std), *added[n], ())
+                    for n, ax in sorted(tc.effects.items(), key=lambda kv: _EFFECT_ORDER[kv[0]]))
+    notes = ["temperature sweep: the terms were chosen on the pose constancy of the still poses' temperature rows "
+             "(imucal.thermal; see [[Temperature]]); the calibration kept is |a| - g on the still intervals with "
+             "the terms held"]
+    if tc.base is None:
+        notes.append(f"the base model without temperature terms was refused ({tc.base_refusal}): the base run "
+                     "shown is the final one")
+    a = settings.alpha_noise
+    return Discovery(base=tc.base or tc.final, final=tc.final, steps=tuple(steps), effects=effects, verdict=verdict(tc),
+                     consistent_before=tc.p_noise(False) >= a, consistent_after=tc.p_noise(True) >= a,
+                     p_before=tc.p_noise(False), p_after=tc.p_noise(True), disagreement=(), notes=tuple(notes),
+                     settings=settings, thermal=tc)
 
 
 @dataclass

@@ -11,5 +11,5 @@ bias(T) + g scale(T). The pieces:
 - ``determine``: what the poses determine, and what to record for what they do not;
 - ``select``: the orders, chosen by the grammar's own forward test (imucal.analysis.discover);
 - ``lag``: a lagging temperature sensor or hysteresis, named only when the data show it;
-- ``run``: the whole thermal calibration, for ``imucal discover``.
+- ``run``: the whole thermal calibration (``imucal discover`` turns it into a Discovery).
 """

@@ -38,6 +38,8 @@ from imucal.thermal.fit import ThermalFit, accel_rows, fit_rows
 BASES = {1: "temperature", 2: "temperature2", 3: "temperature3"}
 TARGETS = ("bias", "scale")
 MAX_ORDER = 3
+#: The grammar's temperature terms: what a sweep's selection can name.
+TEMPERATURE_TERMS = tuple(f"{t}_{b}" for t in TARGETS for b in BASES.values())
 #: Family-wise level for adding a term (discover's default, imucal.analysis.discover.DiscoverSettings).
 ALPHA = 1e-3
 
