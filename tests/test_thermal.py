@@ -231,3 +231,29 @@ def test_the_real_thermal_sweep_workflow(run_cli, tmp_path):
     flight.write_text("t,ax,ay,az,temp\n0,-0.2,0.7,-10.4,5\n1,-0.2,0.7,-10.4,20\n")
     r = run_cli(["apply", tmp_path / "cal" / "calibration.yaml", "--data", flight, "--out", tmp_path / "o.csv"])
     assert r.code == 0, r.err
+
+
+def test_the_gyroscope_bias_over_temperature_orders_values_and_drift():
+    """imucal.gyro.thermal on rows of three poses over 5..25 degC: x linear, y quadratic, z none (plus each
+    pose's Earth rate): the orders found, the curve within its errors, named Parameters in the grammar's names."""
+    from imucal.gyro.thermal import gyro_bias_temperature
+    from imucal.thermal.evidence import ThermalRows
+
+    rng = np.random.default_rng(8)
+    T = np.concatenate([np.linspace(5, 25, 80)] * 3)
+    pose = np.repeat([0, 1, 2], 80)
+    earth = np.array([[7e-5, 0, 1e-5], [0, 7e-5, 0], [2e-5, 0, -7e-5]])[pose]
+    dT = T - 15.0
+    truth = np.column_stack([2e-4 * dT, -1e-4 * dT + 4e-6 * dT ** 2, np.zeros_like(T)])
+    gyro = 0.03 + earth + truth + rng.normal(0, 2e-6, (T.size, 3))
+    n = T.size
+    rows = ThermalRows(raw=np.zeros((n, 3)), temp=T, t=np.arange(n) * 600.0, pose=pose, n_samples=np.full(n, 100),
+                       var=np.ones((n, 3)), gyro=gyro, start=np.arange(n), end=np.arange(n) + 1)
+    g = gyro_bias_temperature(rows)
+    assert g.orders == (1, 2, 0)
+    assert set(g.params.free_names) == {"bias_temperature_x", "bias_temperature_y", "bias_temperature2_y"}
+    assert g.params["bias_temperature_tref"].fixed and g.std["bias_temperature_x"] > 0
+    curve = g.bias(np.array([5.0, 25.0])) - g.bias(np.array([15.0, 15.0]))
+    want = truth[[0, 79]] - np.array([0.0, 0.0, 0.0])
+    np.testing.assert_allclose(curve, want, atol=5e-6)
+    assert np.sqrt(np.mean(g.after ** 2)) < 3e-6 < np.sqrt(np.mean(g.before ** 2))

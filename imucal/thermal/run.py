@@ -113,7 +113,9 @@ def _final(config: RunConfig, rec: Recording, sel: Selection, prob: ThermalProbl
     params = Parameters(replace(p, fixed=False) if n in coef else p for n, p in run.result.params.items())
     std = {**run.result.std, **{n: sel.fit.std[n] for n in coef}}
     fit = {**run.calibration.fit, "temperature_terms": "pose constancy over the temperature sweep "
-                                                      "(imucal.thermal), standard errors scaled by chi2/dof"}
+                                                      "(imucal.thermal), standard errors scaled by chi2/dof",
+           # the range the terms were fitted over (the exports write it: INS_TCAL1_TMIN ...), the rows' own
+           "temperature_range": [float(prob.rows.temp.min()), float(prob.rows.temp.max())]}
     cal = replace(run.calibration, params=params, std=std, fit=fit)
     return replace(run, result=replace(run.result, params=params, std=std), calibration=cal)
 
