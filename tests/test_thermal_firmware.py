@@ -107,6 +107,7 @@ def test_the_autopilots_formula_gives_what_apply_gives(cal_path, run_cli, tmp_pa
     the firmware holds the end value, which is apply at the clamped temperature."""
     raw, temp = _samples()
     params = _export(run_cli, cal_path, fmt, tmp_path)
+    assert "holds no temperature scale term" not in (tmp_path / f"{fmt}.param").read_text()  # none to drop
     lo, hi = (params["INS_TCAL1_TMIN"], params["INS_TCAL1_TMAX"]) if fmt == "ardupilot" else \
         (params["TC_A0_TMIN"], params["TC_A0_TMAX"])
     cal = load_calibration(cal_path)

@@ -124,6 +124,8 @@ def polynomial(cal: Calibration) -> TempPolynomial | None:
     coeffs = np.zeros((4, 3))
     coeffs[:degree + 1] = np.linalg.lstsq(np.vander(temps - tref, degree + 1, increasing=True), S, rcond=None)[0]
     A_ref, s_ref = _affine_at(part, tref, probe)
+    if not any(n in SCALE_TERMS for n, _ in part.effects):  # nothing dropped (not rounding's 1e-15 m/s^2)
+        return TempPolynomial(tref=tref, tmin=tmin, tmax=tmax, s_ref=s_ref, coeffs=coeffs, range_note=note)
     grid = np.linspace(tmin, tmax, LOSS_POINTS)  # the ends included: a scale term's loss peaks there
     lost = [np.eye(3) - A_ref @ np.linalg.inv(_affine_at(part, float(t), probe)[0]) for t in grid]
     g = float(cal.gravity)

@@ -26,6 +26,12 @@ MIN_ROW_SAMPLES = 10
 #: A pose carries temperature evidence when its rows span at least this [degC] (the grammar's own
 #: threshold of a temperature effect, imucal.model.effects.MIN_TEMPERATURE_SPREAD).
 POSE_SPREAD = MIN_TEMPERATURE_SPREAD
+#: A recording is a temperature sweep (its calibration's temperature terms come from its poses' own
+#: constancy, imucal.thermal.run) when one still pose spans at least this [degC], four rows: a term of a
+#: few mg per degC then moves the pose's reading far above its noise. A multi-pose log whose holds of
+#: seconds drift through a few tenths of a degree while warming is calibrated on |a| = g instead
+#: (imucal.analysis.discover): there the temperature changes between poses, not within them.
+SWEEP_SPAN = 4 * TEMPERATURE_STEP
 
 
 @dataclass(frozen=True)
@@ -55,6 +61,11 @@ class ThermalRows:
         """[degC] the temperature range of a pose's rows."""
         t = self.temp[self.pose == pose]
         return float(t.min()), float(t.max())
+
+    @property
+    def is_sweep(self) -> bool:
+        """Whether one pose's rows span SWEEP_SPAN or more."""
+        return any(np.ptp(self.temp[self.pose == p]) >= SWEEP_SPAN for p in self.poses)
 
     def sweeping(self) -> np.ndarray:
         """The poses whose rows span at least POSE_SPREAD: those that carry temperature evidence."""

@@ -46,12 +46,12 @@ class Sweep:
 
 def sweep_of(config: RunConfig) -> Sweep | None:
     """The run's recording and intervals, with rows when a still pose spans a temperature change (at least
-    imucal.thermal.evidence.POSE_SPREAD); None for a file read in chunks (no samples kept)."""
+    imucal.thermal.evidence.SWEEP_SPAN); None for a file read in chunks (no samples kept)."""
     if use_stream(config.data, config.base_dir):
         return None
     rec, iv, _ = read_intervals(config)
     rows = thermal_rows(rec, iv)
-    return Sweep(config, rec, iv, rows if rows is not None and rows.sweeping().size else None)
+    return Sweep(config, rec, iv, rows if rows is not None and rows.is_sweep else None)
 
 
 @dataclass(frozen=True)
