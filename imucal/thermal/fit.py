@@ -36,10 +36,8 @@ from imucal.thermal.evidence import ThermalRows
 @lru_cache(maxsize=64)
 def accel_rows(model: SensorModel, free: tuple[str, ...]) -> Vectorized:
     """(raw, cov, pfree, pfix) -> (a [3], da/dpfree [3 x nf]) of one row, from SensorModel.accel."""
-    names = model.names
     raw, cov = ca.SX.sym("raw", 3), ca.SX.sym("cov", len(model.covariates))
-    pf, pfix = ca.SX.sym("pfree", len(free)), ca.SX.sym("pfix", len(names))
-    p = ca.vertcat(*[pf[free.index(n)] if n in free else pfix[i] for i, n in enumerate(names)])
+    pf, pfix, p = lsq.split_parameters(model.names, free)  # every evidence's split (one code path)
     a = model.accel(raw, cov, p)
     return Vectorized(ca.Function("thermal_a", [raw, cov, pf, pfix], [a, ca.jacobian(a, pf)]))
 

@@ -11,8 +11,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Fit the paper's 9-parameter model, test the residual of the interval means "
                                    "against their noise (chi-square), and while it disagrees add the candidate "
                                    "effect (temperature, drift, nonlinearity) that is significant by a "
-                                   "likelihood-ratio test. Prints the report; --json, --plot and --out write files "
-                                   "(report.html goes into --out DIR, else into --plot DIR).")
+                                   "likelihood-ratio test. A recording that holds still poses over a temperature "
+                                   "change (a sweep: one pose spanning 2 degC) takes its temperature terms from each "
+                                   "pose's constancy instead (docs/thermal.md). Prints the report; --json, --plot and "
+                                   "--out write files (report.html goes into --out DIR, else into --plot DIR).")
     p.add_argument("--config", help="YAML run file (data, static, gravity, fit sections); --data overrides its path")
     options.add_data_options(p)
     options.add_gravity_options(p)
