@@ -76,6 +76,24 @@ def gap_lines(tc: ThermalCalibration, alpha: float) -> list[str]:
             f"(below {alpha:g}: disagrees with the noise)"]
 
 
+def gyro_lines(tc: ThermalCalibration) -> list[str]:
+    """The gyroscope's bias(T) from the same rows, and its drift beside it (evidence, not in the file yet)."""
+    g = tc.gyro
+    if g is None:
+        return []
+    rms = lambda x: np.sqrt(np.mean(x ** 2, axis=0)) * 1e3  # noqa: E731  [mrad/s]
+    out = ["gyroscope bias(T) (evidence: the calibration file does not hold it yet): orders x, y, z = "
+           + ", ".join(map(str, g.orders)) + "; rows about their poses "
+           + ", ".join(f"{b:.3g} -> {a:.3g}" for b, a in zip(rms(g.before), rms(g.after))) + " mrad/s"]
+    out += [f"    {n} = {g.params[n].value:.4g} +/- {g.std[n]:.2g} {g.params[n].unit}" for n in g.params.free_names]
+    out.append("gyroscope drift in time fitted beside it: " + ", ".join(
+        f"{a} {d * 1e3:+.2f} +/- {s * 1e3:.2f} mrad/s per day" for a, d, s in zip(AXIS_NAMES, g.drift, g.drift_std))
+               + "; correlation with the linear temperature term " + ", ".join(
+        "n/a" if not np.isfinite(c) else f"{c:+.2f}" for c in g.drift_correlation)
+               + ": a sweep warms over hours, so a drift and a temperature term are confounded")
+    return out
+
+
 def thermal_lines(tc: ThermalCalibration) -> list[str]:
     """The [[Temperature]] section of the discover report."""
     from imucal.thermal.run import axis_rms
@@ -98,6 +116,7 @@ def thermal_lines(tc: ThermalCalibration) -> list[str]:
         p = sel.fit.params[n]
         L.append(f"    {n:<26s} = {p.value:.6g} +/- {sel.fit.std[n]:.3g} {p.unit}")
     L.extend(f"    - {s}" for s in [*lag_lines(tc.lag), *determined_lines(tc)])
+    L.extend(("    - " if not s.startswith("    ") else "      ") + s.strip() for s in gyro_lines(tc))
     return L
 
 
@@ -120,7 +139,12 @@ def thermal_json(tc: ThermalCalibration) -> dict[str, Any]:
             "hysteresis": {"half_warming_minus_cooling": lag.hysteresis.tolist(),
                            "std": [num(v) for v in lag.hysteresis_std], "p": lag.hysteresis_p,
                            "named": lag.hysteresis_named},
-            "one_sided_axes": [AXIS_NAMES[i] for i in tc.one_sided]}
+            "one_sided_axes": [AXIS_NAMES[i] for i in tc.one_sided],
+            "gyro": None if tc.gyro is None else {
+                "orders": list(tc.gyro.orders), "unit": "rad/s",
+                "coefficients": {n: tc.gyro.params[n].value for n in tc.gyro.params.free_names},
+                "std": {n: num(v) for n, v in tc.gyro.std.items()},
+                "drift_per_day": tc.gyro.drift.tolist(), "drift_std_per_day": tc.gyro.drift_std.tolist()}}
 
 
 def residual_temperature_figure(temp: np.ndarray, before: np.ndarray, after: np.ndarray, pose: np.ndarray,

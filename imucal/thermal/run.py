@@ -23,6 +23,7 @@ from imucal.data.load import use_stream
 from imucal.data.recording import Recording
 from imucal.data.static import Intervals
 from imucal.errors import ImucalError
+from imucal.gyro.thermal import GyroThermal, gyro_bias_temperature
 from imucal.model.effects import AXIS_NAMES, EFFECTS, make_effect
 from imucal.model.parameters import ANGLE_NAMES, BASE_NAMES, Parameters
 from imucal.model.sensor import build_model
@@ -67,6 +68,9 @@ class ThermalCalibration:
     base_refusal: str  #: why it was refused
     one_sided: tuple[int, ...]  #: axes that meet gravity one way only: s_i and b_i at T_ref not told apart
     held: tuple[str, ...]  #: base parameters the run file held
+    #: the gyroscope's bias(T) from the same rows (imucal.gyro.thermal), when the recording has one: evidence,
+    #: not yet in the calibration file (the gyroscope's description holds no temperature term)
+    gyro: GyroThermal | None = None
 
     @property
     def effects(self) -> dict[str, tuple[int, ...]]:
@@ -146,9 +150,10 @@ def thermal_calibration(sweep: Sweep, progress: Callable[[], None] | None = None
         base, refusal = None, exc.message
     support = PoseSupport.of(rows, sel.fit.vectors, sel.fit.poses)
     held = tuple(n for n in BASE_NAMES if n in config.fit.fix)
+    gyro = gyro_bias_temperature(rows, alpha) if rows.gyro is not None and rec.gyro_unit == "rad/s" else None
     return ThermalCalibration(rows=rows, selection=sel, support=support, lag=lag_and_hysteresis(prob, sel, rec, alpha),
                               final=final, base=base, base_refusal=refusal,
-                              one_sided=tuple(one_sided(final.directions)), held=held)
+                              one_sided=tuple(one_sided(final.directions)), held=held, gyro=gyro)
 
 
 def found_label(effects: dict[str, tuple[int, ...]]) -> str:
