@@ -221,11 +221,14 @@ def test_the_real_thermal_sweep_workflow(run_cli, tmp_path):
     r = run_cli(["discover", "--config", cfg, "--out", tmp_path / "cal"])
     assert r.code == 0, r.err
     assert "explained by temperature: bias_temperature[xyz]" in r.out
-    assert "drift" not in r.out and "warmup" not in r.out
+    found = r.out.split("[[Effects found]]")[1].split("[[")[0]
+    assert "bias_temperature[xyz]" in found and "drift" not in found and "warmup" not in found
     assert "absolute bias and scale at the reference temperature are not determined" in r.out
     assert "(none claimed)" in r.out
     cal = load_calibration(tmp_path / "cal" / "calibration.yaml")
     assert {n for n, _ in cal.effects} >= {"bias_temperature"}
+    assert not any("drift" in n or "warmup" in n for n, _ in cal.effects)
+    assert "gyroscope bias(T)" in r.out and "confounded" in r.out
     assert cal.raw_unit == "m/s^2"
     flight = tmp_path / "flight.csv"
     flight.write_text("t,ax,ay,az,temp\n0,-0.2,0.7,-10.4,5\n1,-0.2,0.7,-10.4,20\n")
