@@ -138,6 +138,15 @@ def test_every_figure_function_is_checked(counts_run, discoveries, drawn):
     for name in ("s1", "b2", "theta", "rms_residual"):
         check(histogram, table, name)
 
+    from imucal.report import thermal as thermal_report
+
+    def residual_temperature(arrays, path):  # draw() passes the path second
+        thermal_report.residual_temperature_figure(*arrays, path, "a temperature sweep")
+
+    functools.update_wrapper(residual_temperature, thermal_report.residual_temperature_figure)
+    r = np.random.default_rng(0).normal(0, 1e-3, (30, 3))
+    check(residual_temperature, (np.linspace(5, 25, 30), r, r / 10, np.repeat([0, 1, 2], 10)))
+
     assert set(checked) == figure_functions(), "a figure function is not checked here"
     problems = [p for figs in checked.values() for f in figs for p in axis_problems(f)]
     assert problems == []

@@ -121,7 +121,7 @@ def test_discover_writes_report_html(tmp_path, run_cli, counts_recording):
     assert r.code == 0, r.err
     page = (tmp_path / "plots" / "report.html").read_text(encoding="utf-8")
     assert "<script" not in page and html.escape(EVIL, quote=True) in page
-    assert len(_images(page)) == 4  # residuals, candidates, gap, Allan view
+    assert len(_images(page)) == 5  # residuals, candidates, gap, Allan view, temperature sweep
     assert page.index('id="verdict"') < page.index('id="effects"') < page.index('id="parameters"')
     r2 = run_cli(["discover", "--data", data, "--out", tmp_path / "o", "--quiet"])
     assert r2.code == 0 and (tmp_path / "o" / "report.html").exists()

@@ -156,10 +156,11 @@ def residual_temperature_figure(temp: np.ndarray, before: np.ndarray, after: np.
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(3, 2, figsize=(10, 7.5), dpi=100, sharex=True, sharey="row")
+    fig, axes = plt.subplots(3, 2, figsize=(10, 9), dpi=100)
     colours = plt.get_cmap("tab10")
     poses = np.unique(pose)
     for i in range(3):
+        top = max(float(np.max(np.abs(before[:, i]))), float(np.max(np.abs(after[:, i]))), 1e-12) / MG * 1.1
         for j, (vals, what) in enumerate(((before, "uncorrected"), (after, "corrected"))):
             ax = axes[i, j]
             for c, p in enumerate(poses):
@@ -167,11 +168,10 @@ def residual_temperature_figure(temp: np.ndarray, before: np.ndarray, after: np.
                 ax.plot(temp[m], vals[m, i] / MG, ".", ms=3, color=colours(c % 10), label=f"pose {int(p)}")
             rms = float(np.sqrt(np.mean(vals[:, i] ** 2))) / MG
             ax.set_title(f"axis {AXIS_NAMES[i]}, {what}: RMS {rms:.3g} mg", fontsize=9)
+            ax.set_ylim(-top, top)  # one scale per axis: before and after compare at a glance
             ax.grid(True, alpha=0.3)
-            if j == 0:
-                ax.set_ylabel("about the pose [mg]")
-    for ax in axes[-1]:
-        ax.set_xlabel("temperature [degC]")
+            ax.set_xlabel("temperature [degC]", fontsize=8)
+            ax.set_ylabel("about the pose [mg]", fontsize=8)
     axes[0, 1].legend(fontsize=7, loc="best", markerscale=2)
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()

@@ -207,7 +207,8 @@ def require_observable(obs: Observability, free_names: tuple[str, ...], source: 
         if angles_free:
             fix += ", or fit the 6-parameter model with the angles fixed at 90 deg (--fix-angles, "
             fix += "or fit.fix: [phi, psi, theta] in the YAML)"
-        raise ImucalError(f"only {obs.n_distinct} distinct orientations for {nf} free parameters: {what}",
+        plural = "s" if obs.n_distinct != 1 else ""
+        raise ImucalError(f"only {obs.n_distinct} distinct orientation{plural} for {nf} free parameters: {what}",
                           file=source, field="intervals", fix=fix)
     if obs.undetermined:
         detail = f"Jacobian condition {obs.condition:.3g}"

@@ -46,13 +46,20 @@ class Sweep:
 
 
 def sweep_of(config: RunConfig) -> Sweep | None:
-    """The run's recording and intervals, with rows when a still pose spans a temperature change (at least
-    imucal.thermal.evidence.SWEEP_SPAN); None for a file read in chunks (no samples kept)."""
+    """The run's recording and intervals, with rows when it is a temperature sweep: a still pose spans a
+    temperature change (at least imucal.thermal.evidence.SWEEP_SPAN) and the poses are too few for
+    |a| = g to determine the model (fewer distinct orientations than its nine parameters: the run file
+    holds what they cannot). A multi-pose log keeps discovery's |a| = g path, its temperature changing
+    across the poses. None for a file read in chunks (no samples kept)."""
     if use_stream(config.data, config.base_dir):
         return None
     rec, iv, _ = read_intervals(config)
     rows = thermal_rows(rec, iv)
-    return Sweep(config, rec, iv, rows if rows is not None and rows.is_sweep else None)
+    if rows is None or not rows.is_sweep:
+        return Sweep(config, rec, iv, None)
+    gravity, _ = config.gravity.resolve()
+    _, _, n_distinct = initial_guess(iv, gravity, False, rec.source)
+    return Sweep(config, rec, iv, rows if n_distinct < len(BASE_NAMES) else None)
 
 
 @dataclass(frozen=True)
