@@ -1,29 +1,25 @@
-"""scripts/thermal_study.py (issue 27) run as a program on the real thermal sweep: the targets of the
-issue, with the orders chosen by the data on each split (the script is not imported: tests never import
-from scripts/)."""
+"""studies/thermal_study.py (issue 27) run as a program on the real thermal sweep, as CI runs it: the
+targets of the issue, with the orders chosen by the data on each split."""
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 
-from conftest import real_file
+from studies.tests.helpers import real_file, study
 
-ROOT = Path(__file__).resolve().parents[1]
+SCRIPT = study("thermal_study")
 
 
 @pytest.mark.slow
 def test_the_thermal_study_meets_the_issue_targets(tmp_path):
     data = real_file("thermal-cats-skdivemove", "cats_temperature_calib.nc")
     out = tmp_path / "study.json"
-    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
-    p = subprocess.run([sys.executable, str(ROOT / "scripts" / "thermal_study.py"), "--data", str(data),
-                        "--md", str(tmp_path / "thermal.md"), "--png", str(tmp_path / "thermal.png"),
-                        "--json", str(out)], capture_output=True, text=True, env=env, timeout=900)
+    p = subprocess.run([sys.executable, str(SCRIPT), "--data", str(data), "--md", str(tmp_path / "thermal.md"),
+                        "--png", str(tmp_path / "thermal.png"), "--json", str(out)], capture_output=True, text=True,
+                       timeout=900)
     assert p.returncode == 0, p.stderr
     res = json.loads(out.read_text())
     t, s = res["targets"], {r["split"]: r for r in res["splits"]}
