@@ -29,6 +29,7 @@ from imucal.report.misfit import excess_words
 from imucal.model.effects_registry import effects_from_specs
 from imucal.model.effects import EFFECTS, fit_to_data, prepare_parameters
 from imucal.thermal.determine import interval_advice
+from imucal.thermal.evidence import thermal_rows
 
 if TYPE_CHECKING:  # imported only when used: the gyroscope's modules, the noise-model reader (fit.noise),
     from imucal.analysis.noise_model import NoiseModel  # the chunked reader (a file above STREAM_BYTES)
@@ -340,14 +341,19 @@ def observability(model: SensorModel, params: Parameters, means: FitData, direct
                    varying)
 
 
-def _refuse_absurd(res: FitResult, params: Parameters, source: str) -> None:
+def _refuse_absurd(res: FitResult, params: Parameters, source: str, config: RunConfig,
+                   rec: Recording | RecordingSummary, iv: Intervals) -> None:
     if res.dof > 0 and res.redchi_noise > ABSURD_REDCHI:
         held = [n for n in params.names if params[n].fixed]
         rms = float(np.sqrt(np.mean(res.residuals**2)))
+        fix = ((f"free the held parameters ({', '.join(held)}); " if held else "")
+               + "check that the log holds still poses of one sensor and the data columns")
+        if not any(e.name.endswith(("temperature", "temperature2", "temperature3")) for e in config.fit.effects) \
+                and isinstance(rec, Recording) and (rows := thermal_rows(rec, iv)) is not None and rows.is_sweep:
+            fix = (f"its still poses change with temperature (a sweep, {rows.temp.min():.1f}..{rows.temp.max():.1f} "
+                   f"degC): find and fit the temperature terms with {discover_command(config, rec)} --out DIR")
         raise ImucalError(f"reduced chi-square {res.redchi_noise:.3g} (RMS |a|-g {rms:.3g} m/s^2): the model cannot "
-                          "describe these data, refused", file=source, field="fit",
-                          fix=(f"free the held parameters ({', '.join(held)}); " if held else "")
-                          + "check that the log holds still poses of one sensor and the data columns")
+                          "describe these data, refused", file=source, field="fit", fix=fix)
 
 
 #: Static samples whose residuals are computed at a time for the report's RMS over samples: the
@@ -407,7 +413,7 @@ def calibrate(config: RunConfig, recording: Recording | None = None,
     gravity, gsource = config.gravity.resolve()
     pb = _problem(config, rec, iv, streamed, gravity, held)
     res = fit(pb.data, pb.params, pb.model, gravity, source=rec.source, weights=config.fit.weights)
-    _refuse_absurd(res, pb.params, rec.source)
+    _refuse_absurd(res, pb.params, rec.source, config, rec, iv)
     rm = res.residuals if res.mode == "means" else jacobian_rows(pb.means, res.params, pb.model, gravity,
                                                                  residuals=True)  # residuals on means too
     cal_fit = {

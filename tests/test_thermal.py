@@ -218,6 +218,9 @@ def test_the_real_thermal_sweep_workflow(run_cli, tmp_path):
     nc = real_file("thermal-cats-skdivemove", "cats_temperature_calib.nc")
     cfg = tmp_path / "run.yaml"
     cfg.write_text(f"data: {{path: {nc}}}\nfit:\n  fix: {NOMINAL}\n".replace("'", ""))
+    r = run_cli(["calibrate", cfg, "--out", tmp_path / "plain", "--no-figures"])  # |a| = g without the terms
+    assert r.code == 2 and "a sweep, 5.1..25.7 degC" in r.err and f"imucal discover --config {cfg}" in r.err
+    assert not (tmp_path / "plain").exists()
     r = run_cli(["discover", "--config", cfg, "--out", tmp_path / "cal"])
     assert r.code == 0, r.err
     assert "explained by temperature: bias_temperature[xyz]" in r.out
