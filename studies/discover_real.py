@@ -19,6 +19,7 @@ sys.path.insert(0, str(ROOT))
 
 from imucal.config.run import config_from_dict, load_config  # noqa: E402
 from imucal.analysis.discover import discover  # noqa: E402
+from imucal.report.discover_text import HEADLINE, verdict_text  # noqa: E402
 from imucal.report.discover_figures import FIGURES  # noqa: E402
 from imucal.errors import ImucalError  # noqa: E402
 from imucal.files.output import OutputSet, write_text_atomic  # noqa: E402
@@ -71,7 +72,7 @@ def main() -> int:
         eff = ", ".join(f"{e.label}" for e in d.effects) or "none"
         L.append(f"| {name} ({what}) | {d.base.intervals.n} | {b.redchi:.3g} | {f.redchi:.3g} | "
                  f"{d.rms_before * 1e3:.3g} | {d.rms_after * 1e3:.3g} | {d.rms_noise * 1e3:.3g} | {eff} | "
-                 f"{d.verdict.split(':')[0]} |")
+                 f"{HEADLINE[d.verdict.outcome]} |")
         with OutputSet() as o:
             for fname, fn in FIGURES.items():
                 o.call(figdir / name / fname, lambda p, fn=fn: fn(d, p))
@@ -79,7 +80,7 @@ def main() -> int:
         top = ", ".join(f"{p} ({v:.3g})" for p, v in d.disagreement[:4])
         details.append(
             f"## {name}\n\n{what}; {d.base.intervals.n} static intervals, discover took {dt:.1f} s.\n\n"
-            f"Verdict: **{d.verdict}**.\n\n"
+            f"Verdict: **{verdict_text(d.verdict)}**.\n\n"
             + (f"Patterns carrying most of the misfit (chi-square a single-axis effect would remove): {top}.\n\n"
                if d.disagreement else "")
             + "".join(f"- {e.label}: " + ", ".join(f"{n} = {v:.4g} +/- {e.std[n]:.2g} {e.units[n]}"
@@ -92,7 +93,7 @@ def main() -> int:
             f"![gap]({rel}/discover_gap.png)\n"
             + (f"\nAllan view: interval {d.allan.interval} ({d.allan.duration:.0f} s still), the walk found beside "
                f"the curve.\n\n![allan]({rel}/discover_allan.png)\n" if d.allan is not None else ""))
-        print(f"{name}: {d.verdict} ({dt:.1f} s)")
+        print(f"{name}: {verdict_text(d.verdict)} ({dt:.1f} s)")
     text = "\n".join(L) + "\n\n" + "\n".join(details)
     write_text_atomic(docs / "discover_real.md", text)
     example(figdir / "example")
@@ -113,7 +114,7 @@ def example(out: Path) -> None:
     with OutputSet() as o:
         for fname, fn in FIGURES.items():
             o.call(out / fname, lambda p, fn=fn: fn(d, p))
-    print(f"simulated example: {d.verdict}")
+    print(f"simulated example: {verdict_text(d.verdict)}")
 
 
 if __name__ == "__main__":

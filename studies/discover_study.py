@@ -141,8 +141,10 @@ def visible_chi2(case, path: str, rel: bool = True, genie: bool = False,
     counterpart of discover's search, which fits tau for every warm-up it tries."""
     import dataclasses
 
-    from imucal.analysis.discover import (DiscoverSettings, _candidates, _canonical, _extra, _Problem, _screen,
-                                          _testable)
+    from imucal.analysis.discover import DiscoverSettings
+    from imucal.analysis.discover.candidates import candidates as _candidates, extra as _extra, testable as _testable
+    from imucal.analysis.discover.problem import Problem as _Problem, canonical as _canonical
+    from imucal.analysis.discover.screening import screen as _screen
     from imucal.config.run import config_from_dict
     from imucal.model.effects import make_effect
     from imucal.pipeline import calibrate

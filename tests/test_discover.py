@@ -11,7 +11,9 @@ import numpy as np
 import pytest
 
 from imucal.config.run import config_from_dict
-from imucal.analysis.discover import DiscoverSettings, chi2_sf, discover
+from imucal.analysis.discover import DiscoverSettings, Outcome, discover
+from imucal.report.discover_text import discovery_json, discovery_report, verdict_text
+from imucal.solve.stats import chi2_sf
 from imucal.errors import ImucalError
 from imucal.analysis.simulate import (PosePlan, TemperatureProfile, cube_directions, draw_effect_case, mems_counts_sensor,
                              random_directions, simulate)
@@ -62,7 +64,7 @@ def test_names_the_hidden_effect_and_axes(scored):
 def test_no_false_positive_on_clean_data(scored):
     clean = [d for c, d in scored if c.effect is None]
     assert len(clean) >= 8
-    assert all(not d.effects for d in clean), [d.verdict for d in clean if d.effects]
+    assert all(not d.effects for d in clean), [verdict_text(d.verdict) for d in clean if d.effects]
     assert all(d.final is d.base for d in clean)
 
 
@@ -86,7 +88,7 @@ def test_the_gap_shrinks_to_noise_level(scored):
 
 def test_json_summary_has_the_documented_fields(scored, tmp_path):
     c, d = next((c, d) for c, d in scored if c.effect is not None and d.effects)
-    js = json.loads(json.dumps(d.to_json()))
+    js = json.loads(json.dumps(discovery_json(d)))
     for key in ("effects", "rms_before", "rms_after", "chi2_before", "chi2_after", "dof"):
         assert key in js
     e = js["effects"][0]
@@ -95,12 +97,12 @@ def test_json_summary_has_the_documented_fields(scored, tmp_path):
     assert set(e["coefficients"]) == set(e["std"])
     assert js["rms_after"] < js["rms_before"]
     clean = next(d for c, d in scored if c.effect is None)
-    assert clean.to_json()["effects"] == []
+    assert discovery_json(clean)["effects"] == []
 
 
 def test_report_names_verdict_and_gap(scored):
     c, d = next((c, d) for c, d in scored if c.effect is not None and d.effects)
-    text = d.report()
+    text = discovery_report(d)
     assert "verdict" in text and "RMS |a|-g" in text and "chi2/dof" in text
     assert d.effects[0].label in text and "[[Round 1]]" in text
 
@@ -126,15 +128,16 @@ def test_per_pose_offsets_are_named_a_stochastic_bias_not_a_term(tmp_path):
     d = _discover_sim(sim, "raw", tmp_path, "offsets")
     assert not d.consistent_before
     assert d.effects == ()
-    assert d.verdict.startswith("explained by a stochastic bias: bias_instability"), d.verdict
-    assert "no deterministic term helps" in d.verdict
+    assert d.verdict.outcome is Outcome.STOCHASTIC and d.verdict.stochastic.named == ("bias_instability",), d.verdict
+    assert verdict_text(d.verdict).startswith("explained by a stochastic bias: bias_instability")
+    assert "no deterministic term helps" in verdict_text(d.verdict)
     # ... and the calibration it keeps (--out) is the default fit the verdict names, the excess in its
     # weights and standard errors, not the noise-weighted fit the tests ran on
     kept, tested = d.calibration_run.calibration.fit, d.final.calibration.fit
     assert (kept["weights"], tested["weights"]) == ("auto", "noise")
     assert kept["bias_instability"] > 0 == tested["bias_instability"]
     assert d.calibration_run.result.std["s1"] > 2 * d.final.result.noise_std["s1"]
-    assert d.to_json()["calibration_weights"] == "auto"
+    assert discovery_json(d)["calibration_weights"] == "auto"
 
 
 def test_real_xsens_recording_gets_no_invented_effect():
@@ -147,7 +150,7 @@ def test_real_xsens_recording_gets_no_invented_effect():
     d = discover(load_config(cfg_path))
     assert d.base.result.redchi > 3
     assert d.effects == ()
-    assert d.verdict.startswith("explained by a stochastic bias"), d.verdict  # named and quantified
+    assert d.verdict.outcome is Outcome.STOCHASTIC, d.verdict  # named and quantified
     assert d.stochastic is not None and d.stochastic.named and d.allan is not None
     assert any("no temp column" in n for n in d.notes)
 
@@ -181,7 +184,7 @@ def test_monotonic_temperature_confounds_temperature_and_time(tmp_path):
     assert e.axes == (1,) and e.name in ("bias_temperature", "bias_drift")
     other = "bias_drift[y]" if e.name == "bias_temperature" else "bias_temperature[y]"
     assert other in e.ambiguous_with
-    assert "cannot be told apart" in d.report()
+    assert "cannot be told apart" in discovery_report(d)
 
 
 def test_non_monotonic_temperature_tells_temperature_from_time(tmp_path):
@@ -261,7 +264,7 @@ def test_two_comparable_effects_are_both_named(tmp_path):
     assert sorted(e.label for e in d.effects) == sorted([c1.label, c2.label])
     assert any(s.jointly_with for s in d.steps)
     assert d.consistent_after and d.final.result.redchi < 2.5
-    assert "given" in d.report()
+    assert "given" in discovery_report(d)
 
 
 def test_a_pair_hidden_behind_a_relative_is_found_by_the_pair_screen(tmp_path):
@@ -285,7 +288,7 @@ def test_an_axis_the_poses_barely_see_is_reported_not_ruled_out(tmp_path):
     these poses (few of them along x when the drift is large), so its absence is no finding and the
     report says so; z is seen (about 25) and is ruled out. The linearised lambda agrees with the
     standard error of a full fit with the axis added."""
-    from imucal.analysis.discover import _canonical, _Problem
+    from imucal.analysis.discover.problem import Problem, canonical
 
     case = draw_effect_case(301, effect="scale_drift", axes=(1,), snr=20.0, noise_mg=0.3)
     d = _discover_sim(case.config.run(), case.config.sensor.unit, tmp_path, "blind")
@@ -295,12 +298,12 @@ def test_an_axis_the_poses_barely_see_is_reported_not_ruled_out(tmp_path):
     assert note.startswith("scale_drift[y]: axis x not ruled out")
     assert note.endswith("to test it, hold the x axis up and down at the start and at the end of the recording")
     lam = float(note.split("would add only ")[1].split()[0])
-    assert d.to_json()["effects"][0]["unresolved_axes"] == ["x"] and "not ruled out on x" in d.report()
+    assert discovery_json(d)["effects"][0]["unresolved_axes"] == ["x"] and "not ruled out on x" in discovery_report(d)
     cfg = config_from_dict({"data": {"path": str(tmp_path / "blind.csv"), "unit": case.config.sensor.unit},
                             "fit": {"weights": "noise"}})
-    prob = _Problem(cfg, d.base)
+    prob = Problem(cfg, d.base)
     for axes, name in (((0, 1), "scale_drift_x"), ((1, 2), "scale_drift_z")):
-        r = prob.fit(_canonical({"scale_drift": axes}), d.final.result.values())
+        r = prob.fit(canonical({"scale_drift": axes}), d.final.result.values())
         direct = (e.coefficients["scale_drift_y"] / r.std[name]) ** 2
         if name.endswith("x"):
             assert abs(direct - lam) < 0.25 * lam, (direct, lam)
@@ -311,7 +314,8 @@ def test_an_axis_the_poses_barely_see_is_reported_not_ruled_out(tmp_path):
 def test_the_backward_step_drops_an_axis_the_data_do_not_need(tmp_path):
     """An effect fitted on an axis that carries nothing (as a greedy forward search can pick up) is
     dropped by the backward step, with its note; the true axis stays."""
-    from imucal.analysis.discover import _canonical, _Problem, _prune
+    from imucal.analysis.discover.backward import prune
+    from imucal.analysis.discover.problem import Problem, canonical
     from imucal.pipeline import calibrate
 
     case = draw_effect_case(31, effect="scale_nonlinearity", axes=(0,), snr=60.0)
@@ -319,11 +323,11 @@ def test_the_backward_step_drops_an_axis_the_data_do_not_need(tmp_path):
     path.write_text(case.config.run().to_csv_text())
     cfg = config_from_dict({"data": {"path": str(path), "unit": case.config.sensor.unit}})
     base = calibrate(cfg)
-    prob = _Problem(cfg, base)
+    prob = Problem(cfg, base)
     wide = {"scale_nonlinearity": (0, 1)}
-    current = prob.fit(_canonical(wide), base.result.values())
+    current = prob.fit(canonical(wide), base.result.values())
     notes: list[str] = []
-    _, kept = _prune(prob, current, wide, {"scale_nonlinearity"}, DiscoverSettings(), notes)
+    _, kept = prune(prob, current, wide, {"scale_nonlinearity"}, DiscoverSettings(), notes)
     assert kept == {"scale_nonlinearity": (0,)}
     assert len(notes) == 1 and notes[0].startswith("dropped scale_nonlinearity on axis y"), notes
 

@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import pytest
 
-from imucal.analysis.discover import DiscoverSettings, discover
+from imucal.analysis.discover import DiscoverSettings, Outcome, discover
+from imucal.report.discover_text import discovery_json
 from imucal.analysis.simulate import draw_effect_case
 from imucal.config.run import config_from_dict
 
@@ -41,8 +42,8 @@ def test_a_round_runs_when_one_candidate_stands_out_though_the_omnibus_test_pass
     (step,) = d.steps
     assert step.p_scan < d.settings.alpha_scan and step.chosen is not None
     assert step.chosen.p_adjusted < d.settings.alpha_scan
-    assert d.verdict.startswith("explained"), d.verdict
-    assert d.to_json()["steps"][0]["p_scan"] == step.p_scan
+    assert d.verdict.outcome is Outcome.EXPLAINED, d.verdict
+    assert discovery_json(d)["steps"][0]["p_scan"] == step.p_scan
 
 
 def test_a_warm_up_is_judged_determined_by_its_noise_not_by_the_misfit_it_leaves(tmp_path):
@@ -110,7 +111,7 @@ def test_the_third_warm_up_axis_gains_what_its_linear_score_predicts(tmp_path):
     model describes, not a nonlinear effect of the fit."""
     import numpy as np
 
-    from imucal.analysis.discover import _canonical, _Problem
+    from imucal.analysis.discover.problem import Problem as _Problem, canonical as _canonical
     from imucal.pipeline import calibrate
     from imucal.solve.fit import jacobian_rows
 

@@ -167,8 +167,10 @@ def test_discover_names_the_random_walk_with_the_allan_view(tmp_path):
     assert disc.effects == ()  # the trends the walk makes are not named as drifts
     assert disc.stochastic.named == (stochastic.RANDOM_WALK,)
     assert abs(disc.stochastic.q - q) < 3 * disc.stochastic.q_std
-    assert "bias_random_walk" in disc.verdict and "m/s^2/sqrt(s)" in disc.verdict
-    js = disc.to_json()
+    from imucal.report.discover_text import discovery_json, verdict_text
+
+    assert "bias_random_walk" in verdict_text(disc.verdict) and "m/s^2/sqrt(s)" in verdict_text(disc.verdict)
+    js = discovery_json(disc)
     assert js["stochastic"]["values"]["bias_random_walk"]["unit"] == "m/s^2/sqrt(s)"
     assert js["allan"]["duration_s"] > 100 and len(js["allan"]["line_adev"]) == len(js["allan"]["tau_s"])
     # the curve's own +1/2 slope (one 110 s segment: 14-47 % errors here) agrees with the REML density
@@ -218,7 +220,7 @@ def test_the_grid_likelihood_is_the_likelihood(ml):
 
 def test_a_drift_the_walk_beats_leaves_a_calibration_without_it(tmp_path):
     """bias_temperature on x and a random walk: the search finds a drift too, which the walk then
-    explains (discover._beaten drops it). The final calibration started from every free parameter of
+    explains (imucal.analysis.discover.stochastic.beaten drops it). The final calibration started from every free parameter of
     the search, the dropped drift's included, and refused it: `fit.initial.bias_drift_x is not a free
     parameter` ended the run (seed 4 of an outside review)."""
     from imucal.analysis.discover import discover

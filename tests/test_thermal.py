@@ -13,6 +13,7 @@ import pytest
 
 from conftest import real_file
 from imucal.analysis.discover import discover
+from imucal.report.discover_text import discovery_report, verdict_text
 from imucal.calibration.frozen import load_calibration
 from imucal.config.run import config_from_dict
 from imucal.constants import STANDARD_GRAVITY
@@ -87,7 +88,7 @@ def test_the_orders_are_chosen_by_the_data(truth_sweep):
     assert d.thermal.effects == {"bias_temperature": (0, 1, 2), "bias_temperature2": (1,),
                                  "scale_temperature": (2,)}
     assert {e.name for e in d.effects} == {"bias_temperature", "bias_temperature2", "scale_temperature"}
-    assert "explained by temperature" in d.verdict
+    assert "explained by temperature" in verdict_text(d.verdict)
     assert not d.thermal.lag.lag_named and not d.thermal.lag.hysteresis_named
 
 
@@ -149,7 +150,7 @@ def test_no_temperature_effect_no_term(tmp_path):
     d = discover(run_config(sweep(tmp_path / "flat.csv", truth={"bias1": (0, 0, 0), "bias2": (0, 0, 0),
                                                                   "scale1": (0, 0, 0)}, seed=1)))
     assert d.thermal is not None and d.thermal.effects == {}
-    assert d.effects == () and d.verdict.startswith("no temperature term is significant")
+    assert d.effects == () and verdict_text(d.verdict).startswith("no temperature term is significant")
 
 
 def test_what_the_poses_cannot_determine_is_named_with_what_to_record(tmp_path):
@@ -158,7 +159,7 @@ def test_what_the_poses_cannot_determine_is_named_with_what_to_record(tmp_path):
     und = {t.label: t for t in d.thermal.selection.undetermined}
     assert "scale_temperature[z]" in und
     assert "scale_temperature" not in d.thermal.effects or 2 not in d.thermal.effects["scale_temperature"]
-    text = d.report()
+    text = discovery_report(d)
     assert ("scale_temperature[z] is not determined by these poses" in text
             and "axis z is held along gravity over no temperature range" in text
             and "hold the sensor still with z along gravity (up or down) while the temperature sweeps" in text)
@@ -168,7 +169,7 @@ def test_a_lagging_temperature_sensor_is_named(tmp_path):
     d = discover(run_config(sweep(tmp_path / "lag.csv", seed=3, cycles=4, lag=600.0)))
     lag = d.thermal.lag
     assert lag.lag_named and abs(lag.tau - 600.0) < max(4 * lag.tau_std, 150.0), (lag.tau, lag.tau_std)
-    assert "named: the die leads the sensor" in d.report()
+    assert "named: the die leads the sensor" in discovery_report(d)
 
 
 def test_hysteresis_is_named_when_present(tmp_path):
@@ -181,7 +182,7 @@ def test_hysteresis_is_named_when_present(tmp_path):
 def test_a_clean_sweep_claims_neither(tmp_path):
     d = discover(run_config(sweep(tmp_path / "clean.csv", seed=5, cycles=4)))
     assert not d.thermal.lag.lag_named and not d.thermal.lag.hysteresis_named
-    assert "not shown by these data (none claimed)" in d.report()
+    assert "not shown by these data (none claimed)" in discovery_report(d)
 
 
 def test_a_recording_with_gaps_is_read_as_separate_spans(tmp_path):

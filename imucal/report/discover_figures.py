@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from imucal.analysis.discover import Discovery
+from imucal.report.discover_text import HEADLINE, verdict_text
 from imucal.solve.stats import chi2_sf
 from imucal.model.effects import AXIS_NAMES
 from imucal.report.figures import plain
@@ -133,7 +134,7 @@ def candidates_figure(d: Discovery, path: str | Path, top: int = 14) -> None:
     if not steps:
         fig, ax = plt.subplots(figsize=(8, 2.6), dpi=100)
         ax.axis("off")
-        ax.text(0.5, 0.5, _wrap("No candidates were tried: " + d.verdict, 80), ha="center", va="center",
+        ax.text(0.5, 0.5, _wrap("No candidates were tried: " + verdict_text(d.verdict), 80), ha="center", va="center",
                 fontsize=10)
         fig.savefig(path, format="png")
         plt.close(fig)
@@ -218,7 +219,7 @@ def gap_figure(d: Discovery, path: str | Path) -> None:
             ax.set_ylim(0, top * 1.35)
         ax.legend(fontsize=8, loc="upper right")
     fig.suptitle("The gap before and after adding the effects found" if d.effects
-                 else "The gap: no effect added (" + d.verdict.split(":")[0] + ")", fontsize=10)
+                 else "The gap: no effect added (" + HEADLINE[d.verdict.outcome] + ")", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, format="png")
     plt.close(fig)

@@ -208,10 +208,12 @@ def calibration_html(run: CalibrationRun, figures: Mapping[str, bytes] | None = 
 
 def discovery_html(d: Discovery, figures: Mapping[str, bytes] | None = None) -> str:
     """The page of ``imucal discover``: its verdict, the gap, the effects, then the final calibration."""
+    from imucal.report.discover_text import discovery_report, verdict_text  # (start-up: `calibrate` skips discovery)
+
     b, f = d.base.result, d.final.result
     v = verdict(d.final)
     level = "pass" if d.consistent_after and v.level == "pass" else ("fail" if v.level == "fail" else "check")
-    head = (f'<section class="verdict {level}" id="verdict"><h2>{esc(d.verdict)}</h2>'
+    head = (f'<section class="verdict {level}" id="verdict"><h2>{esc(verdict_text(d.verdict))}</h2>'
             + table_html(["", "base model", "final model"],
                      [["model", esc(b.model_name), esc(f.model_name)],
                       ["RMS |a| − g [mm/s²]", num(d.rms_before * 1e3, ".4g"), num(d.rms_after * 1e3, ".4g")],
@@ -231,6 +233,6 @@ def discovery_html(d: Discovery, figures: Mapping[str, bytes] | None = None) -> 
     title = f"imucal discover: {Path(d.base.recording.source).name}"
     sections = [("verdict", "", head), ("fit", "", _verdict_html(v)), ("effects", "Effects found", effects),
                 *_calibration_sections(d.final),
-                ("discovery", "Discovery report (text)", f"<pre>{esc(d.report())}</pre>"),
+                ("discovery", "Discovery report (text)", f"<pre>{esc(discovery_report(d))}</pre>"),
                 ("figures", "Figures", figures_html(figures or {}, CAPTIONS))]
     return page_html(title, sections)

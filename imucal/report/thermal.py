@@ -19,23 +19,6 @@ if TYPE_CHECKING:
 MG = STANDARD_GRAVITY / 1000.0
 
 
-def _mg(x: float) -> str:
-    return f"{x / MG:.3g} mg"
-
-
-def verdict(tc: ThermalCalibration) -> str:
-    """One sentence: the terms the sweep holds, and how far they bring the poses together."""
-    from imucal.thermal.run import found_label
-
-    lo, hi = tc.temperature_range
-    if not tc.effects:
-        return (f"no temperature term is significant: the rows of {tc.rows.poses.size} poses over {lo:.1f}..{hi:.1f} "
-                f"degC stay within {_mg(tc.rms_before)} RMS of their poses")
-    return (f"explained by temperature: {found_label(tc.effects)} bring the still poses' readings over "
-            f"{lo:.1f}..{hi:.1f} degC from {_mg(tc.rms_before)} to {_mg(tc.rms_after)} RMS about each pose; "
-            f"the rest (chi2/dof {tc.selection.fit.redchi:.3g} against the rows' noise) follows no temperature term")
-
-
 def lag_lines(lag: LagTest) -> list[str]:
     tau = (f"first-order lag of the temperature sensor: tau = {lag.tau:.3g} +/- {lag.tau_std:.2g} s "
            f"(Wald {lag.tau_lr:.3g}, p adjusted {lag.tau_p:.2g}): ")

@@ -49,6 +49,7 @@ def run(args: argparse.Namespace) -> int:
     from imucal.model.effects import EFFECTS
     from imucal.files.output import OutputSet, check_outputs
     from imucal.report.discover_figures import FIGURES
+    from imucal.report.discover_text import discovery_json, discovery_report, verdict_text
     from imucal.report.html import discovery_html, render_png
     from imucal.report.progress import progress
 
@@ -63,12 +64,12 @@ def run(args: argparse.Namespace) -> int:
                                 alpha_effect=args.alpha, alpha_scan=args.alpha / 10, max_effects=args.max_effects)
     with progress("discover", unit="fit") as step:  # a bar on a terminal only
         result = discover(cfg, settings, step)
-    text = result.report()
+    text = discovery_report(result)
     written = []
     pngs = {name: render_png(fn, result) for name, fn in FIGURES.items()} if page_dir else {}
     with OutputSet(inputs) as o:
         if args.json:
-            o.json(args.json, result.to_json())
+            o.json(args.json, discovery_json(result))
             written.append(args.json)
         if args.plot:
             for name, png in pngs.items():
@@ -84,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
         if page_path is not None:
             o.text(page_path, discovery_html(result, pngs))
             written.append(str(page_path))
-    print(f"verdict: {result.verdict}" if args.quiet else text.rstrip())
+    print(f"verdict: {verdict_text(result.verdict)}" if args.quiet else text.rstrip())
     if written:
         print("wrote " + ", ".join(written))
     return 0

@@ -1,0 +1,100 @@
+"""The round's screen: every candidate's Gauss-Newton chi-square from the current fit, and the joint null
+of those statistics (imucal.analysis.min_p), which is the round's multiple-testing correction.
+
+Candidates not in the model enter with coefficient 0 (the current fit): the whitened Jacobian of the
+residuals with respect to the base and every candidate coefficient gives each candidate's linearised
+chi-square (the score, or Lagrange-multiplier, approximation), exact for a linear model. A new warm-up's
+tau does not enter at amplitude 0, so the Jacobian is taken once per tau of the grid.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from imucal.analysis.discover.candidates import extra
+from imucal.analysis.discover.problem import Effects, Problem, canonical
+from imucal.analysis.discover.result import Candidate
+from imucal.analysis.discover.settings import TAU_GRID
+from imucal.analysis.min_p import MinPNull, min_p_null
+from imucal.model.effects import make_effect
+from imucal.solve.fit import FitResult, jacobian_rows
+from imucal.solve.stats import chi2_sf
+
+#: One screen: the whitened Jacobian at one set of shape values, and those values.
+Screen = tuple[np.ndarray, dict[str, float]]
+
+
+def screen(prob: Problem, current: FitResult, effects: Effects, names: Sequence[str],
+           tau_grid: Sequence[float] = TAU_GRID) -> tuple[list[Screen], np.ndarray, dict[str, int], list[str]]:
+    """Column-scaled Jacobians of the residuals w.r.t. base + every candidate coefficient, at the fit.
+
+    Returns ([(J / sigma, shape values)] one per tau of ``tau_grid`` (fractions of the last interval's
+    time), r / sigma, column index by parameter name, current free names)."""
+    every = {n: (0, 1, 2) for n in names}
+    for n in effects:
+        every[n] = (0, 1, 2)
+    model, params = prob.parameters(canonical(every), current.values(), check=False)
+    have = set(current.params.names)
+    params = params.with_values({n: 0.0 for e in model.effects for n in e.coefficient_names if n not in have})
+    shapes = [n for e in model.effects for n in e.shape_names if n not in have]
+    t_end = float(np.max(prob.iv.t_mid)) if prob.iv.n else 1.0
+    grid = [{n: f * t_end for n in shapes} for f in tau_grid] if shapes else [{}]
+    w = 1.0 / current.sigma
+    data = prob.data(model)
+    screens = [(jacobian_rows(data, params.with_values(g), model, prob.gravity) * w[:, None], g) for g in grid]
+    cols = {n: i for i, n in enumerate(params.free_names)}
+    return screens, current.residuals * w, cols, list(current.free_names)
+
+
+def linear_chi2(Jw: np.ndarray, rw: np.ndarray, cols: list[int]) -> float:
+    """min_x |rw + Jw[:, cols] x|^2: the Gauss-Newton chi-square (exact for a linear model)."""
+    A = Jw[:, cols]
+    x, *_ = np.linalg.lstsq(A, -rw, rcond=None)
+    return float(np.sum((rw + A @ x) ** 2))
+
+
+def screen_candidate(screens: list[Screen], rw: np.ndarray, base_cols: list[int], col: dict[str, int], name: str,
+                     new: tuple[int, ...]) -> tuple[float, tuple[tuple[str, float], ...]]:
+    """Gauss-Newton chi-square of one candidate, profiled over the screened shape values."""
+    eff = make_effect(name, new)
+    cols = base_cols + [col[c] for c in eff.coefficient_names]
+    best = None
+    for Jw, g in screens:
+        start = tuple((n, g[n]) for n in eff.shape_names if n in g)
+        if best is not None and not start:
+            break  # no shape parameter to profile: every screen gives the same columns
+        chi2 = linear_chi2(Jw, rw, cols)
+        if best is None or chi2 < best[0]:
+            best = (chi2, start)
+    return best
+
+
+@dataclass(frozen=True)
+class Scan:
+    """A round's screen: every candidate's linearised chi-square, and the min-p null over them."""
+
+    screened: list[Candidate]
+    null: MinPNull
+    p: float  #: family-wise p of the best screened candidate (linearised, unscaled)
+    screens: list[np.ndarray]  #: whitened Jacobians, one per screened shape value (``screen``)
+    rw: np.ndarray  #: whitened residual of the current fit
+    col: dict[str, int]  #: column of each parameter in ``screens``
+    base_cols: list[int]  #: columns of the current model's free parameters
+
+
+def scan(prob: Problem, current: FitResult, effects: Effects, names: Sequence[str], cands: list) -> Scan:
+    """Gauss-Newton chi-square of each candidate from the current fit, and the joint null of
+    their statistics (``imucal.analysis.min_p``): the round's multiple-testing correction."""
+    screens, rw, col, cur_free = screen(prob, current, effects, names)
+    base_cols = [col[n] for n in cur_free]
+    screened, family = [], []
+    for n, merged, new in cands:
+        chi2, start = screen_candidate(screens, rw, base_cols, col, n, new)
+        c = Candidate(n, merged, new, chi2_screen=chi2, extra=extra(n, effects), start=start)
+        screened.append(c)
+        family.append(([col[x] for x in make_effect(n, new).coefficient_names], c.k, c.extra > 0))
+    null = min_p_null([Jw for Jw, _ in screens], base_cols, family)
+    p_best = min((chi2_sf(max(0.0, current.chi2 - c.chi2_screen), c.k) for c in screened), default=1.0)
+    return Scan(screened, null, null.adjust(p_best), [Jw for Jw, _ in screens], rw, col, base_cols)
