@@ -46,11 +46,11 @@ def _num(x: float):
 
 
 def _weights(v: Verdict) -> str:
-    """How the calibration kept counts an excess over the noise."""
+    """How the calibration kept counts the excess over the noise (a clause)."""
     if v.weights == "auto":
-        return ("which the default fit (weights: auto) counts in its standard errors (its values are the "
+        return ("the default fit (weights: auto) counts it in its standard errors (its values are the "
                 "unweighted fit's)")
-    return f"which the calibration kept (weights: {v.weights}) does not model"
+    return f"the calibration kept (weights: {v.weights}) does not model it"
 
 
 def _values(s: StochasticPart) -> str:
@@ -74,11 +74,10 @@ def _unexplained(v: Verdict) -> str:
     if s is not None and s.withheld is not None:
         why = (f"a single step of the bias at t = {s.step_at:.4g} s fits better" if s.withheld is Withheld.STEP
                else _WITHHELD[s.withheld])
-        text += (f"; a stochastic bias fits the scatter too ({_values(s)}) but is not claimed: {why}; "
-                 f"{_weights(v).removeprefix('which ')}")
+        text += f"; a stochastic bias fits the scatter too ({_values(s)}) but is not claimed: {why}; {_weights(v)}"
     elif math.isfinite(v.excess_rms) and v.excess_rms > 0:
         text += (f"; the scatter between intervals fits a random bias per visit of a pose (bias_instability, "
-                 f"{v.excess_rms:.3g} m/s^2 rms), {_weights(v)}")
+                 f"{v.excess_rms:.3g} m/s^2 rms); {_weights(v)}")
     return text
 
 
@@ -110,9 +109,9 @@ def verdict_text(v: Verdict) -> str:
     if v.outcome is Outcome.EXPLAINED:
         return f"explained: after adding {terms} chi2/dof = {v.redchi:.3g} (p = {v.p:.3g}), at noise level"
     if v.outcome is Outcome.STOCHASTIC:
-        return f"explained by a stochastic bias: {_values(s)}{amb}, {_weights(v)}; no deterministic term helps ({_rest(v)})"
+        return f"explained by a stochastic bias: {_values(s)}{amb}; {_weights(v)}; no deterministic term helps ({_rest(v)})"
     if v.outcome is Outcome.TERMS_AND_STOCHASTIC:
-        return f"explained by {terms} plus a stochastic bias: {_values(s)}{amb}, {_weights(v)} (without it: {_rest(v)})"
+        return f"explained by {terms} plus a stochastic bias: {_values(s)}{amb}; {_weights(v)} (without it: {_rest(v)})"
     if v.outcome is Outcome.PARTLY_EXPLAINED:
         return f"partly explained by {terms}; the remaining {_unexplained(v)}"
     return _unexplained(v)
