@@ -232,3 +232,13 @@ def test_cli_argument_errors(run_cli) -> None:
     assert r.code == 2 and "5 poses cannot determine 9 parameters" in r.err
     r = run_cli(["plan-poses", "--scheme", "dodecahedron"])
     assert r.code == 2 and "unknown scheme 'dodecahedron'" in r.err
+
+
+@pytest.mark.parametrize("noise", ["1e-310", "1e300"])
+def test_cli_refuses_a_noise_no_design_can_be_scored_at(run_cli, noise) -> None:
+    """1e-310 made F = J^T J / noise^2 overflow (LinAlgError, exit 3); 1e300 called the poses singular."""
+    r = run_cli(["plan-poses", "--n", "12", "--noise", noise])
+    assert r.code == 2, r.err
+    lines = r.err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("imucal: error: noise: noise "), r.err
+    assert "outside 1e-09 to 100 m/s^2" in lines[0] and "fix:" in lines[0]

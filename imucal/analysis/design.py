@@ -54,6 +54,10 @@ CRITERIA = ("D", "A", "E")
 #: Default noise of |a| - g per interval mean [m/s^2]: an MPU-6050 (~0.04 m/s^2 per sample)
 #: held still for 4 s at 100 Hz (400 samples) gives ~0.002 m/s^2.
 DEFAULT_NOISE = 0.002
+#: Noise of |a| - g per interval mean that a design is scored at [m/s^2]: from 1e-9 (a nano-g, below any
+#: accelerometer's mean of a hold) to 100 (ten g: no still pose); outside it F = J^T J / noise^2
+#: overflows or underflows double precision and the scores mean nothing.
+NOISE_RANGE = (1e-9, 100.0)
 #: Parameters of the 6-parameter model (angles fixed at 90 deg).
 SIX_NAMES = BASE_NAMES[:6]
 #: Tilt of the wedge for the "wedge-24" scheme [deg]; 30.36 deg toward the face diagonals puts the
@@ -276,6 +280,10 @@ def evaluate(directions: np.ndarray, criterion: str = "D", noise: float = DEFAUL
         raise ImucalError(f"unknown criterion {short(criterion)}", field="criterion", fix="use D, A or E")
     if isinstance(noise, bool) or not isinstance(noise, (int, float)) or not (math.isfinite(noise) and noise > 0):
         raise ImucalError(f"noise {short(noise)} must be a positive number of m/s^2", field="noise")
+    if not NOISE_RANGE[0] <= noise <= NOISE_RANGE[1]:
+        raise ImucalError(f"noise {noise:g} m/s^2 per interval mean is outside {NOISE_RANGE[0]:g} to "
+                          f"{NOISE_RANGE[1]:g} m/s^2", field="noise",
+                          fix="give the noise of |a| - g of one pose's mean, e.g. 0.002 for a MEMS held 4 s")
     u = unit_rows(directions)
     free = tuple(free)
     k = _require_distinct(u, free, label) if check_distinct else distinct_directions(u)[0]
