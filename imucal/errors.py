@@ -28,6 +28,14 @@ class ImucalError(Exception):
         return " ".join(text.split())  # always one line
 
 
+class ImucalWarning(UserWarning):
+    """What the user must know about a result that is still given (a poor fit, dropped intervals).
+
+    The library issues it through :mod:`warnings` (a notebook shows it; ``warnings.filterwarnings``
+    silences or raises it); the command line prints the same sentence as ``imucal: warning: ...``.
+    """
+
+
 # Exit statuses of the command line (README "Exit statuses"). One meaning each.
 EXIT_OK = 0  #: success
 EXIT_NOT_CONVERGED = 1  #: the solver did not converge (outputs written, status "failed")

@@ -402,9 +402,9 @@ def _samples_rms(cal: Calibration, pb: _Problem, rec: Recording | RecordingSumma
     return (np.concatenate(kept) if kept else np.empty(0)) if streamed is None else None, rms
 
 
-def calibrate(config: RunConfig, recording: Recording | None = None,
-              held: Mapping[str, float] | None = None) -> CalibrationRun:
-    """Run the whole calibration described by ``config`` (on ``recording`` when given, else on
+def calibrate_accelerometer(config: RunConfig, recording: Recording | None = None,
+                            held: Mapping[str, float] | None = None) -> CalibrationRun:
+    """Run the whole accelerometer calibration described by ``config`` (on ``recording`` when given, else on
     the file ``config.data`` names): read -> detect -> guess -> fit -> result -> calibration.
     ``held``: parameters of the model (effect coefficients and their references) held at these
     values, determined by other evidence (a temperature sweep's poses, imucal.thermal.run)."""
@@ -448,9 +448,9 @@ def calibrate(config: RunConfig, recording: Recording | None = None,
 
 def calibrate_imu(config: RunConfig, recording: Recording | None = None,
                   gyro_file: str | None = None) -> CalibrationRun:
-    """The accelerometer (``calibrate``), then the gyroscope when the recording has gx, gy, gz
+    """The accelerometer (``calibrate_accelerometer``), then the gyroscope when the recording has gx, gy, gz
     or ``gyro_file`` (imu_tk's second file) is given: one calibration holding both sensors."""
-    run = calibrate(config, recording)
+    run = calibrate_accelerometer(config, recording)
     if gyro_file is None and getattr(run.recording, "gyro", None) is None:
         return run  # no gyroscope (a file read in chunks never has one)
     from imucal.calibration.gyro import GyroCalibration  # here: 10 modules a run without a gyroscope skips

@@ -151,9 +151,9 @@ def _calibration(path: str | None, work: Path):
     if path:
         return load_calibration(path)
     from imucal.config.run import config_from_dict
-    from imucal.pipeline import calibrate
+    from imucal.pipeline import calibrate_accelerometer
 
-    run = calibrate(config_from_dict({"data": {"path": str(XSENS)}, "gravity": {"value": 9.81744}}))
+    run = calibrate_accelerometer(config_from_dict({"data": {"path": str(XSENS)}, "gravity": {"value": 9.81744}}))
     run.calibration.save(work / "calibration.yaml")
     return load_calibration(work / "calibration.yaml")
 

@@ -40,7 +40,7 @@ from imucal.files.output import write_text_atomic  # noqa: E402
 from imucal.fleet.manifest import load_manifest  # noqa: E402
 from imucal.fleet.population import draw_fleet, write_fleet  # noqa: E402
 from imucal.model.parameters import BASE_NAMES  # noqa: E402
-from imucal.pipeline import calibrate  # noqa: E402
+from imucal.pipeline import calibrate_accelerometer  # noqa: E402
 
 VOLATILE = ("seconds", "cpu_seconds", "skipped")
 
@@ -208,7 +208,7 @@ def main() -> int:
         t0 = time.perf_counter()
         good = [u for u in m.units if not truth[u.id]["corrupt"]]
         for u in good:
-            v = calibrate(u.config).result.params.value_dict()
+            v = calibrate_accelerometer(u.config).result.params.value_dict()
             assert [v[k] for k in BASE_NAMES] == [float(t[u.id][k]) for k in BASE_NAMES], u.id
         single = (time.perf_counter() - t0) / len(good)
         done, skipped = killed_and_resumed(manifest, tmp / "killed", n)

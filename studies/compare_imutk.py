@@ -21,7 +21,7 @@ sys.path.insert(0, str(ROOT))
 from imucal.config.run import load_config  # noqa: E402
 from imucal.files.output import write_text_atomic  # noqa: E402
 from imucal.export.peers import read_imutk_calib  # noqa: E402
-from imucal.pipeline import calibrate  # noqa: E402
+from imucal.pipeline import calibrate_accelerometer  # noqa: E402
 
 CALIB = ROOT / "data" / "xsens-mti-imutk" / "imutk_test_imu_acc.calib"
 #: imu_tk's residual as published with its output (shared/data/real/xsens-mti-imutk/README.txt).
@@ -30,7 +30,7 @@ IMUTK_PUBLISHED_RMS = 0.0011
 
 def compare(weights: str = "auto") -> dict:
     cfg = load_config(ROOT / "configs" / "xsens-mti-imutk.yaml")
-    run = calibrate(dataclasses.replace(cfg, fit=dataclasses.replace(cfg.fit, weights=weights)))
+    run = calibrate_accelerometer(dataclasses.replace(cfg, fit=dataclasses.replace(cfg.fit, weights=weights)))
     cal, res, iv = run.calibration, run.result, run.intervals
     peer = read_imutk_calib(CALIB)
     g = cal.gravity

@@ -147,7 +147,7 @@ def visible_chi2(case, path: str, rel: bool = True, genie: bool = False,
     from imucal.analysis.discover.screening import screen as _screen
     from imucal.config.run import config_from_dict
     from imucal.model.effects import make_effect
-    from imucal.pipeline import calibrate
+    from imucal.pipeline import calibrate_accelerometer
     from imucal.solve.fit import jacobian_rows
 
     sensor = case.config.sensor
@@ -155,7 +155,7 @@ def visible_chi2(case, path: str, rel: bool = True, genie: bool = False,
     with open(path, "w") as f:
         f.write(clean.run().to_csv_text())
     cfg = config_from_dict({"data": {"path": path, "unit": sensor.unit}, "fit": {"weights": "noise"}})
-    base = calibrate(cfg)
+    base = calibrate_accelerometer(cfg)
     prob = _Problem(cfg, base)
     e = make_effect(case.effect, case.axes)
     truth = sensor.effects[case.effect]

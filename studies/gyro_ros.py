@@ -48,7 +48,7 @@ from imucal.gyro.model import misalignment_entries  # noqa: E402
 from imucal.gyro.run import gyro_data  # noqa: E402
 from imucal.gyro.segments import GyroData, motion_segments  # noqa: E402
 from imucal.solve.stats import chi2_sf  # noqa: E402
-from imucal.pipeline import calibrate  # noqa: E402
+from imucal.pipeline import calibrate_accelerometer  # noqa: E402
 
 OUT = ROOT / "studies" / "results" / "gyro_ros.md"
 #: [s] integration from inside the still poses (GyroOptions.lead_in_s), table 1b
@@ -89,7 +89,7 @@ class Rec:
 
 def load(k: int, real: Path) -> Rec:
     folder = real / "ros-imu-getovermassif" / f"data{k}"
-    run = calibrate(load_config(ROOT / "configs" / f"ros-imu-data{k}.yaml"))
+    run = calibrate_accelerometer(load_config(ROOT / "configs" / f"ros-imu-data{k}.yaml"))
     data, _ = gyro_data(run, str(folder / "gyro_data.txt"), unit="rad/s")
     return Rec(f"data{k}", run, data, folder, read_imutk_calib(folder / "test_imu_acc.calib"),
                read_imutk_calib(folder / "test_imu_gyro.calib"))

@@ -32,7 +32,7 @@ from imucal.gyro.lead_in import EDGE_RATIO, lead_in_for, edge_motion  # noqa: E4
 from imucal.gyro.segments import GyroData, motion_segments  # noqa: E402
 from imucal.files.output import write_text_atomic  # noqa: E402
 from imucal.export.peers import read_imutk_calib  # noqa: E402
-from imucal.pipeline import calibrate  # noqa: E402
+from imucal.pipeline import calibrate_accelerometer  # noqa: E402
 
 REAL = ROOT.parent / "shared" / "data" / "real"  # ../shared beside the repository
 XSENS = REAL / "xsens-mti-imutk"
@@ -55,7 +55,7 @@ def _real() -> Path:
 
 
 def load(config: str, gyro_file: Path, unit: str) -> tuple[object, GyroData, np.ndarray]:
-    run = calibrate(load_config(ROOT / "configs" / config))
+    run = calibrate_accelerometer(load_config(ROOT / "configs" / config))
     g = np.loadtxt(gyro_file)
     return run, gyro_data_from_run(run, g[:, 0], g[:, 1:4], unit=unit), g
 

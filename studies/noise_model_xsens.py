@@ -28,7 +28,7 @@ sys.path.insert(0, str(ROOT))
 from imucal.config.run import load_config  # noqa: E402
 from imucal.files.output import write_text_atomic  # noqa: E402
 from imucal.model.parameters import BASE_NAMES  # noqa: E402
-from imucal.pipeline import calibrate  # noqa: E402
+from imucal.pipeline import calibrate_accelerometer  # noqa: E402
 
 CONFIG = ROOT / "configs" / "xsens-mti-imutk.yaml"
 
@@ -45,7 +45,7 @@ def noise_json(folder: Path) -> Path:
 def run(weights: str, noise: Path | None):
     cfg = load_config(CONFIG)
     fit = dataclasses.replace(cfg.fit, weights=weights, noise=None if noise is None else str(noise))
-    return calibrate(dataclasses.replace(cfg, fit=fit))
+    return calibrate_accelerometer(dataclasses.replace(cfg, fit=fit))
 
 
 def main() -> int:

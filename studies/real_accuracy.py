@@ -112,14 +112,14 @@ class Outcome:
 def evaluate(rec: RealRecording) -> Outcome:
     """Calibrate one recording and score ours and the authors' calibration on our intervals."""
     from imucal.errors import ImucalError
-    from imucal.pipeline import calibrate
+    from imucal.pipeline import calibrate_accelerometer
 
     out = Outcome(rec)
     peer = rec.reader(REAL / rec.published) if rec.reader and rec.published else None
     out.peer = peer
     out.published = peer.nine_parameters() if peer is not None else None
     try:
-        run = calibrate(rec.config())
+        run = calibrate_accelerometer(rec.config())
     except ImucalError as exc:
         out.refused = str(exc)
         return out

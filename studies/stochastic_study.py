@@ -62,7 +62,7 @@ def test(data: FitData) -> stochastic.StochasticFit:
 def real_rows() -> list[str]:
     from imucal.analysis.discover import discover
     from imucal.config.run import load_config
-    from imucal.pipeline import calibrate
+    from imucal.pipeline import calibrate_accelerometer
 
     out = []
     for name in ("xsens-mti-imutk", "ros-imu-data2", "ros-imu-data3", "ros-imu-data4"):
@@ -70,7 +70,7 @@ def real_rows() -> list[str]:
         if not Path(cfg.base_dir or ".", cfg.data.path).exists():
             out.append(f"| {name} | recording not found | | |")
             continue
-        d, run = discover(cfg), calibrate(cfg)
+        d, run = discover(cfg), calibrate_accelerometer(cfg)
         s = d.stochastic
         named = "none (consistent with noise)" if s is None else (", ".join(
             f"{n} {v:.3g} +/- {sd:.2g} {u}" for n, (v, sd, u) in s.values().items()) or "none")

@@ -133,14 +133,14 @@ def evaluate(src: Source) -> Row:
     on the default run's still intervals."""
     from imucal.data.load import load_recording
     from imucal.errors import ImucalError
-    from imucal.pipeline import calibrate
+    from imucal.pipeline import calibrate_accelerometer
 
     row, t0 = Row(src), time.perf_counter()
     try:
         cfg = src.run_config()
         rec = load_recording(cfg.data, cfg.base_dir)
-        row.default = calibrate(cfg, rec)
-        row.uniform = calibrate(replace(cfg, fit=replace(cfg.fit, weights="uniform")), rec)
+        row.default = calibrate_accelerometer(cfg, rec)
+        row.uniform = calibrate_accelerometer(replace(cfg, fit=replace(cfg.fit, weights="uniform")), rec)
     except ImucalError as exc:
         row.refused = str(exc)
     else:

@@ -107,11 +107,11 @@ def si_recording(sim_csv) -> SimRecording:
 def calibrate_file(path: Path | str, **sections):
     """Run the library pipeline on ``path`` with YAML-like sections (fit=..., static=..., ...)."""
     from imucal.config.run import config_from_dict
-    from imucal.pipeline import calibrate
+    from imucal.pipeline import calibrate_accelerometer
 
     data = dict(sections.pop("data", {}))
     data.setdefault("path", str(path))
-    return calibrate(config_from_dict({"data": data, **sections}))
+    return calibrate_accelerometer(config_from_dict({"data": data, **sections}))
 
 
 @pytest.fixture(scope="session")

@@ -117,14 +117,14 @@ def work(tmp_path_factory) -> Path:
 @pytest.fixture(scope="module")
 def cases(work) -> dict[str, Case]:
     from imucal.config.run import config_from_dict
-    from imucal.pipeline import calibrate
+    from imucal.pipeline import calibrate_accelerometer
     from imucal.analysis.simulate import PosePlan, cube_directions, mems_counts_sensor, si_sensor, simulate
 
     rng = np.random.default_rng(20240601)
     out: dict[str, Case] = {}
     # Real: Xsens MTi, 16-bit offset-binary counts, fitted by the pipeline.
     if XSENS.exists():
-        run = calibrate(config_from_dict({"data": {"path": str(XSENS)}, "gravity": {"value": 9.81744}}))
+        run = calibrate_accelerometer(config_from_dict({"data": {"path": str(XSENS)}, "gravity": {"value": 9.81744}}))
         p = work / "xsens.yaml"
         run.calibration.save(p)
         cal = load_calibration(p)
@@ -134,7 +134,7 @@ def cases(work) -> dict[str, Case]:
     sim = simulate(si_sensor(rng), PosePlan(cube_directions()), seed=3)
     csv = work / "si.csv"
     csv.write_text(sim.to_csv_text())
-    run = calibrate(config_from_dict({"data": {"path": str(csv), "unit": "m/s^2"}}))
+    run = calibrate_accelerometer(config_from_dict({"data": {"path": str(csv), "unit": "m/s^2"}}))
     p = work / "si.yaml"
     run.calibration.save(p)
     cal = load_calibration(p)

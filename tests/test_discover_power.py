@@ -88,7 +88,7 @@ def test_the_simulated_warm_up_is_the_model_discover_fits(seed, term, snr, tmp_p
 
     import numpy as np
 
-    from imucal.pipeline import calibrate
+    from imucal.pipeline import calibrate_accelerometer
 
     case = draw_effect_case(seed, effect=term, snr=snr, noise_mg=0.3)
     assert len(case.axes) == 2
@@ -97,7 +97,7 @@ def test_the_simulated_warm_up_is_the_model_discover_fits(seed, term, snr, tmp_p
         sensor, noise=tuple(0.1 * np.asarray(sensor.noise))))
     path = tmp_path / "quiet.csv"
     path.write_text(quiet.run().to_csv_text())
-    run = calibrate(config_from_dict({"data": {"path": str(path), "unit": sensor.unit}, "fit": {
+    run = calibrate_accelerometer(config_from_dict({"data": {"path": str(path), "unit": sensor.unit}, "fit": {
         "effects": [{"name": term, "axes": ["xyz"[a] for a in case.axes]}]}}))
     assert run.result.redchi < 2.0, run.result.redchi
     truth = sensor.effects[term]
@@ -120,7 +120,7 @@ def test_the_third_warm_up_axis_gains_what_its_linear_score_predicts(tmp_path):
     path = tmp_path / "case.csv"
     path.write_text(case.config.run().to_csv_text())
     cfg = config_from_dict({"data": {"path": str(path), "unit": case.config.sensor.unit}})
-    prob = _Problem(cfg, calibrate(cfg))
+    prob = _Problem(cfg, calibrate_accelerometer(cfg))
     start = {**prob.run.result.values(), "bias_warmup_tau": 11.5}
     two = prob.fit(_canonical({"bias_warmup": (0, 2)}), start)
     three = prob.fit(_canonical({"bias_warmup": (0, 1, 2)}), start)

@@ -19,7 +19,7 @@ from imucal.model.effects import (EFFECTS, MIN_TEMPERATURE_SPREAD, REFERENCE_TEM
 from imucal.errors import ImucalError
 from imucal.model.sensor import build_model
 from imucal.model.parameters import base_parameters
-from imucal.pipeline import calibrate
+from imucal.pipeline import calibrate_accelerometer
 from imucal.analysis.simulate import (PosePlan, SensorSpec, TemperatureProfile, cube_directions, mems_counts_sensor,
                              random_directions, simulate)
 
@@ -145,7 +145,7 @@ def test_simulate_fit_recover(tmp_path, name, axes, coeffs):
     sim = simulate(sensor, _plan(rng), seed=5, temperature=TemperatureProfile(period=100.0, swing=4.0))
     cfg = config_from_dict({"data": {"path": _write(tmp_path, sim)},
                             "fit": {"effects": [{"name": name, "axes": ["xyz"[a] for a in axes]}]}})
-    run = calibrate(cfg)
+    run = calibrate_accelerometer(cfg)
     res = run.result
     assert res.redchi < 3.0
     for pname, v in coeffs.items():
@@ -171,8 +171,8 @@ def test_rescaled_readings_give_the_same_relative_coefficients(tmp_path):
     sim = simulate(sensor, _plan(rng), seed=2, temperature=TemperatureProfile(period=90.0, swing=4.0))
     small = dataclasses.replace(sim, raw=sim.raw / 1000.0)
     fx = {"effects": [{"name": "bias_temperature", "axes": ["y"]}, {"name": "scale_temperature", "axes": ["x"]}]}
-    r1 = calibrate(config_from_dict({"data": {"path": _write(tmp_path, sim, "a.csv")}, "fit": fx})).result
-    r2 = calibrate(config_from_dict({"data": {"path": _write(tmp_path, small, "b.csv")}, "fit": fx})).result
+    r1, r2 = (calibrate_accelerometer(config_from_dict({"data": {"path": _write(tmp_path, s, n)}, "fit": fx})).result
+              for s, n in ((sim, "a.csv"), (small, "b.csv")))
     assert r2.params["bias_temperature_y"].value * 1000 == pytest.approx(r1.params["bias_temperature_y"].value,
                                                                           rel=1e-4)
     assert r2.params["scale_temperature_x"].value == pytest.approx(r1.params["scale_temperature_x"].value, rel=1e-4)
@@ -209,7 +209,7 @@ def test_calibrate_refuses_temperature_effect_on_constant_temperature(tmp_path):
     cfg = config_from_dict({"data": {"path": _write(tmp_path, sim)},
                             "fit": {"effects": [{"name": "bias_temperature", "axes": ["x"]}]}})
     with pytest.raises(ImucalError) as exc:
-        calibrate(cfg)
+        calibrate_accelerometer(cfg)
     assert "temperature is constant" in str(exc.value) and "rec.csv" in str(exc.value)
 
 
@@ -219,7 +219,7 @@ def test_calibrate_refuses_temperature_effect_without_temp(tmp_path):
     cfg = config_from_dict({"data": {"path": _write(tmp_path, sim)},
                             "fit": {"effects": [{"name": "scale_temperature", "axes": ["x", "y"]}]}})
     with pytest.raises(ImucalError, match="scale_temperature needs temperature but the data have no temp column"):
-        calibrate(cfg)
+        calibrate_accelerometer(cfg)
 
 
 def test_prepare_parameters_sets_reference_temperature():
@@ -241,7 +241,7 @@ def test_calibration_file_round_trip_and_apply_with_temperature(tmp_path):
     sim = simulate(sensor, _plan(rng), seed=3, temperature=TemperatureProfile(period=100.0, swing=4.0))
     cfg = config_from_dict({"data": {"path": _write(tmp_path, sim)},
                             "fit": {"effects": [{"name": "bias_temperature", "axes": ["z"]}]}})
-    run = calibrate(cfg)
+    run = calibrate_accelerometer(cfg)
     cal = run.calibration
     path = tmp_path / "cal.yaml"
     cal.save(path)
@@ -268,8 +268,8 @@ def test_effect_without_covariates_applies(tmp_path):
     sensor = dataclasses.replace(mems_counts_sensor(rng, noise_counts=1.0),
                                  effects={"scale_nonlinearity": {"scale_nonlinearity_x": 5e-4}})
     sim = simulate(sensor, _plan(rng, n_random=8), seed=4)
-    run = calibrate(config_from_dict({"data": {"path": _write(tmp_path, sim)},
-                                      "fit": {"effects": [{"name": "scale_nonlinearity", "axes": ["x"]}]}}))
+    fx = {"effects": [{"name": "scale_nonlinearity", "axes": ["x"]}]}
+    run = calibrate_accelerometer(config_from_dict({"data": {"path": _write(tmp_path, sim)}, "fit": fx}))
     a = run.calibration.apply(sim.raw[sim.still])
     assert abs(np.sqrt(np.mean((np.linalg.norm(a, axis=1) - G) ** 2))) < 5e-3
     assert math.isfinite(run.result.std["scale_nonlinearity_x"])
@@ -292,7 +292,7 @@ def test_generated_c_applies_effects_with_temperature_and_time(tmp_path):
     sensor = dataclasses.replace(mems_counts_sensor(rng, noise_counts=1.0), effects=spec)
     sim = simulate(sensor, _plan(rng, n_random=8), seed=6, temperature=TemperatureProfile(period=100.0, swing=4.0))
     fx = {"effects": [{"name": n, "axes": [next(iter(c))[-1]]} for n, c in spec.items()]}
-    cal = calibrate(config_from_dict({"data": {"path": _write(tmp_path, sim)}, "fit": fx})).calibration
+    cal = calibrate_accelerometer(config_from_dict({"data": {"path": _write(tmp_path, sim)}, "fit": fx})).calibration
     assert cal.covariates == ("temp", "time")
     write_c(cal, tmp_path / "c", prefix="eff", precision="double")
     src = (tmp_path / "c" / "eff.c").read_text()
@@ -352,7 +352,7 @@ def test_a_drift_on_a_plan_that_revisits_every_pose_in_reverse_is_calibrated(tmp
     case = draw_effect_case(50280, effect=name, axes=(0, 1, 2), snr=40.0, noise_mg=0.3, revisit=True)
     path = tmp_path / "revisit.csv"
     path.write_text(case.config.run().to_csv_text())
-    run = calibrate(config_from_dict({"data": {"path": str(path), "unit": case.config.sensor.unit},
+    run = calibrate_accelerometer(config_from_dict({"data": {"path": str(path), "unit": case.config.sensor.unit},
                                       "fit": {"effects": [{"name": name, "axes": ["x", "y", "z"]}]}}))
     assert np.bincount(run.observability.labels).min() >= 2  # each pose at least twice
     truth = case.config.sensor.effects[name]

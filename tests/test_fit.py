@@ -361,12 +361,12 @@ def test_noise_std_is_what_the_weights_alone_predict_whatever_the_misfit(tmp_pat
     ``noise_std`` stays what the observability check predicts from the noise of each row."""
     from imucal.analysis.simulate import draw_effect_case
     from imucal.config.run import config_from_dict
-    from imucal.pipeline import calibrate
+    from imucal.pipeline import calibrate_accelerometer
 
     case = draw_effect_case(60081, effect="scale_warmup", snr=216.4, noise_mg=0.3)
     path = tmp_path / "warm.csv"
     path.write_text(case.config.run().to_csv_text())
-    run = calibrate(config_from_dict({"data": {"path": str(path), "unit": case.config.sensor.unit},
+    run = calibrate_accelerometer(config_from_dict({"data": {"path": str(path), "unit": case.config.sensor.unit},
                                       "fit": {"weights": "noise"}}))
     res = run.result
     assert res.redchi > 20

@@ -15,7 +15,7 @@ from imucal.errors import ImucalError
 from imucal.gyro import fit as gyro_fit
 from imucal.gyro.evaluate import rms
 from imucal.gyro.run import gyro_data
-from imucal.pipeline import calibrate
+from imucal.pipeline import calibrate_accelerometer
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -38,7 +38,7 @@ def ros_data2():
     g = real_file("ros-imu-getovermassif", "data2", "gyro_data.txt")
     cfg = load_config(ROOT / "configs" / "ros-imu-data2.yaml")
     cfg = dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, gyro_unit="rad/s"))
-    data, _ = gyro_data(calibrate(cfg), str(g))
+    data, _ = gyro_data(calibrate_accelerometer(cfg), str(g))
     return data
 
 

@@ -14,7 +14,7 @@ import pytest
 
 from imucal.cli.main import main
 from imucal.config.run import config_from_dict
-from imucal.pipeline import calibrate
+from imucal.pipeline import calibrate_accelerometer
 
 CHROMIUM = next((shutil.which(n) for n in ("chromium", "chromium-browser", "google-chrome") if shutil.which(n)),
                 None)
@@ -50,7 +50,7 @@ def _screenshot_std(png: Path) -> float:
 def calibrated(counts_recording, tmp_path_factory):
     out = tmp_path_factory.mktemp("browser") / "out"
     assert main(["calibrate", "--data", str(counts_recording.path), "--out", str(out), "--quiet"]) == 0
-    run = calibrate(config_from_dict({"data": {"path": str(counts_recording.path)}}))
+    run = calibrate_accelerometer(config_from_dict({"data": {"path": str(counts_recording.path)}}))
     return out / "report.html", run
 
 

@@ -17,7 +17,7 @@ import pytest
 from imucal.analysis.simulate import PosePlan, cube_directions, mems_counts_sensor, simulate
 from imucal.cli.main import main
 from imucal.config.run import config_from_dict
-from imucal.pipeline import calibrate
+from imucal.pipeline import calibrate_accelerometer
 from imucal.report.html import calibration_html, chi2_consistent, verdict
 from imucal.solve.stats import chi2_sf
 
@@ -107,7 +107,7 @@ def test_poor_fit_is_flagged_in_the_verdict(tmp_path):
     raw = sim.raw * (1 + 5e-4 * (t / t[-1]))[:, None]  # 0.05 % scale drift over the log
     path = tmp_path / "drift.csv"
     path.write_text(replace(sim, raw=raw, sensor=replace(sensor, quantum=0.0)).to_csv_text())
-    run = calibrate(config_from_dict({"data": {"path": str(path)}}))
+    run = calibrate_accelerometer(config_from_dict({"data": {"path": str(path)}}))
     v = verdict(run)
     assert v.level == "check" and v.checks[1].ok is False
     page = calibration_html(run)

@@ -33,12 +33,12 @@ import json, sys
 import numpy as np
 from imucal.analysis.design import optimal_design
 from imucal.config.run import config_from_dict
-from imucal.pipeline import calibrate
+from imucal.pipeline import calibrate_accelerometer
 steps = []
 optimal_design(9, progress=lambda: steps.append(1))
 cfg = config_from_dict({{"data": {{"path": {str(ROOT / "data" / "xsens-mti-imutk" / "xsens_acc.mat")!r},
                                   "stream": "always"}}, "gravity": {{"value": 9.81744}}, "fit": {{"mode": "samples"}}}})
-run = calibrate(cfg)
+run = calibrate_accelerometer(cfg)
 print(json.dumps([len(steps), run.result.mode, "tqdm" in sys.modules]))
 """
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, timeout=300,

@@ -22,7 +22,7 @@ from imucal.data.static import MovingVariance, detect_static, moving_variance
 from imucal.data.load import has_gyro, use_stream
 from imucal.data.stream import StreamedRecording
 from imucal.errors import ImucalError
-from imucal.pipeline import calibrate, static_samples
+from imucal.pipeline import calibrate_accelerometer, static_samples
 from test_trust_data import ACC, OTHER, ids
 
 INTERVAL_FIELDS = ("start", "end", "t_start", "t_end", "mean", "std", "mean_std", "t_mid")
@@ -136,7 +136,7 @@ def test_calibration_in_chunks_equals_the_whole_file(name):
     cfg = load_config(Path(__file__).resolve().parents[1] / "configs" / f"{name}.yaml")
     if not (cfg.base_dir / cfg.data.path).exists():
         pytest.skip(f"real recording {cfg.base_dir / cfg.data.path} not present")
-    runs = [calibrate(dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, stream=how)))
+    runs = [calibrate_accelerometer(dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, stream=how)))
             for how in ("never", "always")]
     whole, chunks = runs
     assert chunks.recording.raw is None and chunks.sample_residuals is None  # read in chunks

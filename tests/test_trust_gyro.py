@@ -151,7 +151,7 @@ def test_real_recordings_default_no_worse_than_without_the_rejected(name, turnin
     """MPU-9150 imu2 (mikoff): poses where the sensor turns while the accelerometer is still; Xsens: none."""
     from imucal.config.run import config_from_dict
     from imucal.gyro.check import run_still_check
-    from imucal.pipeline import calibrate
+    from imucal.pipeline import calibrate_accelerometer
 
     if name == "xsens":
         data = {"path": str(real_file("xsens-mti-imutk", "xsens_acc.mat")), "unit": "raw",
@@ -159,7 +159,7 @@ def test_real_recordings_default_no_worse_than_without_the_rejected(name, turnin
     else:
         data = {"path": str(real_file("mpu9150-mikoff", "imu2.log")), "unit": "m/s^2", "gyro_unit": "rad/s",
                 "sample_rate": 100, "columns": {"ax": 0, "ay": 1, "az": 2, "gx": 3, "gy": 4, "gz": 5}}
-    c = run_still_check(calibrate(config_from_dict({"data": data, "gravity": {"value": 9.81744}})))
+    c = run_still_check(calibrate_accelerometer(config_from_dict({"data": data, "gravity": {"value": 9.81744}})))
     assert c.no_worse and bool(c.rejected) == turning
     if turning:  # taking them as still poses costs direction error on the motions between the still ones
         assert c.all_still_deg > 1.5 * c.default_deg

@@ -77,13 +77,13 @@ def test_xsens_default_fit_is_as_good_as_the_uniform_one_and_better_than_imu_tk(
     interval means is at most 0.95 times imu_tk's 0.001122 m/s^2, near the uniform fit's."""
     from conftest import real_file
     from imucal.config.run import load_config
-    from imucal.pipeline import calibrate
+    from imucal.pipeline import calibrate_accelerometer
     import dataclasses
     from pathlib import Path
 
     cfg = load_config(Path(__file__).resolve().parents[1] / "configs" / "xsens-mti-imutk.yaml")
     real_file("xsens-mti-imutk", "xsens_acc.mat")  # skips without ../shared
-    runs = {w: calibrate(dataclasses.replace(cfg, fit=dataclasses.replace(cfg.fit, weights=w)))
+    runs = {w: calibrate_accelerometer(dataclasses.replace(cfg, fit=dataclasses.replace(cfg.fit, weights=w)))
             for w in ("auto", "noise", "uniform")}
     rms = {w: r.calibration.fit["rms_residual"] for w, r in runs.items()}
     assert rms["auto"] <= 0.95 * 0.001122

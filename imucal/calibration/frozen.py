@@ -18,7 +18,7 @@ from imucal.calibration import fileformat
 from imucal.calibration.fields import ACCELEROMETER, GYROSCOPE
 from imucal.errors import ImucalError
 from imucal.model.parameters import BASE_NAMES, Parameters
-from imucal.model.sensor import build_model
+from imucal.model.sensor import SensorModel, build_model
 from imucal.model.effects import make_effect
 
 if TYPE_CHECKING:  # the gyroscope's modules load only for a file or run that has one (docs/architecture.md)
@@ -48,7 +48,7 @@ class Calibration:
 
     # --- the model -------------------------------------------------------------------------
     @property
-    def model(self):
+    def model(self) -> SensorModel:
 
         return build_model(self.effect_objects())
 

@@ -167,7 +167,8 @@ class GyroSettings:
 
     def __post_init__(self) -> None:
         check_choice(self.gsens, GYRO_GSENS, "gyro.gsens", "g-sensitivity choice")
-        if self.lead_in_s != "auto" and not (_is_real(self.lead_in_s) and 0 <= self.lead_in_s <= 10):
+        lead_in = self.lead_in_s
+        if lead_in != "auto" and not (_is_real(lead_in) and isinstance(lead_in, (int, float)) and 0 <= lead_in <= 10):
             raise ImucalError(f"lead_in_s {short(self.lead_in_s)} is not auto or between 0 and 10 s",
                               field="gyro.lead_in_s", fix="give auto, or seconds such as 0.5")
         if not isinstance(self.free_bias, bool):

@@ -64,7 +64,7 @@ def still_check(data: GyroData, options: GyroOptions = GyroOptions()) -> StillCh
 
 
 def run_still_check(run, gyro_file: str | None = None) -> StillCheck | None:
-    """``still_check`` of an accelerometer run (imucal.pipeline.calibrate's CalibrationRun) with the
+    """``still_check`` of an accelerometer run (imucal.pipeline.calibrate_accelerometer's CalibrationRun) with the
     gyro options of its configuration; None when the recording has no gyroscope. ``gyro_file``:
     imu_tk's second file; default the configuration's ``data.gyro_path`` (relative to the YAML file)."""
     cfg = run.config
