@@ -686,10 +686,28 @@ def test_the_finished_program_ignores_sigterm_until_it_exits(monkeypatch, tmp_pa
             signal.signal(s, h)
 
 
+def _wait_until_caught(p: subprocess.Popen, sig: int, limit: float = 60.0) -> None:
+    """Until process ``p`` catches ``sig`` (its SigCgt mask in /proc: main() has set its handlers), so a
+    signal sent after it reaches the run, not an interpreter still importing on a loaded machine."""
+    status = Path(f"/proc/{p.pid}/status")
+    if not status.exists():
+        return  # no /proc: the delay alone
+    deadline = time.monotonic() + limit
+    while p.poll() is None and time.monotonic() < deadline:
+        try:
+            masks = [ln.split()[1] for ln in status.read_text().splitlines() if ln.startswith("SigCgt:")]
+        except OSError:  # it ended meanwhile
+            return
+        if masks and int(masks[0], 16) >> (sig - 1) & 1:
+            return
+        time.sleep(0.005)
+
+
 @pytest.mark.parametrize("delay", [0.3, 0.5, 0.7])
 def test_sigterm_at_any_moment_is_an_interruption_never_an_internal_error(work, delay):
     """A signal inside CasADi's C code comes back as SystemError with the interrupt in its context."""
     p = _imucal(["calibrate", "--data", "rec.csv", "--out", "s"], work)
+    _wait_until_caught(p, signal.SIGTERM)  # the run has begun: before, the interpreter is still starting
     time.sleep(delay)
     p.send_signal(signal.SIGTERM)
     _, err = p.communicate(timeout=60)
