@@ -176,6 +176,7 @@ def test_cli_plans_writes_json_and_scores_it_back(run_cli, tmp_path) -> None:
     r = run_cli(["plan-poses", "--n", "12", "--json", out])
     assert r.code == 0, r.err
     assert "[[Comparison at N = 12]]" in r.out and "edges" in r.out and "best cube subset" in r.out
+    assert "[[Efficiency]] against this plan: the 12 cube edges 97.0 %" in r.out
     obj = json.loads(out.read_text())
     assert obj["format"] == "imucal-pose-plan" and obj["n"] == 12
     P = np.array(obj["poses"])
@@ -242,3 +243,17 @@ def test_cli_refuses_a_noise_no_design_can_be_scored_at(run_cli, noise) -> None:
     lines = r.err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("imucal: error: noise: noise "), r.err
     assert "outside 1e-09 to 100 m/s^2" in lines[0] and "fix:" in lines[0]
+
+
+def test_plan_poses_says_how_efficient_a_scheme_is(run_cli, tmp_path) -> None:
+    """Issue 29: scoring the 12 cube edges says they are 97 % efficient: the D-efficiency against the
+    best 12-pose plan plan-poses finds, computed here from the two designs."""
+    out = tmp_path / "edges.json"
+    r = run_cli(["plan-poses", "--scheme", "edges", "--no-compare", "--json", out])
+    assert r.code == 0, r.err
+    want = D.evaluate(D.scheme_directions("edges"), "D").d_efficiency(D.optimal_design(12, "D"))
+    assert 0.95 < want < 0.99
+    assert f"the 12 cube edges: {100 * want:.1f} % efficient against the best 12-pose plan found" in r.out
+    assert json.loads(out.read_text())["efficiency_vs_best_found"] == pytest.approx(want, rel=1e-12)
+    r = run_cli(["plan-poses", "--scheme", "faces", "--fix-angles", "--no-compare"])
+    assert "the 6 cube faces: as good as the best 6-pose plan found" in r.out and "--fix-angles finds" in r.out

@@ -147,6 +147,16 @@ def test_every_figure_function_is_checked(counts_run, discoveries, drawn):
     r = np.random.default_rng(0).normal(0, 1e-3, (30, 3))
     check(residual_temperature, (np.linspace(5, 25, 30), r, r / 10, np.repeat([0, 1, 2], 10)))
 
+    from imucal.analysis.still_noise import measure_noise
+    from imucal.data.recording import Recording
+    from imucal.report.noise import allan_figure
+
+    rng = np.random.default_rng(3)
+    n = 3000
+    still = Recording(t=np.arange(n) / 100.0, raw=rng.normal(0, 1, (n, 3)), temp=None, unit="m/s^2", source="s",
+                      sha256="", gyro=rng.normal(0, 1e-3, (n, 3)), gyro_unit="rad/s")
+    check(allan_figure, measure_noise(still))
+
     assert set(checked) == figure_functions(), "a figure function is not checked here"
     problems = [p for figs in checked.values() for f in figs for p in axis_problems(f)]
     assert problems == []

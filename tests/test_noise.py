@@ -58,3 +58,43 @@ def test_cli_on_the_xsens_still_start(run_cli, tmp_path):
     assert d["segment"].startswith("the longest still interval") and d["unit"] == "m/s^2"
     assert 1e-4 < d["kalibr"]["accelerometer_noise_density"] < 1e-2
     assert d["kalibr"]["accelerometer_random_walk"] is None and "random walk n/a" in r.out
+
+
+def _imu_still_log(path, white_acc: float, white_gyro: float, n: int = 20_000, seed: int = 5):
+    """A still log with accelerometer [m/s^2] and gyroscope [rad/s] columns of known white noise."""
+    rng = np.random.default_rng(seed)
+    acc = np.array([0.1, -0.2, 9.81]) + rng.normal(0, white_acc * np.sqrt(FS), (n, 3))
+    gyr = np.array([0.01, 0.0, -0.02]) + rng.normal(0, white_gyro * np.sqrt(FS), (n, 3))
+    np.savetxt(path, np.column_stack([np.arange(n) / FS, acc, gyr]), delimiter=",", fmt="%.9g",
+               header="t,ax,ay,az,gx,gy,gz", comments="")
+    return path
+
+
+def test_noise_covers_the_gyroscope_and_draws_the_allan_plot(run_cli, tmp_path):
+    """Issue 29: the gyroscope's columns get their own table, JSON section and Kalibr fields, and --plot
+    draws both sensors' Allan deviation; the JSON still reads as a --noise file."""
+    from imucal.analysis.noise_model import load_noise_model
+
+    log = _imu_still_log(tmp_path / "still.csv", 2e-3, 1e-4)
+    js, png = tmp_path / "n.json", tmp_path / "allan.png"
+    r = run_cli(["noise", "--data", log, "--unit", "m/s^2", "--gyro-unit", "rad/s", "--json", js, "--plot", png])
+    assert r.code == 0, r.err
+    assert "[accelerometer] unit m/s^2" in r.out and "[gyroscope] unit rad/s" in r.out
+    d = json.loads(js.read_text())
+    for sensor, want in ((d, 2e-3), (d["gyro"], 1e-4)):
+        for a in "xyz":
+            e = sensor["axes"][a]
+            assert abs(e["white_density"] / want - 1) < 4 * e["white_rel_err"] + 0.02, (a, e)
+    k = d["kalibr"]
+    assert k["gyroscope_noise_density"] == max(d["gyro"]["axes"][a]["white_density"] for a in "xyz")
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert load_noise_model(js).white_density == pytest.approx([d["axes"][a]["white_density"] for a in "xyz"])
+
+
+def test_noise_json_to_stdout_is_the_json_alone(run_cli, tmp_path):
+    """`--json -`: stdout holds the JSON alone (the tables go to stderr), no file named '-'."""
+    log = _imu_still_log(tmp_path / "still.csv", 2e-3, 1e-4, n=5000)
+    r = run_cli(["noise", "--data", log, "--json", "-"])
+    assert r.code == 0, r.err
+    assert json.loads(r.out)["gyro"]["unit"] == "raw" and "[gyroscope]" in r.err
+    assert not (tmp_path / "-").exists() and not __import__("pathlib").Path("-").exists()

@@ -84,3 +84,33 @@ def test_discover_calls_its_hook_once_per_fit() -> None:
     d = discover(cfg, DiscoverSettings(candidates=("bias_drift",), max_effects=1), lambda: calls.append(1))
     fitted = sum(1 for s in d.steps for c in s.candidates if np.isfinite(getattr(c, "chi2", np.nan)))
     assert len(calls) >= 1 and len(calls) >= fitted
+
+
+def _on_a_terminal(code: str) -> tuple[int, str]:
+    """Run ``code`` in a child whose stdin, stdout and stderr are a 100-column pseudo-terminal."""
+    pid, fd = pty.fork()
+    if pid == 0:
+        fcntl.ioctl(0, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))
+        os.environ["PYTHONPATH"] = str(ROOT)
+        os.execv(sys.executable, [sys.executable, "-c", code])
+    out = b""
+    while True:
+        try:
+            chunk = os.read(fd, 4096)
+        except OSError:
+            break
+        if not chunk:
+            break
+        out += chunk
+    _, status = os.waitpid(pid, 0)
+    return os.WEXITSTATUS(status), out.decode(errors="replace")
+
+
+def test_simulate_fleet_shows_its_progress_on_a_terminal(tmp_path: Path) -> None:
+    """Issue 29: `imucal simulate --fleet N` (38 s for 200 units) counts its units on a terminal."""
+    cfg = ROOT / "configs" / "simulate_fleet.yaml"
+    code = ("import sys\nfrom imucal.report import progress\nprogress.DELAY_S = 0\nfrom imucal.cli.main import main\n"
+            f"sys.exit(main(['simulate', {str(cfg)!r}, '--fleet', '3', '--out', {str(tmp_path / 'f')!r}]))\n")
+    status, text = _on_a_terminal(code)
+    assert status == 0, text
+    assert "simulate --fleet" in text and "3/3" in text and "wrote 3 units" in text

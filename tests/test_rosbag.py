@@ -119,10 +119,10 @@ def _numbers(d, prefix: str = "") -> dict[str, float]:
 
 @pytest.mark.parametrize("ros", BAG_KINDS)
 def test_a_bag_calibrates_as_the_same_samples_in_a_csv(si_bags, run_cli, tmp_path, ros):
+    """... and without --topic: the bag's one IMU topic is read (issue 29)."""
     bags, csv, _, _ = si_bags
     keys = ("params", "std", "matrix", "offset", "rms_residual", "chi2", "n_intervals")
-    csv_js, bag_js = _calibrate(run_cli, csv, tmp_path / "csv"), _calibrate(run_cli, bags[ros], tmp_path / "bag",
-                                                                            "--topic", "/imu")
+    csv_js, bag_js = _calibrate(run_cli, csv, tmp_path / "csv"), _calibrate(run_cli, bags[ros], tmp_path / "bag")
     want, got = (_numbers({k: js[k] for k in keys}) for js in (csv_js, bag_js))
     assert len(want) > 20 and set(got) == set(want)
     for k in want:
@@ -198,8 +198,13 @@ def _bad(tmp_path: Path, case: str) -> tuple[Path, list[str]]:
     acc = np.tile([0.0, 0.0, 9.8], (50, 1))
     if case == "topic absent":
         return write_bag(tmp_path / "a.bag", 1, {"/imu/data": imu_topic(1, t, acc)}), ["--topic", "/imu"]
-    if case == "no topic":
-        return write_bag(tmp_path / "a.bag", 1, {"/imu/data": imu_topic(1, t, acc)}), []
+    if case == "two imu topics":
+        return write_bag(tmp_path / "a.bag", 1, {"/imu/data": imu_topic(1, t, acc), "/imu2": imu_topic(1, t, acc)}), []
+    if case == "no imu topic":
+        ts = get_typestore(Stores.ROS2_HUMBLE)
+        ns = T0_SEC * 10**9 + np.arange(5) * 10**7
+        temp = ("sensor_msgs/msg/Temperature", list(ns), _temp_msgs(ts, ns, np.full(5, 20.0)))
+        return write_bag(tmp_path / "n", 2, {"/temp": temp}), []
     if case == "wrong type":
         ts = get_typestore(Stores.ROS2_HUMBLE)
         ns = T0_SEC * 10**9 + np.arange(5) * 10**7
@@ -234,7 +239,8 @@ def _bad(tmp_path: Path, case: str) -> tuple[Path, list[str]]:
 
 
 BAD = {"topic absent": ("topic /imu is not in the bag", "/imu/data"),
-       "no topic": ("needs the IMU topic", "/imu/data"),
+       "two imu topics": ("the bag has 2 IMU topics (/imu/data, /imu2)", "one of /imu/data, /imu2"),
+       "no imu topic": ("the bag has no sensor_msgs/Imu topic", "data.topic"),
        "wrong type": ("carries sensor_msgs/msg/Temperature", "/imu/data"),
        "empty topic": ("holds no messages", "data.topic"),
        "not monotonic": ("not strictly increasing at message 20", "header.stamp"),

@@ -258,6 +258,29 @@ class Design:
                 "poses": [[float(x) for x in d] for d in self.directions]}
 
 
+def efficiency(design: Design, best: Design) -> float:
+    """How near ``design`` comes to ``best`` on their criterion (1: as good; 0.97: it needs 1/0.97 times
+    the recordings to match): D (det F / det F_best)^(1/p), A trace F_best^-1 / trace F^-1, E
+    lambda_min(F) / lambda_min(F_best)."""
+    if design.criterion != best.criterion or design.free != best.free:
+        raise ImucalError("designs scored on different criteria or parameters cannot be compared",
+                          field="criterion", fix="score both with the same --criterion and model")
+    if design.criterion == "D":
+        return design.d_efficiency(best)
+    return best.value / design.value if design.criterion == "A" else design.value / best.value
+
+
+def against_optimum(design: Design, sensor: DesignSensor = DesignSensor(), gravity: float = STANDARD_GRAVITY,
+                    seed: int = 0, progress: Callable[[], None] | None = None) -> tuple[float, Design]:
+    """``design``'s efficiency against the best design of as many poses that ``optimal_design`` finds
+    (the same criterion, noise and parameters), and that design (``design`` itself when no better one
+    is found: efficiency 1)."""
+    best = optimal_design(design.n, design.criterion, design.noise, sensor, gravity, design.free, seed=seed,
+                          progress=progress)
+    eff = efficiency(design, best)
+    return (1.0, design) if eff >= 1.0 else (eff, best)
+
+
 def _require_distinct(u: np.ndarray, free: Sequence[str], label: str) -> int:
     k, _ = distinct_directions(u)
     if k < len(free):

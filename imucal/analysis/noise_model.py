@@ -136,6 +136,7 @@ class NoiseJson:
     rate_hz: float | None = None
     allan: AllanSection | None = None
     kalibr: Mapping[str, float | None] | None = None
+    gyro: Any = None  #: the gyroscope's noise (same fields); not read: the fit's noise is the accelerometer's
 
 
 @dataclass(frozen=True)

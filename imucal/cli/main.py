@@ -95,6 +95,16 @@ def _interrupted(exc: BaseException) -> bool:
     return bool(_SIGNALLED)
 
 
+def _run(args: argparse.Namespace) -> int:
+    """The command; with ``--json -`` its words go to stderr and stdout holds the JSON alone."""
+    if getattr(args, "json", None) != "-":
+        return args.run(args)
+    from imucal.files.output import data_on_stdout
+
+    with data_on_stdout():
+        return args.run(args)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run one command. Exit statuses: imucal.errors.EXIT_* (README, "Exit status")."""
     as_program = argv is None  # the console script or python -m imucal, not a caller's code
@@ -114,7 +124,7 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError:  # not the main thread (e.g. a test runner's worker): leave it alone
         pass
     try:
-        code = int(args.run(args) or 0)
+        code = int(_run(args) or 0)
         sys.stdout.flush()  # a reader gone shows here, not in the interpreter's last flush
         return code
     except ImucalError as exc:

@@ -13,6 +13,7 @@ from typing import BinaryIO
 
 from imucal.data.lines import BINARY_PROBE, MAX_STREAM_BYTES, binary_file, check_text, is_number, not_utf8, split
 from imucal.data.spec import ROLES, DataSpec
+from imucal.data.timebase import time_column_name
 from imucal.errors import ImucalError, short
 from imucal.files.inputs import open_regular
 
@@ -35,6 +36,11 @@ _DEFAULT_NAMES = {"t": ("t", "time", "timestamp"), "ax": ("ax", "acc_x", "accx",
                   "gx": ("gx", "gyro_x", "gyrx", "wx"), "gy": ("gy", "gyro_y", "gyry", "wy"),
                   "gz": ("gz", "gyro_z", "gyrz", "wz"), "temp": ("temp", "temperature", "t_c"),
                   "mx": ("mx", "mag_x", "magx"), "my": ("my", "mag_y", "magy"), "mz": ("mz", "mag_z", "magz")}
+
+
+def _known(name: str) -> bool:
+    """A header name a role is read from without a mapping (a time column's by time_column_name)."""
+    return name.lower() in sum(_DEFAULT_NAMES.values(), ()) or time_column_name(name)[0]
 
 
 @dataclass(frozen=True)
@@ -91,7 +97,7 @@ def _find_header(lines: list[str], k0: int, spec: DataSpec, path: Path) -> int |
             first_text = names if first_text is None else first_text
             if wanted and not all(w in names for w in wanted):
                 continue
-            if not wanted and not any(n.lower() in sum(_DEFAULT_NAMES.values(), ()) for n in names):
+            if not wanted and not any(_known(n) for n in names):
                 continue
             return i
     if wanted and first_text is not None:
@@ -122,6 +128,8 @@ def _header_columns(names: list[str], spec: DataSpec, path: Path) -> dict[str, i
                                   fix="map the role to one of the header's names")
         else:
             name = next((c for c in _DEFAULT_NAMES[role] if c in lower), None)
+            if name is None and role == "t":  # timestamp_ms, time_s, stamp: the unit is read from the name
+                name = next((n for n in lower if time_column_name(n)[0]), None)
             if name is not None:
                 cols[role] = _only_column(lower, name, role, path)
     return cols

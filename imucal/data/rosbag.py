@@ -66,7 +66,8 @@ def _stamp_ns(msg: object) -> int:
 
 
 def read_bag(path: str | os.PathLike, topic: str | None, temp_topic: str | None = None) -> Recording:
-    """The Recording (imucal.data.recording.Recording) of the IMU messages on ``topic``."""
+    """The Recording (imucal.data.recording.Recording) of the IMU messages on ``topic`` (None: the
+    bag's one IMU topic)."""
     path = Path(path)
     if not path.exists():
         raise ImucalError("file not found", file=str(path), field="data.path",
@@ -81,6 +82,7 @@ def read_bag(path: str | os.PathLike, topic: str | None, temp_topic: str | None 
     where = "data.path"
     try:
         with AnyReader([path], default_typestore=get_typestore(Stores.LATEST)) as reader:
+            topic = topic or _only_imu_topic(reader, path)
             conns, present = _imu_connections(reader, path, topic)
             where = f"topic {topic}"
             msgs = _imu_messages(reader, conns)
@@ -125,12 +127,19 @@ def _connections(reader: object, path: Path, topic: str, msgtype: str, field: st
     return conns, present
 
 
-def _imu_connections(reader: object, path: Path, topic: str | None) -> tuple[list, str]:
+def _only_imu_topic(reader: object, path: Path) -> str:
+    """The bag's one sensor_msgs/Imu topic, read without --topic; refused when it has none or several."""
+    imu = sorted({c.topic for c in reader.connections if c.msgtype == IMU_TYPE})  # type: ignore[attr-defined]
+    if len(imu) == 1:
+        return imu[0]
+    what = "no sensor_msgs/Imu topic" if not imu else f"{len(imu)} IMU topics ({', '.join(imu)})"
+    raise ImucalError(f"the bag has {what}: which to read is not clear", file=str(path), field="data.topic",
+                      fix="give --topic (data.topic)" + (f", one of {', '.join(imu)}" if imu else
+                                                         " naming a topic of sensor_msgs/Imu messages"))
+
+
+def _imu_connections(reader: object, path: Path, topic: str) -> tuple[list, str]:
     """The connections of the IMU ``topic`` (sensor_msgs/msg/Imu only) and the bag's IMU topics."""
-    if not topic:
-        present = ", ".join(sorted({c.topic for c in reader.connections if c.msgtype == IMU_TYPE})) or "none"
-        raise ImucalError("a ROS bag needs the IMU topic to read", file=str(path), field="data.topic",
-                          fix=f"give --topic (data.topic); IMU topics in the bag: {present}")
     return _connections(reader, path, topic, IMU_TYPE, "data.topic", "IMU")
 
 

@@ -171,25 +171,53 @@ class Decision:
     gap_ref: float  #: steps longer than GAP_STEPS x this are gap candidates
     short_fraction: float
     rate_given: float | None
-    time_unit: str  #: the unit asked for (data.time_unit: "auto" or a unit)
+    time_unit: str  #: the unit asked for (data.time_unit: "auto" or a unit; or the one the column's name states)
+    column: str = ""  #: the time column's name
 
     @property
     def rate(self) -> float:
         return 1.0 / (self.step * TIME_UNITS[self.unit]) if self.step > 0 else float("nan")
 
 
+#: Names of a time column (lower case), and the units a name may state after one of them: t, time,
+#: timestamp, stamp with a suffix such as _ms, _s, (us), [ns] or " sec" (timestamp_ms, time_s, t_ms).
+TIME_NAMES = ("timestamp", "time_stamp", "stamp", "time", "t")
+TIME_NAME_UNITS = {"s": "s", "sec": "s", "secs": "s", "second": "s", "seconds": "s",
+                   "ms": "ms", "msec": "ms", "millis": "ms", "millisecond": "ms", "milliseconds": "ms",
+                   "us": "us", "\u00b5s": "us", "\u03bcs": "us", "usec": "us", "micros": "us", "microsecond": "us",
+                   "microseconds": "us", "ns": "ns", "nsec": "ns", "nanos": "ns", "nanosecond": "ns",
+                   "nanoseconds": "ns", "min": "min", "minute": "min", "minutes": "min"}
+
+
+def time_column_name(name: str) -> tuple[bool, str | None]:
+    """Whether a column ``name`` names time (TIME_NAMES), and the unit it states (None: none stated)."""
+    n = name.strip().lower()
+    for base in TIME_NAMES:
+        if n.startswith(base):
+            rest = n[len(base):].strip(" _-.:()[]{}")
+            if not rest:
+                return True, None
+            if rest in TIME_NAME_UNITS:
+                return True, TIME_NAME_UNITS[rest]
+    return False, None
+
+
 def decide(st: StepStats, time_unit: str, rate_given: float | None, column: str, path: Path) -> Decision:
-    """Jitter or not, the unit (given, or inferred from the step), the step, the rate check."""
+    """Jitter or not, the unit (given, stated by the column's name, or inferred from the step), the step,
+    the rate check."""
+    named = time_column_name(column)[1]
+    if time_unit == "auto" and named is not None:  # timestamp_ms: the column says its unit
+        time_unit = named
     clock = st.clock_step
     short = st.short(SHORT_STEP * clock) if st.n > 1 and clock > 0 else 0
     frac = short / (st.n - 1) if st.n > 1 else 0.0
     jittered = frac > JITTER_FRACTION
     shown, what = _shown(jittered, st.median_step, clock)
-    unit, note = _unit_and_note(shown, what, st.first, time_unit, rate_given, path)
+    unit, note = _unit_and_note(shown, what, st.first, time_unit, rate_given, path, column)
     if st.n > 1:
         check_rate(clock, unit, path)
     dec = Decision(unit=unit, note=note, jittered=jittered, step=clock, gap_ref=clock if jittered else st.median_step,
-                   short_fraction=frac, rate_given=rate_given, time_unit=time_unit)
+                   short_fraction=frac, rate_given=rate_given, time_unit=time_unit, column=column)
     if rate_given is not None and st.n > 1 and abs(dec.rate / rate_given - 1.0) > RATE_TOLERANCE:
         raise ImucalError(f"sample rate {rate_given:g} Hz given, but the time column {column} steps at "
                           f"{dec.rate:.4g} Hz ({what} {shown:g} {unit}): two sources of time disagree",
@@ -200,9 +228,12 @@ def decide(st: StepStats, time_unit: str, rate_given: float | None, column: str,
 
 
 def _unit_and_note(step: float, what: str, first: float, time_unit: str, rate_given: float | None,
-                   path: Path) -> tuple[str, str]:
-    """The unit (given; or the one the given rate names; or inferred from the step) and its note."""
+                   path: Path, column: str = "") -> tuple[str, str]:
+    """The unit (given, or stated by the column's name; or the one the given rate names; or inferred
+    from the step) and its note."""
     if time_unit != "auto":
+        if time_column_name(column)[1] == time_unit:
+            return time_unit, f"time unit from the column name {column}: {time_unit}"
         return time_unit, f"time unit given: {time_unit}"
     if rate_given is not None and (unit := _unit_of_rate(step, rate_given)) is not None:
         return unit, (f"time unit inferred: {unit} ({what} {step:g} -> {1.0 / (step * TIME_UNITS[unit]):.4g} Hz, "
@@ -230,7 +261,7 @@ def refine(dec: Decision, st: StepStats, gap_index: np.ndarray, gap_step: np.nda
 
     step = T + (offset(st.tail, st.n - st.tail.size) - offset(st.head, 0)) / between
     unit, note = _unit_and_note(*_shown(dec.jittered, st.median_step, step), st.first, dec.time_unit,
-                                dec.rate_given, path)
+                                dec.rate_given, path, dec.column)
     if unit != dec.unit or not step > 0:  # pragma: no cover - a step moved by a unit's factor: keep the decision
         return dec, gap_step
     return replace(dec, step=step, note=note), (gap_step - T + step if dec.jittered else gap_step)

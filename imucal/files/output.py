@@ -17,15 +17,48 @@ import re
 import shutil
 import signal
 import stat
+import sys
 import tempfile
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator
+from typing import Any, Callable, Iterable, Iterator, TextIO
 
 from imucal.errors import INTERRUPTING, ImucalError
 from imucal.files.inputs import same_file
 
 PathLike = str | os.PathLike
 _STAGING = re.compile(r"^\.imucal-(\d+)-")
+
+#: An output named "-" goes to standard output (``--json -``), as in any Unix tool: after the run has
+#: succeeded, in one piece, while the words a command prints go to stderr (``data_on_stdout``).
+STDOUT = "-"
+_data_streams: list[TextIO] = []  #: the standard output of before data_on_stdout, innermost last
+
+
+def is_stdout(path: PathLike | None) -> bool:
+    """``path`` names standard output ("-")."""
+    return path is not None and os.fspath(path) == STDOUT
+
+
+@contextlib.contextmanager
+def data_on_stdout(active: bool = True) -> Iterator[None]:
+    """While ``active``: print() goes to stderr, and an output named "-" to the standard output of
+    before, so ``imucal ... --json - | jq`` reads the JSON alone."""
+    if not active:
+        yield
+        return
+    _data_streams.append(sys.stdout)
+    try:
+        with contextlib.redirect_stdout(sys.stderr):
+            yield
+    finally:
+        _data_streams.pop()
+
+
+def write_stdout(text: str) -> None:
+    """``text`` onto standard output (data_on_stdout's, when active), flushed."""
+    out = _data_streams[-1] if _data_streams else sys.stdout
+    out.write(text)
+    out.flush()
 
 
 def _umask() -> int:
@@ -58,8 +91,8 @@ def _not_regular(path: Path) -> str | None:
 def check_outputs(inputs: Iterable[PathLike | None], outputs: Iterable[PathLike | None]) -> list[Path]:
     """Refuse, before any work, outputs that would overwrite an input, each other, or anything
     that is not a regular file. Returns the outputs as paths."""
-    ins = [Path(p) for p in inputs if p is not None]
-    outs = [Path(p) for p in outputs if p is not None]
+    ins = [Path(p) for p in inputs if p is not None and not is_stdout(p)]
+    outs = [Path(p) for p in outputs if p is not None and not is_stdout(p)]
     for i, out in enumerate(outs):
         check_destination(out)
         for inp in ins:
@@ -154,8 +187,17 @@ def write_text_atomic(path: str | os.PathLike, text: str) -> None:
     write_bytes_atomic(path, encode_text(text))
 
 
+def json_text(obj: Any) -> str:
+    """The JSON of every JSON output (indented, NaN kept as JavaScript's NaN)."""
+    return json.dumps(obj, indent=2, sort_keys=False, allow_nan=True) + "\n"
+
+
 def write_json_atomic(path: str | os.PathLike, obj: Any) -> None:
-    write_text_atomic(path, json.dumps(obj, indent=2, sort_keys=False, allow_nan=True) + "\n")
+    """``obj`` as JSON into ``path`` atomically, or onto standard output when ``path`` is "-"."""
+    if is_stdout(path):
+        write_stdout(json_text(obj))
+    else:
+        write_text_atomic(path, json_text(obj))
 
 
 def _pid_alive(pid: int) -> bool:
@@ -287,6 +329,7 @@ class OutputSet:
         self._staged: list[tuple[Path, Path]] = []
         self._tmpdirs: dict[Path, Path] = {}
         self._created: list[Path] = []  #: directories made for this set, removed if it fails
+        self._stdout: list[str] = []  #: texts for standard output ("-"), written once the set is published
 
     def _stage(self, dest: str | os.PathLike) -> Path:
         dest = Path(dest)
@@ -319,7 +362,11 @@ class OutputSet:
             raise _write_error(Path(dest), exc) from None
 
     def json(self, dest: str | os.PathLike, obj: Any) -> None:
-        self.text(dest, json.dumps(obj, indent=2, allow_nan=True) + "\n")
+        """``obj`` as JSON into ``dest``; "-": onto standard output once the set is published."""
+        if is_stdout(dest):
+            self._stdout.append(json_text(obj))
+        else:
+            self.text(dest, json_text(obj))
 
     def call(self, dest: str | os.PathLike, writer: Callable[[Path], None]) -> None:
         """Let ``writer(tmp_path)`` produce the file (e.g. matplotlib's savefig)."""
@@ -377,6 +424,9 @@ class OutputSet:
                             sig.forget()
         finally:
             self._clean(published)  # (again, when the wait for the lock was interrupted)
+        if published:
+            for text in self._stdout:
+                write_stdout(text)
 
     def _clean(self, published: bool) -> None:
         for d in self._tmpdirs.values():

@@ -10,6 +10,7 @@ from __future__ import annotations
 import csv
 import io
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
@@ -123,9 +124,10 @@ def _truth_row(u: SimUnit) -> dict:
 
 
 def write_fleet(units: list[SimUnit], out: Path, inputs: list[str], tolerances: dict | None = None,
-                settings: dict | None = None) -> Path:
-    """One CSV per unit in ``out``/recordings (a folder manifest too), truth.csv and manifest.yaml (shared ``settings``: run-file sections) in
-    ``out``; each recording is written atomically, the manifest last. The manifest's path."""
+                settings: dict | None = None, progress: Callable[[], None] | None = None) -> Path:
+    """One CSV per unit in ``out``/recordings (a folder manifest too), truth.csv and manifest.yaml (shared
+    ``settings``: run-file sections) in ``out``; each recording is written atomically, the manifest last.
+    ``progress()`` is called after each unit's recording (imucal.report.progress). The manifest's path."""
     out = Path(out)
     manifest = {"format": FORMAT, "format_version": FORMAT_VERSION, "settings": dict(settings or {}),
                 "tolerances": dict(DEFAULT_TOLERANCES if tolerances is None else tolerances),
@@ -142,6 +144,8 @@ def write_fleet(units: list[SimUnit], out: Path, inputs: list[str], tolerances: 
     for u, path in zip(units, recordings):  # one atomic file each; the manifest comes last
         text = u.config.run().to_csv_text()
         write_bytes_atomic(path, _damage(text, u.corrupt) if u.corrupt else text.encode())
+        if progress is not None:
+            progress()
     with OutputSet(inputs) as o:
         o.text(out / TRUTH_FILE, buf.getvalue())
         o.text(out / MANIFEST_FILE, "# imucal batch manifest.yaml --out DIR  (written by imucal simulate --fleet)\n"

@@ -31,10 +31,11 @@ def on_terminal() -> bool:
 
 @contextlib.contextmanager
 def progress(desc: str, total: float | None = None, unit: str = "it", enabled: bool | None = None,
-             delay: float = DELAY_S, scale: bool = False, leave: bool = False) -> Iterator[Step]:
+             delay: float | None = None, scale: bool = False, leave: bool = False) -> Iterator[Step]:
     """``with progress("fits", total=n) as step: ... step()`` (or ``step(k, note="2 failed")``).
 
     ``enabled``: None shows the bar when stderr is a terminal; True or False forces it.
+    ``delay``: [s] before the bar appears (None: DELAY_S, read at the call).
     ``total``: None when the count is not known in advance (the bar counts and shows the rate).
     ``scale``: show large counts with k, M, G prefixes (bytes read). ``leave``: keep the finished
     bar on the screen (else it is cleared).
@@ -44,7 +45,8 @@ def progress(desc: str, total: float | None = None, unit: str = "it", enabled: b
         return
     from tqdm import tqdm  # only on a terminal: keeps the start-up of every other run lean
 
-    bar = tqdm(total=total, desc=desc, unit=unit, file=sys.stderr, dynamic_ncols=True, delay=delay,
+    bar = tqdm(total=total, desc=desc, unit=unit, file=sys.stderr, dynamic_ncols=True,
+               delay=DELAY_S if delay is None else delay,
                leave=leave, unit_scale=scale)
 
     def step(n: float = 1, note: str | None = None) -> None:

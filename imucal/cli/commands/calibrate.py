@@ -11,7 +11,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("calibrate", help="fit the 9-parameter model to a static multi-pose recording",
                        description="Fit shifts, scales and axis angles (Nakov & Ivanov) to a recording. "
                                    "Writes DIR/calibration.yaml, DIR/report.txt, DIR/report.html and figures.")
-    p.add_argument("config", nargs="?", help="YAML run file (see configs/)")
+    p.add_argument("config", nargs="?", metavar="CONFIG|RECORDING",
+                   help="YAML run file (.yaml, .yml; see configs/), or a recording, read as --data")
     options.add_data_options(p, gyro=True, stream=True)
     options.add_gravity_options(p)
     options.add_model_options(p, noise=True)
@@ -26,6 +27,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _config(args: argparse.Namespace):
     from imucal.errors import ImucalError
 
+    if args.config and not options.is_run_file(args.config):  # `imucal calibrate bench.csv`
+        if args.data:
+            raise ImucalError(f"{args.config} is a recording and --data names another", field="arguments",
+                              fix="give the recording once, as --data or alone")
+        args.config, args.data = None, args.config
     if args.config and args.data:
         raise ImucalError("give either CONFIG or --data, not both", field="arguments",
                           fix="put data.path in the YAML, or drop the YAML for a quick run")

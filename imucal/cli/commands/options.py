@@ -18,7 +18,16 @@ from imucal.constants import GYRO_UNIT_CHOICES, TIME_UNIT_CHOICES
 from imucal.errors import ImucalError
 
 if TYPE_CHECKING:
-    from imucal.config.run import GravitySpec, GyroSettings, RunConfig
+    from imucal.config.run import FitSettings, GravitySpec, GyroSettings, RunConfig
+
+
+#: Suffixes of a YAML run file; any other file given where a run file or a recording may stand is a recording.
+RUN_FILE_SUFFIXES = (".yaml", ".yml")
+
+
+def is_run_file(path: str) -> bool:
+    """``path`` names a YAML run file (by its suffix), not a recording (CSV, text, .mat, a bag, ...)."""
+    return Path(path).suffix.lower() in RUN_FILE_SUFFIXES
 
 
 def add_data_options(p: argparse.ArgumentParser, data_required: bool = False, gyro: bool = False,
@@ -36,8 +45,8 @@ def add_data_options(p: argparse.ArgumentParser, data_required: bool = False, gy
                    help="column roles, 0-based indices or header names: t=0,ax=4,ay=5,az=6 "
                         "(roles t, ax, ay, az, gx, gy, gz, temp, mx, my, mz)")
     g.add_argument("--time-unit", choices=TIME_UNIT_CHOICES,
-                   help="unit of the time column (default auto: s, ms, us or ns inferred from the stamps and "
-                        "reported; min only when given)")
+                   help="unit of the time column (default auto: the unit its name states, as timestamp_ms or "
+                        "time_s, else s, ms, us or ns inferred from the stamps and reported; min only when given)")
     g.add_argument("--sample-rate", type=float,
                    help="sample rate [Hz]: the time base of a file without a time column; beside a time column "
                         "it is checked against the stamps (refused when they disagree by more than a few per cent)")
@@ -66,6 +75,9 @@ def add_model_options(p: argparse.ArgumentParser, mode: bool = True, noise: bool
     """--fix-angles, --weights, (where the command can fit samples) --mode and (``noise``) --noise."""
     g = p.add_argument_group("model")
     g.add_argument("--fix-angles", action="store_true", help="hold the angles at 90 deg (6-parameter model)")
+    g.add_argument("--fix", action="append", metavar="NAME[=VALUE]",
+                   help="hold a parameter (s1..s3, b1..b3, phi, psi, theta) at its initial value, or at VALUE; "
+                        "repeat or separate by commas: --fix phi --fix s1=0 or --fix phi,psi (YAML fit.fix)")
     if mode:
         g.add_argument("--mode", choices=("means", "samples"), help="fit interval means (default) or samples")
     g.add_argument("--weights", choices=("auto", "noise", "uniform"),
@@ -113,6 +125,26 @@ def _gyro(args: argparse.Namespace, cfg: RunConfig) -> GyroSettings:
         raise ImucalError(exc.message, field=flag, fix=exc.fix) from None
 
 
+def _fixed(items: list[str] | None, fit: FitSettings) -> FitSettings:
+    """``fit`` with the --fix options: NAME holds a parameter at its start, NAME=VALUE at VALUE (fit.fix)."""
+    if not items:
+        return fit
+    names, held = list(fit.fix), dict(fit.initial)
+    for item in (x.strip() for text in items for x in text.split(",")):
+        name, sep, value = (x.strip() for x in item.partition("="))
+        if sep:
+            try:
+                held[name] = float(value)
+            except ValueError:
+                raise ImucalError(f"{value!r} is not a number to hold {name} at", field="--fix",
+                                  fix="e.g. --fix s1=0 or --fix phi") from None
+        names.append(name)
+    try:
+        return dataclasses.replace(fit, fix=tuple(dict.fromkeys(names)), initial=held)
+    except ImucalError as exc:
+        raise ImucalError(exc.message, field="--fix", fix=exc.fix) from None
+
+
 def _gravity(args: argparse.Namespace, cfg: RunConfig) -> GravitySpec:
     from imucal.config.run import GravitySpec
 
@@ -151,7 +183,7 @@ def run_config(args: argparse.Namespace, config: str | None = None, data_overrid
         if getattr(args, opt, None) is not None:
             over[key] = getattr(args, opt)
     data = dataclasses.replace(cfg.data, **over) if over else cfg.data
-    fit = cfg.fit
+    fit = _fixed(getattr(args, "fix", None), cfg.fit)
     mode, weights = getattr(args, "mode", None), getattr(args, "weights", None)
     if getattr(args, "fix_angles", False) or mode or weights:
         fix = set(fit.fix) | ({"phi", "psi", "theta"} if getattr(args, "fix_angles", False) else set())

@@ -52,8 +52,27 @@ def _units(name: str) -> tuple[float, str]:
     return 1e3, "mrad"
 
 
+#: What each named scheme is, in words (imucal.analysis.design.SCHEMES).
+SCHEME_WORDS = {"faces": "the 6 cube faces", "corners": "the 8 cube corners", "edges": "the 12 cube edges",
+                "faces+edges": "the 6 cube faces and 12 edges", "cube-24": "the 24 cube positions",
+                "wedge-24": "the 24 positions on a wedge", "cube-26": "the 26 cube directions"}
+
+
+def efficiency_line(design, eff: float, best) -> str:
+    """``design``'s efficiency against the best plan of as many poses (imucal.analysis.design.against_optimum)."""
+    name = SCHEME_WORDS.get(design.label, design.label or "this plan")
+    cmd = (f"imucal plan-poses --n {design.n}" + (" --fix-angles" if len(design.free) == 6 else "")
+           + (f" --criterion {design.criterion}" if design.criterion != "D" else ""))
+    if best is design:
+        return (f"[[Efficiency]] {name}: as good as the best {design.n}-pose plan found "
+                f"(criterion {design.criterion}: {cmd} finds none better)")
+    return (f"[[Efficiency]] {name}: {100 * eff:.1f} % efficient against the best {design.n}-pose plan found "
+            f"(criterion {design.criterion}, {cmd}): {1 / eff:.3g} times the recordings to match it")
+
+
 def format_design(design, comparison=None) -> str:
 
+    from imucal.analysis.design import efficiency
     from imucal.analysis.pose_instructions import instructions
 
     L = []
@@ -82,13 +101,17 @@ def format_design(design, comparison=None) -> str:
         L.append(f"    {'random (best)':<18} {comparison.random_best:12.6g}")
         if not math.isfinite(comparison.random_median):
             L.append("    (some random sets leave parameters undetermined)")
+        named = [o for o in comparison.others if o.label in SCHEME_WORDS and o.label != d.label]
+        if named and d.label not in SCHEME_WORDS:
+            L.append("[[Efficiency]] against this plan: " + "; ".join(
+                f"{SCHEME_WORDS[o.label]} {100 * efficiency(o, d):.1f} %" for o in named))
     return "\n".join(L)
 
 
 def run(args: argparse.Namespace) -> int:
     from imucal.report.progress import progress
-    from imucal.analysis.design import (BASE_NAMES, DEFAULT_NOISE, SIX_NAMES, compare, evaluate, optimal_design,
-                          scheme_directions)
+    from imucal.analysis.design import (BASE_NAMES, DEFAULT_NOISE, SIX_NAMES, against_optimum, compare, evaluate,
+                                        optimal_design, scheme_directions)
     from imucal.errors import ImucalError
     from imucal.analysis.plan_file import read_plan
     from imucal.analysis.pose_instructions import instructions
@@ -113,6 +136,11 @@ def run(args: argparse.Namespace) -> int:
             design = optimal_design(args.n, args.criterion, noise, free=free, seed=args.seed, progress=step)
     comp = None if args.no_compare else compare(design, seed=args.seed)
     print(format_design(design, comp))
+    eff = None
+    if args.evaluate or args.scheme:  # how near the optimum it comes (the 12 cube edges: 97 %)
+        with progress("plan-poses: the best plan of as many poses", unit="step") as step:
+            eff, best = against_optimum(design, seed=args.seed, progress=step)
+        print(efficiency_line(design, eff, best))
     order = hold_order(design.n, args.revisit)
     if args.revisit:
         print(f"[[Hold order]] every pose twice, the second pass in reverse ({len(order)} holds; for discover): "
@@ -123,6 +151,8 @@ def run(args: argparse.Namespace) -> int:
             obj = design.to_json()
             obj["instructions"] = [inst.numbered(k + 1) for k, inst in enumerate(insts)]
             obj["hold_order"] = order
+            if eff is not None:
+                obj["efficiency_vs_best_found"] = eff
             if comp is not None:
                 obj["comparison"] = [{"label": other.label, "criterion_value": other.value,
                                       "log_det_fisher": other.log_det_fisher, "predicted_std": other.std}

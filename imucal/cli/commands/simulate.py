@@ -31,13 +31,15 @@ def _fleet(args: argparse.Namespace, cfg) -> int:
 
     from imucal.errors import ImucalError
     from imucal.fleet.population import MANIFEST_FILE, TRUTH_FILE, Population, draw_fleet, parse_spread, write_fleet
+    from imucal.report.progress import progress
 
     if args.truth:
         raise ImucalError("--truth is for one recording; a fleet writes OUT/truth.csv", field="--truth",
                           fix="drop --truth")
     units = draw_fleet(cfg, args.fleet, args.defective, args.corrupt,
                        parse_spread(args.spread) if args.spread else Population())
-    manifest = write_fleet(units, Path(args.out), [args.config])
+    with progress("simulate --fleet", total=len(units), unit="unit", leave=True) as step:  # on a terminal only
+        manifest = write_fleet(units, Path(args.out), [args.config], progress=step)
     print(f"wrote {len(units)} units ({args.defective} defective, {args.corrupt} corrupt) to {args.out}: "
           f"recordings/<unit>.csv, {TRUTH_FILE}, {MANIFEST_FILE}; run: imucal batch {manifest} --out RESULTS")
     return 0
