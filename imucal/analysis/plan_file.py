@@ -43,6 +43,7 @@ class PlanFile:
     label: Any = None
     comparison: Any = None
     random: Any = None
+    efficiency_vs_best_found: Any = None  #: a scheme's or plan's efficiency against the best of as many poses
 
     @classmethod
     def schema_input(cls, raw: Any) -> Any:
