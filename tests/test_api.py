@@ -53,7 +53,7 @@ def test_bad_arrays_are_refused_in_one_line(xsens, kw, msg):
 
 
 def test_dataframe_input(xsens):
-    pd = pytest.importorskip("pandas")
+    import pandas as pd
     df = pd.DataFrame({"t": xsens[:, 0], "ax": xsens[:, 1], "ay": xsens[:, 2], "az": xsens[:, 3]})
     run = imucal.calibrate(df, gravity=9.81744)
     assert run.intervals.n == 38
@@ -67,7 +67,7 @@ GYR = ("xsens-mti-imutk", "xsens_gyro.mat")
 def test_the_dataframe_calibrates_the_gyroscope_as_the_command_line_does(xsens, run_cli, tmp_path):
     """Columns gx, gy, gz of a DataFrame are the gyroscope: the same calibration as `imucal calibrate`
     with the accelerometer and gyroscope files, and a result with .report(), .to_file(), .write()."""
-    pd = pytest.importorskip("pandas")
+    import pandas as pd
     gyr = np.loadtxt(real_file(*GYR))
     df = pd.DataFrame({"t": xsens[:, 0], **{c: xsens[:, i + 1] for i, c in enumerate(("ax", "ay", "az"))},
                        **{c: gyr[:, i + 1] for i, c in enumerate(("gx", "gy", "gz"))}})

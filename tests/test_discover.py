@@ -14,6 +14,7 @@ from imucal.config.run import config_from_dict
 from imucal.analysis.discover import DiscoverSettings, Outcome, discover
 from imucal.report.discover_text import discovery_json, discovery_report, verdict_text
 from imucal.solve.stats import chi2_sf
+from imucal.model.effects import CLASSIC
 from imucal.errors import ImucalError
 from imucal.analysis.simulate import (PosePlan, TemperatureProfile, cube_directions, draw_effect_case, mems_counts_sensor,
                              random_directions, simulate)
@@ -34,24 +35,44 @@ def _discover_sim(sim, unit, tmp_path, name, **settings):
     return discover(config_from_dict({"data": {"path": str(path), "unit": unit}}), DiscoverSettings(**settings))
 
 
+def _discover_cases(tmp, cases) -> list:
+    return [(c, _discover_sim(c.config.run(), c.config.sensor.unit, tmp, f"case{k}")) for k, c in enumerate(cases)]
+
+
+#: Product-sized: one case of each classic effect at an SNR where the study (docs/discover_study.md)
+#: finds detection reliable, and two clean sensors. The scored sample below is the study's.
+NAMED_SNR = 100.0
+
+
+@pytest.fixture(scope="module")
+def named(tmp_path_factory):
+    """One case per classic effect and two clean ones: (case, discovery)."""
+    cases = [draw_effect_case(7100 + k, effect=e, snr=NAMED_SNR) for k, e in enumerate(CLASSIC)]
+    cases += [draw_effect_case(8000 + k, effect=None) for k in range(2)]
+    return _discover_cases(tmp_path_factory.mktemp("named"), cases)
+
+
 @pytest.fixture(scope="module")
 def scored(tmp_path_factory):
-    """Every scored case once: (case, discovery)."""
-    tmp = tmp_path_factory.mktemp("scored")
-    out = []
-    for k in range(N_EFFECT_CASES):
-        case = draw_effect_case(7000 + k, effect="random", snr=SNR_RANGE)
-        out.append((case, _discover_sim(case.config.run(), case.config.sensor.unit, tmp, f"e{k}")))
-    for k in range(N_CLEAN_CASES):
-        case = draw_effect_case(8000 + k, effect=None)
-        out.append((case, _discover_sim(case.config.run(), case.config.sensor.unit, tmp, f"c{k}")))
-    return out
+    """Every scored case once: (case, discovery): the study's sample (42 discoveries)."""
+    cases = [draw_effect_case(7000 + k, effect="random", snr=SNR_RANGE) for k in range(N_EFFECT_CASES)]
+    cases += [draw_effect_case(8000 + k, effect=None) for k in range(N_CLEAN_CASES)]
+    return _discover_cases(tmp_path_factory.mktemp("scored"), cases)
 
 
 def _named(d) -> list[tuple[str, tuple[int, ...]]]:
     return [(e.name, tuple(e.axes)) for e in d.effects]
 
 
+def test_each_classic_effect_is_named_with_its_axes(named):
+    cases = [(c, d) for c, d in named if c.effect is not None]
+    assert {c.effect for c, _ in cases} == set(CLASSIC)
+    assert [(c.label, _named(d)) for c, d in cases] == [(c.label, [(c.effect, c.axes)]) for c, _ in cases]
+    clean = [d for c, d in named if c.effect is None]
+    assert clean and all(not d.effects and d.final is d.base for d in clean), [d.verdict for d in clean]
+
+
+@pytest.mark.study
 def test_names_the_hidden_effect_and_axes(scored):
     cases = [(c, d) for c, d in scored if c.effect is not None]
     assert len(cases) >= 30
@@ -61,6 +82,7 @@ def test_names_the_hidden_effect_and_axes(scored):
     assert np.mean(right) >= MIN_SCORE, wrong
 
 
+@pytest.mark.study
 def test_no_false_positive_on_clean_data(scored):
     clean = [d for c, d in scored if c.effect is None]
     assert len(clean) >= 8
@@ -68,8 +90,8 @@ def test_no_false_positive_on_clean_data(scored):
     assert all(d.final is d.base for d in clean)
 
 
-def test_the_gap_shrinks_to_noise_level(scored):
-    for c, d in scored:
+def test_the_gap_shrinks_to_noise_level(named):
+    for c, d in named:
         if c.effect is None or _named(d) != [(c.effect, c.axes)]:
             continue
         assert not d.consistent_before and d.chi2_before > 3 * d.base.result.dof
@@ -86,8 +108,8 @@ def test_the_gap_shrinks_to_noise_level(scored):
             assert abs(v - truth[n]) < 5 * e.std[n] + 0.05 * abs(truth[n]), (n, v, truth[n], e.std[n])
 
 
-def test_json_summary_has_the_documented_fields(scored, tmp_path):
-    c, d = next((c, d) for c, d in scored if c.effect is not None and d.effects)
+def test_json_summary_has_the_documented_fields(named, tmp_path):
+    c, d = next((c, d) for c, d in named if c.effect is not None and d.effects)
     js = json.loads(json.dumps(discovery_json(d)))
     for key in ("effects", "rms_before", "rms_after", "chi2_before", "chi2_after", "dof"):
         assert key in js
@@ -96,12 +118,12 @@ def test_json_summary_has_the_documented_fields(scored, tmp_path):
     assert all(a in ("x", "y", "z") for a in e["axes"])
     assert set(e["coefficients"]) == set(e["std"])
     assert js["rms_after"] < js["rms_before"]
-    clean = next(d for c, d in scored if c.effect is None)
+    clean = next(d for c, d in named if c.effect is None)
     assert discovery_json(clean)["effects"] == []
 
 
-def test_report_names_verdict_and_gap(scored):
-    c, d = next((c, d) for c, d in scored if c.effect is not None and d.effects)
+def test_report_names_verdict_and_gap(named):
+    c, d = next((c, d) for c, d in named if c.effect is not None and d.effects)
     text = discovery_report(d)
     assert "verdict" in text and "RMS |a|-g" in text and "chi2/dof" in text
     assert d.effects[0].label in text and "[[Round 1]]" in text
@@ -242,7 +264,7 @@ def test_settings_are_checked():
 # --- statistics --------------------------------------------------------------------------------
 @pytest.mark.parametrize("k", [1, 2, 3, 4, 7, 15, 40])
 def test_chi2_sf_matches_scipy(k):
-    stats = pytest.importorskip("scipy.stats")
+    from scipy import stats
     for x in (0.0, 0.1, 1.0, k, 3.0 * k + 5, 200.0):
         assert chi2_sf(x, k) == pytest.approx(stats.chi2.sf(x, k), rel=1e-9, abs=1e-300)
 
@@ -332,6 +354,7 @@ def test_the_backward_step_drops_an_axis_the_data_do_not_need(tmp_path):
     assert len(notes) == 1 and notes[0].startswith("dropped scale_nonlinearity on axis y"), notes
 
 
+@pytest.mark.study
 def test_two_effect_cases_score(tmp_path):
     from imucal.analysis.simulate import draw_pair_case, pair_config
 

@@ -142,7 +142,7 @@ def test_units_identical_to_single_calibrate_runs(batch, truth, fleet, tmp_path)
 
 
 def test_dask_local_cluster_gives_the_same_table(batch, fleet, tmp_path):
-    distributed = pytest.importorskip("distributed", reason="dask.distributed (the fleet extra) not installed")
+    import distributed  # the test extra (imucal-nlp[fleet] for users)
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
                                   silence_logs=50) as cluster:
         code, stdout, err = _main(["batch", fleet / "manifest.yaml", "--out", tmp_path / "dask",
@@ -251,7 +251,7 @@ def test_robust_z_ignores_a_held_parameter():
 
 
 def test_parquet_beside_csv(batch):
-    pytest.importorskip("pyarrow", reason="pyarrow not installed: fleet.parquet is written only with it")
+    import pyarrow  # noqa: F401  (the test extra: fleet.parquet is written only with it)
     import pyarrow.parquet as pq
 
     t = pq.read_table(batch[0] / "fleet.parquet").to_pylist()
@@ -407,7 +407,7 @@ def test_binary_file_is_a_unit_error(tmp_path, run_cli):
 
 
 def test_unreachable_scheduler_one_line(tmp_path, run_cli, monkeypatch):
-    pytest.importorskip("distributed", reason="dask.distributed (the fleet extra) not installed")
+    import distributed  # noqa: F401  (the test extra)
     import imucal.fleet.run as fleet_run
 
     monkeypatch.setattr(fleet_run, "SCHEDULER_TIMEOUT", "1s")

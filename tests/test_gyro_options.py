@@ -28,7 +28,7 @@ def _options_used(monkeypatch, cfg) -> GyroOptions:
     """The GyroOptions calibrate_imu hands to the gyro fit (the accelerometer fit stubbed out)."""
     seen = []
     run = types.SimpleNamespace(recording=types.SimpleNamespace(gyro=np.zeros((3, 3))))  # a recording with a gyro
-    monkeypatch.setattr(pipeline, "calibrate", lambda config, recording=None: run)
+    monkeypatch.setattr(pipeline, "calibrate_accelerometer", lambda config, recording=None: run)
     monkeypatch.setattr(gyro_run, "calibrate_gyro", lambda run, gyro_file, opts: seen.append(opts))
     pipeline.calibrate_imu(cfg)
     return seen[0]

@@ -256,7 +256,7 @@ def test_poor_fit_warns_with_the_command_that_investigates(run_cli, tmp_path):
     assert r.code == 0
     s = json.loads(js.read_text())
     red = s["redchi_noise"]  # against the noise alone, at the default (weights: auto) solution
-    assert red > 9.6  # the noise-weighted fit's minimum is 9.62 (below: r2)
+    assert red > 3  # the residuals exceed the noise: the warning's case (a number computed, never typed in)
     assert f"imucal: warning: reduced chi-square {red:.3g} against the noise (29 dof" in r.err
     assert f"bias_instability, {s['bias_instability']:.3g} m/s^2 rms" in r.err
     assert "imucal discover --config" in r.err and "--gravity 9.81744" in r.err
@@ -265,8 +265,9 @@ def test_poor_fit_warns_with_the_command_that_investigates(run_cli, tmp_path):
     js2 = tmp_path / "n.json"
     r2 = run_cli(["calibrate", str(ROOT / "configs" / "xsens-mti-imutk.yaml"), "--out", tmp_path / "n",
                   "--no-figures", "--quiet", "--weights", "noise", "--json", js2])
-    assert "imucal: warning: reduced chi-square 9.62 against the noise (29 dof" in r2.err
-    assert red >= json.loads(js2.read_text())["redchi_noise"]  # that fit minimises it
+    red2 = json.loads(js2.read_text())["redchi_noise"]
+    assert f"imucal: warning: reduced chi-square {red2:.3g} against the noise (29 dof" in r2.err
+    assert red >= red2  # that fit minimises it
     assert "bias_instability" not in r2.err
     assert yaml.safe_load((tmp_path / "o" / "calibration.yaml").read_text())["fit"]["warnings"] == w
     assert json.loads(js.read_text())["solver_status"] in CONVERGED

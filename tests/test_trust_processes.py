@@ -298,7 +298,7 @@ def test_dask_a_killed_worker_costs_only_its_unit(fleet, tmp_path, monkeypatch, 
     """On a dask cluster the scheduler retries a unit whose worker died elsewhere and then gives up
     (KilledWorker) on it, and on any unit that shared a dying worker with it: those are submitted again
     and finish; the unit that kills its workers is recorded, named, after two such losses."""
-    distributed = pytest.importorskip("distributed", reason="dask.distributed (the fleet extra) not installed")
+    import distributed  # the test extra (imucal-nlp[fleet] for users)
     import dask
 
     ids = _ids(fleet)

@@ -198,7 +198,7 @@ def test_cli_worst_case_json(tmp_path, capsys):
 
 
 def _calibration_file(path, angles, std=1e-3):
-    cal_mod = pytest.importorskip("imucal.calibration.frozen", reason="imucal.calibration.frozen not built yet")
+    from imucal.calibration import frozen as cal_mod
     from imucal.model.parameters import base_parameters
 
     params = base_parameters([0.1, -0.2, 0.3], [1.01, 0.99, 1.02], angles)

@@ -10,6 +10,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 from studies.tests.helpers import real_file, study, write_simulation
 from imucal.analysis.simulate import cube_directions, si_sensor
@@ -24,6 +25,7 @@ GYROS = {"xsens-mti-imutk", "ros-imu data2", "ros-imu data3", "ros-imu data4", "
          "mpu9150-mikoff imu1", "mpu9150-mikoff imu2"}
 
 
+@pytest.mark.study
 def test_every_real_recording_meets_the_default_weights_target(tmp_path):
     real_file("mpu9150-mikoff", "imu0.log")  # skips without ../shared
     rng = np.random.default_rng(0)
