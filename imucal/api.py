@@ -218,8 +218,9 @@ def calibrate(acc: ArrayLike | RunConfig, gyro: ArrayLike | None = None, mag: Ar
     if getattr(acc, "columns", None) is not None:
         acc, t, temp, gyro, mag = _frame_columns(acc, t, temp, gyro, mag)
     if mag is not None:
-        raise ImucalError("magnetometer readings are not calibrated by this version", field="mag",
-                          fix="calibrate the accelerometer and gyroscope without mag=")
+        raise ImucalError("magnetometer readings are not part of a calibration yet", field="mag",
+                          fix="calibrate the magnetometer with imucal.mag.calibrate.calibrate_mag(mag, acc), "
+                              "and the accelerometer and gyroscope here without mag=")
     rec = recording_from_arrays(acc, t, temp, fs, unit, time_unit, gyro=gyro, gyro_unit=gyro_unit)
     base = config or config_from_dict({"data": {"path": rec.source}}, None)
     given: dict[str, Any] = {"data": {"path": rec.source, "unit": unit},

@@ -33,7 +33,7 @@ from imucal.mag import evidence as ev  # noqa: E402
 from imucal.mag.calibrate import MagSettings, calibrate_mag  # noqa: E402
 from imucal.mag.frame import dip_angles  # noqa: E402
 from imucal.mag.simulate import simulate_mag, truth_from_soft_iron  # noqa: E402
-from imucal.pipeline import calibrate  # noqa: E402
+from imucal.pipeline import calibrate_accelerometer  # noqa: E402
 
 LOGS = ROOT.parent / "shared" / "data" / "real" / "magnetometer-ckexplorer"
 #: The rate is not stated. acc_log.csv's holds last about 76 samples: at an assumed 25 Hz (3 s) the
@@ -83,7 +83,7 @@ def accelerometer_section(acc: np.ndarray, mag_cal) -> tuple[list[str], np.ndarr
     readings as logged: |a| of the windows, and the magnetometer's dip scatter with each."""
     cfg = config_from_dict({"data": {"path": str(LOGS / "acc_log.csv"), "sample_rate": ASSUMED_RATE, "unit": "g"}},
                            None)
-    run = calibrate(cfg)
+    run = calibrate_accelerometer(cfg)
     fit = run.result
     applied = run.calibration.apply(acc) / 9.80665  # in g again
     w = ev.windows(len(acc), WINDOW)

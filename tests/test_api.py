@@ -97,7 +97,7 @@ def test_gyro_arrays_take_their_unit(xsens):
 
 
 @pytest.mark.parametrize("kw, field, msg", [
-    ({"mag": np.zeros((5, 3))}, "mag", "magnetometer readings are not calibrated by this version"),
+    ({"mag": np.zeros((5, 3))}, "mag", "magnetometer readings are not part of a calibration yet"),
     ({"gyro": np.zeros((7, 3))}, "gyro", "gyro has 7 rows, acc has 51175"),
     ({"gyro": np.zeros((51175, 2))}, "gyro", "gyro must be an (N, 3) array"),
     ({"gyro_unit": "rpm"}, "gyro_unit", "unknown gyro unit 'rpm'"),

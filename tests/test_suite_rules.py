@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-TESTS = sorted((ROOT / "tests").glob("*.py"))
+TESTS = sorted((ROOT / "tests").glob("*.py"))  # the product's tests
 
 
 def _calls(path: Path, name: str) -> list[int]:
@@ -36,8 +36,7 @@ IMPORT_NAMES = {"pyyaml": "yaml", "dask": "distributed"}
 def test_every_package_the_tests_import_is_declared():
     """A third-party module a test imports is a dependency or in the test extra (pyproject.toml)."""
     declared = _requirements() | {IMPORT_NAMES.get(n, n) for n in _requirements()} | {"dask"}
-    scripts = {p.stem for p in (ROOT / "scripts").glob("*.py")}  # studies: moving out of the tests (docs29)
-    local = {"imucal", "conftest", *(p.stem for p in TESTS), *scripts}
+    local = {"imucal", "conftest", *(p.stem for p in TESTS)}
     missing = {}
     for p in TESTS:
         for n in ast.walk(ast.parse(p.read_text(encoding="utf-8"))):
