@@ -61,24 +61,85 @@ def test_report_loads_cleanly_and_shows_its_numbers(calibrated, tmp_path):
     assert shot.exists(), r.stderr[-2000:]
     assert _console_errors(r.stderr) == []
     assert _screenshot_std(shot) > BLANK_STD
-    if os.environ.get(KEEP_SCREENSHOT):
-        shutil.copyfile(shot, Path(os.environ[KEEP_SCREENSHOT]) / "report-desktop.png")
     d = _chromium(page, tmp_path, "--dump-dom")
     assert _console_errors(d.stderr) == []
     dom = d.stdout
-    assert dom.count("<img") == 2
+    assert dom.count("<img") == 4  # the recording, |a| - g before and after, residuals, directions
     for n, p in run.result.params.items():  # fitted values and their standard errors, as rendered
         assert f"{p.value:.10g}" in dom and f"{run.result.std[n]:.4g}" in dom, n
     assert f"{run.calibration.fit['rms_residual'] * 1e3:.4g} mm/s²" in dom
     assert ("PASS" in dom) or ("CHECK" in dom)
 
 
-def test_the_screenshot_goes_to_the_docs_when_asked(calibrated, tmp_path, monkeypatch):
+#: A desktop window: the page is laid out within this width, nothing wider than it (issue 29).
+DESKTOP = (1280, 1600)
+#: Measures the laid-out page in the browser (run on a copy of the page: the page itself runs no script):
+#: the document's width, and every element wider than the window outside a scrolling table.
+LAYOUT_PROBE = """<script>
+addEventListener('load', () => {
+  const w = innerWidth, out = [];
+  for (const e of document.body.querySelectorAll('*')) {
+    if (e.closest('.scroll') && !e.classList.contains('scroll')) continue;
+    const r = e.getBoundingClientRect();
+    if (r.right > w + 0.5 || r.left < -0.5) out.push(e.tagName + '#' + (e.id || '') + ' ' + Math.round(r.right));
+  }
+  const p = document.createElement('pre'); p.id = 'layout';
+  p.textContent = JSON.stringify({width: w, scroll: document.documentElement.scrollWidth, wide: out});
+  document.body.appendChild(p);
+});
+</script>"""
+
+
+@pytest.fixture(scope="module")
+def imu_page(tmp_path_factory) -> Path:
+    """report.html of the shipped Xsens recording: accelerometer and gyroscope, with a poor accelerometer fit."""
+    out = tmp_path_factory.mktemp("imu") / "out"
+    cfg = Path(__file__).resolve().parents[1] / "configs" / "xsens-mti-imutk.yaml"
+    assert main(["calibrate", str(cfg), "--out", str(out), "--quiet"]) == 0
+    return out / "report.html"
+
+
+def _layout(page: Path, tmp: Path) -> dict:
+    import json
+
+    probe = tmp / "probe.html"
+    text = page.read_text(encoding="utf-8").replace("default-src 'none'", "default-src 'none'; script-src 'unsafe-inline'")
+    probe.write_text(text.replace("</body>", LAYOUT_PROBE + "</body>"), encoding="utf-8")
+    d = _chromium(probe, tmp, "--dump-dom", f"--window-size={DESKTOP[0]},{DESKTOP[1]}")
+    start = d.stdout.index('<pre id="layout">') + len('<pre id="layout">')
+    return json.loads(d.stdout[start:d.stdout.index("</pre>", start)].replace("&quot;", '"'))
+
+
+def test_the_imu_page_loads_cleanly_within_a_desktop_window(imu_page, tmp_path):
+    """Every sensor's verdict and section laid out within 1280 px, nothing overflowing (a wide table scrolls
+    inside its box); the screenshot at desktop width is the one the docs show (KEEP_SCREENSHOT)."""
+    shot = tmp_path / "desktop.png"
+    r = _chromium(imu_page, tmp_path, f"--screenshot={shot}", f"--window-size={DESKTOP[0]},{DESKTOP[1]}")
+    assert shot.exists() and _console_errors(r.stderr) == [], r.stderr[-2000:]
+    assert _screenshot_std(shot) > BLANK_STD and mpimg.imread(shot).shape[1] == DESKTOP[0]
+    layout = _layout(imu_page, tmp_path)
+    assert layout["width"] == DESKTOP[0] and layout["scroll"] <= DESKTOP[0] and layout["wide"] == [], layout
+    dom = _chromium(imu_page, tmp_path, "--dump-dom").stdout
+    assert 'id="verdict-accelerometer"' in dom and 'id="verdict-gyroscope"' in dom and 'id="gyroscope"' in dom
+    if os.environ.get(KEEP_SCREENSHOT):
+        shutil.copyfile(shot, Path(os.environ[KEEP_SCREENSHOT]) / "report-desktop.png")
+
+
+def test_the_layout_check_catches_an_overflow(imu_page, tmp_path):
+    """The same measure finds an element wider than the window."""
+    wide = tmp_path / "wide.html"
+    wide.write_text(imu_page.read_text(encoding="utf-8").replace(
+        "</body>", '<div id="toowide" style="width:2000px">x</div></body>'), encoding="utf-8")
+    layout = _layout(wide, tmp_path)
+    assert layout["scroll"] > DESKTOP[0] and any(w.startswith("DIV#toowide") for w in layout["wide"])
+
+
+def test_the_screenshot_goes_to_the_docs_when_asked(imu_page, tmp_path, monkeypatch):
     """`python scripts/update_docs.py screenshots` sets the variable: the docs show this test's screenshot."""
     keep = tmp_path / "images"
     keep.mkdir()
     monkeypatch.setenv(KEEP_SCREENSHOT, str(keep))
-    test_report_loads_cleanly_and_shows_its_numbers(calibrated, tmp_path)
+    test_the_imu_page_loads_cleanly_within_a_desktop_window(imu_page, tmp_path)
     assert _screenshot_std(keep / "report-desktop.png") > BLANK_STD
 
 

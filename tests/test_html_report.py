@@ -18,7 +18,8 @@ from imucal.analysis.simulate import PosePlan, cube_directions, mems_counts_sens
 from imucal.cli.main import main
 from imucal.config.run import config_from_dict
 from imucal.pipeline import calibrate_accelerometer
-from imucal.report.html import calibration_html, chi2_consistent, verdict
+from imucal.report.html import calibration_html
+from imucal.report.verdict import chi2_consistent, verdict
 from imucal.solve.stats import chi2_sf
 
 #: A file name an attacker could choose: markup, an entity, a quote and matplotlib's mathtext marker.
@@ -62,8 +63,8 @@ def test_report_html_needs_no_network_and_runs_no_script(cli_page):
     assert not re.search(r"<script", page, re.I)
     assert not re.search(r"""(src|href)=["']?(https?:|//|file:)""", page, re.I)
     imgs = _images(page)
-    assert len(imgs) == 2  # residuals.png and directions.png, the same bytes as the files
-    assert imgs == [(out / "residuals.png").read_bytes(), (out / "directions.png").read_bytes()]
+    names = ["recording.png", "before_after.png", "residuals.png", "directions.png"]  # in the page's order
+    assert imgs == [(out / n).read_bytes() for n in names]  # the same bytes as the files
     for png in imgs:  # they decode as pictures
         assert mpimg.imread(io.BytesIO(png), format="png").shape[0] > 100
 
@@ -85,7 +86,8 @@ def test_verdict_pass_on_a_clean_fit_and_check_when_warned(counts_run):
     assert v.level == ("pass" if expected_ok and not v.warnings else "check")
     assert v.headline.startswith("PASS" if v.level == "pass" else "CHECK")
     page = calibration_html(counts_run)
-    assert page.index(html.escape(v.headline)) < page.index('id="parameters"')
+    for sv in v.sensors:
+        assert page.index(html.escape(sv.headline)) < page.index('id="parameters"')
     assert "Figures were not made" in page
 
 
@@ -112,6 +114,10 @@ def test_poor_fit_is_flagged_in_the_verdict(tmp_path):
     assert v.level == "check" and v.checks[1].ok is False
     page = calibration_html(run)
     assert "class=\"verdict check\"" in page and "imucal discover" in page
+    # issue 29: the headline states the number its failed check states (was: the weighted fit's 1)
+    red = f"reduced chi-square {run.result.redchi_noise:.3g} against the noise"
+    assert red in v.sensors[0].headline and red in v.checks[1].detail
+    assert f"reduced chi-square {run.result.redchi:.3g} against" not in v.sensors[0].headline
 
 
 def test_discover_writes_report_html(tmp_path, run_cli, counts_recording):
@@ -140,3 +146,67 @@ def test_extra_sections_are_escaped(counts_run):
     page = calibration_html(counts_run, extra={"Gyro <i>": "bias 1 < 2 & </pre><script>"})
     assert "<h2>Gyro &lt;i&gt;</h2>" in page and "<pre>bias 1 &lt; 2 &amp; &lt;/pre&gt;&lt;script&gt;</pre>" in page
     assert page.index("Gyro &lt;i&gt;") < page.index('id="figures"')
+
+
+# --- issue 29: a page an engineer reads at a glance, for every sensor of the calibration -----------------
+@pytest.fixture(scope="module")
+def imu_page(tmp_path_factory):
+    """The shipped Xsens run: accelerometer and gyroscope (imu_tk's two files)."""
+    from pathlib import Path
+
+    out = tmp_path_factory.mktemp("imu") / "out"
+    cfg = Path(__file__).resolve().parents[1] / "configs" / "xsens-mti-imutk.yaml"
+    assert main(["calibrate", str(cfg), "--out", str(out), "--quiet"]) == 0
+    return out, (out / "report.html").read_text(encoding="utf-8")
+
+
+def test_every_sensor_has_its_verdict_and_its_section_in_one_form(imu_page):
+    out, page = imu_page
+    import yaml
+
+    sensors = yaml.safe_load((out / "calibration.yaml").read_text())["sensors"]
+    assert sensors == ["accelerometer", "gyroscope"]
+    for s in sensors:
+        assert f'id="verdict-{s}"' in page and page.index(f'id="verdict-{s}"') < page.index('id="recording"')
+    assert page.index('id="recording"') < page.index('id="parameters"') < page.index('id="gyroscope"')
+    assert "<pre>" not in page  # the gyroscope is a section, not a text dump
+    for unit in ("mg", "raw/g", "mrad", "deg/s", "raw/deg/s", "(deg/s)/g"):
+        assert f"<td>{html.escape(unit)}</td>" in page, unit
+    assert "before: |a| − g [mm/s²]" in page and "after: |a| − g [mm/s²]" in page
+
+
+def test_the_datasheet_units_are_the_fitted_values_converted():
+    """mg, ppm and mrad from an SI sensor's parameters, each by its formula."""
+    from imucal.calibration.frozen import Calibration
+    from imucal.constants import STANDARD_GRAVITY
+    from imucal.model.parameters import base_parameters
+    from imucal.report.datasheet import datasheet
+
+    p = base_parameters([0.1, -0.2, 0.3], [1.001, 0.999, 1.0002], [math.pi / 2 + 1e-3, math.pi / 2, math.pi / 2 - 2e-3],
+                        raw_unit="m/s^2")
+    std = {n: 1e-4 for n in p.names}
+    rows = {r.quantity: r for r in datasheet(Calibration(params=p, std=std, gravity=9.81, raw_unit="m/s^2"))
+            ["accelerometer"]}
+    assert rows["bias x"].value == pytest.approx(0.1 / 1.001 / STANDARD_GRAVITY * 1e3) and rows["bias x"].unit == "mg"
+    assert rows["scale error y"].value == pytest.approx((0.999 - 1) * 1e6) and rows["scale error y"].unit == "ppm"
+    assert rows["scale error y"].std == pytest.approx(1e-4 * 1e6)
+    assert rows["misalignment x-y (from 90°)"].value == pytest.approx(1.0) and rows["misalignment y-z (from 90°)"
+                                                                                   ].value == pytest.approx(-2.0)
+
+
+from hypothesis import given, settings, strategies as st  # noqa: E402
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.text(alphabet=st.characters(codec="utf-8"), max_size=60)
+       | st.sampled_from(['<script>alert(1)</script>', '"><img src=x onerror=alert(1)>', "' onmouseover='x",
+                          "</td></tr></table><b>", "&amp;&lt;", "]]>--><!--", "\u2028\x00"]))
+def test_the_html_escape_is_text_for_any_string(text):
+    """page.esc, the one HTML escaping function: its output holds no markup character and reads back
+    as the same text, inside an element and inside a quoted attribute."""
+    from imucal.report.page import esc
+
+    out = esc(text)
+    assert not set(out) & set("<>\"'") and html.unescape(out) == text
+    assert "&" not in out.replace("&amp;", "").replace("&lt;", "").replace("&gt;", "").replace("&quot;", "").replace(
+        "&#x27;", "")

@@ -99,4 +99,93 @@ def directions_figure(run: CalibrationRun, path: str | Path) -> None:
     plt.close(fig)
 
 
-FIGURES = {"residuals.png": residual_figure, "directions.png": directions_figure}
+#: Points drawn per channel of the recording's time series (evenly spaced samples): a screen's width.
+SERIES_POINTS = 4000
+#: Shading of the recording's spans: still intervals, intervals dropped (an axis clipped), and still
+#: intervals the gyroscope showed turning (imucal.gyro.still).
+STILL, DROPPED, TURNING = ("tab:green", 0.14), ("tab:red", 0.30), ("tab:orange", 0.35)
+
+
+def _shade(ax, spans, style, label: str, hatch: str | None = None) -> None:
+    for k, (a, b) in enumerate(spans):
+        ax.axvspan(a, b, color=style[0], alpha=style[1], lw=0, hatch=hatch, label=label if k == 0 else None)
+
+
+def _gyro_turning(run: CalibrationRun) -> list[tuple[float, float]]:
+    if run.gyro is None:
+        return []
+    from imucal.gyro.result import motions  # only a run with a gyroscope
+
+    st = motions(run.gyro).still
+    return [] if st is None else [(r.t_start, r.t_end) for r in st.rejected]
+
+
+def recording_figure(run: CalibrationRun, path: str | Path) -> None:
+    """The recording against time: calibrated acceleration (and angular rate, when the recording holds the
+    gyroscope's columns), the still intervals shaded, the dropped and the gyro's turning ones marked."""
+    from imucal.model.channels import covariate_values
+
+    plt = _plt()
+    rec, cal, iv = run.recording, run.calibration, run.intervals
+    gyro = getattr(rec, "gyro", None) if rec.raw is not None and cal.gyro is not None else None
+    fig, axes = plt.subplots(2 if gyro is not None else 1, 1, figsize=(10, 5.6 if gyro is not None else 3.4),
+                             dpi=110, sharex=True, squeeze=False)
+    panels = [(axes[0, 0], "acceleration [m/s^2]")] + ([(axes[1, 0], "angular rate [deg/s]")] if gyro is not None else [])
+    if rec.raw is not None:  # (a file read in chunks keeps no samples: the spans alone)
+        k = np.unique(np.linspace(0, rec.n - 1, min(rec.n, SERIES_POINTS)).astype(int))
+        covs = covariate_values(cal.covariates, temp=None if rec.temp is None else rec.temp[k], time=rec.t[k])
+        acc = cal.apply(rec.raw[k], covs)
+        series = [acc] + ([np.degrees(cal.gyro.apply(gyro[k], acc))] if gyro is not None else [])
+        for (ax, _), y in zip(panels, series):
+            for j, (a, c) in enumerate(zip("xyz", ("tab:blue", "tab:orange", "tab:green"))):
+                ax.plot(rec.t[k], y[:, j], lw=0.7, color=c, label=a)
+    dropped = [(d["t_start"], d["t_end"]) for d in cal.data.get("dropped_intervals", [])]
+    for ax, label in panels:
+        _shade(ax, zip(iv.t_start, iv.t_end), STILL, f"still ({iv.n})")
+        _shade(ax, dropped, DROPPED, f"dropped: an axis clipped ({len(dropped)})", "//")
+        _shade(ax, _gyro_turning(run), TURNING, "turning for the gyro", "xx")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+        ax.legend(loc="upper right", fontsize=7, ncol=6)
+    axes[-1, 0].set_xlabel("time [s]")
+    fig.suptitle(plain(f"{Path(rec.source).name}: {rec.n} samples, {iv.n} still intervals"), fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, format="png")
+    plt.close(fig)
+
+
+def before_after(run: CalibrationRun) -> tuple[np.ndarray, np.ndarray]:
+    """|a| - g [m/s^2] at each interval mean before calibration and after. Before: the readings with one
+    offset and one scale common to the three axes (the means of the fitted ones: an ADC's mid-scale code
+    and its nominal sensitivity), so what the per-axis offsets, scales and angles correct."""
+    p = run.calibration.params
+    s = float(np.mean([p[f"s{i}"].value for i in (1, 2, 3)]))
+    b = float(np.mean([p[f"b{i}"].value for i in (1, 2, 3)]))
+    before = np.linalg.norm((run.intervals.mean - s) / b, axis=1) - run.calibration.gravity
+    return before, interval_residuals(run)[0]
+
+
+def before_after_figure(run: CalibrationRun, path: str | Path) -> None:
+    """|a| - g per pose before and after the calibration, on a scale linear near zero and logarithmic
+    beyond (the two differ by orders of magnitude)."""
+    plt = _plt()
+    before, after = before_after(run)
+    k = np.arange(before.size)
+    fig, ax = plt.subplots(figsize=(9, 4.2), dpi=110)
+    ax.plot(k, before * 1e3, "s", ms=5, color="0.55", label="before: one offset and one scale for all axes")
+    ax.plot(k, after * 1e3, "o", ms=5, color="tab:blue", label="after the calibration")
+    rms = float(np.sqrt(np.mean(after**2))) * 1e3
+    ax.set_yscale("symlog", linthresh=max(rms, 1e-6))
+    ax.axhline(0, color="k", lw=0.8)
+    ax.set_xlabel("static interval, as numbered in the report [#]")
+    ax.set_ylabel("|a| - g  [mm/s^2]")
+    ax.set_title(f"|a| - g per pose: RMS {np.sqrt(np.mean(before**2)) * 1e3:.4g} mm/s^2 before, {rms:.3g} after")
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2, fontsize=8, frameon=False)
+    ax.grid(alpha=0.3, which="both")
+    fig.tight_layout()
+    fig.savefig(path, format="png")
+    plt.close(fig)
+
+
+FIGURES = {"recording.png": recording_figure, "before_after.png": before_after_figure,
+           "residuals.png": residual_figure, "directions.png": directions_figure}

@@ -1,98 +1,60 @@
-"""One self-contained HTML page per run: the verdict first, then parameters, residuals, figures.
-
-The page needs nothing but itself: figures are inline base64 PNGs, the style is inline, there is
-no script, and a Content-Security-Policy forbids loading anything from elsewhere. Every piece of
-text that comes from the user (file names, units, config strings, effect labels) is escaped.
-Built from the same run object as the text report (imucal.report.text).
+"""One self-contained HTML page per run, read at a glance: the verdict of every sensor first (typed in
+imucal.report.verdict), the recording as a time series with its still intervals, then each sensor the
+calibration holds in the same form (datasheet units beside the fitted values, the checks' evidence, its
+apply map), the statistics and the figures. Every text goes through page.esc, the one HTML escaping
+function; the page runs no script and loads nothing (page.CSP). Built from the same run object as the
+text report (imucal.report.text).
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Mapping
 
 import numpy as np
 
 from imucal.pipeline import CalibrationRun
-from imucal.solve.misfit import POOR_FIT_P, POOR_FIT_REDCHI, excess_residuals
+from imucal.report.datasheet import DatasheetRow, datasheet
+from imucal.report.figures import before_after
+from imucal.report.page import (CSP, STYLE, esc, figures_html, num, page_html, render_png,  # noqa: F401
+                                table_html)
 from imucal.report.text import interval_residuals, t_quantile_975, time_base_words
-from imucal.solve.stats import chi2_sf
-from imucal.report.page import esc, figures_html, num, page_html, render_png, table_html  # noqa: F401 (render_png: callers)
+from imucal.report.verdict import Check, SensorVerdict, Verdict, chi2_consistent, verdict  # noqa: F401
 
 if TYPE_CHECKING:  # discovery pages only: `imucal calibrate` does not import the discovery modules
     from imucal.analysis.discover import Discovery
 
-@dataclass(frozen=True)
-class Check:
-    """One line of the verdict: what was checked, whether it passed (None: cannot tell), details."""
 
-    what: str
-    ok: bool | None
-    detail: str
-
-
-@dataclass(frozen=True)
-class Verdict:
-    level: str  #: "pass", "check" (usable, but read the warnings) or "fail"
-    headline: str
-    checks: tuple[Check, ...]
-    warnings: tuple[str, ...]
+def _checks_html(checks: tuple[Check, ...]) -> str:
+    rows = []
+    for c in checks:
+        mark, cls = ("yes", "ok") if c.ok else (("no", "bad") if c.ok is False else ("n/a", "na"))
+        rows.append(f'<tr><td>{esc(c.what)}</td><td class="{cls}">{mark}</td><td>{esc(c.detail)}</td></tr>')
+    return f'<div class="scroll"><table><tbody>{"".join(rows)}</tbody></table></div>'
 
 
-def chi2_consistent(chi2: float, dof: int) -> tuple[bool | None, float]:
-    """Whether chi-square on ``dof`` is consistent with the noise (the rule of imucal.pipeline.fit_warnings:
-    poor when reduced chi-square > POOR_FIT_REDCHI and p < POOR_FIT_P), and its p-value."""
-    if dof <= 0 or not math.isfinite(chi2):
-        return None, math.nan
-    return excess_residuals(chi2, dof) is None, chi2_sf(chi2, dof)
-
-
-def verdict(run: CalibrationRun) -> Verdict:
-    """Pass/fail first: converged? residuals consistent with the noise? anything to warn about?"""
-    res, cal, obs = run.result, run.calibration, run.observability
-    consistent, p = chi2_consistent(res.chi2_noise, res.dof)  # against the noise alone
-    dropped = cal.data.get("dropped_intervals", [])
-    rms = cal.fit["rms_residual"] * 1e3
-    checks = [
-        Check("IPOPT converged", res.success, f"{res.status_words}; {res.iterations} iterations"),
-        Check("residuals consistent with the noise", consistent,
-              "cannot be tested: 0 degrees of freedom" if consistent is None else
-              f"reduced chi-square {res.redchi_noise:.3g} (chi-square {res.chi2_noise:.4g} on {res.dof} dof, "
-              f"p = {p:.3g}; poor when above {POOR_FIT_REDCHI:g} with p < {POOR_FIT_P:g})"
-              + (f"; the standard errors include a between-interval excess of {res.excess ** 0.5:.3g} m/s^2 rms "
-                 "(bias_instability)" if res.excess > 0 else "")),
-        Check("every parameter determined by the poses", not obs.poorly_determined,
-              f"{obs.n_distinct} distinct orientations; Jacobian condition {obs.condition:.3g}"
-              + ("; poorly determined: " + ", ".join(obs.poorly_determined) if obs.poorly_determined else "")),
-        Check("no parameter at a bound", not res.at_bound,
-              "; ".join(f"{n} at its {b} bound" for n, b in res.at_bound.items()) or "all inside their bounds"),
-        Check("no static interval dropped", not dropped,
-              f"{len(dropped)} dropped because an axis was clipped" if dropped else
-              f"{run.intervals.n} static intervals used"),
-    ]
-    warnings = tuple(cal.fit.get("warnings", []))
-    if not res.success:
-        level, word = "fail", "FAIL: the solver did not converge"
-    elif any(c.ok is False for c in checks) or warnings:
-        level, word = "check", "CHECK: usable, read the warnings"
-    else:
-        level, word = "pass", "PASS"
-    headline = (f"{word} (RMS |a| - g {rms:.3g} mm/s² on {run.intervals.n} interval means, "
-                f"reduced chi-square {num(res.redchi, '.3g')})")
-    return Verdict(level, headline, tuple(checks), warnings)
+def _sensor_verdict_html(s: SensorVerdict) -> str:
+    warn = ("<ul class=\"warn\">" + "".join(f"<li>{esc(w)}</li>" for w in s.warnings) + "</ul>") if s.warnings else ""
+    return (f'<div class="verdict {s.level}" id="verdict-{s.sensor}"><h2>{esc(s.headline)}</h2>'
+            f"{_checks_html(s.checks)}{warn}</div>")
 
 
 def _verdict_html(v: Verdict) -> str:
-    rows = []
-    for c in v.checks:
-        mark, cls = ("yes", "ok") if c.ok else (("no", "bad") if c.ok is False else ("n/a", "na"))
-        rows.append(f'<tr><td>{esc(c.what)}</td><td class="{cls}">{mark}</td><td>{esc(c.detail)}</td></tr>')
-    warn = ""
-    if v.warnings:
-        warn = "<p><b>Warnings</b></p><ul class=\"warn\">" + "".join(f"<li>{esc(w)}</li>" for w in v.warnings) + "</ul>"
-    return (f'<section class="verdict {v.level}" id="verdict"><h2>{esc(v.headline)}</h2>'
-            f"<table><tbody>{''.join(rows)}</tbody></table>{warn}</section>")
+    """The page's level first, then each sensor's verdict with the checks it is made of."""
+    return (f'<section class="verdict {v.level}" id="verdict"><h2>{esc(v.headline.split(";")[0])}</h2>'
+            f'<div class="sensors">{"".join(_sensor_verdict_html(s) for s in v.sensors)}</div></section>')
+
+
+def _datasheet_html(rows: list[DatasheetRow]) -> str:
+    return table_html(["quantity", "value", "standard error", "unit", "fitted", "value", "standard error", "unit"],
+                      [[esc(r.quantity), num(r.value, ".5g"), num(r.std, ".2g"), esc(r.unit), esc(r.parameter),
+                        num(r.fitted, ".8g"), num(r.fitted_std, ".2g"), esc(r.fitted_unit)] for r in rows],
+                      [False, True, True, False, False, True, True, False])
+
+
+DATASHEET_NOTE = ("<p class=\"meta\">In a datasheet's units; a bias is the offset s/b as an acceleration (or rate), "
+                  "which for a sensor reading unsigned counts holds its mid-scale code. Standard errors to first "
+                  "order.</p>")
 
 
 def _parameters_html(run: CalibrationRun) -> str:
@@ -134,18 +96,20 @@ def _apply_html(run: CalibrationRun) -> str:
 def _residuals_html(run: CalibrationRun) -> str:
     iv = run.intervals
     r, s = interval_residuals(run)
+    before, _ = before_after(run)
     rows, cls = [], []
     for k in range(iv.n):
         z = r[k] / s[k] if math.isfinite(s[k]) and s[k] > 0 else math.nan
         rows.append([str(k), num(iv.t_start[k], ".2f"), num(iv.t_end[k], ".2f"),
                      " ".join(num(v, "+.3f") for v in run.directions[k]),
-                     num(r[k] * 1e3, "+.4f"), num(s[k] * 1e3, ".4f"), num(z, "+.2f")])
+                     num(before[k] * 1e3, "+.5g"), num(r[k] * 1e3, "+.4f"), num(s[k] * 1e3, ".4f"), num(z, "+.2f")])
         cls.append("out" if math.isfinite(z) and abs(z) > 3 else "")
     rms = float(np.sqrt(np.mean(r**2)))
     return (f"<p>|a| − g at each interval mean; σ from the interval's own scatter. RMS {rms * 1e3:.4g} mm/s²; "
             "rows beyond 3σ are shaded.</p>"
-            + table_html(["#", "start [s]", "end [s]", "direction (unit vector)", "|a| − g [mm/s²]", "σ [mm/s²]",
-                      "residual / σ"], rows, [True, True, True, False, True, True, True], cls))
+            + table_html(["#", "start [s]", "end [s]", "direction (unit vector)", "before: |a| − g [mm/s²]",
+                          "after: |a| − g [mm/s²]", "σ [mm/s²]", "residual / σ"], rows,
+                         [True, True, True, False, True, True, True, True], cls))
 
 
 def _statistics_html(run: CalibrationRun) -> str:
@@ -173,6 +137,10 @@ def _statistics_html(run: CalibrationRun) -> str:
 
 
 CAPTIONS = {
+    "recording.png": "the recording against time, calibrated: still intervals shaded green, intervals dropped "
+                     "(an axis clipped) red, intervals the gyroscope showed turning orange",
+    "before_after.png": "|a| − g of each interval mean before (one offset and one scale for all axes) and after "
+                        "the calibration",
     "residuals.png": "residual |a| − g of each interval mean, with 2σ bars and the RMS band",
     "directions.png": "gravity direction of each interval on the sphere (equal-area projection), numbered "
                       "as in the residual table",
@@ -185,24 +153,77 @@ CAPTIONS = {
 }
 
 
-def _calibration_sections(run: CalibrationRun) -> list[tuple[str, str, str]]:
-    return [("parameters", "Parameters with standard errors", _parameters_html(run)),
-            ("statistics", "Fit statistics and data", _statistics_html(run)),
-            ("residuals", "Residuals per pose", _residuals_html(run)),
-            ("apply", "Apply map", _apply_html(run))]
+def _accelerometer_html(run: CalibrationRun, figures: Mapping[str, bytes]) -> str:
+    parts = [_datasheet_html(datasheet(run.calibration)["accelerometer"]), DATASHEET_NOTE,
+             "<h3>Fitted parameters</h3>", _parameters_html(run), "<h3>|a| − g per pose, before and after</h3>"]
+    if "before_after.png" in figures:
+        parts.append(figures_html({"before_after.png": figures["before_after.png"]}, CAPTIONS))
+    parts += [f'<div id="residuals">{_residuals_html(run)}</div>', '<h3 id="apply">Apply map</h3>', _apply_html(run)]
+    return "\n".join(parts)
+
+
+def _gyroscope_html(run: CalibrationRun) -> str:
+    from imucal.gyro.result import arrays, motions  # only a run with a gyroscope
+    from imucal.report.gyro import gap_lines, still_lines
+
+    res, g = run.gyro, run.calibration.gyro
+    assert res is not None and g is not None
+    rows = [[esc(n), num(p.value, ".10g"), "fixed" if p.fixed else num(res.std.get(n, math.nan), ".4g"), esc(p.unit)]
+            for n, p in res.params.items()]
+    m = motions(res)
+    C, c, D = g.rate_map()
+    apply_rows = [[f"ω<sub>{'xyz'[i]}</sub>"] + [num(v, "+.9e") for v in C[i]] + [num(c[i], "+.9e")]
+                  + [num(v, "+.3e") for v in D[i]] for i in range(3)]
+    still = "".join(f"<li>{esc(line.strip())}</li>" for line in [*still_lines(m.still), *gap_lines(m.gapped)]
+                    ) if m.still is not None else ""
+    return "\n".join([
+        _datasheet_html(datasheet(run.calibration)["gyroscope"]), DATASHEET_NOTE, "<h3>Fitted parameters</h3>",
+        table_html(["parameter", "value", "standard error", "unit"], rows, [False, True, True, False]),
+        f"<p class=\"meta\">Raw unit {esc(m.unit)}; scales {esc(m.unit)} per rad/s; "
+        f"{arrays(res).bias.size} axes; IPOPT {esc(res.status_words)}, {res.iterations} iterations.</p>",
+        "<h3>Still poses and motions</h3>", f"<ul>{still}</ul>" if still else "",
+        "<h3>Apply map</h3>",
+        f"<p>ω = C raw + c − D a, with ω in rad/s, raw in {esc(m.unit)}, a the calibrated acceleration [m/s²].</p>",
+        table_html(["", "C[:, x]", "C[:, y]", "C[:, z]", "c [rad/s]", "D[:, x]", "D[:, y]", "D[:, z]"], apply_rows,
+                   [False] + [True] * 7)])
+
+
+def _recording_html(figures: Mapping[str, bytes]) -> str:
+    if "recording.png" not in figures:
+        return "<p class=\"meta\">Figures were not made for this run.</p>"
+    return figures_html({"recording.png": figures["recording.png"]}, CAPTIONS)
+
+
+#: Each sensor kind's section (a calibration's sensors in its order); a new sensor adds one line.
+SENSOR_SECTIONS = {"accelerometer": ("Accelerometer", _accelerometer_html),
+                   "gyroscope": ("Gyroscope", lambda run, figures: _gyroscope_html(run))}
+
+
+def _calibration_sections(run: CalibrationRun, figures: Mapping[str, bytes] | None = None
+                          ) -> list[tuple[str, str, str]]:
+    figures = figures or {}
+    out = [("recording", "The recording", _recording_html(figures))]
+    for sensor in run.calibration.sensors:
+        title, section = SENSOR_SECTIONS[sensor]
+        out.append((sensor if sensor != "accelerometer" else "parameters", esc(title), section(run, figures)))
+    out.append(("statistics", "Fit statistics and data", _statistics_html(run)))
+    return out
 
 
 def calibration_html(run: CalibrationRun, figures: Mapping[str, bytes] | None = None,
                      extra: Mapping[str, str] | None = None) -> str:
-    """The page of ``imucal calibrate``: verdict, parameters, statistics, residuals, figures.
+    """The page of ``imucal calibrate``: the verdict of every sensor, the recording, each sensor's section,
+    the statistics and the remaining figures.
 
-    ``figures`` maps file names to PNG bytes; ``extra`` maps headings to more plain text (e.g. the
-    gyroscope report), shown preformatted and escaped."""
+    ``figures`` maps file names to PNG bytes; ``extra`` maps headings to more plain text, shown
+    preformatted and escaped."""
+    figures = dict(figures or {})
     title = f"imucal calibration: {Path(run.recording.source).name}"
-    sections = [("verdict", "", _verdict_html(verdict(run))), *_calibration_sections(run)]
+    sections = [("verdict", "", _verdict_html(verdict(run))), *_calibration_sections(run, figures)]
     for k, (head, text) in enumerate((extra or {}).items()):
         sections.append((f"extra{k}", esc(head), f"<pre>{esc(text)}</pre>"))
-    sections.append(("figures", "Figures", figures_html(figures or {}, CAPTIONS)))
+    rest = {n: png for n, png in figures.items() if n not in ("recording.png", "before_after.png")}
+    sections.append(("figures", "Figures", figures_html(rest, CAPTIONS)))
     return page_html(title, sections)
 
 
@@ -232,7 +253,9 @@ def discovery_html(d: Discovery, figures: Mapping[str, bytes] | None = None) -> 
                       [False, False, True, True, False, True, True]) if rows else "<p>None added.</p>")
     title = f"imucal discover: {Path(d.base.recording.source).name}"
     sections = [("verdict", "", head), ("fit", "", _verdict_html(v)), ("effects", "Effects found", effects),
-                *_calibration_sections(d.final),
+                *_calibration_sections(d.final, figures),
                 ("discovery", "Discovery report (text)", f"<pre>{esc(discovery_report(d))}</pre>"),
                 ("figures", "Figures", figures_html(figures or {}, CAPTIONS))]
     return page_html(title, sections)
+
+

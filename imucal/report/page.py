@@ -33,6 +33,10 @@ tr.out td{background:#fdecea}
 figure{margin:1em 0} figure img{max-width:100%;border:1px solid #e3e6ea}
 figcaption{font-size:.9em;color:#555} pre{background:#f6f8fa;padding:.8em;overflow-x:auto;font-size:.85em}
 .meta{color:#555;font-size:.9em} ul.warn li{color:#8a5a00}
+.scroll{max-width:100%;overflow-x:auto} .sensors{display:flex;flex-wrap:wrap;gap:.8em}
+.sensors .verdict{flex:1 1 30em;margin:0;min-width:0} .sensors .verdict h2{font-size:1.05em}
+.verdict table{font-size:.88em} .verdict td:first-child{min-width:11em} td.ok,td.bad,td.na{white-space:nowrap}
+code,td{overflow-wrap:break-word}
 """
 
 
@@ -51,12 +55,13 @@ def table_html(head: Iterable[str], rows: Iterable[Iterable[str]], numeric: Iter
     numeric = list(numeric)
     head = list(head)
     cls = [' class="num"' if i < len(numeric) and numeric[i] else "" for i in range(len(head))]
-    out = ["<table><thead><tr>" + "".join(f"<th{c}>{h}</th>" for c, h in zip(cls, head)) + "</tr></thead><tbody>"]
+    out = ['<div class="scroll"><table><thead><tr>' + "".join(f"<th{c}>{h}</th>" for c, h in zip(cls, head))
+           + "</tr></thead><tbody>"]
     rc = list(row_class)
     for k, r in enumerate(rows):
         attr = f' class="{rc[k]}"' if k < len(rc) and rc[k] else ""
         out.append(f"<tr{attr}>" + "".join(f"<td{c}>{v}</td>" for c, v in zip(cls, r)) + "</tr>")
-    out.append("</tbody></table>")
+    out.append("</tbody></table></div>")  # a wide table scrolls inside its box, never widens the page
     return "\n".join(out)
 
 

@@ -63,12 +63,9 @@ def calibrate_files(config: RunConfig, gyro_file: str | Path | None = None) -> R
 def stage_files(o: OutputSet, out: Path, files: RunFiles, figures: bool, json_path: str | Path | None = None) -> None:
     """Stage the run's files in ``out`` (and the summary at ``json_path``) into ``o``."""
     pngs = {name: render_png(fn, files.run) for name, fn in FIGURES.items()} if figures else {}
-    gyro = files.gyro
     o.call(out / CALIBRATION_FILE, files.run.calibration.save)
     o.text(out / REPORT_FILE, files.text)
-    if gyro is not None:
-        from imucal.report.gyro import gyro_report  # measured start-up: only a run with a gyroscope
-    o.text(out / HTML_FILE, calibration_html(files.run, pngs, None if gyro is None else {"Gyroscope": gyro_report(gyro)}))
+    o.text(out / HTML_FILE, calibration_html(files.run, pngs))  # every sensor's section, in one form
     for name, png in pngs.items():
         o.bytes(out / name, png)
     if json_path is not None:
