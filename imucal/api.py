@@ -64,26 +64,47 @@ class CalibrationResult(CalibrationRun):
         return self.result.success and (self.gyro is None or self.gyro.success)
 
     def report(self) -> str:
-        """The text report (report.txt of ``imucal calibrate``): values, standard errors, checks."""
+        """The text report, as ``imucal calibrate`` writes it into report.txt.
+
+        Returns:
+            Values with standard errors, correlations, the fit statistics and each sensor's section.
+        """
         from imucal.report.text import fit_report
 
         return fit_report(self)
 
     def summary(self) -> dict[str, Any]:
-        """The machine-readable summary (``imucal calibrate --json``)."""
+        """The machine-readable summary, as ``imucal calibrate --json`` writes it.
+
+        Returns:
+            A JSON-ready mapping: parameters, standard errors, statistics, warnings, ``gyro``.
+        """
         from imucal.report.text import summary
 
         return summary(self)
 
     def to_file(self, path: str | os.PathLike[str]) -> Path:
-        """Write the calibration file (calibration.yaml: every sensor, loadable with
-        ``imucal.load_calibration``) atomically; returns its path."""
+        """Write the calibration file of every sensor atomically.
+
+        Args:
+            path: where to write it (calibration.yaml; ``imucal.load_calibration`` reads it back).
+
+        Returns:
+            The path written.
+        """
         self.calibration.save(path)
         return Path(path)
 
     def write(self, out: str | os.PathLike[str], figures: bool = True) -> list[Path]:
-        """Write what ``imucal calibrate --out DIR`` writes (calibration.yaml, report.txt, report.html,
-        figures) into ``out``, all or nothing; returns the paths written."""
+        """Write what ``imucal calibrate --out DIR`` writes, all files or none.
+
+        Args:
+            out: the folder (calibration.yaml, report.txt, report.html and the figures go into it).
+            figures: also draw the PNG figures (report.html then shows them).
+
+        Returns:
+            The paths written.
+        """
         from imucal.files.output import OutputSet, check_outputs
         from imucal.report.run_files import RunFiles, output_paths, stage_files
 
@@ -136,8 +157,22 @@ def recording_from_arrays(acc: ArrayLike, t: Sequence[float] | np.ndarray | None
                           temp: Sequence[float] | np.ndarray | None = None, fs: float | None = None,
                           unit: str = "raw", time_unit: str = "auto", name: str = "<arrays>", *,
                           gyro: ArrayLike | None = None, gyro_unit: str = "raw") -> Recording:
-    """A Recording from an (N, 3) array (or DataFrame) of raw readings, with time stamps or a rate,
-    and optionally (N, 3) gyroscope readings on the same time base (``gyro_unit``: raw, deg/s, rad/s)."""
+    """A recording built from arrays, checked as a file's would be.
+
+    Args:
+        acc: (N, 3) raw accelerometer readings, or a DataFrame with columns ax, ay, az (gx..gz, t, temp).
+        t: N strictly increasing time stamps (unit inferred, or ``time_unit``); None: give ``fs``.
+        temp: N temperatures [deg C], or None.
+        fs: the sample rate [Hz]; beside ``t`` it is checked against the stamps.
+        unit: the accelerometer's raw unit (a label: raw, m/s^2, ...).
+        time_unit: the unit of ``t`` (auto, s, ms, us, ns, min).
+        name: the recording's name in messages and reports.
+        gyro: (N, 3) gyroscope readings on the same samples, or None.
+        gyro_unit: the gyroscope's raw unit: raw (counts), deg/s or rad/s.
+
+    Returns:
+        The Recording the pipeline reads.
+    """
     if getattr(acc, "columns", None) is not None:
         acc, t, temp, gyro, _ = _frame_columns(acc, t, temp, gyro, None)
     raw = _readings(acc, "acc")
@@ -193,12 +228,17 @@ def calibrate(acc: ArrayLike | RunConfig, gyro: ArrayLike | None = None, mag: Ar
             (and gx, gy, gz; mx, my, mz; t; temp, each taken when the keyword is not given), or a
             RunConfig (the YAML's typed form: the file it names is calibrated, as the CLI does).
         gyro: (N, 3) gyroscope readings on the accelerometer's time base: the gyroscope is
-            calibrated too, into the same calibration (``gyro_unit``: raw counts, deg/s or rad/s).
-        mag: (N, 3) magnetometer readings (not calibrated by this version: refused in one line).
-        t: N time stamps (unit inferred, or ``time_unit``); or give ``fs`` [Hz] instead.
+            calibrated too, into the same calibration.
+        mag: (N, 3) magnetometer readings (not part of a calibration yet: refused in one line).
+        t: N time stamps (unit inferred, or ``time_unit``); or give ``fs`` instead.
         temp: N temperatures [deg C], for temperature effects.
-        gravity: local g [m/s^2]; or ``latitude`` [deg] and ``height`` [m] (WGS84 normal gravity).
+        fs: the sample rate [Hz] (without ``t``; beside it, checked against the stamps).
+        gravity: local g [m/s^2] (default: standard gravity, or the ``config``'s).
+        latitude: [deg] for WGS84 normal gravity instead of ``gravity``.
+        height: [m] above the ellipsoid, with ``latitude``.
         unit: the accelerometer's raw unit (label: raw, m/s^2, ...).
+        gyro_unit: the gyroscope's raw unit: raw (counts: the scale is searched), deg/s or rad/s.
+        time_unit: the unit of ``t``: auto (inferred and reported), s, ms, us, ns or min.
         fix: parameters held at their initial value (``["phi"]``), or at a value (``{"s1": 0.0}``).
         fix_angles: hold the three axis angles at 90 deg (the 6-parameter model).
         mode: fit interval ``"means"`` (default) or ``"samples"``.

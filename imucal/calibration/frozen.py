@@ -71,9 +71,12 @@ class Calibration:
         return np.array(self.params.values(), float)
 
     def linear_map(self) -> tuple[np.ndarray, np.ndarray]:
-        """A (3x3, lower triangular) and c (3) with a_orth = A raw + c (Theorem).
+        """The accelerometer's map as a matrix and an offset: a_orth = A raw + c (the Theorem).
 
         With effects, the map at covariates zero (reference temperature, t = 0).
+
+        Returns:
+            A (3, 3), lower triangular [(m/s^2) per raw unit], and c (3,) [m/s^2].
         """
 
         base = build_model()
@@ -86,7 +89,15 @@ class Calibration:
 
     # --- apply -------------------------------------------------------------------------------
     def apply(self, raw: np.ndarray, covariates: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
-        """Calibrated acceleration [m/s^2] in the Theorem's orthonormal frame, one row per sample."""
+        """Calibrated acceleration in the Theorem's orthonormal frame.
+
+        Args:
+            raw: (N, 3) raw readings, or one (3,) sample.
+            covariates: {"temp": (N,), "time": (N,)} when the calibration has effects that read them.
+
+        Returns:
+            (N, 3) (or (3,)) acceleration [m/s^2].
+        """
         raw = np.asarray(raw, float)
         if raw.shape == (3,):  # one sample
             return self.apply(raw[None, :], covariates)[0]
@@ -112,7 +123,16 @@ class Calibration:
 
     def apply_imu(self, raw_acc: np.ndarray, raw_gyro: np.ndarray,
                   covariates: Mapping[str, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """(acceleration [m/s^2], angular rate [rad/s]) of the same samples, in one frame."""
+        """Calibrated acceleration and angular rate of the same samples, in one frame.
+
+        Args:
+            raw_acc: (N, 3) raw accelerometer readings.
+            raw_gyro: (N, 3) raw gyroscope readings of the same samples.
+            covariates: as for :meth:`apply`.
+
+        Returns:
+            (acceleration [m/s^2], angular rate [rad/s]), each (N, 3).
+        """
         if self.gyro is None:
             raise ImucalError("this calibration has no gyroscope part", field="gyroscope",
                               fix="calibrate with gyro columns (gx, gy, gz) or --gyro-data")
@@ -134,7 +154,14 @@ class Calibration:
     # --- files -------------------------------------------------------------------------------
     @classmethod
     def load(cls, path: str | os.PathLike) -> "Calibration":
-        """Read a calibration file written by :meth:`save` (refuses unknown versions)."""
+        """Read a calibration file written by :meth:`save` (unknown versions are refused).
+
+        Args:
+            path: the calibration YAML.
+
+        Returns:
+            The Calibration, as saved.
+        """
         return load_calibration(path)
 
     def to_dict(self) -> dict[str, Any]:
@@ -142,7 +169,11 @@ class Calibration:
         return fileformat.to_dict(self)
 
     def save(self, path: str | os.PathLike) -> None:
-        """Write the calibration file atomically (imucal.calibration.fileformat)."""
+        """Write the calibration file atomically (imucal.calibration.fileformat).
+
+        Args:
+            path: the calibration YAML to write (replaced whole, or left as it was).
+        """
         fileformat.save(self, path)
 
 
@@ -155,7 +186,14 @@ def from_dict(d: Mapping[str, Any], path: str = "<calibration>") -> Calibration:
 
 
 def load_calibration(path: str | os.PathLike) -> Calibration:
-    """Read a calibration YAML written by :meth:`Calibration.save`; refuses unknown versions."""
+    """Read a calibration YAML written by :meth:`Calibration.save`; refuses unknown versions.
+
+    Args:
+        path: the calibration file.
+
+    Returns:
+        The Calibration of every sensor the file holds.
+    """
     return from_dict(fileformat.read_file(path), str(path))
 
 

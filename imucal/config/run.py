@@ -228,6 +228,13 @@ def config_from_dict(d: Any, path: str | None = None) -> RunConfig:
 
 
 def load_config(path: str | os.PathLike) -> RunConfig:
+    """Read a YAML run file into its typed settings (unknown keys are refused by name).
 
+    Args:
+        path: the run file (relative paths in it are relative to its folder).
+
+    Returns:
+        The RunConfig that ``imucal calibrate CONFIG`` and ``imucal.calibrate(config)`` run.
+    """
     d = read_yaml(path, "config", "pass a YAML run file (see configs/)")
     return config_from_dict(d, str(path))

@@ -23,7 +23,15 @@ STREAM_BYTES = 64 * 1024**2
 
 def load_recording(spec: DataSpec | str | os.PathLike, base_dir: str | os.PathLike | None = None
                    ) -> Recording:
-    """Read a recording described by ``spec`` (a DataSpec or just a path with defaults) whole."""
+    """Read a recording whole: a CSV or text file, a .mat text file, or a ROS bag.
+
+    Args:
+        spec: a DataSpec (the run file's ``data:`` section) or just a path, read with the defaults.
+        base_dir: the folder relative paths are relative to (the run file's), or None.
+
+    Returns:
+        The Recording: time [s], raw readings, temperature and gyroscope when present, its time base.
+    """
     spec = as_spec(spec)
     path = resolve_path(spec, base_dir)
     if is_bag(path):

@@ -730,9 +730,19 @@ def detect_static(t: np.ndarray, raw: np.ndarray, settings: StaticSettings = Sta
                   rails: dict | None = None) -> Intervals:
     """Find the intervals in which the sensor is still; drop those with a clipped axis.
 
-    ``rails``: declared rails (imucal.data.spec.rails); None detects clipping from the data.
     Dropped intervals are listed in ``meta["dropped"]`` (t_start, t_end, axis, rail, reason).
     imucal.data.stream does the same on a file read in chunks.
+
+    Args:
+        t: (N,) times [s].
+        raw: (N, 3) raw readings.
+        settings: window, minimum duration, threshold and trim (the run file's ``static:``).
+        temp: (N,) temperatures [deg C], or None.
+        source: the recording's name, for messages.
+        rails: declared rails (imucal.data.spec.rails); None detects clipping from the data.
+
+    Returns:
+        The Intervals: one row per still interval, its mean and the mean's standard error.
     """
     n = raw.shape[0]
     if n < 3:

@@ -12,6 +12,13 @@ def normal_gravity(latitude_deg: float, height_m: float = 0.0) -> float:
 
     Somigliana's closed form (NIMA TR8350.2 Eq. 4-1) with the second-order height
     correction (Eq. 4-3).
+
+    Args:
+        latitude_deg: geodetic latitude [deg], -90 to 90.
+        height_m: height above the ellipsoid [m].
+
+    Returns:
+        Normal gravity [m/s^2].
     """
     if not -90.0 <= latitude_deg <= 90.0 or not math.isfinite(latitude_deg):
         raise ImucalError(f"latitude {latitude_deg} is outside [-90, 90] degrees",

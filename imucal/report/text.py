@@ -43,7 +43,16 @@ def _fmt(v: float) -> str:
 
 
 def fit_report(run: CalibrationRun, correl_min: float = CORREL_MIN) -> str:
-    """Values, standard errors (absolute and %), initial values, bounds hit, correlations, status."""
+    """A run as text, in the manner of lmfit's fit_report (report.txt).
+
+    Args:
+        run: the run (imucal.pipeline.CalibrationRun, or imucal.calibrate's result).
+        correl_min: correlations above this are listed.
+
+    Returns:
+        Values, standard errors (absolute and %), initial values, bounds hit, correlations, status,
+        the intervals and every further sensor's section.
+    """
     L = [*_calibration_lines(run), *_statistics_lines(run), *_variable_lines(run.result),
          *_correlation_lines(run.result, correl_min), *_apply_lines(run.calibration), *_interval_lines(run),
          *_gyro_lines(run)]
@@ -259,7 +268,14 @@ def _gyro_lines(run: CalibrationRun) -> list[str]:
 
 
 def summary(run: CalibrationRun) -> dict:
-    """The machine-readable summary (the CLI's --json), built from a run."""
+    """The machine-readable summary of a run (``imucal calibrate --json``).
+
+    Args:
+        run: the run (imucal.pipeline.CalibrationRun, or imucal.calibrate's result).
+
+    Returns:
+        A JSON-ready mapping: parameters, standard errors, statistics, warnings and ``gyro``.
+    """
     res, cal = run.result, run.calibration
     v, sd = res.params, res.std
 

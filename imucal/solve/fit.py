@@ -255,6 +255,18 @@ def fit(data: FitData, params: Parameters, model: SensorModel, gravity: float,
     Samples mode: each row's gravity is g plus the second-order terms of its interval's scatter
     (``_samples_rows``). ``hessian="exact"`` gives IPOPT the exact Hessian instead of Gauss-Newton's
     J^T W J.
+
+    Args:
+        data: the rows (interval means or samples), their noise and covariates (pipeline.fit_data).
+        params: every parameter, free or held, with its start and bounds.
+        model: the sensor model whose residual is fitted.
+        gravity: local g [m/s^2].
+        source: the recording's name, for messages.
+        weights: "noise", "uniform" or "auto", as above.
+        hessian: "gauss-newton" or "exact".
+
+    Returns:
+        The FitResult: values, standard errors, covariance, chi-square, solver status.
     """
     names = model.names
     if tuple(params.names) != names:
