@@ -30,9 +30,9 @@ def cli_counts(counts_recording, tmp_path_factory):
 def test_calibrate_writes_its_files(cli_counts):
     code, out, js = cli_counts
     assert code == 0
-    assert sorted(p.name for p in out.iterdir()) == ["calibration.yaml", "directions.png", "report.html",
-                                                      "report.txt", "residuals.png"]
-    for fig in ("directions.png", "residuals.png"):
+    assert sorted(p.name for p in out.iterdir()) == ["before_after.png", "calibration.yaml", "directions.png",
+                                                      "recording.png", "report.html", "report.txt", "residuals.png"]
+    for fig in ("directions.png", "residuals.png", "recording.png", "before_after.png"):
         assert (out / fig).read_bytes()[:8] == PNG
     assert js.exists()
     assert not [p for p in out.parent.rglob(".*") if p.name.startswith((".imucal-", ".calibration"))]

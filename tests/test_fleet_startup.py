@@ -44,9 +44,9 @@ def test_workers_are_forked_warm(tmp_path):
     cfg = load_simulation_config(str(ROOT / "configs" / "simulate_fleet.yaml"))
     manifest = write_fleet(draw_fleet(cfg, 1, 0, 0), tmp_path / "sim", [], settings={"output": {"figures": False}})
     code = ("import json\nimport imucal.fleet.warm\nfrom imucal.solve import least_squares as lsq\n"
-            "from imucal.fleet.manifest import load_manifest\nfrom imucal.pipeline import calibrate\n"
+            "from imucal.fleet.manifest import load_manifest\nfrom imucal.pipeline import calibrate_accelerometer\n"
             "before = (lsq.row_functions.cache_info().misses, lsq._solver.cache_info().misses)\n"
-            f"run = calibrate(load_manifest({str(manifest)!r}).units[0].config)\n"
+            f"run = calibrate_accelerometer(load_manifest({str(manifest)!r}).units[0].config)\n"
             "after = (lsq.row_functions.cache_info().misses, lsq._solver.cache_info().misses)\n"
             "print(json.dumps([before, after, run.result.success]))")
     before, after, ok = _run(code, tmp_path)

@@ -22,8 +22,10 @@ def _plt():
 
 
 def plain(text: str) -> str:
-    """User text shown literally in a figure: dollar signs would start matplotlib's mathtext."""
-    return text.replace("$", r"\$")
+    """User text shown literally in a figure: dollar signs would start matplotlib's mathtext, and a
+    name that is not UTF-8 (a lone surrogate, b'log\xff.csv') is shown escaped, as every text output
+    writes it (imucal.files.output.TEXT_ERRORS)."""
+    return text.encode("utf-8", errors="backslashreplace").decode("utf-8").replace("$", r"\$")
 
 
 def residual_figure(run: CalibrationRun, path: str | Path) -> None:
