@@ -387,7 +387,7 @@ def case_parts() -> dict:
     from imucal.config.run import config_from_dict
     from imucal.data.load import load_recording
     from imucal.files.output import OutputSet
-    from imucal.pipeline import calibrate, read_intervals
+    from imucal.pipeline import calibrate_accelerometer, read_intervals
     from imucal.report.run_files import RunFiles, stage_files
     from imucal.report.text import fit_report, summary as run_summary
     parts["imports of the calibration path"] = T() - t0
@@ -400,7 +400,7 @@ def case_parts() -> dict:
     read_intervals(cfg, rec)
     parts["static intervals"] = T() - t
     t = T()
-    run = calibrate(cfg, rec)
+    run = calibrate_accelerometer(cfg, rec)
     parts["calibrate (intervals again, guess, fit, covariance)"] = T() - t - parts["static intervals"]
     t = T()
     files = RunFiles(run=run, text=fit_report(run), summary=run_summary(run))

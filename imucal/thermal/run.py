@@ -1,11 +1,11 @@
 """The thermal calibration of a recording that holds still poses over a temperature sweep.
 
 ``thermal_calibration(config, base)``: the base fit (|a| = g on the still intervals, with what the
-run file holds: imucal.pipeline.calibrate) gives the parameters at the reference temperature; the
+run file holds: imucal.pipeline.calibrate_accelerometer) gives the parameters at the reference temperature; the
 pose-constancy rows (imucal.thermal.evidence) give the temperature terms, their orders chosen by
 the grammar's test (imucal.thermal.select); the lag and hysteresis of the temperature sensor are
 tested (imucal.thermal.lag). The calibration kept is the base fit once more with the terms held
-at their values (``pipeline.calibrate(held=...)``), so the file, ``apply``, the generated C and the
+at their values (``pipeline.calibrate_accelerometer(held=...)``), so the file, ``apply``, the generated C and the
 autopilot exports carry them, with the pose fit's standard errors.
 
 ``imucal discover`` takes this path when the recording is such a sweep (``sweep_of``).
@@ -27,7 +27,7 @@ from imucal.gyro.thermal import GyroThermal, gyro_bias_temperature
 from imucal.model.effects import AXIS_NAMES, EFFECTS, make_effect
 from imucal.model.parameters import ANGLE_NAMES, BASE_NAMES, Parameters
 from imucal.model.sensor import build_model
-from imucal.pipeline import CalibrationRun, calibrate, initial_guess, make_parameters, read_intervals
+from imucal.pipeline import CalibrationRun, calibrate_accelerometer, initial_guess, make_parameters, read_intervals
 from imucal.solve.stats import chi2_sf
 from imucal.thermal.determine import PoseSupport, one_sided
 from imucal.thermal.evidence import ThermalRows, thermal_rows
@@ -117,7 +117,8 @@ def _final(config: RunConfig, rec: Recording, sel: Selection, prob: ThermalProbl
     order = {n: i for i, n in enumerate(EFFECTS)}
     specs = tuple(EffectSpec(n, tuple(AXIS_NAMES[a] for a in ax))
                   for n, ax in sorted(sel.effects.items(), key=lambda kv: order[kv[0]]))
-    run = calibrate(replace(config, fit=replace(config.fit, effects=specs)), rec, held=_held_values(sel, prob))
+    run = calibrate_accelerometer(replace(config, fit=replace(config.fit, effects=specs)), rec,
+                                  held=_held_values(sel, prob))
     if not sel.effects:
         return run
     coef = set(sel.fit.free_names)
@@ -152,7 +153,7 @@ def thermal_calibration(sweep: Sweep, progress: Callable[[], None] | None = None
     sel = replace(sel, fit=prob.fit(sel.effects, sel.fit.params.value_dict()), none=prob.fit({}))
     final = _final(config, rec, sel, prob)
     try:
-        base, refusal = calibrate(config, rec), ""
+        base, refusal = calibrate_accelerometer(config, rec), ""
     except ImucalError as exc:
         base, refusal = None, exc.message
     support = PoseSupport.of(rows, sel.fit.vectors, sel.fit.poses)
