@@ -338,13 +338,13 @@ def test_the_backward_step_drops_an_axis_the_data_do_not_need(tmp_path):
     dropped by the backward step, with its note; the true axis stays."""
     from imucal.analysis.discover.backward import prune
     from imucal.analysis.discover.problem import Problem, canonical
-    from imucal.pipeline import calibrate
+    from imucal.pipeline import calibrate_accelerometer
 
     case = draw_effect_case(31, effect="scale_nonlinearity", axes=(0,), snr=60.0)
     path = tmp_path / "c.csv"
     path.write_text(case.config.run().to_csv_text())
     cfg = config_from_dict({"data": {"path": str(path), "unit": case.config.sensor.unit}})
-    base = calibrate(cfg)
+    base = calibrate_accelerometer(cfg)
     prob = Problem(cfg, base)
     wide = {"scale_nonlinearity": (0, 1)}
     current = prob.fit(canonical(wide), base.result.values())

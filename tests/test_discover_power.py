@@ -112,7 +112,7 @@ def test_the_third_warm_up_axis_gains_what_its_linear_score_predicts(tmp_path):
     import numpy as np
 
     from imucal.analysis.discover.problem import Problem as _Problem, canonical as _canonical
-    from imucal.pipeline import calibrate
+    from imucal.pipeline import calibrate_accelerometer
     from imucal.solve.fit import jacobian_rows
 
     case = draw_effect_case(60001, effect="bias_warmup", snr=53.03, noise_mg=0.3)

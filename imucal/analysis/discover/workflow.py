@@ -23,7 +23,7 @@ from imucal.config.run import EffectSpec, RunConfig
 from imucal.errors import ImucalError
 from imucal.model.effects import AXIS_NAMES, EFFECTS, MIN_DOF
 from imucal.model.parameters import BASE_NAMES
-from imucal.pipeline import CalibrationRun, calibrate
+from imucal.pipeline import CalibrationRun, calibrate_accelerometer
 from imucal.thermal.run import Sweep, sweep_of
 from imucal.thermal.select import TEMPERATURE_TERMS
 from imucal.solve.fit import FitResult
@@ -135,7 +135,7 @@ def final_run(config: RunConfig, base: CalibrationRun, st: State, notes: list[st
     """The whole pipeline once more with the effects found: the calibration file to keep."""
     if not st.found:
         return base
-    final = calibrate(final_config(config, st.effects, st.current))
+    final = calibrate_accelerometer(final_config(config, st.effects, st.current))
     if final.result.chi2 > st.current.chi2 * (1 + 1e-6) + 1e-9:
         notes.append(f"the final calibration's chi2 {final.result.chi2:.6g} is above the discovery fit's "
                      f"{st.current.chi2:.6g} (a different local optimum)")
@@ -149,7 +149,7 @@ def _start(config: RunConfig, settings: DiscoverSettings) -> tuple[Sweep | None,
         sweep = sweep_of(config) if set(TEMPERATURE_TERMS) & set(settings.candidates) else None
         if sweep is not None and sweep.rows is not None:  # still poses held over a temperature change
             return sweep, None
-        return sweep, calibrate(config, sweep.recording if sweep is not None else None)
+        return sweep, calibrate_accelerometer(config, sweep.recording if sweep is not None else None)
     except ImucalError as exc:
         if exc.field != "intervals":
             raise
@@ -201,7 +201,7 @@ def _kept(asked: RunConfig, config: RunConfig, st: State, p_after: float, settin
         return None
     try:
         auto = dataclasses.replace(config, fit=dataclasses.replace(config.fit, weights="auto"))
-        return calibrate(final_config(auto, st.effects, st.current) if st.found else auto)
+        return calibrate_accelerometer(final_config(auto, st.effects, st.current) if st.found else auto)
     except ImucalError as exc:
         notes.append(f"the calibration with weights auto was refused ({exc.message}); the one kept has weights noise")
         return None
