@@ -160,7 +160,10 @@ def imu_page(tmp_path_factory):
     return out, (out / "report.html").read_text(encoding="utf-8")
 
 
-def test_every_sensor_has_its_verdict_and_its_section_in_one_form(imu_page):
+def test_every_sensor_has_its_verdict_and_its_section_in_one_form(imu_page, counts_run):
+    from imucal.report.figures import recording_figure
+    from imucal.report.html import render_png
+
     out, page = imu_page
     import yaml
 
@@ -173,6 +176,9 @@ def test_every_sensor_has_its_verdict_and_its_section_in_one_form(imu_page):
     for unit in ("mg", "raw/g", "mrad", "deg/s", "raw/deg/s", "(deg/s)/g"):
         assert f"<td>{html.escape(unit)}</td>" in page, unit
     assert "before: |a| − g [mm/s²]" in page and "after: |a| − g [mm/s²]" in page
+    # the recording's time series has the gyroscope's panel too (its second file, imu_tk's layout)
+    one_panel = mpimg.imread(io.BytesIO(render_png(recording_figure, counts_run)), format="png").shape[0]
+    assert mpimg.imread(out / "recording.png").shape[0] > 1.4 * one_panel
 
 
 def test_the_datasheet_units_are_the_fitted_values_converted():

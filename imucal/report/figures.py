@@ -122,14 +122,29 @@ def _gyro_turning(run: CalibrationRun) -> list[tuple[float, float]]:
     return [] if st is None else [(r.t_start, r.t_end) for r in st.rejected]
 
 
+def _gyro_samples(run: CalibrationRun) -> np.ndarray | None:
+    """The gyroscope's raw readings on the accelerometer's samples: the recording's columns, or the second
+    file the run names (data.gyro_path, imu_tk's layout); None without a gyroscope."""
+    rec, data = run.recording, run.config.data
+    if rec.raw is None or run.calibration.gyro is None:
+        return None
+    if rec.gyro is not None or data.gyro_path is None:
+        return rec.gyro
+    from imucal.gyro.run import gyro_on_accel_samples  # only a run with a gyroscope
+
+    p = Path(data.gyro_path)
+    return gyro_on_accel_samples(rec, str(p if p.is_absolute() or run.config.base_dir is None
+                                          else run.config.base_dir / p))
+
+
 def recording_figure(run: CalibrationRun, path: str | Path) -> None:
-    """The recording against time: calibrated acceleration (and angular rate, when the recording holds the
-    gyroscope's columns), the still intervals shaded, the dropped and the gyro's turning ones marked."""
+    """The recording against time: calibrated acceleration (and angular rate, when the run calibrated a
+    gyroscope), the still intervals shaded, the dropped and the gyro's turning ones marked."""
     from imucal.model.channels import covariate_values
 
     plt = _plt()
     rec, cal, iv = run.recording, run.calibration, run.intervals
-    gyro = getattr(rec, "gyro", None) if rec.raw is not None and cal.gyro is not None else None
+    gyro = _gyro_samples(run)
     fig, axes = plt.subplots(2 if gyro is not None else 1, 1, figsize=(10, 5.6 if gyro is not None else 3.4),
                              dpi=110, sharex=True, squeeze=False)
     panels = [(axes[0, 0], "acceleration [m/s^2]")] + ([(axes[1, 0], "angular rate [deg/s]")] if gyro is not None else [])

@@ -56,6 +56,10 @@ def run(args: argparse.Namespace) -> int:
     out = Path(os.path.normpath(out))
     figures = cfg.output.figures and not args.no_figures
     gyro_file = args.gyro_data or options.data_path(cfg, gyro=True)
+    if args.gyro_data:  # the run records where its gyroscope came from (the report's time series reads it)
+        import dataclasses
+
+        cfg = dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, gyro_path=os.path.abspath(args.gyro_data)))
     inputs = [args.config, options.data_path(cfg), gyro_file, options.noise_path(cfg)]
     check_outputs(inputs, [*output_paths(out, figures), args.json])  # fail before the work, not after it
     files = calibrate_files(cfg, gyro_file)
