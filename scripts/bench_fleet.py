@@ -229,8 +229,9 @@ def main() -> int:
              "| units per CPU-hour | CPUs used by the units | CPUs busy, whole machine |",
              "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for label, wall, per_unit, cpu, units_cpu, busy, workers, _ in rows:
-        eff = (n / wall) / (workers * n / one[1])  # units/s over the workers x one worker's units/s
-        lines.append(f"| {label} | {wall:.1f} | {n / wall:.2f} | {eff:.2f} | {per_unit * 1e3:.0f} | {cpu * 1e3:.0f} "
+        # units/s over the workers x one worker's units/s (like for like: the runs without unit figures)
+        eff = "" if "figures" in label else f"{(n / wall) / (workers * n / one[1]):.2f}"
+        lines.append(f"| {label} | {wall:.1f} | {n / wall:.2f} | {eff} | {per_unit * 1e3:.0f} | {cpu * 1e3:.0f} "
                      f"| {3600 / cpu:,.0f} | {units_cpu:.2f} | {busy:.2f} |")
     lines += ["", "Efficiency: units per second over (workers x units per second of one worker); below 1 where the "
                   "workers share cores with each other or with other jobs (CPUs busy, whole machine)."]
