@@ -182,6 +182,9 @@ def calibrate_cmd(out: str) -> list[str]:
 
 
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
+#: What the `imucal` command sets before numpy loads (imucal.cli.main), unless the user set it.
+ONE_BLAS_THREAD = {"OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS", "1"),
+                   "MKL_NUM_THREADS": os.environ.get("MKL_NUM_THREADS", "1")}
 
 
 def timed_runs(cmd: list[str], runs: int, warmup: int = 2, cwd: str | None = None) -> tuple[list[float], list[float]]:
@@ -498,7 +501,8 @@ def parts_table(p: dict) -> list[str]:
         return [f"(parts: {p.get('error', 'not measured')})", ""] if p else []
     L = ["## Where the default run's time goes", "",
          "The default `imucal calibrate --data xsens_acc.mat --gravity 9.81744` (figures and report on), step by step "
-         "in one process (`bench_speed.py --child parts`), CPU time; the interpreter's own start (with this "
+         "in one process (`bench_speed.py --child parts`, one BLAS thread as the command runs), CPU time; numpy "
+         "is loaded before (in the floor `import numpy, casadi`) and the interpreter's own start (with this "
          "machine's site hooks) is the floor `python -c pass` above.", "",
          "| step | CPU [s] |", "|---|---|"]
     L += [f"| {k} | {v:.3f} |" for k, v in p["parts"].items()]
@@ -640,7 +644,7 @@ def main(argv: list[str] | None = None) -> int:
     if "parts" in only:
         print("parts ...", file=sys.stderr)
         p = subprocess.run([sys.executable, __file__, "--child", "parts", "--size", "0"], capture_output=True,
-                           text=True, cwd=ROOT, env=ENV)
+                           text=True, cwd=ROOT, env={**ENV, **ONE_BLAS_THREAD})  # as the imucal command runs
         r["parts"] = json.loads(p.stdout.strip().splitlines()[-1]) if p.returncode == 0 else {"error": p.stderr[-300:]}
     if "calibrate" in only:
         print("calibrate ...", file=sys.stderr)
