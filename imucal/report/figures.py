@@ -1,6 +1,8 @@
-"""Figures (matplotlib, PNG): residual per interval and interval directions on the sphere.
+"""The calibration's figures (PNG): the recording, |a| - g before and after, the residual per interval
+and the intervals' directions on the sphere.
 
-Plotting is kept apart from the maths; matplotlib is imported only when a figure is made.
+Plotting is kept apart from the maths; matplotlib is imported only when a figure is made, through
+imucal.report.canvas (fixed margins, no pyplot).
 """
 from __future__ import annotations
 
@@ -9,16 +11,22 @@ from pathlib import Path
 import numpy as np
 
 from imucal.pipeline import CalibrationRun
+from imucal.report.canvas import Margins, new_figure, plain_ticks, save_png
 from imucal.report.text import interval_residuals
 
 
 def _plt():
+    """pyplot on the Agg backend, for the figures drawn outside this module (fleet, discover, poses)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     return plt
+
+
+#: The residual and before/after figures' size [in]; the recording's width.
+WIDE, WIDE_H = 9.0, 4.2
 
 
 def plain(text: str) -> str:
@@ -29,10 +37,10 @@ def plain(text: str) -> str:
 
 
 def residual_figure(run: CalibrationRun, path: str | Path) -> None:
-    plt = _plt()
     res, iv = run.result, run.intervals
     r, s = interval_residuals(run)
-    fig, ax = plt.subplots(figsize=(9, 4.2), dpi=110)
+    fig, axes = new_figure(WIDE, WIDE_H)
+    ax = axes[0, 0]
     k = np.arange(iv.n)
     ax.errorbar(k, r * 1e3, yerr=None if np.isnan(s).all() else 2 * s * 1e3, fmt="o", ms=4, capsize=2,
                 label="|a| - g at interval mean (bars: 2 sigma)")
@@ -44,9 +52,7 @@ def residual_figure(run: CalibrationRun, path: str | Path) -> None:
     ax.set_title(f"Residual per interval ({plain(res.model_name)}, reduced chi-square {res.redchi:.3g})")
     ax.legend(loc="best", fontsize=8)
     ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, format="png")
-    plt.close(fig)
+    save_png(fig, path)
 
 
 def _polar_angle_map(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -57,16 +63,20 @@ def _polar_angle_map(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return ang * v[:, 0] / safe, ang * v[:, 1] / safe
 
 
+#: Two lines of figure title and two of each disk's title above the disks; the right disk's tick labels
+#: and y label between them.
+DIRECTIONS_MARGINS = Margins(top=1.05, wspace=0.3)
+
+
 def directions_figure(run: CalibrationRun, path: str | Path) -> None:
     """Gravity directions of the intervals, one disk per hemisphere: the distance from a disk's
     centre is the angle from the +z (left) or -z (right) sensor axis, in degrees. Every interval is
     numbered as in the report's tables; intervals in the same pose share a colour and a label."""
-    plt = _plt()
     d = run.directions
     labels = run.observability.labels
-    fig, axes = plt.subplots(1, 2, figsize=(10, 5.6), dpi=110)
+    fig, axes = new_figure(10, 5.6, DIRECTIONS_MARGINS, 1, 2)
     circ = np.linspace(0, 2 * np.pi, 200)
-    for ax, sign in ((axes[0], 1), (axes[1], -1)):
+    for ax, sign in ((axes[0, 0], 1), (axes[0, 1], -1)):
         sel = (d[:, 2] >= 0) if sign > 0 else (d[:, 2] < 0)
         v = d[sel] * np.array([1, 1, sign])
         x, y = _polar_angle_map(v)
@@ -96,9 +106,7 @@ def directions_figure(run: CalibrationRun, path: str | Path) -> None:
                  f"({run.intervals.n} intervals, {run.observability.n_distinct} distinct poses)\n"
                  "azimuthal equidistant projection of each hemisphere; numbers = interval # in the report, "
                  "colour = pose", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, format="png")
-    plt.close(fig)
+    save_png(fig, path)
 
 
 #: Points drawn per channel of the recording's time series (evenly spaced samples): a screen's width.
@@ -137,16 +145,19 @@ def _gyro_samples(run: CalibrationRun) -> np.ndarray | None:
                                           else run.config.base_dir / p))
 
 
+#: The panels share the time axis: little space between them.
+RECORDING_MARGINS = Margins(hspace=0.1)
+
+
 def recording_figure(run: CalibrationRun, path: str | Path) -> None:
     """The recording against time: calibrated acceleration (and angular rate, when the run calibrated a
     gyroscope), the still intervals shaded, the dropped and the gyro's turning ones marked."""
     from imucal.model.channels import covariate_values
 
-    plt = _plt()
     rec, cal, iv = run.recording, run.calibration, run.intervals
     gyro = _gyro_samples(run)
-    fig, axes = plt.subplots(2 if gyro is not None else 1, 1, figsize=(10, 5.6 if gyro is not None else 3.4),
-                             dpi=110, sharex=True, squeeze=False)
+    fig, axes = new_figure(10, 5.6 if gyro is not None else 3.4, RECORDING_MARGINS, 2 if gyro is not None else 1,
+                           sharex=True)
     panels = [(axes[0, 0], "acceleration [m/s^2]")] + ([(axes[1, 0], "angular rate [deg/s]")] if gyro is not None else [])
     if rec.raw is not None:  # (a file read in chunks keeps no samples: the spans alone)
         k = np.unique(np.linspace(0, rec.n - 1, min(rec.n, SERIES_POINTS)).astype(int))
@@ -166,9 +177,7 @@ def recording_figure(run: CalibrationRun, path: str | Path) -> None:
         ax.legend(loc="upper right", fontsize=7, ncol=6)
     axes[-1, 0].set_xlabel("time [s]")
     fig.suptitle(plain(f"{Path(rec.source).name}: {rec.n} samples, {iv.n} still intervals"), fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, format="png")
-    plt.close(fig)
+    save_png(fig, path)
 
 
 def before_after(run: CalibrationRun) -> tuple[np.ndarray, np.ndarray]:
@@ -182,26 +191,29 @@ def before_after(run: CalibrationRun) -> tuple[np.ndarray, np.ndarray]:
     return before, interval_residuals(run)[0]
 
 
+#: The legend sits below the x label.
+BEFORE_AFTER_MARGINS = Margins(bottom=0.95)
+
+
 def before_after_figure(run: CalibrationRun, path: str | Path) -> None:
     """|a| - g per pose before and after the calibration, on a scale linear near zero and logarithmic
     beyond (the two differ by orders of magnitude)."""
-    plt = _plt()
     before, after = before_after(run)
     k = np.arange(before.size)
-    fig, ax = plt.subplots(figsize=(9, 4.2), dpi=110)
+    fig, axes = new_figure(WIDE, WIDE_H, BEFORE_AFTER_MARGINS)
+    ax = axes[0, 0]
     ax.plot(k, before * 1e3, "s", ms=5, color="0.55", label="before: one offset and one scale for all axes")
     ax.plot(k, after * 1e3, "o", ms=5, color="tab:blue", label="after the calibration")
     rms = float(np.sqrt(np.mean(after**2))) * 1e3
     ax.set_yscale("symlog", linthresh=max(rms, 1e-6))
+    plain_ticks(ax)
     ax.axhline(0, color="k", lw=0.8)
     ax.set_xlabel("static interval, as numbered in the report [#]")
     ax.set_ylabel("|a| - g  [mm/s^2]")
     ax.set_title(f"|a| - g per pose: RMS {np.sqrt(np.mean(before**2)) * 1e3:.4g} mm/s^2 before, {rms:.3g} after")
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2, fontsize=8, frameon=False)
     ax.grid(alpha=0.3, which="both")
-    fig.tight_layout()
-    fig.savefig(path, format="png")
-    plt.close(fig)
+    save_png(fig, path)
 
 
 FIGURES = {"recording.png": recording_figure, "before_after.png": before_after_figure,
