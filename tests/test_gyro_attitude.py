@@ -83,6 +83,29 @@ def test_pruned_grid_search_is_the_grid_argmin(case) -> None:
         return float((steps.residuals(gyro_model(), free, np.r_[np.full(3, k), np.zeros(6)], pfix) ** 2).sum())
 
     grid = 10.0 ** np.arange(1, 5.01, 0.1)
-    brute = grid[int(np.argmin([cost(k) for k in grid]))]
+    costs = [cost(k) for k in grid]
+    brute = grid[int(np.argmin(costs))]
+    rows = np.vstack([np.tile(grid, (3, 1)), np.zeros((6, grid.size))])  # every scale in one pass, broadcast
+    np.testing.assert_allclose(steps.costs(gyro_model(), free, rows, pfix), costs, rtol=1e-12)
     assert _grid_argmin(steps, params, grid) == brute
     assert abs(np.log10(brute / 4770.0)) < 0.1  # and it found the true scale's basin
+
+
+def test_motion_evidence_integrates_once_per_point(case, monkeypatch) -> None:
+    """The fit asks for the residuals at a point twice before its Jacobian: the motions are integrated once."""
+    from imucal.gyro.attitude import SegmentSteps
+    from imucal.gyro.evidence import MotionEvidence
+
+    data, seg, st = case
+    params = _params(st, np.full(3, 4770.0))
+    ev = MotionEvidence(gyro_model(), params.free_names, _steps(data, seg), np.full(seg.n, 1e-3), 5.0)
+    calls = []
+    orig = SegmentSteps.residuals
+    monkeypatch.setattr(SegmentSteps, "residuals", lambda self, *a: calls.append(1) or orig(self, *a))
+    pfree = np.array([params[n].value for n in params.free_names])
+    first = ev.residuals(pfree, params.values())
+    assert np.array_equal(ev.residuals(pfree, params.values()), first) and len(calls) == 1
+    r, _ = ev.jacobian(pfree, params.values())
+    np.testing.assert_allclose(r, first, rtol=0, atol=1e-12)
+    ev.residuals(pfree * 1.001, params.values())
+    assert len(calls) == 2

@@ -190,10 +190,11 @@ class SegmentSteps:
         k = pfree.shape[1]
         gen = _generated(model, free)
         tile = (lambda v: np.tile(v, (1, k)))
-        rows = np.repeat(pfree, self.dt.shape[1], axis=1)
-        a = gen.increment(rows, pfix, tile(self.raw0), tile(self.raw1), tile(self.acc0), tile(self.acc1),
-                          tile(self.dt))[0]
-        P, _ = products(gen.product, a, self.layout.tiled(k))
+        steps = (lambda v: v[:, None, :])  # (m, 1, S) against the parameters' (nfree, k, 1): the
+        # description's instructions on the parameters alone (half the increment's) run k times, not k S
+        a = gen.increment(np.asarray(pfree, float)[:, :, None], pfix, steps(self.raw0), steps(self.raw1),
+                          steps(self.acc0), steps(self.acc1), steps(self.dt))[0]
+        P, _ = products(gen.product, a.reshape(4, -1), self.layout.tiled(k))  # column k S + s, as tiled
         r = gen.end(P, tile(self.u0), tile(self.u1))[0]
         return np.sum(r.reshape(3, k, self.n) ** 2, axis=(0, 2))
 

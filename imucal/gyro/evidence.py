@@ -32,11 +32,18 @@ class MotionEvidence(JacobianEvidence):
         self.dof = 2 * steps.n - self.n_free  # the residual's component along u1 is of second order
         self.min_angle_deg, self.source = float(min_angle_deg), source
 
+    _r_key: bytes | None = None
+    _r: np.ndarray = np.zeros(0)
+
     def residuals(self, pfree: np.ndarray, pfix: np.ndarray) -> np.ndarray:
+        """The residuals at a point, kept: the fit asks for them again at the point before its Jacobian."""
         key = np.asarray(pfree, float).tobytes() + np.asarray(pfix, float).tobytes()
         if self._key == key:
             return self._rj[0]
-        return self.steps.residuals(self.model, self.free, pfree, pfix).ravel()
+        if self._r_key != key:
+            self._r = self.steps.residuals(self.model, self.free, pfree, pfix).ravel()
+            self._r_key = key
+        return self._r
 
     def jacobian(self, pfree: np.ndarray, pfix: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         r, J = self.steps.jacobian(self.model, self.free, pfree, pfix)

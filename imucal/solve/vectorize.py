@@ -13,6 +13,7 @@ constants (``repr`` of floats): nothing user-supplied reaches it.
 """
 from __future__ import annotations
 
+import math
 from functools import lru_cache
 from typing import Callable, Sequence
 
@@ -73,12 +74,20 @@ def _constant(v: float) -> str:
     return repr(v)
 
 
+#: Rows evaluated at a time: each register of the generated code is then a 32 KB array that stays in
+#: the CPU's cache (17,860 rows of the gyroscope's 3,000-instruction tangent: 33 ms in one block,
+#: 21 ms in blocks of 4096; the same numbers, every operation being elementwise).
+ROW_BLOCK = 4096
+
+
 class Vectorized:
     """``f`` evaluated over N rows at once with numpy.
 
     Call with one array per input, shaped (nnz,) for inputs shared by every row or (nnz, N) for
     inputs that vary by row. Returns, per output, a dense array (numel, N) in CasADi's
-    column-major order (or (numel,) when no input varies by row).
+    column-major order (or (numel,) when no input varies by row). Inputs may also be (nnz, *shape)
+    with shapes that broadcast (say parameters (nnz, k, 1) against rows (nnz, 1, N)): every output is
+    then (numel, *broadcast shape), and an instruction on the parameters alone runs k times, not k N.
     """
 
     def __init__(self, f: ca.Function) -> None:
@@ -96,14 +105,29 @@ class Vectorized:
 
     def __call__(self, *args: np.ndarray | Sequence[float]) -> list[np.ndarray]:
         ins = [np.asarray(a, float) for a in args]
-        ins = [a if a.ndim == 2 else a.reshape(self._nnz_in[k]) for k, a in enumerate(ins)]
-        n = max((a.shape[1] for a in ins if a.ndim == 2), default=None)
+        ins = [a if a.ndim >= 2 else a.reshape(self._nnz_in[k]) for k, a in enumerate(ins)]
+        varying = [a.shape[1:] for a in ins if a.ndim >= 2]
+        if not varying:
+            return self._evaluate(ins, ())
+        shape = np.broadcast_shapes(*varying)
+        n, step = shape[-1], max(ROW_BLOCK // math.prod(shape[:-1]), 64)  # blocks of the last axis
+        if n <= step:
+            return self._evaluate(ins, shape)
+        outs = [np.empty((m,) + shape) for m in self._numel_out]
+        for s in range(0, n, step):
+            block = [a[..., s:s + step] if a.ndim >= 2 and a.shape[-1] > 1 else a for a in ins]
+            for out, part in zip(outs, self._evaluate(block, shape[:-1] + (min(step, n - s),))):
+                out[..., s:s + step] = part
+        return outs
+
+    def _evaluate(self, ins: list[np.ndarray], shape: tuple[int, ...]) -> list[np.ndarray]:
+        """The generated code on one block of rows; outputs (numel, *shape)."""
         with np.errstate(all="ignore"):
             raw = self._run(*[list(a) for a in ins])
         res = []
         for k, nz in enumerate(raw):
             rows, cols, n1 = self._dense[k]
-            out = np.zeros((self._numel_out[k],) + ((n,) if n is not None else ()))
+            out = np.zeros((self._numel_out[k],) + shape)
             for v, i, j in zip(nz, rows, cols):
                 out[i + j * n1] = v
             res.append(out)
