@@ -453,8 +453,8 @@ def calibrate_imu(config: RunConfig, recording: Recording | None = None,
     run = calibrate_accelerometer(config, recording)
     if gyro_file is None and getattr(run.recording, "gyro", None) is None:
         return run  # no gyroscope (a file read in chunks never has one)
-    from imucal.calibration.gyro import GyroCalibration  # here: 10 modules a run without a gyroscope skips
-    from imucal.gyro.fit import GyroOptions
+    from imucal.gyro.fit import GyroOptions  # here: 10 modules a run without a gyroscope skips
+    from imucal.gyro.result import calibrated
     from imucal.gyro.run import calibrate_gyro
     from imucal.report.gyro import gyro_warnings
 
@@ -462,5 +462,4 @@ def calibrate_imu(config: RunConfig, recording: Recording | None = None,
     if res is None:
         return run
     cal_fit = {**run.calibration.fit, "warnings": [*run.calibration.fit.get("warnings", []), *gyro_warnings(res)]}
-    return replace(run, gyro=res, calibration=replace(run.calibration, gyro=GyroCalibration.from_result(res),
-                                                      fit=cal_fit))
+    return replace(run, gyro=res, calibration=replace(run.calibration, attached=(calibrated(res),), fit=cal_fit))

@@ -29,7 +29,8 @@ sys.path.insert(0, str(ROOT))
 from imucal.analysis.plan_file import read_plan  # noqa: E402
 from imucal.analysis.simulate import load_simulation_config  # noqa: E402
 from imucal.calibration.frozen import load_calibration  # noqa: E402
-from imucal.calibration.gyro import GyroCalibration  # noqa: E402
+from imucal.calibration.gyro import from_arrays  # noqa: E402
+from imucal.calibration.section import to_section  # noqa: E402
 from imucal.config.run import load_config  # noqa: E402
 from imucal.export.kalibr import read_kalibr_yaml  # noqa: E402
 from imucal.files.output import write_text_atomic  # noqa: E402
@@ -84,9 +85,9 @@ def sample_files(tmp: Path) -> dict[str, tuple[Path, object]]:
     """One good file per reader, and the function that reads it."""
     cal = yaml.safe_load((ROOT / "tests" / "data" / "calibration_v1_before_rename.yaml").read_text())
     z = np.zeros(3)
-    g = GyroCalibration(unit="rad/s", bias=z, scale=np.ones(3), misalignment=np.eye(3), gsens=np.zeros((3, 3)),
+    g = from_arrays(unit="rad/s", bias=z, scale=np.ones(3), misalignment=np.eye(3), gsens=np.zeros((3, 3)),
                         std={"bias": z, "scale": z, "misalignment": np.zeros((3, 3)), "gsens": np.zeros((3, 3))})
-    cal = {**cal, "format_version": 2, "sensors": ["accelerometer", "gyroscope"], "gyroscope": g.to_dict()}
+    cal = {**cal, "format_version": 3, "sensors": ["accelerometer", "gyroscope"], "gyroscope": to_section(g)}
     files = {
         "run config (configs/xsens-mti-imutk.yaml)": (ROOT / "configs" / "xsens-mti-imutk.yaml", load_config),
         "simulation (configs/simulate_example.yaml)": (ROOT / "configs" / "simulate_example.yaml",

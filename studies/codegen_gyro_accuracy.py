@@ -8,7 +8,7 @@ gyroscope) is calibrated first. The C is generated in float and double, compiled
 -std=c99, loaded with ctypes and run on the recording's raw samples and on 10^5 random 16-bit
 vectors of both sensors. Reported: the operation count of NAME_apply_gyro, the max error of the
 rate against Python's double apply [rad/s], the a priori bound (imucal.export.codegen.
-gyro_float_error_bound with the accelerometer's bound carried through D, plus the rounding of
+affine_float_error_bound with the accelerometer's bound carried through D, plus the rounding of
 Python's double reference) and the largest
 error / bound over the samples, and the Cortex-M4F size of the functions when arm-none-eabi-gcc
 is installed. The table replaces the block between the markers in --out. Not a test.
@@ -31,7 +31,13 @@ sys.path.insert(0, str(ROOT))
 
 from imucal.calibration.frozen import load_calibration  # noqa: E402
 from imucal.calibration.frozen import Calibration  # noqa: E402
-from imucal.export.codegen import float_error_bound, generate_c, gyro_float_error_bound, write_c  # noqa: E402
+from imucal.export.codegen import float_error_bound, generate_c, affine_float_error_bound, write_c  # noqa: E402
+
+
+def _rate_map(g) -> tuple:
+    """(C, c, D) with omega = C raw + c - D a: the gyroscope's map through the one accessor (affine)."""
+    a = g.affine()
+    return a.A, a.c, -a.B
 
 DATA = ROOT / "data" / "xsens-mti-imutk"
 CFLAGS = ["-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-pedantic", "-fPIC", "-shared"]
@@ -73,8 +79,8 @@ def _python_rounding_acc(cal: Calibration, raw: np.ndarray) -> np.ndarray:
 
 def _python_rounding_gyro(cal: Calibration, raw_g: np.ndarray, acc: np.ndarray, acc_err: np.ndarray) -> np.ndarray:
     """Rounding of the reference's double rate, raw @ C.T + c - acc @ D.T, and of its acc through D."""
-    C, _, D = cal.gyro.rate_map()
-    return (6 * U53 * (np.abs(raw_g) @ np.abs(C).T + np.abs(C) @ np.abs(cal.gyro.bias) + np.abs(acc) @ np.abs(D).T)
+    C, _, D = _rate_map(cal.gyro)
+    return (6 * U53 * (np.abs(raw_g) @ np.abs(C).T + np.abs(C) @ np.abs(cal.gyro.forward().s) + np.abs(acc) @ np.abs(D).T)
             + acc_err @ np.abs(D).T)
 
 
@@ -111,8 +117,8 @@ def main(argv: list[str] | None = None) -> int:
                 acc_ref, omega_ref = cal.apply_imu(ra, rg)
                 err = np.abs(_apply_imu(lib, dtype, ra, rg) - omega_ref)
                 py_acc = _python_rounding_acc(cal, ra)
-                bound = (gyro_float_error_bound(cal.gyro, rg, acc_ref, prec,
-                                                acc_error=float_error_bound(cal, ra, prec) + py_acc)
+                bound = (affine_float_error_bound(cal.gyro, rg, acc_ref, prec,
+                                                input_error=float_error_bound(cal, ra, prec) + py_acc)
                          + _python_rounding_gyro(cal, rg, acc_ref, py_acc))
                 rows.append(f"| {prec} | {name} | {err.max():.2g} | {bound.max():.2g} | {(err / bound).max():.2f} |")
         sizes = ""
@@ -128,14 +134,14 @@ def main(argv: list[str] | None = None) -> int:
             sizes = (f"\n\nCortex-M4F ({version}, {' '.join(M4[1:6])}, float): imucal_apply_gyro "
                      f"{size['imucal_apply_gyro']} bytes, imucal_apply_imu {size['imucal_apply_imu']} bytes "
                      f"(two calls), imucal_apply_gyro_i16 {size['imucal_apply_gyro_i16']} bytes.")
-    uses = "with" if cal.gyro.uses_gsens else "without"
+    uses = "with" if cal.gyro.reads_inputs() else "without"
     block = "\n".join([
         BEGIN,
         f"Written by `studies/codegen_gyro_accuracy.py` (rerun it to refresh). Calibration: {what}, {uses} "
         "g-sensitivity.",
         f"NAME_apply_gyro: {ops}.",
         "Error: max over the samples and axes of |omega from NAME_apply_imu - Calibration.apply_imu| [rad/s]; "
-        "bound: the a priori bound of the C (gyro_float_error_bound, the accelerometer's float_error_bound "
+        "bound: the a priori bound of the C (affine_float_error_bound, the accelerometer's float_error_bound "
         "carried through D) plus the rounding of Python's own double apply (the same order as the C's in "
         "double); error / bound: the largest ratio over the samples and axes.",
         "",

@@ -101,13 +101,13 @@ def _dict(saved) -> dict:
     return yaml.safe_load(saved[1].read_text())
 
 
-@pytest.mark.parametrize("version", [3, 0, "1", 1.5, True, None])
+@pytest.mark.parametrize("version", [4, 0, "1", 1.5, True, None])
 def test_unknown_version_is_refused(saved, tmp_path, version):
     d = _dict(saved)
     d["format_version"] = version
     p = tmp_path / "v.yaml"
     p.write_text(yaml.safe_dump(d))
-    with pytest.raises(ImucalError, match=rf"unknown format version {version!r} \(this imucal reads versions 1, 2\)") \
+    with pytest.raises(ImucalError, match=rf"unknown format version {version!r} \(this imucal reads versions 1, 2, 3\)") \
             as ei:
         load_calibration(p)
     assert ei.value.field == "format_version" and str(ei.value).startswith(str(p))
@@ -117,7 +117,7 @@ def test_unknown_version_is_refused(saved, tmp_path, version):
 def test_version_1_files_still_load(saved, tmp_path):
     """A file as imucal wrote it before format version 2 (no sensor list) gives the same calibration."""
     d = _dict(saved)
-    assert d["format_version"] == 2 and d["sensors"] == ["accelerometer"]
+    assert d["format_version"] == 3 and d["sensors"] == ["accelerometer"]
     d["format_version"] = 1
     del d["sensors"]
     p = tmp_path / "v1.yaml"

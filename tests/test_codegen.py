@@ -709,7 +709,7 @@ def _delete(path: list):
 
 
 @pytest.mark.parametrize("edit, message", [
-    (_set(["format_version"], 99), "format_version: unknown format version 99 (this imucal reads versions 1, 2)"),
+    (_set(["format_version"], 99), "format_version: unknown format version 99 (this imucal reads versions 1, 2, 3)"),
     (_delete(["parameters", "theta"]), "parameters.theta: missing key 'theta'"),
     (_delete(["gravity"]), "gravity: missing key 'gravity'"),
     (_set(["parameters", "b2", "value"], -400.0), "parameters.b2.value: scale b2 = -400.0 must be positive"),

@@ -18,7 +18,7 @@ import yaml
 from imucal.analysis.simulate import mems_counts_sensor
 from imucal.calibration.frozen import load_calibration
 from imucal.export.arduino import arduino_files, sketch
-from imucal.export.codegen import float_error_bound, generate_c, gyro_float_error_bound
+from imucal.export.codegen import float_error_bound, generate_c, affine_float_error_bound
 from test_codegen import STRICT, EffectCalibration, TempBias, _truth_calibration
 from test_codegen_gyro import _gyro
 
@@ -63,7 +63,7 @@ def accel_cal(tmp_path_factory):
 def imu_cal(accel_cal, tmp_path_factory):
     """The same accelerometer with a gyroscope part (bias, scales, misalignment, g-sensitivity)."""
     path = tmp_path_factory.mktemp("ard") / "imu.yaml"
-    dataclasses.replace(accel_cal[0], gyro=_gyro(True)).save(path)
+    dataclasses.replace(accel_cal[0], attached=(_gyro(True),)).save(path)
     return load_calibration(path), path
 
 
@@ -183,7 +183,7 @@ def test_sketch_with_gyro_double(imu_cal, tmp_path, run_cli):
     out = _build_and_run(tmp_path / "board", "board", tmp_path, defines)
     acc_py, omega_py = cal.apply_imu(raw, raw_g)
     acc_bound = float_error_bound(cal, raw[None], "double")[0]
-    omega_bound = gyro_float_error_bound(cal.gyro, raw_g, acc_py, "double", acc_bound)[0]
+    omega_bound = affine_float_error_bound(cal.gyro, raw_g, acc_py, "double", acc_bound)[0]
     assert np.all(np.abs(_vector(out, "acc") - acc_py) <= acc_bound + PRINT_ROUNDING)
     assert np.all(np.abs(_vector(out, "omega") - omega_py) <= omega_bound + PRINT_ROUNDING)
     assert np.linalg.norm(omega_py) > 0.5  # rad/s: the gyro path is exercised

@@ -56,16 +56,16 @@ def calibration(tmp_path_factory) -> tuple[Calibration, Path]:
                             gyro_file=str(XSENS_GYRO))
         cal = run.calibration
     else:  # synthetic truth: same code shape
-        from imucal.calibration.gyro import GyroCalibration
+        from imucal.calibration.gyro import from_arrays
         from imucal.model.parameters import base_parameters
 
         z3, z33 = np.zeros(3), np.zeros((3, 3))
-        gyro = GyroCalibration(unit="raw", bias=np.array([12.0, -30.0, 7.5]), scale=np.array([940.0, 930.0, 945.0]),
+        gyro = from_arrays(unit="raw", bias=np.array([12.0, -30.0, 7.5]), scale=np.array([940.0, 930.0, 945.0]),
                                misalignment=np.array([[1, 0.01, -0.02], [0.015, 1, 0.005], [-0.01, 0.02, 1]]),
                                gsens=np.array([[1.0, 2, -3], [-2, 1.5, 4], [3, -1, 2.5]]) * 1e-4,
                                std={"bias": z3, "scale": z3, "misalignment": z33, "gsens": z33})
         cal = Calibration(params=base_parameters([30, -20, 10], [1670, 1680, 1660], [1.57, 1.56, 1.58]),
-                          std={}, gravity=9.80665, gyro=gyro)
+                          std={}, gravity=9.80665, attached=(gyro,))
     path = d / "calibration.yaml"
     cal.save(path)
     return load_calibration(path), d
@@ -197,7 +197,7 @@ def test_example_runs_on_qemu_mps2_an386_and_matches_python(calibration, tmp_pat
 @pytest.mark.skipif(QEMU is None, reason="qemu-system-arm not found (Debian: apt-get install qemu-system-arm)")
 def test_example_with_gyro_on_qemu_matches_host_and_python(calibration, tmp_path):
     """The example's gyro path on the target: imucal_apply then imucal_apply_gyro, as imucal_apply_imu."""
-    from imucal.export.codegen import float_error_bound, gyro_float_error_bound
+    from imucal.export.codegen import float_error_bound, affine_float_error_bound
 
     if not _rdimon():
         pytest.skip("newlib's rdimon.specs not found (Debian: apt-get install libnewlib-arm-none-eabi)")
@@ -235,5 +235,5 @@ def test_example_with_gyro_on_qemu_matches_host_and_python(calibration, tmp_path
     # the a priori bounds, with room for Python's own double rounding (1e-12 of the sums)
     acc_err = float_error_bound(cal, raw_a) + 1e-12 * (1 + np.abs(acc_ref))
     assert np.all(np.abs(out[:, :3] - acc_ref) <= acc_err)
-    bound = gyro_float_error_bound(cal.gyro, raw_g, acc_ref, "float", acc_error=acc_err) + 1e-12
+    bound = affine_float_error_bound(cal.gyro, raw_g, acc_ref, "float", input_error=acc_err) + 1e-12
     assert np.all(np.abs(out[:, 3:] - omega_ref) <= bound)

@@ -3,7 +3,7 @@ batch and integer forms, compiled strictly, loaded back and compared with ``Cali
 
 The calibrations: the Xsens MTi recording (accelerometer and gyroscope, g-sensitivity selected by
 the fit) and a synthetic signed 16-bit IMU with and without g-sensitivity. The comparison holds
-each sample to the a priori bound (``gyro_float_error_bound``, with the accelerometer's
+each sample to the a priori bound (``affine_float_error_bound``, with the accelerometer's
 ``float_error_bound`` carried through D for NAME_apply_imu) plus the rounding of Python's own
 double apply.
 
@@ -27,11 +27,12 @@ import pytest
 from conftest import real_file
 from imucal.calibration.frozen import load_calibration
 from imucal.calibration.frozen import Calibration
-from imucal.calibration.gyro import GyroCalibration
+from imucal.calibration.gyro import from_arrays
+from imucal.calibration.sensor import SensorCalibration
 from imucal.cli.main import main
 from imucal.errors import ImucalError
-from imucal.export.codegen import (apply_gyro_function, float_error_bound, generate_c,
-                                   gyro_float_error_bound, write_c)
+from imucal.export.codegen import (sensor_function, float_error_bound, generate_c,
+                                   affine_float_error_bound, write_c)
 from test_codegen import EMBEDDED, EXAMPLE, GCC, SANITIZE, STRICT, compile_shared, python_error_bound
 
 pytestmark = pytest.mark.skipif(GCC is None, reason="gcc not found: cannot compile generated C")
@@ -58,13 +59,13 @@ def xsens(tmp_path_factory):
     return load_calibration(path), path, raw_a, raw_g
 
 
-def _gyro(gsens: bool) -> GyroCalibration:
+def _gyro(gsens: bool) -> SensorCalibration:
     """A +-2000 deg/s 16-bit gyro (16.4 LSB per deg/s) with bias, scale errors, misalignment."""
     rng = np.random.default_rng(11)
     mis = np.eye(3) + np.where(np.eye(3) == 1, 0.0, rng.normal(0, 0.01, (3, 3)))
     G = rng.normal(0, 2e-4, (3, 3)) if gsens else np.zeros((3, 3))
     zero = {"bias": np.zeros(3), "scale": np.zeros(3), "misalignment": np.zeros((3, 3)), "gsens": np.zeros((3, 3))}
-    return GyroCalibration(unit="raw", bias=np.array([23.4, -57.1, 11.9]),
+    return from_arrays(unit="raw", bias=np.array([23.4, -57.1, 11.9]),
                            scale=16.4 * 180 / np.pi * np.array([1.01, 0.98, 1.005]), misalignment=mis,
                            gsens=G, std=zero, fit={"rms_direction_error_deg": {"before": 2.5, "after": 0.2}})
 
@@ -76,7 +77,7 @@ def synthetic(counts_run, tmp_path_factory) -> dict[str, Calibration]:
     out = {}
     for name, gs in (("gsens", True), ("plain", False)):
         p = d / f"{name}.yaml"
-        dataclasses.replace(counts_run.calibration, gyro=_gyro(gs)).save(p)
+        dataclasses.replace(counts_run.calibration, attached=(_gyro(gs),)).save(p)
         out[name] = load_calibration(p)
     return out
 
@@ -137,12 +138,18 @@ def xsens_libs(xsens, tmp_path_factory) -> dict[str, GyroLib]:
     return {prec: _build(cal, d / prec, "xs", prec, source=path) for prec in ("float", "double")}
 
 
+def _rate_map(g) -> tuple:
+    """(C, c, D) with omega = C raw + c - D a: the gyroscope's map through the one accessor (affine)."""
+    a = g.affine()
+    return a.A, a.c, -a.B
+
+
 # --- reference bounds -----------------------------------------------------------------------
 def python_gyro_bound(cal: Calibration, raw_g: np.ndarray, acc: np.ndarray, acc_error: np.ndarray) -> np.ndarray:
     """Rounding of Python's double apply_imu: raw @ C.T + c (c = -C s_g rounded) - acc @ D.T,
     plus what the error of Python's own acc does through D."""
-    C, _, D = cal.gyro.rate_map()
-    return (6 * U53 * (np.abs(raw_g) @ np.abs(C).T + np.abs(C) @ np.abs(cal.gyro.bias) + np.abs(acc) @ np.abs(D).T)
+    C, _, D = _rate_map(cal.gyro)
+    return (6 * U53 * (np.abs(raw_g) @ np.abs(C).T + np.abs(C) @ np.abs(cal.gyro.forward().s) + np.abs(acc) @ np.abs(D).T)
             + acc_error @ np.abs(D).T)
 
 
@@ -151,7 +158,7 @@ def imu_bound(cal: Calibration, raw_a: np.ndarray, raw_g: np.ndarray, acc_ref: n
     """|NAME_apply_imu's omega - Python's| <= the C's a priori bound + Python's rounding."""
     py_acc = python_error_bound(cal, raw_a)
     c_acc = float_error_bound(cal, raw_a, precision) + py_acc  # the C acc against Python's
-    return (gyro_float_error_bound(cal.gyro, raw_g, acc_ref, precision, acc_error=c_acc)
+    return (affine_float_error_bound(cal.gyro, raw_g, acc_ref, precision, input_error=c_acc)
             + python_gyro_bound(cal, raw_g, acc_ref, py_acc))
 
 
@@ -177,9 +184,9 @@ def test_gyro_kernel_is_straight_line_without_division_or_libm(xsens, synthetic)
             stripped = re.sub(r"(raw_g|acc|omega)\[\d\]", "", body)
             for banned in ("if", "for", "while", "?", "/", "sin", "cos", "sqrt", "malloc", "static", "["):
                 assert banned not in stripped.replace("/* inputs first: omega may alias them */", "").replace(
-                    "/* D = 0: no g-sensitivity */", ""), (name, banned)
+                    "/* B = 0: not read */", ""), (name, banned)
             assert ("acc[" in body) == (name != "plain")
-        f = apply_gyro_function(cal.gyro)
+        f = sensor_function(cal.gyro)
         ids = [f.instruction_id(i) for i in range(f.n_instructions())]
         assert set(ids) <= {ca.OP_MUL, ca.OP_ADD, ca.OP_SUB, ca.OP_CONST, ca.OP_INPUT, ca.OP_OUTPUT}
         assert ids.count(ca.OP_MUL) == mul
@@ -189,7 +196,7 @@ def test_casadi_kernel_is_pythons_apply(xsens):
     """The CasADi function (before any C) evaluates Python's GyroCalibration.apply."""
     cal, _, raw_a, raw_g = xsens
     acc, omega = cal.apply_imu(raw_a[::50], raw_g[::50])
-    got = np.asarray(apply_gyro_function(cal.gyro).map(acc.shape[0])(raw_g[::50].T, acc.T)).T
+    got = np.asarray(sensor_function(cal.gyro).map(acc.shape[0])(raw_g[::50].T, acc.T)).T
     np.testing.assert_allclose(got, omega, rtol=0, atol=1e-13)
 
 
@@ -219,7 +226,7 @@ def test_apply_imu_matches_python_within_the_a_priori_bound(xsens, xsens_libs, p
     acc_in = acc_ref.astype(lib.dtype).astype(float)
     omega = lib.gyro_batch(raw_g, acc_in).astype(float)
     e_in = np.abs(acc_in - acc_ref) + python_error_bound(cal, raw_a)
-    bound = (gyro_float_error_bound(cal.gyro, raw_g, acc_ref, precision, acc_error=e_in)
+    bound = (affine_float_error_bound(cal.gyro, raw_g, acc_ref, precision, input_error=e_in)
              + python_gyro_bound(cal, raw_g, acc_ref, python_error_bound(cal, raw_a)))
     assert np.all(np.abs(omega - omega_ref) <= bound)
 
@@ -228,11 +235,11 @@ def test_bound_is_not_vacuous(xsens):
     """The bound is a few float ULP of the rate, far below the calibration's own accuracy."""
     cal, _, raw_a, raw_g = xsens
     acc, omega = cal.apply_imu(raw_a, raw_g)
-    b = gyro_float_error_bound(cal.gyro, raw_g, acc, "float", acc_error=float_error_bound(cal, raw_a))
+    b = affine_float_error_bound(cal.gyro, raw_g, acc, "float", input_error=float_error_bound(cal, raw_a))
     assert b.max() < 2e-5  # rad/s; the recording turns at up to about 5 rad/s
     rest = np.abs(omega).max(axis=1) < 0.05
     assert rest.sum() > 10_000 and b[rest].max() < 1e-6  # the rounded bias u |C| |s_g|: 4e-7 rad/s
-    b_double = gyro_float_error_bound(cal.gyro, raw_g, acc, "double")
+    b_double = affine_float_error_bound(cal.gyro, raw_g, acc, "double")
     assert b_double.max() < 1e-13
 
 
@@ -280,13 +287,13 @@ def test_outputs_may_alias_inputs(xsens_libs, xsens):
 def test_without_g_sensitivity_acc_is_not_read(synthetic, tmp_path):
     cal = synthetic["plain"]
     gen = generate_c(cal, prefix="pl")
-    assert "#define PL_GYRO_USES_ACC 0" in gen.header and "no g-sensitivity, so D = 0" in gen.header
+    assert "#define PL_GYRO_USES_ACC 0" in gen.header and "B = 0: pl_apply_gyro does not read acc" in gen.header
     lib = _build(cal, tmp_path, "pl", "double")
     rng = np.random.default_rng(5)
     rg = rng.integers(-32768, 32768, (5000, 3)).astype(float)
     omega = lib.gyro_batch(rg, None)  # acc may be NULL
     ref = cal.gyro.apply(rg)
-    bound = gyro_float_error_bound(cal.gyro, rg, np.zeros_like(rg), "double") + python_gyro_bound(
+    bound = affine_float_error_bound(cal.gyro, rg, np.zeros_like(rg), "double") + python_gyro_bound(
         cal, rg, np.zeros_like(rg), np.zeros_like(rg))
     assert np.all(np.abs(omega - ref) <= bound)
     assert "#define IMUCAL_GYRO_USES_ACC 1" in generate_c(synthetic["gsens"]).header
@@ -310,11 +317,14 @@ def test_header_documents_units_frame_values_and_bound(xsens):
     cal, path, _, _ = xsens
     h = generate_c(cal, prefix="imucal", source=path).header
     flat = " ".join(h.replace("\n *", " ").split())
-    assert "omega = C (raw_g - s_g) - D a" in flat
+    assert "omega = A (raw_g - s) + B [ax, ay, az]" in flat
     assert "omega in [rad/s], in the same frame f as acc" in flat
-    assert f"s_g bias [{cal.gyro.unit}] = " + ", ".join(format(x, ".10g") for x in cal.gyro.bias) in flat
-    assert f"{cal.gyro.fit['rms_direction_error_deg']['after']:.3g} deg after calibration" in flat
-    assert "float arithmetic: |error| per axis <= 8u |C| |raw_g - s_g|" in flat
+    assert f"s [{cal.gyro.raw_unit}] = " + ", ".join(format(x, ".10g") for x in cal.gyro.forward().s) in flat
+    for n, p in cal.gyro.params.items():  # every parameter with its standard error and unit
+        assert f"{n} = {p.value:.10g} +/- {cal.gyro.std[n]:.2g} [{p.unit}]" in flat, n
+    d = cal.gyro.fit["rms_direction_error_deg"]
+    assert f"rms_direction_error_deg before {d['before']:.3g}, after {d['after']:.3g}" in flat
+    assert "float arithmetic: |error| per axis <= gamma |A| |raw_g - s| + u |A| |s| + gamma' |B| |inputs|" in flat
     for sig in ("void imucal_apply_gyro(const float raw_g[3], const float acc[3], float omega[3]);",
                 "void imucal_apply_imu(const float raw_a[3], const float raw_g[3], float acc[3], float omega[3]);",
                 "void imucal_apply_gyro_i16(const int16_t raw_g[3], const float acc[3], float omega[3]);",
@@ -357,7 +367,7 @@ def test_effects_with_covariates_give_apply_imu_cov(synthetic, tmp_path):
         assert np.allclose(acc, acc_ref[k], rtol=1e-12, atol=1e-12)
         got.append(omega.copy())
     acc_err = 1e-12 * (1 + np.abs(acc_ref))  # the effect model's C against Python's (asserted above)
-    bound = gyro_float_error_bound(cal.gyro, rg, acc_ref, "double", acc_error=acc_err) + python_gyro_bound(
+    bound = affine_float_error_bound(cal.gyro, rg, acc_ref, "double", input_error=acc_err) + python_gyro_bound(
         cal, rg, acc_ref, np.zeros_like(acc_ref))
     assert np.all(np.abs(np.array(got) - omega_ref) <= bound)
 
@@ -369,15 +379,15 @@ PWN = '2024 */ __attribute__((constructor)) static void pwn(void){system("id");}
 def test_gyro_text_fields_are_refused_or_sanitised(synthetic, tmp_path):
     cal = synthetic["gsens"]
     for unit in (PWN, "rad/s//x", "deg/s\n"):
-        bad = dataclasses.replace(cal, gyro=dataclasses.replace(cal.gyro, unit=unit))
+        bad = dataclasses.replace(cal, attached=(dataclasses.replace(cal.gyro, raw_unit=unit),))
         with pytest.raises(ImucalError, match=r"gyroscope.units.input: .* is not a unit \(letters, digits"):
             generate_c(bad)
     fit = {"rms_direction_error_deg": {"after": PWN, "before": "1e999 */"}, "chi2": PWN}
-    gen = generate_c(dataclasses.replace(cal, gyro=dataclasses.replace(cal.gyro, fit=fit)), prefix="tx")
+    gen = generate_c(dataclasses.replace(cal, attached=(dataclasses.replace(cal.gyro, fit=fit),)), prefix="tx")
     for text in gen.files.values():
         for marker in ("system(", "__attribute__", "pwn", "//"):
             assert marker not in text
-    assert "gravity-direction error over the motions n/a deg after calibration, n/a deg before" in gen.header
+    assert "rms_direction_error_deg" not in gen.header and "chi2" not in gen.header  # text, not numbers: left out
     for name, text in gen.files.items():
         (tmp_path / name).write_text(text)
     compile_shared(tmp_path, "tx")
@@ -443,7 +453,7 @@ def test_example_reads_gx_gy_gz_and_matches_the_library_and_python(xsens, xsens_
     acc_c = out[:, :3]  # from NAME_prepare + NAME_apply_coeffs (float parameters, float trig)
     ref = cal.gyro.apply(raw_g[:500], acc_c)  # the gyro on the acc the program used
     e_in = np.abs(acc_c) * 2.0**-24  # acc printed with 9 digits: within half a float ULP
-    bound = (gyro_float_error_bound(cal.gyro, raw_g[:500], acc_c, "float", acc_error=e_in)
+    bound = (affine_float_error_bound(cal.gyro, raw_g[:500], acc_c, "float", input_error=e_in)
              + python_gyro_bound(cal, raw_g[:500], acc_c, np.zeros_like(acc_c)))
     assert np.all(np.abs(out[:, 3:] - ref) <= bound)
 

@@ -14,7 +14,8 @@ import pytest
 import yaml
 
 from conftest import real_file
-from imucal.calibration.gyro import GyroCalibration
+from imucal.calibration.gyro import from_arrays
+from imucal.calibration.sensor import SensorCalibration
 from imucal.errors import ImucalError
 from imucal.export.formats import ExportOptions
 from imucal.export.peers import read_imutk_calib
@@ -38,23 +39,29 @@ def xsens():
     cfg = config_from_dict({"data": {"path": str(real_file(*ACC))}, "gravity": {"value": G_XSENS},
                             "static": {"window": 0.5, "min_duration": 1.5}})
     cal = calibrate_imu(cfg, gyro_file=str(real_file(*GYR))).calibration
-    assert cal.gyro is not None and cal.gyro.uses_gsens
+    assert cal.gyro is not None and cal.gyro.reads_inputs()
     raw_a = np.loadtxt(real_file(*ACC))[::50, 1:]
     raw_g = np.loadtxt(real_file(*GYR))[::50, 1:]
     return cal, raw_a, raw_g
 
 
-def gyro_part(unit: str = "rad/s", scale=(1.013, 0.987, 1.004), gsens: bool = True) -> GyroCalibration:
+def _rate_map(g) -> tuple:
+    """(C, c, D) with omega = C raw + c - D a: the gyroscope's map through the one accessor (affine)."""
+    a = g.affine()
+    return a.A, a.c, -a.B
+
+
+def gyro_part(unit: str = "rad/s", scale=(1.013, 0.987, 1.004), gsens: bool = True) -> SensorCalibration:
     """A misaligned gyroscope with a g-sensitivity, readings in ``unit``."""
     M = np.array([[1.0, 0.012, -0.02], [0.008, 1.0, 0.015], [-0.011, 0.025, 1.0]])
     G = np.array([[2e-4, -1e-4, 3e-4], [1e-4, 4e-4, -2e-4], [-3e-4, 2e-4, 1e-4]]) if gsens else np.zeros((3, 3))
     f = {"rad/s": 1.0, "deg/s": 180 / math.pi}.get(unit, 1000.0)
     vals = {"bias": np.array([0.02, -0.013, 0.007]) * f, "scale": np.array(scale) * f, "misalignment": M, "gsens": G}
-    return GyroCalibration(unit=unit, std={k: np.zeros_like(v) for k, v in vals.items()}, **vals)
+    return from_arrays(unit=unit, std={k: np.zeros_like(v) for k, v in vals.items()}, **vals)
 
 
-def with_gyro(g: GyroCalibration, angles=(1.556, 1.585, 1.562)):
-    return dataclasses.replace(synthetic(angles=angles), gyro=g)
+def with_gyro(g: SensorCalibration, angles=(1.556, 1.585, 1.562)):
+    return dataclasses.replace(synthetic(angles=angles), attached=(g,))
 
 
 # --- the peers' formulas, from their sources ---------------------------------------------------
@@ -126,7 +133,7 @@ def stated_gsens(text: str) -> tuple[float, float]:
 
 def raw_gyro(cal, omega: np.ndarray, acc: np.ndarray) -> np.ndarray:
     """Raw gyro readings that imucal calibrates to ``omega`` given the acceleration ``acc``."""
-    C, c, D = cal.gyro.rate_map()
+    C, c, D = _rate_map(cal.gyro)
     return np.linalg.solve(C, (omega - c + acc @ D.T).T).T
 
 
@@ -156,7 +163,7 @@ def test_madlab_gyro_fields_follow_their_convention(xsens):
     np.testing.assert_allclose(np.linalg.norm(d["R_g"], axis=1), 1.0, rtol=1e-12)  # unit rows, as Eq. 12 gives
     assert np.count_nonzero(np.array(d["K_g"]) - np.diag(np.diag(d["K_g"]))) == 0
     assert d["gyr_unit"] == "deg/s" and d["from_gyr_unit"] == "raw" and d["from_acc_unit"] == "raw"
-    np.testing.assert_array_equal(d["b_g"], xsens[0].gyro.bias)
+    np.testing.assert_array_equal(d["b_g"], xsens[0].gyro.forward().s)
 
 
 @pytest.mark.parametrize("scale", [(1.013, 0.987, 1.004), (1.013, 0.987, -1.004), (-1.0, 1.0, 1.0)])
@@ -226,8 +233,8 @@ def test_autopilot_gyro_error_is_the_stated_residual(xsens, fmt, which):
 def test_autopilot_gyro_offset_in_rad_per_s(fmt):
     """Readings already in rad/s or deg/s: k is exact, the offset is s_g in rad/s; an ideal gyro is held exactly."""
     for unit, k in (("rad/s", 1.0), ("deg/s", 180 / math.pi)):
-        g = gyro_part(unit, scale=(1.0, 1.0, 1.0), gsens=False)
-        g = dataclasses.replace(g, misalignment=np.eye(3), scale=np.full(3, k))
+        g = from_arrays(unit, bias=np.array([0.02, -0.013, 0.007]) * k, scale=np.full(3, k), misalignment=np.eye(3),
+                        gsens=np.zeros((3, 3)))
         cal = with_gyro(g, angles=(math.pi / 2,) * 3)  # orthogonal accelerometer axes: its frame is imucal's
         out = export(cal, fmt)
         w = unit_vectors(100, 6)
@@ -268,7 +275,7 @@ def test_gyro_round_trip(xsens, tmp_path, fmt, name):
     got = back.gyro.apply(raw_g, back.apply(raw_a))
     if fmt in ("ardupilot", "px4"):  # the offset s_g / k, exactly; nothing else
         k = stated_sensitivity(out.text)
-        np.testing.assert_allclose(back.gyro.o, cal.gyro.bias / k, rtol=1e-12)
+        np.testing.assert_allclose(back.gyro.o, cal.gyro.forward().s / k, rtol=1e-12)
         assert np.all(back.gyro.C == np.eye(3)) and np.all(back.gyro.D == 0)
     elif fmt == "imutk":  # all but G_s
         np.testing.assert_allclose(got, cal.gyro.apply(raw_g, np.zeros_like(acc)), rtol=1e-9, atol=1e-9)
@@ -300,7 +307,7 @@ def test_cli_imutk_writes_both_files(xsens, xsens_file, run_cli, tmp_path, uncha
     assert r.code == 0, r.err
     assert f"wrote {tmp_path / 'acc_gyro.calib'}" in r.out and "G_s leaves a rate error" in r.out
     back = read_imutk_calib(tmp_path / "acc.calib", tmp_path / "acc_gyro.calib")
-    np.testing.assert_allclose(back.gyro.o, xsens[0].gyro.bias, rtol=1e-12)
+    np.testing.assert_allclose(back.gyro.o, xsens[0].gyro.forward().s, rtol=1e-12)
     with unchanged():  # the gyro file would overwrite the calibration: nothing is written
         r = run_cli(["export", xsens_file, "--format", "imutk", "--out", tmp_path / "new.calib",
                      "--gyro-out", xsens_file])

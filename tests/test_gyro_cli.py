@@ -34,9 +34,10 @@ def test_two_files_calibrate_both_sensors(two_files_run):
     assert g["fit"]["status"] == "Solve_Succeeded" and g["fit"]["n_segments"] >= 30
     assert all(s > 0 for s in g["std"]["scale"])
     f = yaml.safe_load((d / "o" / "calibration.yaml").read_text())
-    assert f["format_version"] == 2 and f["sensors"] == ["accelerometer", "gyroscope"]
+    assert f["format_version"] == 3 and f["sensors"] == ["accelerometer", "gyroscope"]
     assert f["gyroscope"]["kind"] == "gyroscope" and not (d / "o" / "gyro.yaml").exists()
-    np.testing.assert_allclose(f["gyroscope"]["parameters"]["scale"], g["scale"], rtol=1e-12)
+    scale = [f["gyroscope"]["parameters"][f"scale_{a}"]["value"] for a in "xyz"]
+    np.testing.assert_allclose(scale, g["scale"], rtol=1e-12)
     assert "[[Gyroscope]]" in (d / "o" / "report.txt").read_text()
 
 
@@ -167,8 +168,14 @@ def test_apply_interpolates_a_gyro_at_another_rate(two_files_run, run_cli, tmp_p
 @pytest.mark.parametrize("edit, field", [
     (lambda g: g["apply"]["matrix"][0].__setitem__(0, g["apply"]["matrix"][0][0] * 1.001), "gyroscope.apply.matrix"),
     (lambda g: g.__setitem__("kind", "magnetometer"), "gyroscope.kind"),
-    (lambda g: g["parameters"].__setitem__("scale", [1.0, float("nan"), 1.0]), "gyroscope.parameters.scale[1]"),
-    (lambda g: g["parameters"].__setitem__("bias", [1.0, 2.0]), "gyroscope.parameters.bias"),
+    (lambda g: g["parameters"]["scale_y"].__setitem__("value", float("nan")), "gyroscope.parameters.scale_y.value"),
+    (lambda g: g["parameters"].pop("bias_z"), "gyroscope.parameters.bias_z"),
+    (lambda g: g["parameters"]["m_xy"].__setitem__("unit", "1 */ int x; /*"), "gyroscope.parameters.m_xy.unit"),
+    (lambda g: g["parameters"].__setitem__("m_xx", g["parameters"]["m_xy"]), "gyroscope.parameters"),
+    (lambda g: g["parameters"]["scale_x"].__setitem__("value", 0.0), "gyroscope.parameters"),
+    (lambda g: g["apply"]["input_matrix"][2].__setitem__(1, 1e-3), "gyroscope.apply.input_matrix"),
+    (lambda g: g.__setitem__("model", "gyro-other"), "gyroscope.model"),
+    (lambda g: g["units"].__setitem__("output", "deg/s"), "gyroscope.units.output"),
     (lambda g: g["units"].__setitem__("input", "rad/s */ int x; /*"), "gyroscope.units.input"),
 ])
 def test_an_edited_gyro_section_is_refused(two_files_run, tmp_path, edit, field):

@@ -13,7 +13,8 @@ import pytest
 import yaml
 
 from imucal.calibration.frozen import load_calibration
-from imucal.calibration.gyro import GyroCalibration
+from imucal.calibration.gyro import from_arrays
+from imucal.calibration.section import to_section
 from imucal.config.run import RunConfig, config_from_dict
 from imucal.errors import ImucalError
 from imucal.files.schema import fill, keys, rule
@@ -128,13 +129,18 @@ KALIBR = {"model": "scale-misalignment", "accelerometers": {"M": [[400.0, 0.0, 0
           "imucal_accelerometer_offset": [1.0, 2.0, 3.0]}
 
 
+def _gyro_calibration_v2() -> dict:
+    """A version-2 file with both sensors, as imucal wrote it before issue 26 (tests/data)."""
+    return yaml.safe_load((Path(__file__).parent / "data" / "calibration_v2_xsens_gyro.yaml").read_text())
+
+
 def _gyro_calibration() -> dict:
-    """The v1 test calibration with an identity gyroscope added (a version-2 file with both sensors)."""
+    """The v1 test calibration with an identity gyroscope added (a version-3 file with both sensors)."""
     d = yaml.safe_load(V1_CALIBRATION.read_text())
     z = np.zeros(3)
-    g = GyroCalibration(unit="rad/s", bias=z, scale=np.ones(3), misalignment=np.eye(3), gsens=np.zeros((3, 3)),
+    g = from_arrays(unit="rad/s", bias=z, scale=np.ones(3), misalignment=np.eye(3), gsens=np.zeros((3, 3)),
                         std={"bias": z, "scale": z, "misalignment": np.zeros((3, 3)), "gsens": np.zeros((3, 3))})
-    return {**d, "format_version": 2, "sensors": ["accelerometer", "gyroscope"], "gyroscope": g.to_dict()}
+    return {**d, "format_version": 3, "sensors": ["accelerometer", "gyroscope"], "gyroscope": to_section(g)}
 
 
 #: reader -> (file name, the good mapping, write(mapping) -> text, command line given the file and tmp)
@@ -147,8 +153,10 @@ READERS: dict[str, tuple[str, Callable[[], Any], Callable[[Any], str], Callable[
              lambda f, tmp: ["plan-poses", "--evaluate", f, "--no-compare"]),
     "calibration v1": ("cal.yaml", lambda: yaml.safe_load(V1_CALIBRATION.read_text()), yaml.safe_dump,
                        lambda f, tmp: ["apply", f, "--data", tmp / "never.csv", "--out", tmp / "a.csv"]),
-    "calibration v2 gyroscope": ("cal.yaml", _gyro_calibration, yaml.safe_dump,
+    "calibration v2 gyroscope": ("cal.yaml", _gyro_calibration_v2, yaml.safe_dump,
                                  lambda f, tmp: ["apply", f, "--data", tmp / "never.csv", "--out", tmp / "a.csv"]),
+    "calibration v3 sensor section": ("cal.yaml", _gyro_calibration, yaml.safe_dump,
+                                      lambda f, tmp: ["apply", f, "--data", tmp / "never.csv", "--out", tmp / "a.csv"]),
     "fleet manifest": ("fleet.yaml", lambda: {"units": [{"id": "U1", "data": "a.csv"}], "tolerances": {}},
                        yaml.safe_dump, lambda f, tmp: ["batch", f, "--out", tmp / "b"]),
     "kalibr imu.yaml": ("imu.yaml", lambda: copy.deepcopy(KALIBR), yaml.safe_dump,
@@ -214,6 +222,15 @@ BAD = {
          "scale is not finite (nan)"),
         ("missing required", "gyroscope.units", _DELETE, "gyroscope.units", "missing section 'units'"),
     ],
+    "calibration v3 sensor section": [
+        ("wrong type", "gyroscope.parameters.bias_x", "zero", "gyroscope.parameters.bias_x", "must be a mapping"),
+        ("unknown key", "gyroscope.colour", "red", "gyroscope.colour", "unknown key 'colour'"),
+        ("bool for number", "gyroscope.parameters.scale_x.value", True, "gyroscope.parameters.scale_x.value",
+         "True is not a number"),
+        ("NaN", "gyroscope.parameters.scale_y.value", float("nan"), "gyroscope.parameters.scale_y.value",
+         "value is not finite (nan)"),
+        ("missing required", "gyroscope.units", _DELETE, "gyroscope.units", "missing section 'units'"),
+    ],
     "fleet manifest": [
         ("wrong type", "units", 5, "units", "units must be a list or a CSV file name, got 5"),
         ("unknown key", "unit", [], "unit", "unknown key 'unit'"),
@@ -267,6 +284,7 @@ def test_the_good_file_of_each_reader_passes_its_schema(reader: str, tmp_path: P
     read = {"run config": lambda: config_from_dict(yaml.safe_load(p.read_text()), str(p)),
             "simulation": lambda: load_simulation_config(str(p)), "plan": lambda: read_plan(str(p)),
             "calibration v1": lambda: load_calibration(p), "calibration v2 gyroscope": lambda: load_calibration(p),
+            "calibration v3 sensor section": lambda: load_calibration(p),
             "fleet manifest": lambda: manifest_from_dict(yaml.safe_load(p.read_text()), str(p)),
             "kalibr imu.yaml": lambda: read_kalibr_yaml(p), "mad-lab-fau/imucal JSON": lambda: read_peer(p, "madlab"),
             "imucal matrix JSON": lambda: read_peer(p, "matrix")}[reader]

@@ -1,4 +1,8 @@
-"""The calibration file: YAML, format version 2 (version 1 still read), validated on load.
+"""The calibration file: YAML, format version 3 (versions 1 and 2 still read), validated on load.
+
+Version 3 (issue 26): the accelerometer at the top level as before, and one section per other sensor
+(``gyroscope:``), written and read by the one generic section of imucal.calibration.section from the
+sensor's Parameters; version 2's gyroscope section (plain arrays) is read by imucal.calibration.gyro.
 
 Below the Calibration it stores (imucal.calibration.frozen builds, saves and loads one through
 this module): ``to_dict``/``save`` read a calibration's fields, ``read_mapping`` validates a file's
@@ -22,6 +26,9 @@ import numpy as np
 
 from imucal.calibration.fields import (ACCELEROMETER, DATE_PATTERN, GYROSCOPE, NAME_PATTERN, SHA256_PATTERN,
                                       VERSION_PATTERN, check_raw_unit, check_unit)
+from imucal.calibration.section import ParameterEntry, from_section, parameter_entries, read_parameters, to_section
+from imucal.calibration.sensor import SensorCalibration
+from imucal.model.registry import DESCRIPTIONS, KINDS
 from imucal.constants import SI_ACCEL_UNIT
 from imucal.errors import ImucalError, short
 from imucal.files.output import write_text_atomic
@@ -31,16 +38,16 @@ from imucal.model.geometry import gram_det_np
 from imucal.model.channels import TEMPERATURE, TIME
 from imucal.model.parameters import ANGLE_NAMES, BASE_NAMES, Parameter, Parameters, model_label
 
-if TYPE_CHECKING:  # the gyroscope's modules load only for a file that has one (docs/architecture.md)
+if TYPE_CHECKING:
     from imucal.calibration.frozen import Calibration
-    from imucal.calibration.gyro import GyroCalibration
 
 
 FORMAT = "imucal-calibration"
-FORMAT_VERSION = 2
-#: Versions this imucal reads: 1 (accelerometer only, no sensor list) and 2 (``sensors`` lists the
-#: kinds the file holds; a ``gyroscope`` section when it has one).
-READABLE_VERSIONS = (1, 2)
+FORMAT_VERSION = 3
+#: Versions this imucal reads: 1 (accelerometer only, no sensor list), 2 (``sensors`` lists the
+#: kinds the file holds; a ``gyroscope`` section of plain arrays when it has one) and 3 (one section per
+#: sensor beside the accelerometer, from its Parameters: imucal.calibration.section).
+READABLE_VERSIONS = (1, 2, 3)
 #: Relative disagreement between apply.matrix/offset and the parameters' map that counts as an
 #: edit rather than round-off (the file stores floats with repr, so a true file agrees exactly).
 DERIVED_RTOL = 1e-9
@@ -67,17 +74,13 @@ def to_dict(cal: "Calibration") -> dict[str, Any]:
                   "time": TIME.unit, "temperature": TEMPERATURE.unit, "gravity": SI_ACCEL_UNIT},
         "output_frame": OUTPUT_FRAME,
         "gravity": float(cal.gravity),
-        "parameters": {
-            n: {"value": float(p.value), "std": _f(cal.std.get(n, float("nan"))), "unit": p.unit,
-                "lower": _f(p.lower), "upper": _f(p.upper), "fixed": bool(p.fixed),
-                "solver_scale": float(p.scale)}  # IPOPT's scaling magnitude, not b1..b3
-            for n, p in cal.params.items()},
+        "parameters": parameter_entries(cal.params, cal.std),
         "apply": {"matrix": A.tolist(), "offset": c.tolist(), "equation": cal.equation},
         "fit": dict(cal.fit),
         "data": dict(cal.data),
         "software": {"name": "imucal", "version": cal.software_version},
         "created": cal.created,
-        **({"gyroscope": cal.gyro.to_dict()} if cal.gyro is not None else {}),
+        **{s.kind: to_section(s) for s in cal.attached},
     }
 
 
@@ -96,20 +99,6 @@ _NUMBER = rule(msg="{value} is not a number", fix=REGEN)
 _BOUND = rule(msg="{value} is not a number", allow_inf=True, fix=REGEN)
 #: A standard error: not negative (null when undetermined, .inf when unbounded).
 _STD = rule(ge=0, allow_inf=True, msg="{value} is not a standard error (a number >= 0, or null)", fix=REGEN)
-
-
-@dataclass(frozen=True)
-class ParameterEntry:
-    """One entry of ``parameters:``; ``scale`` is ``solver_scale``'s name in files before the rename."""
-
-    value: float = field(metadata=_NUMBER)
-    std: float | None = field(default=None, metadata=_STD)  #: null: not determined
-    unit: str = field(default="", metadata=rule(msg="{value} is not text", fix=REGEN))
-    lower: float | None = field(default=None, metadata=_BOUND)
-    upper: float | None = field(default=None, metadata=_BOUND)
-    fixed: bool = field(default=False, metadata=rule(msg="{value} is not true or false"))
-    solver_scale: float | None = field(default=None, metadata=_NUMBER)
-    scale: float | None = field(default=None, metadata=_NUMBER)
 
 
 @dataclass(frozen=True)
@@ -149,7 +138,7 @@ class CalibrationFile:
 
     format: Literal["imucal-calibration"] = field(metadata=rule(
         msg=f"format {{value}} is not {FORMAT!r}", fix="pass a calibration.yaml written by `imucal calibrate`"))
-    format_version: Literal[1, 2] = field(metadata=rule(
+    format_version: Literal[1, 2, 3] = field(metadata=rule(
         msg="unknown format version {value} (this imucal reads versions "
             f"{', '.join(map(str, READABLE_VERSIONS))})", fix="regenerate the file with this imucal or upgrade imucal"))
     parameters: Mapping[str, ParameterEntry] = field(metadata=rule(fix=REGEN))
@@ -165,37 +154,26 @@ class CalibrationFile:
     apply: Any = None
     fit: Mapping[str, Any] = field(default_factory=dict, metadata=rule(fix=REGEN))
     data: Mapping[str, Any] = field(default_factory=dict, metadata=rule(fix=REGEN))
-    gyroscope: Any = None  #: GyroSection (imucal.calibration.gyro)
+    #: the other sensors' sections by kind (imucal.model.registry), read by imucal.calibration.section
+    #: (version 3) or imucal.calibration.gyro (version 2)
+    sections: Mapping[str, Any] = field(default_factory=dict)
 
     @classmethod
     def schema_input(cls, raw: Any) -> Any:
-        """YAML reads an unquoted timestamp as a datetime: the text it was."""
-        if isinstance(raw, Mapping) and isinstance(raw.get("created"), _dt.datetime):
-            return {**raw, "created": raw["created"].isoformat()}
-        return raw
+        """YAML reads an unquoted timestamp as a datetime: the text it was. The sensors' sections, each
+        under its kind's name, are gathered into ``sections``."""
+        if not isinstance(raw, Mapping):
+            return raw
+        out = {k: v for k, v in raw.items() if k not in DESCRIPTIONS and k != "sections"}
+        if isinstance(raw.get("created"), _dt.datetime):
+            out["created"] = raw["created"].isoformat()
+        kinds = {k: v for k, v in raw.items() if k in DESCRIPTIONS}
+        return {**out, "sections": kinds} if kinds or "sections" in raw else out
 
 
 def _parameters(entries: Mapping[str, ParameterEntry], path: str) -> tuple[Parameters, dict[str, float]]:
     """The base parameters first, then each effect's in file order."""
-    plist: list[Parameter] = []
-    std: dict[str, float] = {}
-    for n in list(BASE_NAMES) + [n for n in entries if n not in BASE_NAMES]:
-        if n not in entries:
-            raise ImucalError(f"missing key {n!r}", file=path, field=f"parameters.{n}", fix=REGEN)
-        e, where = entries[n], f"parameters.{n}."
-        if e.solver_scale is not None and e.scale is not None:
-            raise ImucalError("has both solver_scale and its old name scale", file=path, field=where + "scale",
-                              fix="keep only solver_scale")
-        key = "scale" if e.scale is not None else "solver_scale"
-        try:
-            plist.append(Parameter(n, float(e.value), lower=-math.inf if e.lower is None else float(e.lower),
-                                   upper=math.inf if e.upper is None else float(e.upper), unit=e.unit,
-                                   fixed=e.fixed, scale=float(getattr(e, key) or 1.0)))
-        except ImucalError as exc:
-            field_ = where + key if exc.field and exc.field.endswith(".scale") else exc.field
-            raise ImucalError(exc.message, file=path, field=field_, fix=exc.fix) from None
-        std[n] = math.nan if e.std is None else float(e.std)
-    return Parameters(plist), std
+    return read_parameters(entries, tuple(BASE_NAMES) + tuple(n for n in entries if n not in BASE_NAMES), path)
 
 
 @dataclass(frozen=True)
@@ -219,7 +197,7 @@ def read_mapping(d: Mapping[str, Any], path: str = "<calibration>") -> FileConte
     effects = tuple((e.name, tuple("xyz".index(a) for a in e.axes)) for e in f.effects)
     values = dict(params=params, std=std, gravity=float(f.gravity), raw_unit=f.units.input, effects=effects,
                   fit=dict(f.fit), data=dict(f.data), created=f.created, software_version=f.software.version,
-                  gyro=_gyro_section(f, path))
+                  attached=_attached(f, path))
     return FileContent(values, f.model, f.apply)
 
 
@@ -256,22 +234,28 @@ def _check_parameter_names(cal: "Calibration", path: str) -> None:
                           field="parameters", fix=REGEN)
 
 
-def _gyro_section(f: CalibrationFile, path: str) -> GyroCalibration | None:
-    """The gyroscope part of a version-2 file; ``sensors`` must list exactly what the file holds."""
+def _attached(f: CalibrationFile, path: str) -> tuple[SensorCalibration, ...]:
+    """The sensors beside the accelerometer: version 3's sections (imucal.calibration.section), version 2's
+    gyroscope section (imucal.calibration.gyro); ``sensors`` must list exactly what the file holds."""
     if f.format_version == 1:
-        if f.gyroscope is not None or f.sensors is not None:
+        if f.sections or f.sensors is not None:
             raise ImucalError("version 1 files hold an accelerometer only", file=path, field="format_version",
-                              fix="write format_version: 2 for a file with sensors and a gyroscope section")
-        return None
-    want = (ACCELEROMETER,) + ((GYROSCOPE,) if f.gyroscope is not None else ())
+                              fix="write format_version: 3 for a file with sensors and their sections")
+        return ()
+    want = tuple(k for k in KINDS if k == ACCELEROMETER or k in f.sections)
     if f.sensors != want:
         raise ImucalError(f"{short(list(f.sensors or ()))} does not list the file's sensors {list(want)}", file=path,
                           field="sensors", fix=REGEN)
-    if f.gyroscope is None:
-        return None
-    from imucal.calibration.gyro import GyroCalibration  # measured start-up: only a file with a gyroscope
+    if f.format_version == 2:
+        if set(f.sections) - {GYROSCOPE}:
+            raise ImucalError(f"version 2 files hold no {sorted(set(f.sections) - {GYROSCOPE})[0]}", file=path,
+                              field="format_version", fix="write format_version: 3")
+        if GYROSCOPE not in f.sections:
+            return ()
+        from imucal.calibration.gyro import read_v2  # only a version-2 file with a gyroscope
 
-    return GyroCalibration.from_dict(f.gyroscope, path)
+        return (read_v2(f.sections[GYROSCOPE], path),)
+    return tuple(from_section(k, f.sections[k], path) for k in want[1:])
 
 
 def check_text_fields(cal: "Calibration", path: str = "<calibration>") -> None:
@@ -295,8 +279,8 @@ def check_text_fields(cal: "Calibration", path: str = "<calibration>") -> None:
         if not NAME_PATTERN.match(n):
             raise bad("parameters", n, "a parameter name", regen)
         check_unit(p.unit, f"parameters.{n}.unit", path, regen)
-    if cal.gyro is not None:
-        check_unit(cal.gyro.unit, "gyroscope.units.input", path, "write e.g. rad/s, deg/s or counts")
+    for other in cal.attached:
+        check_raw_unit(other.raw_unit, f"{other.kind}.units.input", path, "write e.g. rad/s, deg/s or counts")
     for name, _ in cal.effects:
         if not NAME_PATTERN.match(name):
             raise bad("effects", name, "an effect name", regen)

@@ -1,29 +1,28 @@
-"""A frozen calibration: values plus the apply map (saving and loading: imucal.calibration.fileformat).
+"""A frozen calibration: the accelerometer, and every sensor calibrated in its frame (saving and loading:
+imucal.calibration.fileformat).
 
-The apply map is the Theorem: a_orth = E^-T diag(1/b) (raw - s) = A raw + c, with A lower
+The accelerometer's apply map is the Theorem: a_orth = E^-T diag(1/b) (raw - s) = A raw + c, with A lower
 triangular (structural zeros above the diagonal). Effects, when present, make A and c depend
-on covariates (temperature, time) and the map is evaluated through the CasADi model.
+on covariates (temperature, time). Every sensor's map, the accelerometer's included, is evaluated by
+numpy generated from its description's CasADi ``apply`` (imucal.calibration.sensor); the other sensors
+(the gyroscope) are ``attached``, each a SensorCalibration read through that one value.
 """
 from __future__ import annotations
 
 import datetime as _dt
 import os
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Mapping
+from typing import Any, Mapping
 
 import numpy as np
 
 from imucal import __version__
 from imucal.calibration import fileformat
-from imucal.calibration.fields import ACCELEROMETER, GYROSCOPE
+from imucal.calibration.sensor import SensorCalibration, apply_sensors
 from imucal.errors import ImucalError
 from imucal.model.parameters import BASE_NAMES, Parameters
-from imucal.model.sensor import SensorModel, build_model
+from imucal.model.sensor import ACCELEROMETER, GYROSCOPE, SensorModel, build_model
 from imucal.model.effects import make_effect
-
-if TYPE_CHECKING:  # the gyroscope's modules load only for a file or run that has one (docs/architecture.md)
-    from imucal.calibration.gyro import GyroCalibration
-
 
 
 @dataclass(frozen=True)
@@ -39,12 +38,32 @@ class Calibration:
     data: Mapping[str, Any] = field(default_factory=dict)  #: file name, sha256
     created: str = ""
     software_version: str = __version__
-    gyro: GyroCalibration | None = None  #: the gyroscope part, in the same output frame
+    #: the other sensors calibrated in the accelerometer's output frame (the gyroscope), in KINDS order
+    attached: tuple[SensorCalibration, ...] = ()
 
     @property
     def sensors(self) -> tuple[str, ...]:
         """The sensor kinds this calibration holds."""
-        return (ACCELEROMETER,) + ((GYROSCOPE,) if self.gyro is not None else ())
+        return (ACCELEROMETER,) + tuple(s.kind for s in self.attached)
+
+    @property
+    def accelerometer(self) -> SensorCalibration:
+        """The accelerometer as one calibrated sensor (its description, parameters, standard errors, fit)."""
+        return SensorCalibration(self.model, self.params, self.std, self.raw_unit, self.fit)
+
+    @property
+    def all_sensors(self) -> tuple[SensorCalibration, ...]:
+        """Every sensor, the accelerometer first."""
+        return (self.accelerometer, *self.attached)
+
+    def sensor(self, kind: str) -> SensorCalibration | None:
+        """The sensor ``kind``, or None when this calibration has none."""
+        return next((s for s in self.all_sensors if s.kind == kind), None)
+
+    @property
+    def gyro(self) -> SensorCalibration | None:
+        """The gyroscope, or None."""
+        return self.sensor(GYROSCOPE)
 
     # --- the model -------------------------------------------------------------------------
     @property
@@ -103,11 +122,6 @@ class Calibration:
             return self.apply(raw[None, :], covariates)[0]
         if raw.ndim != 2 or raw.shape[1] != 3:
             raise ImucalError(f"raw data must have shape (N, 3) or (3,), got {raw.shape}", field="raw")
-        if not self.effects:
-            A, c = self.linear_map()
-            out = (A @ raw.T).T  # one BLAS call; half the peak memory of raw @ A.T + c
-            out += c
-            return out
         covs = self.covariates
         covariates = covariates or {}
         missing = [c for c in covs if c not in covariates]
@@ -117,9 +131,19 @@ class Calibration:
         n = raw.shape[0]
         C = np.column_stack([np.broadcast_to(np.asarray(covariates[c], float), (n,)) for c in covs]) if covs \
             else np.zeros((n, 0))  # effects without covariates (scale_nonlinearity)
-        # Serial map: CasADi's "thread" map aborts the process for large n (one thread per call).
-        f = self.model.accel.map(n, "serial")
-        return np.asarray(f(raw.T, C.T, self.values)).T
+        return self.accelerometer.apply(raw, C)
+
+    def apply_all(self, raw: Mapping[str, np.ndarray | None], covariates: Mapping[str, np.ndarray] | None = None,
+                  acc: np.ndarray | None = None) -> dict[str, np.ndarray]:
+        """Every sensor whose raw readings ``raw`` holds by kind ({"accelerometer": (N, 3), "gyroscope": ...}),
+        each in the accelerometer's frame: {kind: calibrated (N, 3)} (imucal.calibration.sensor.apply_sensors).
+        ``acc``: the accelerometer's calibrated readings when already computed (``apply``)."""
+        if acc is None and raw.get(ACCELEROMETER) is not None:  # its checks and covariates as ``apply``'s
+            acc = self.apply(raw[ACCELEROMETER], covariates)
+        if acc is None:
+            return apply_sensors(self.attached, raw, covariates)
+        columns = {**(covariates or {}), **dict(zip(self.accelerometer.model.output.columns, np.atleast_2d(acc).T))}
+        return {ACCELEROMETER: acc, **apply_sensors(self.attached, raw, columns)}
 
     def apply_imu(self, raw_acc: np.ndarray, raw_gyro: np.ndarray,
                   covariates: Mapping[str, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -136,8 +160,9 @@ class Calibration:
         if self.gyro is None:
             raise ImucalError("this calibration has no gyroscope part", field="gyroscope",
                               fix="calibrate with gyro columns (gx, gy, gz) or --gyro-data")
-        acc = self.apply(raw_acc, covariates)
-        return acc, self.gyro.apply(raw_gyro, acc)
+        out = self.apply_all({ACCELEROMETER: np.atleast_2d(raw_acc), GYROSCOPE: np.atleast_2d(raw_gyro)}, covariates)
+        one = np.ndim(raw_acc) == 1
+        return (out[ACCELEROMETER][0], out[GYROSCOPE][0]) if one else (out[ACCELEROMETER], out[GYROSCOPE])
 
     @property
     def equation(self) -> str:

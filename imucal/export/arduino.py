@@ -21,7 +21,7 @@ from pathlib import Path
 from imucal import __version__
 from imucal.calibration.fileformat import OUTPUT_FRAME
 from imucal.calibration.frozen import Calibration
-from imucal.calibration.gyro import OUTPUT_UNIT as GYRO_UNIT
+from imucal.constants import SI_RATE_UNIT as GYRO_UNIT
 from imucal.constants import SI_ACCEL_UNIT
 from imucal.errors import ImucalError
 from imucal.export.codegen import (DEFAULT_PREFIX, GeneratedC, _sha256, check_prefix, comment_text,
@@ -222,7 +222,7 @@ def library_readme(gen: GeneratedC, cal: Calibration, source: str | os.PathLike 
         "## Units and frame",
         "",
         f"- input: raw accelerometer readings in `{comment_text(cal.raw_unit)}` as the sensor reports them "
-        f"(`int16_t` counts, or `{real}`)" + (f"; raw gyroscope readings in `{comment_text(gyro.unit)}`" if gyro else ""),
+        f"(`int16_t` counts, or `{real}`)" + (f"; raw gyroscope readings in `{comment_text(gyro.raw_unit)}`" if gyro else ""),
         f"- output: acceleration in {SI_ACCEL_UNIT}" + (f", angular rate in {GYRO_UNIT}" if gyro else "")
         + f", {real} precision",
         f"- frame: the {OUTPUT_FRAME} (right-handed), not the sensor's skewed axes",

@@ -183,7 +183,7 @@ def _notes(cal: Calibration, fit: DiagonalFit, what: str, units: str, c: float) 
     notes = [fit.sentence(what)]
     gfit = gyro_fit(cal)
     if gfit is not None:
-        notes.append(gfit.sentence(what, cal.gyro.unit))
+        notes.append(gfit.sentence(what, cal.gyro.raw_unit))
     notes += _thermal_notes(cal, what)
     if cal.raw_unit == UNSTATED_UNIT:
         notes.append(f"{what} applies {units} to its driver's readings in m/s^2 (offsets in m/s^2, scales "
@@ -210,7 +210,7 @@ def _gyro_header(cal: Calibration, fit: OffsetFit | None, label: str, formula: s
         return []
     k = "" if fit.exact_unit else " (assumed: your driver's datasheet sensitivity replaces it)"
     return [f"Gyroscope ({formula}):", f"{label} = s_g / k [rad/s], the driver's sensitivity "
-            f"k = {fit.sensitivity!r} {cal.gyro.unit} per rad/s{k}."]
+            f"k = {fit.sensitivity!r} {cal.gyro.raw_unit} per rad/s{k}."]
 
 
 def _offset_formula(cal: Calibration, offsets: str, scales: str, c: float) -> str:

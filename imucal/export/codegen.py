@@ -30,7 +30,7 @@ import math
 import os
 import re
 import textwrap
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Mapping, Sequence
 
@@ -40,7 +40,10 @@ import numpy as np
 from imucal import __version__
 from imucal.calibration.fileformat import OUTPUT_FRAME, check_text_fields
 from imucal.calibration.frozen import Calibration
-from imucal.calibration.gyro import OUTPUT_UNIT as GYRO_UNIT, GyroCalibration
+from imucal.calibration.sensor import SensorCalibration
+from imucal.export import codegen_sensor as sensor_c
+from imucal.export.codegen_sensor import affine_float_error_bound  # noqa: F401  (every sensor's bound)
+from imucal.model.registry import DESCRIPTIONS, describe
 from imucal.constants import SI_ACCEL_UNIT
 from imucal.errors import ImucalError, short
 from imucal.files.inputs import read_input_bytes
@@ -104,40 +107,40 @@ def apply_coeffs_function() -> ca.Function:
     return ca.Function("apply_coeffs", [k, raw], [acc], ["coeffs", "raw"], ["acc"])
 
 
+def sensor_function(s: SensorCalibration, name: str | None = None) -> ca.Function:
+    """The one emitter's CasADi function for any calibrated sensor: (raw[3], inputs[k]) -> calibrated[3],
+    its description's ``apply`` at this calibration's values. An affine map is written A (raw - s) + B inputs
+    with A, B its Jacobians and s its offset at these values (the accelerometer's L = E^-T diag(1/b) and
+    shifts, the gyroscope's C = M_g^-1 B_g^-1, D = -B = C H and bias), exact zeros dropped: a map that does
+    not depend on an input (the gyroscope without g-sensitivity) never reads it. Any other map (effects) is
+    ``apply`` with the values substituted, CasADi folding what depends on them alone into constants."""
+    raw, inp = ca.SX.sym("raw", 3), ca.SX.sym("inputs", len(s.model.inputs))
+    if s.model.is_affine and not s.model.effects:
+        # its map as A (raw - s) + B inputs (SensorModel.affine: CasADi's Jacobians of apply; s = -A^-1 c):
+        # the offset subtracted first (exact in float for raw near s, offset-binary counts), no division
+        a, f = s.affine(), s.forward()
+        y = ca.mtimes(ca.sparsify(ca.DM(a.A)), raw - ca.DM(f.s)) + ca.mtimes(ca.sparsify(ca.DM(a.B)), inp)
+    else:
+        y = ca.cse(s.model.apply(raw, inp, ca.DM(s.values)))
+    return ca.Function(name or f"apply_{s.model.symbol}", [raw, inp], [ca.densify(y)], ["raw", "inputs"],
+                       ["calibrated"])
+
+
 def apply_baked_function(cal: Calibration) -> ca.Function:
-    """raw[3] -> acc[3] with this calibration's L and s as constants (base model only)."""
-    A, _ = cal.linear_map()
-    s = cal.values[0:3]
+    """raw[3] -> acc[3] with this calibration's L and s as constants (base model only): the accelerometer's
+    ``sensor_function``, A (raw - s) with its structural zeros (3 subtractions, 6 multiplies, 3 additions)."""
     raw = ca.SX.sym("raw", 3)
-    acc = ca.mtimes(_triangular([float(A[i, j]) for i in range(3) for j in range(i + 1)]),
-                    raw - ca.DM(s))
-    return ca.Function("apply", [raw], [ca.densify(acc)], ["raw"], ["acc"])
+    return ca.Function("apply", [raw], [sensor_function(cal.accelerometer)(raw, ca.SX(0, 1))], ["raw"], ["acc"])
 
 
 def apply_cov_function(cal: Calibration) -> ca.Function:
-    """(raw[3], cov[k]) -> acc[3]: the full model with effects, parameter values substituted.
-
-    CasADi folds every covariate-free subexpression (the trig of the angles) into constants.
-    """
-    model = _model(cal)
-    raw = ca.SX.sym("raw", 3)
-    cov = ca.SX.sym("cov", len(model.covariates))
-    acc = ca.cse(model.accel(raw, cov, ca.DM(cal.values)))
-    return ca.Function("apply_cov", [raw, cov], [ca.densify(acc)], ["raw", "cov"], ["acc"])
-
-
-def apply_gyro_function(gyro: GyroCalibration) -> ca.Function:
-    """(raw_g[3], acc[3]) -> omega[3] = C (raw_g - s_g) - D acc with this gyroscope's C, s_g, D.
-
-    C and D are GyroCalibration.rate_map's (the gyro model's inverse, imucal.gyro.model); the
-    bias is subtracted first, as the accelerometer's shift (c = -C s_g cancels for
-    offset-binary counts). Exact zeros are dropped, so D = 0 leaves acc unread.
-    """
-    C, _, D = gyro.rate_map()
-    raw = ca.SX.sym("raw_g", 3)
-    acc = ca.SX.sym("acc", 3)
-    omega = ca.mtimes(ca.sparsify(ca.DM(C)), raw - ca.DM(gyro.bias)) - ca.mtimes(ca.sparsify(ca.DM(D)), acc)
-    return ca.Function("apply_gyro", [raw, acc], [ca.densify(omega)], ["raw_g", "acc"], ["omega"])
+    """(raw[3], cov[k]) -> acc[3]: the full model with effects, parameter values substituted (the
+    accelerometer's ``sensor_function``). CasADi folds every covariate-free subexpression (the trig of the
+    angles) into constants."""
+    _model(cal)
+    f = sensor_function(cal.accelerometer, "apply_cov")
+    raw, cov = ca.SX.sym("raw", 3), ca.SX.sym("cov", len(cal.accelerometer.model.inputs))
+    return ca.Function("apply_cov", [raw, cov], [f(raw, cov)], ["raw", "cov"], ["acc"])
 
 
 def _model(cal: Calibration):
@@ -321,28 +324,6 @@ def float_error_bound(cal: Calibration, raw: np.ndarray, precision: str = "float
     return g5 * d @ np.abs(A).T + u * (1 + g5) * (np.abs(A) @ np.abs(s))
 
 
-def gyro_float_error_bound(gyro: GyroCalibration, raw_g: np.ndarray, acc: np.ndarray,
-                           precision: str = "float", acc_error: np.ndarray | None = None) -> np.ndarray:
-    """A priori bound (N, 3) on |NAME_apply_gyro(raw_g, acc) - exact| per axis [rad/s].
-
-    omega_i = sum_j C_ij (raw_j - s_j) - sum_j D_ij a_j is a sum of at most 6 products: each C
-    term carries the rounding of C_ij, of the subtraction, of the product and at most 5 of the
-    sum (gamma_8), each D term one fewer (gamma_7), and the rounded bias an absolute u |s_j|
-    (Higham, Ch. 3): |err_i| <= gamma_8 |C| |raw - s| + u (1 + gamma_8) |C| |s| + gamma_7 |D| |a|.
-    ``acc_error`` bounds the error of the acc passed in (``float_error_bound`` for
-    NAME_apply_imu, which feeds its own float acc): it adds (1 + gamma_7) |D| acc_error.
-    """
-    u = UNIT_ROUNDOFF[precision]
-    g7, g8 = 7 * u / (1 - 7 * u), 8 * u / (1 - 8 * u)
-    C, _, D = gyro.rate_map()
-    s = gyro.bias
-    a = np.abs(np.atleast_2d(np.asarray(acc, float)))
-    e = np.zeros_like(a) if acc_error is None else np.abs(np.atleast_2d(acc_error))
-    d = np.abs(np.atleast_2d(np.asarray(raw_g, float)) - s)
-    return (g8 * d @ np.abs(C).T + u * (1 + g8) * (np.abs(C) @ np.abs(s))
-            + g7 * (a + e) @ np.abs(D).T + e @ np.abs(D).T)
-
-
 # --- the generated files ------------------------------------------------------------------------
 @dataclass(frozen=True)
 class GeneratedC:
@@ -355,7 +336,13 @@ class GeneratedC:
     apply_ops: OpCount | None  #: the baked NAME_apply (None when the map needs covariates)
     apply_coeffs_ops: OpCount
     apply_cov_ops: OpCount | None  #: NAME_apply_cov (None without covariates)
-    apply_gyro_ops: OpCount | None = None  #: NAME_apply_gyro (None without a gyroscope part)
+    #: NAME_apply_S of every sensor beside the accelerometer, by kind (codegen_sensor)
+    sensor_ops: Mapping[str, OpCount] = field(default_factory=dict)
+
+    @property
+    def apply_gyro_ops(self) -> OpCount | None:
+        """NAME_apply_gyro (None without a gyroscope)."""
+        return self.sensor_ops.get("gyroscope")
 
     @property
     def files(self) -> dict[str, str]:
@@ -508,18 +495,17 @@ def generate_c(cal: Calibration, prefix: str = DEFAULT_PREFIX, precision: str = 
     else:
         k_cov = kernel(apply_cov_function(cal), [raw_in, [f"cov[{i}]" for i in range(len(covs))]],
                        acc_out, precision)
-    k_gyro = None
-    if cal.gyro is not None:  # omega = C (raw_g - s_g) - D acc, read into locals g0.. and f0..
-        k_gyro = kernel(apply_gyro_function(cal.gyro), [["g0", "g1", "g2"], ["f0", "f1", "f2"]],
-                        [["omega[0]", "omega[1]", "omega[2]"]], precision)
+    # every other sensor through the same emitter: its raw in locals g0.., acc in f0.., covariates in c0..
+    cov_index = {n: i for i, n in enumerate(covs)}
+    ks = tuple((sc, kernel(sensor_function(sc), *sensor_c.kernel_io(sc, cov_index), precision)) for sc in cal.attached)
     ctx = _Context(cal, prefix, real, source, effects, covs,
                    model_label(model.name if model is not None else "nakov-ivanov-9", cal.params))
-    header = _header(ctx, k_apply, k_cov, k_gyro)
-    src = _source(ctx, k_prep, k_coef, k_apply, k_cov, k_gyro)
+    header = _header(ctx, k_apply, k_cov, ks)
+    src = _source(ctx, k_prep, k_coef, k_apply, k_cov, ks)
     _check_generated(header, f"{prefix}.h")
     _check_generated(src, f"{prefix}.c")
     return GeneratedC(prefix, precision, header, src, k_apply.ops if k_apply else None, k_coef.ops,
-                      k_cov.ops if k_cov else None, k_gyro.ops if k_gyro else None)
+                      k_cov.ops if k_cov else None, {sc.kind: k.ops for sc, k in ks})
 
 
 def write_c(cal: Calibration, out_dir: str | os.PathLike, prefix: str = DEFAULT_PREFIX,
@@ -556,8 +542,13 @@ class _Context:
     def lit(self, x: float) -> str:
         return c_literal(x, self.real)
 
+    def text(self, value: object, max_len: int = MAX_COMMENT_TEXT) -> str:
+        """Text from a file or the command line, made safe for a C comment (``comment_text``)."""
+        return comment_text(value, max_len)
 
-def _header_doc(c: _Context, k_apply: Kernel | None, k_cov: Kernel | None, k_gyro: Kernel | None) -> list[str]:
+
+def _header_doc(c: _Context, k_apply: Kernel | None, k_cov: Kernel | None,
+                ks: tuple[tuple[SensorCalibration, Kernel], ...]) -> list[str]:
     """The header's opening comment: provenance, model, units, expected error, cost."""
     cal, p, real = c.cal, c.prefix, c.real
     v = cal.params.value_dict()
@@ -571,8 +562,9 @@ def _header_doc(c: _Context, k_apply: Kernel | None, k_cov: Kernel | None, k_gyr
     g = cal.gravity
     u = UNIT_ROUNDOFF[real]
     extra = [n for n in cal.params if n not in BASE_NAMES]
-    what = ("calibrated acceleration and angular rate from raw accelerometer and gyroscope readings"
-            if k_gyro else "calibrated acceleration from raw accelerometer readings")
+    kinds = ["accelerometer"] + [sc.kind for sc, _ in ks]
+    what = (f"calibrated readings of the {', '.join(kinds[:-1])} and {kinds[-1]} from their raw readings" if ks
+            else "calibrated acceleration from raw accelerometer readings")
     lines = [
         *textwrap.wrap(f"{p}.h: {what} ({real} precision).", 94, initial_indent="/* ",
                        subsequent_indent=" * "),
@@ -629,8 +621,8 @@ def _header_doc(c: _Context, k_apply: Kernel | None, k_cov: Kernel | None, k_gyr
         name = f"{p}_apply" if k_apply else f"{p}_apply_cov"
         lines += [" *", f" * Cost of {name} (the full model with effects): {k.ops}; no branch, no heap,",
                   f" * no mutable static state. {p}_apply_coeffs (base model): 6 multiplies, 6 adds."]
-    if k_gyro is not None:
-        lines += _gyro_doc(c, k_gyro)
+    for sc, k in ks:
+        lines += sensor_c.doc(c, sc, k)
     return lines + [" */"]
 
 
@@ -659,7 +651,7 @@ def _header_types(c: _Context) -> list[str]:
     return out
 
 
-def _header_apply_decls(c: _Context, k_gyro: Kernel | None) -> list[str]:
+def _header_apply_decls(c: _Context, ks: tuple[tuple[SensorCalibration, Kernel], ...]) -> list[str]:
     """This calibration's apply entry points (raw only, or raw and covariates)."""
     cal, p, P, real = c.cal, c.prefix, c.P, c.real
     out: list[str] = []
@@ -694,19 +686,24 @@ def _header_apply_decls(c: _Context, k_gyro: Kernel | None) -> list[str]:
             f"void {p}_apply_cov(const {real} raw[3], const {real} cov[{P}_N_COV], {real} acc[3]);", "",
             f"/* {p}_apply_cov over n samples: raw as x y z x y z ..., cov as n rows of {P}_N_COV. */",
             f"void {p}_apply_cov_batch(const {real} *raw, const {real} *cov, {real} *acc, size_t n);", ""]
-    out += [f"#define {P}_HAS_GYRO 1 /* a gyroscope part: {p}_apply_gyro, {p}_apply_imu"
-            f"{'_cov' if c.covariates else ''} below */" if k_gyro is not None else
-            f"#define {P}_HAS_GYRO 0 /* accelerometer only: no gyroscope functions */", ""]
+    held = {sc.kind for sc, _ in ks}
+    for kind in DESCRIPTIONS:  # every sensor imucal knows: 1 with its functions below, 0 without
+        sym = describe(kind).symbol
+        out += [f"#define {P}_HAS_{sym.upper()} 1 /* a {kind}: {p}_apply_{sym}, {p}_apply_imu"
+                f"{'_cov' if c.covariates else ''} below */" if kind in held else
+                f"#define {P}_HAS_{sym.upper()} 0 /* no {kind}: no {kind} functions */"]
+    out += [""]
     out += ["/* Index of each known covariate in cov, or -1 when this calibration does not use it. */",
             *(f"#define {P}_COV_{n.upper()} {c.covariates.index(n) if n in c.covariates else -1}"
               f" /* {n} [{u}] */" for n, u in COVARIATE_UNITS.items()), ""]
     return out
 
 
-def _header(c: _Context, k_apply: Kernel | None, k_cov: Kernel | None, k_gyro: Kernel | None) -> str:
+def _header(c: _Context, k_apply: Kernel | None, k_cov: Kernel | None,
+            ks: tuple[tuple[SensorCalibration, Kernel], ...]) -> str:
     p, P, real = c.prefix, c.P, c.real
     guard = f"{P}_H"
-    out = ["\n".join(_header_doc(c, k_apply, k_cov, k_gyro)), *_header_types(c), *_header_apply_decls(c, k_gyro)]
+    out = ["\n".join(_header_doc(c, k_apply, k_cov, ks)), *_header_types(c), *_header_apply_decls(c, ks)]
     out += [
         f"/* Coefficients from the nine base-model parameters s1 s2 s3 [raw] b1 b2 b3 [raw per {SI_ACCEL_UNIT}]",
         " * phi psi theta [rad] (the calibration file's order), e.g. read from flash at start-up.",
@@ -718,14 +715,16 @@ def _header(c: _Context, k_apply: Kernel | None, k_cov: Kernel | None, k_gyro: K
         f"void {p}_apply_coeffs(const {p}_coeffs *c, const {real} raw[3], {real} acc[3]);", "",
         f"/* {p}_apply_coeffs over n samples stored as x y z x y z ... */",
         f"void {p}_apply_coeffs_batch(const {p}_coeffs *c, const {real} *raw, {real} *acc, size_t n);", ""]
-    if k_gyro is not None:
-        out += _gyro_declarations(c, k_gyro)
+    for sc, k in ks:
+        out += sensor_c.declarations(c, sc, k)
+    if ks:
+        out += sensor_c.imu_declarations(c, tuple(sc for sc, _ in ks))
     out += ["#ifdef __cplusplus", "}", "#endif", "", f"#endif /* {guard} */", ""]
     return "\n".join(out)
 
 
 def _source(c: _Context, k_prep: Kernel, k_coef: Kernel, k_apply: Kernel | None,
-            k_cov: Kernel | None, k_gyro: Kernel | None) -> str:
+            k_cov: Kernel | None, ks: tuple[tuple[SensorCalibration, Kernel], ...]) -> str:
     p, P, real = c.prefix, c.P, c.real
     zero = "0.0f" if real == "float" else "0.0"
 
@@ -780,137 +779,8 @@ def _source(c: _Context, k_prep: Kernel, k_coef: Kernel, k_apply: Kernel | None,
         "{", f"  const {p}_coeffs k = *c; /* a local copy: stores to acc cannot change it */",
         "  size_t i;", f"  for (i = 0; i < n; ++i) {p}_apply_coeffs(&k, raw + 3 * i, acc + 3 * i);",
         "}", ""]
-    if k_gyro is not None:
-        out += _gyro_source(c, k_gyro)
+    for sc, k in ks:
+        out += sensor_c.source(c, sc, k)
+    if ks:
+        out += sensor_c.imu_source(c, tuple(sc for sc, _ in ks))
     return "\n".join(out)
-
-
-# --- the gyroscope part (calibrations with cal.gyro) -------------------------------------------
-def _matrix_text(M: np.ndarray, spec: str = ".9g") -> str:
-    return "; ".join(", ".join(_fmt(x, spec) for x in row) for row in np.asarray(M))
-
-
-def _gyro_doc(c: _Context, k: Kernel) -> list[str]:
-    """Header comment lines: the gyro's model, values, units, frame, error bound and cost."""
-    gy, p, real = c.cal.gyro, c.prefix, c.real
-    unit = comment_text(gy.unit)
-    C, _, D = gy.rate_map()
-    u = UNIT_ROUNDOFF[real]
-    rest = gyro_float_error_bound(gy, gy.bias, np.full(3, c.cal.gravity / math.sqrt(3)), real).max()
-    per_rate = 8 * u * (np.abs(C) @ np.abs(np.linalg.inv(C))).sum(axis=1).max()  # |raw - s| = |C^-1 omega|
-    fit = gy.fit if isinstance(gy.fit, Mapping) else {}
-    dirs = fit.get("rms_direction_error_deg")
-    dirs = dirs if isinstance(dirs, Mapping) else {}
-    std = gy.std
-
-    def wrap(text: str) -> list[str]:
-        return textwrap.wrap(text, 94, initial_indent=" *   ", subsequent_indent=" *     ")
-
-    lines = [
-        " *",
-        " * Gyroscope (imucal.gyro.model): raw_g = s_g + B_g (M_g omega + G_s a), applied as",
-        " *   omega = C (raw_g - s_g) - D a,  C = M_g^-1 B_g^-1,  D = M_g^-1 G_s,",
-        f" *   a the calibrated acceleration [{SI_ACCEL_UNIT}] of the same sample (what {p}_apply writes).",
-        *wrap(f"s_g bias [{unit}] = " + ", ".join(_fmt(x, ".10g") for x in gy.bias)),
-        *wrap(f"B_g scales [{unit} per rad/s] = " + ", ".join(_fmt(x, ".10g") for x in gy.scale)),
-        *wrap("M_g misalignment (unit diagonal, rows ;) = " + _matrix_text(gy.misalignment)),
-        *wrap("G_s g-sensitivity [(rad/s) per (m/s^2)] = " + _matrix_text(gy.gsens) if gy.uses_gsens else
-              f"G_s = 0: no g-sensitivity, so D = 0 and {p}_apply_gyro does not read acc"),
-        *wrap(f"C [rad/s per {unit}] = " + _matrix_text(C)),
-        *(wrap("D [(rad/s) per (m/s^2)] = " + _matrix_text(D)) if gy.uses_gsens else []),
-        *wrap("standard errors: bias " + ", ".join(_fmt(x, ".2g") for x in np.ravel(std.get("bias", [])))
-              + "; scale " + ", ".join(_fmt(x, ".2g") for x in np.ravel(std.get("scale", []))) + "."),
-        f" * Units: raw_g in [{unit}] (the recording's unit); omega in [{GYRO_UNIT}], in the same frame f as",
-        " * acc (the accelerometer's orthonormal frame above), so both outputs share one frame.",
-        " *",
-        " * Expected error of omega",
-        f" *   fit: rms gravity-direction error over the motions {_fmt(dirs.get('after'), '.3g')} deg after "
-        f"calibration, {_fmt(dirs.get('before'), '.3g')} deg before;",
-        f" *   {real} arithmetic: |error| per axis <= 8u |C| |raw_g - s_g| + u |C| |s_g| + 7u |D| |a|,",
-        f" *   i.e. <= {rest:.2g} rad/s at rest with |a| = g, plus {per_rate:.2g} max_j |omega_j| while rotating.",
-        " *",
-        f" * Cost of {p}_apply_gyro: {k.ops}; no branch, no heap, no",
-        " * mutable static state.",
-    ]
-    return lines
-
-
-def _gyro_declarations(c: _Context, k: Kernel) -> list[str]:
-    p, P, real = c.prefix, c.P, c.real
-    unit = comment_text(c.cal.gyro.unit)
-    uses_acc = "f0" in k.reads or "f1" in k.reads or "f2" in k.reads
-    out = [
-        f"/* 1: {p}_apply_gyro reads acc (the gyroscope has a g-sensitivity, D != 0); 0: acc is not read",
-        " * and may be NULL. */",
-        f"#define {P}_GYRO_USES_ACC {int(uses_acc)}", "",
-        f"/* omega = calibrated angular rate [{GYRO_UNIT}, frame f] from raw_g [{unit}] and acc, the calibrated",
-        f" * acceleration [{SI_ACCEL_UNIT}, frame f] of the same sample ({p}_apply's output). The argument is",
-        f" * there whether or not this calibration uses it ({P}_GYRO_USES_ACC), so firmware need not change",
-        " * when a new calibration selects the g-sensitivity. omega may alias raw_g or acc. */",
-        f"void {p}_apply_gyro(const {real} raw_g[3], const {real} acc[3], {real} omega[3]);", "",
-        f"/* {p}_apply_gyro over n samples stored as x y z x y z ... */",
-        f"void {p}_apply_gyro_batch(const {real} *raw_g, const {real} *acc, {real} *omega, size_t n);", "",
-        f"/* {p}_apply_gyro on integer counts: int16_t (two's complement) or uint16_t (offset binary). */",
-        f"void {p}_apply_gyro_i16(const int16_t raw_g[3], const {real} acc[3], {real} omega[3]);",
-        f"void {p}_apply_gyro_u16(const uint16_t raw_g[3], const {real} acc[3], {real} omega[3]);", ""]
-    if not c.covariates:
-        out += [
-            f"/* Both sensors of one sample: acc from raw_a ({p}_apply), then omega from raw_g and that acc",
-            f" * ({p}_apply_gyro). The outputs may alias the inputs. */",
-            f"void {p}_apply_imu(const {real} raw_a[3], const {real} raw_g[3], {real} acc[3], {real} omega[3]);",
-            "",
-            f"/* {p}_apply_imu over n samples, each array stored as x y z x y z ... */",
-            f"void {p}_apply_imu_batch(const {real} *raw_a, const {real} *raw_g, {real} *acc, {real} *omega,"
-            " size_t n);", "",
-            f"/* {p}_apply_imu on integer counts of both sensors (exact conversion). */",
-            f"void {p}_apply_imu_i16(const int16_t raw_a[3], const int16_t raw_g[3], {real} acc[3], "
-            f"{real} omega[3]);",
-            f"void {p}_apply_imu_u16(const uint16_t raw_a[3], const uint16_t raw_g[3], {real} acc[3], "
-            f"{real} omega[3]);", ""]
-    else:
-        out += [
-            f"/* Both sensors of one sample: acc from raw_a and the covariates ({p}_apply_cov), then omega",
-            f" * ({p}_apply_gyro). The outputs may alias the inputs. */",
-            f"void {p}_apply_imu_cov(const {real} raw_a[3], const {real} raw_g[3], const {real} cov[{P}_N_COV],",
-            f"                       {real} acc[3], {real} omega[3]);", ""]
-    return out
-
-
-def _gyro_source(c: _Context, k: Kernel) -> list[str]:
-    p, P, real = c.prefix, c.P, c.real
-    reads = [f"{v}{i} = {arr}[{i}]" for v, arr in (("g", "raw_g"), ("f", "acc")) for i in range(3)
-             if f"{v}{i}" in k.reads]
-    uses_acc = any(r.startswith("f") for r in reads)
-    out = [f"/* omega = C (raw_g - s_g) - D acc with this gyroscope's C, s_g, D ({k.ops}). */",
-           f"void {p}_apply_gyro(const {real} raw_g[3], const {real} acc[3], {real} omega[3])", "{",
-           *([f"  const {real} {', '.join(reads)}; /* inputs first: omega may alias them */"] if reads else []),
-           *([] if uses_acc else ["  (void)acc; /* D = 0: no g-sensitivity */"]),
-           *([] if any(r.startswith("g") for r in reads) else ["  (void)raw_g;"]),
-           k.body(), "}", "",
-           f"void {p}_apply_gyro_batch(const {real} *raw_g, const {real} *acc, {real} *omega, size_t n)", "{",
-           "  size_t i;",
-           f"  for (i = 0; i < n; ++i) {p}_apply_gyro(raw_g + 3 * i, {'acc + 3 * i' if uses_acc else 'acc'}, "
-           "omega + 3 * i);" + ("" if uses_acc else " /* acc unread */"), "}", ""]
-    for itype, suffix in (("int16_t", "i16"), ("uint16_t", "u16")):
-        out += [f"void {p}_apply_gyro_{suffix}(const {itype} raw_g[3], const {real} acc[3], {real} omega[3])", "{",
-                f"  const {real} g[3] = {{({real})raw_g[0], ({real})raw_g[1], ({real})raw_g[2]}};",
-                f"  {p}_apply_gyro(g, acc, omega);", "}", ""]
-    copy = f"  const {real} g[3] = {{raw_g[0], raw_g[1], raw_g[2]}}; /* acc may alias raw_g */"
-    if not c.covariates:
-        out += [f"void {p}_apply_imu(const {real} raw_a[3], const {real} raw_g[3], {real} acc[3], {real} omega[3])",
-                "{", copy, f"  {p}_apply(raw_a, acc);", f"  {p}_apply_gyro(g, acc, omega);", "}", "",
-                f"void {p}_apply_imu_batch(const {real} *raw_a, const {real} *raw_g, {real} *acc, {real} *omega,"
-                " size_t n)", "{", "  size_t i;",
-                f"  for (i = 0; i < n; ++i) {p}_apply_imu(raw_a + 3 * i, raw_g + 3 * i, acc + 3 * i, omega + 3 * i);",
-                "}", ""]
-        for itype, suffix in (("int16_t", "i16"), ("uint16_t", "u16")):
-            out += [f"void {p}_apply_imu_{suffix}(const {itype} raw_a[3], const {itype} raw_g[3], {real} acc[3], "
-                    f"{real} omega[3])", "{",
-                    f"  const {real} a[3] = {{({real})raw_a[0], ({real})raw_a[1], ({real})raw_a[2]}};",
-                    f"  const {real} g[3] = {{({real})raw_g[0], ({real})raw_g[1], ({real})raw_g[2]}};",
-                    f"  {p}_apply(a, acc);", f"  {p}_apply_gyro(g, acc, omega);", "}", ""]
-    else:
-        out += [f"void {p}_apply_imu_cov(const {real} raw_a[3], const {real} raw_g[3], const {real} cov[{P}_N_COV],",
-                f"                       {real} acc[3], {real} omega[3])", "{", copy,
-                f"  {p}_apply_cov(raw_a, cov, acc);", f"  {p}_apply_gyro(g, acc, omega);", "}", ""]
-    return out

@@ -108,7 +108,7 @@ def to_imutk(cal: Calibration, opts: ExportOptions) -> Exported:
     gyro = None
     if cal.gyro is not None:
         gyro = _calib_text(*imutk_factors(cal.gyro))
-        if cal.gyro.uses_gsens:
+        if cal.gyro.reads_inputs():
             notes += (gsens_sentence("imu_tk", cal.gyro, cal.gravity),)
     return Exported(_calib_text(A @ np.linalg.inv(K), K, s), notes, gyro)
 
@@ -126,8 +126,8 @@ def to_madlab(cal: Calibration, opts: ExportOptions) -> Exported:
         notes += ("gyroscope fields are the identity (this calibration has no gyroscope)",)
     else:
         K_g, R_g, b_g, K_ga = madlab_factors(cal.gyro)
-        gyro = {"from_gyr_unit": cal.gyro.unit, "K_g": K_g, "R_g": R_g, "K_ga": K_ga, "b_g": b_g}
-        what = f"gyroscope output in {MADLAB_GYR_UNIT}, K_ga [{cal.gyro.unit} per m/s^2]"
+        gyro = {"from_gyr_unit": cal.gyro.raw_unit, "K_g": K_g, "R_g": R_g, "K_ga": K_ga, "b_g": b_g}
+        what = f"gyroscope output in {MADLAB_GYR_UNIT}, K_ga [{cal.gyro.raw_unit} per m/s^2]"
     d = {
         "acc_unit": SI_ACCEL_UNIT, "gyr_unit": MADLAB_GYR_UNIT, "from_acc_unit": cal.raw_unit,
         "from_gyr_unit": gyro["from_gyr_unit"], "comment": " ".join((f"exported by imucal; {what}",) + eff),
@@ -153,14 +153,14 @@ def to_matrix(cal: Calibration, opts: ExportOptions) -> Exported:
         lines += [",".join(_num(v) for v in (*A[i], c[i])) for i in range(3)]
         if g is not None:
             lines.append(hash_comment(f"gyroscope: {MATRIX_GYRO_EQUATION}; columns m1,m2,m3,offset,acc_m1,acc_m2,"
-                                      f"acc_m3; raw in {cal.gyro.unit}, omega in {SI_RATE_UNIT}, a in {SI_ACCEL_UNIT}"))
+                                      f"acc_m3; raw in {cal.gyro.raw_unit}, omega in {SI_RATE_UNIT}, a in {SI_ACCEL_UNIT}"))
             cg = -g.C @ g.s
             lines += [",".join(_num(v) for v in (*g.C[i], cg[i], *g.D[i])) for i in range(3)]
         return Exported("\n".join(lines) + "\n", notes)
     d = {"format": "imucal-affine", "equation": "a = matrix @ raw + offset", "input_unit": cal.raw_unit,
          "output_unit": SI_ACCEL_UNIT, "matrix": A.tolist(), "offset": c.tolist()}
     if g is not None:
-        d["gyroscope"] = {"equation": MATRIX_GYRO_EQUATION, "input_unit": cal.gyro.unit, "output_unit": SI_RATE_UNIT,
+        d["gyroscope"] = {"equation": MATRIX_GYRO_EQUATION, "input_unit": cal.gyro.raw_unit, "output_unit": SI_RATE_UNIT,
                           "matrix": g.C.tolist(), "offset": (-g.C @ g.s).tolist(), "acc_matrix": g.D.tolist()}
     if notes:
         d["note"] = " ".join(notes)

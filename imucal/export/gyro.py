@@ -1,8 +1,10 @@
 """The gyroscope part of the exports: imucal's rate map factored into each peer's convention, and
 what a format cannot hold, measured.
 
-imucal's gyroscope (imucal.calibration.gyro) applies omega = C raw + c - D a [rad/s] in the
-accelerometer's output frame, a the calibrated acceleration [m/s^2]. Forward, as the peers write it:
+imucal's gyroscope applies omega = C raw + c - D a [rad/s] in the accelerometer's output frame, a the
+calibrated acceleration [m/s^2]: its map read through the one accessor of every calibrated sensor
+(imucal.calibration.sensor.SensorCalibration.affine: C = A, D = -B; ``forward``). Forward, as the peers
+write it:
     raw - s = P omega + F a,     P = C^-1 = B_g M_g,   F = P D = B_g G_s,   s = -C^-1 c = s_g.
 Each peer's formula (cited where it is written, imucal.export.formats, kalibr, autopilot) is one
 factoring of P, F and s:
@@ -22,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from imucal.calibration.gyro import GyroCalibration
+from imucal.calibration.sensor import SensorCalibration
 from imucal.constants import RATE_UNITS
 
 
@@ -37,13 +39,12 @@ class Forward:
     D: np.ndarray  #: [(rad/s) per (m/s^2)]
 
 
-def forward(g: GyroCalibration) -> Forward:
-    C, c, D = g.rate_map()
-    P = np.linalg.inv(C)
-    return Forward(P=P, F=P @ D, s=np.asarray(g.bias, float), C=C, D=D)
+def forward(g: SensorCalibration) -> Forward:
+    a, f = g.affine(), g.forward()
+    return Forward(P=f.P, F=f.F, s=f.s, C=a.A, D=-a.B)
 
 
-def kalibr_factors(g: GyroCalibration) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def kalibr_factors(g: SensorCalibration) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(M, C_gyro_i, A) with P = M C_gyro_i (M lower triangular, positive diagonal when det P > 0,
     C_gyro_i a rotation) and A = F C_gyro_i^T."""
     f = forward(g)
@@ -57,18 +58,18 @@ def kalibr_factors(g: GyroCalibration) -> tuple[np.ndarray, np.ndarray, np.ndarr
     return M, R, f.F @ R.T
 
 
-def imutk_factors(g: GyroCalibration) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def imutk_factors(g: SensorCalibration) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(T, K, b) with T K = C, T unit diagonal, K diagonal."""
     C = forward(g).C
     K = np.diag(np.diag(C))
-    return C @ np.linalg.inv(K), K, np.asarray(g.bias, float)
+    return C @ np.linalg.inv(K), K, forward(g).s
 
 
 #: mad-lab-fau/imucal's Ferraris output unit (FerrarisCalibration.OUT_GYR_UNIT).
 MADLAB_GYR_UNIT = "deg/s"
 
 
-def madlab_factors(g: GyroCalibration) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def madlab_factors(g: SensorCalibration) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(K_g, R_g, b_g, K_ga) for an output in deg/s: K_g R_g = (pi/180) P, rows of R_g unit vectors."""
     f = forward(g)
     KR = f.P * RATE_UNITS[MADLAB_GYR_UNIT]  # raw per (deg/s)
@@ -93,12 +94,12 @@ class RateError:
         return f"max {self.max_deg_s:.3g} deg/s, RMS {self.rms_deg_s:.3g} deg/s"
 
 
-def gsens_residual(g: GyroCalibration, gravity: float) -> RateError:
+def gsens_residual(g: SensorCalibration, gravity: float) -> RateError:
     """What a format without a g-sensitivity term leaves at rest: D a at |a| = g, all directions."""
     return RateError.of(forward(g).D, gravity)
 
 
-def gsens_sentence(what: str, g: GyroCalibration, gravity: float) -> str:
+def gsens_sentence(what: str, g: SensorCalibration, gravity: float) -> str:
     return (f"{what} has no gyroscope g-sensitivity term: imucal's G_s leaves a rate error at |a| = g over all "
             f"directions of {gsens_residual(g, gravity).text()}")
 
@@ -135,12 +136,12 @@ class OffsetFit:
                 f"{self.gsens.text()}")
 
 
-def offset_fit(g: GyroCalibration, R: np.ndarray, gravity: float) -> OffsetFit:
+def offset_fit(g: SensorCalibration, R: np.ndarray, gravity: float) -> OffsetFit:
     """The offset-only model of ``g`` (OffsetFit), R the accelerometer's best-aligned rotation."""
     f = forward(g)
     RP = R.T @ f.P
-    exact = g.unit in RATE_UNITS
-    k = 1.0 / RATE_UNITS[g.unit] if exact else float(np.sum(RP * RP) / np.trace(RP))  # argmin ||RP/k - I||_F
+    exact = g.raw_unit in RATE_UNITS
+    k = 1.0 / RATE_UNITS[g.raw_unit] if exact else float(np.sum(RP * RP) / np.trace(RP))  # argmin ||RP/k - I||_F
     return OffsetFit(offset=f.s / k, sensitivity=k, exact_unit=exact,
                      rate=RateError.of(RP / k - np.eye(3), RATE_RANGE), gsens=RateError.of(f.F / k, gravity))
 

@@ -98,7 +98,7 @@ def _kalibr_header(cal: Calibration) -> list[str]:
     if g is not None:
         out += ["gyroscope: measurement = M C_gyro_i omega + A C_gyro_i a + b_g (addGyroscopeErrorTerms),",
                 "omega and a in the accelerometer's frame; M lower triangular, C_gyro_i a rotation,",
-                f"A the g-sensitivity [{g.unit} per m/s^2]; gyroscopes.M [{g.unit} per rad/s] (Kalibr's",
+                f"A the g-sensitivity [{g.raw_unit} per m/s^2]; gyroscopes.M [{g.raw_unit} per rad/s] (Kalibr's",
                 "rad/s when the raw unit is).",
                 "omega = (M C_gyro_i)^-1 (measurement - b_g - A C_gyro_i a): imucal's gyroscope, exactly.",
                 "Kalibr writes these intrinsics in its results; it does not read them as a starting point."]
@@ -157,8 +157,8 @@ def to_kalibr(cal: Calibration, opts: ExportOptions) -> Exported:
               f"imucal_accelerometer_offset: {_flow(s.tolist())}  "
               + hash_comment(f"b_a = s [{cal.raw_unit}], not a Kalibr key")]
     if g is not None:
-        lines.append(f"imucal_gyroscope_offset: {_flow(np.asarray(g.bias, float).tolist())}  "
-                     + hash_comment(f"b_g = s_g [{g.unit}], not a Kalibr key"))
+        lines.append(f"imucal_gyroscope_offset: {_flow(g.forward().s.tolist())}  "
+                     + hash_comment(f"b_g = s_g [{g.raw_unit}], not a Kalibr key"))
     if n is None:
         notes.append(f"noise fields are null: {how}")
     return Exported("\n".join(lines) + "\n", tuple(notes))

@@ -13,6 +13,7 @@ from typing import Mapping
 
 import numpy as np
 
+from imucal.calibration.sensor import SensorCalibration
 from imucal.gyro.segments import GapMotion
 from imucal.gyro.still import NotStill, Stillness
 from imucal.model.gyroscope import BIAS_NAMES, GSENS_NAMES, MIS_NAMES, SCALE_NAMES, misalignment_matrix
@@ -107,6 +108,20 @@ def to_dict(res: FitResult) -> dict:
         "not_still": [] if m.still is None else [not_still_dict(r) for r in m.still.rejected],
         "gap_motions": [gap_dict(g) for g in m.gapped],
     }
+
+
+def fit_section(res: FitResult) -> dict:
+    """The gyroscope's fit statistics as its calibration file section keeps them."""
+    d, m = to_dict(res), motions(res)
+    return {**d["fit"], "rms_direction_error_deg": m.rms_direction_error_deg,
+            "gsens_p_value": [float(v) for v in m.gsens_p_value],
+            **({"not_still": d["not_still"]} if m.still and m.still.rejected else {}),
+            **({"gap_motions": d["gap_motions"]} if m.gapped else {})}
+
+
+def calibrated(res: FitResult) -> SensorCalibration:
+    """The fitted gyroscope as one calibrated sensor of a Calibration."""
+    return SensorCalibration(res.model, res.params, dict(res.std), motions(res).unit, fit_section(res))
 
 
 def not_still_dict(r: NotStill) -> dict:

@@ -80,7 +80,7 @@ def gyro_model() -> SensorModel:
     """The gyroscope's description (built once)."""
     return SensorModel(effects=(), names=NAMES, inputs=INPUTS, functions={"apply": _apply()}, kind=GYROSCOPE,
                        label=LABEL, channel=ANGULAR_RATE, output=ANGULAR_RATE.with_unit(SI_RATE_UNIT),
-                       evidence_reads=(TIME,))
+                       evidence_reads=(TIME,), symbol="gyro", output_symbol="omega")
 
 
 def gyro_parameters(unit: str, bias: Iterable[float], scale: Iterable[float], mis: Iterable[float] = (0.0,) * 6,

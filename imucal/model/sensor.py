@@ -85,6 +85,7 @@ class SensorModel:
       names     its parameters in the order of p (named Parameters with units, bounds, scales and
                 undetermined thresholds are built by each sensor's own function)
       output    the calibrated channel: its columns (ax.., gx..) and unit (m/s^2, rad/s)
+      symbol    its short name in generated C (acc, gyro) and its output's (acc, omega)
       functions CasADi functions built once:
         apply(raw[3], inputs[k], p[n]) -> calibrated[3]   the map from raw to calibrated
       and, generated from apply, ``affine``: p -> (A, c, B) with calibrated = A raw + c + B inputs, for a
@@ -109,6 +110,10 @@ class SensorModel:
     output: Channel = ACCELERATION.with_unit(SI_ACCEL_UNIT)
     #: channels its evidence reads beyond its raw channel and inputs (the gyroscope's: time)
     evidence_reads: tuple[Channel, ...] = ()
+    #: its short name in generated C (NAME_apply_<symbol>, raw_<first letter>, NAME_HAS_<SYMBOL>) and the
+    #: name of its calibrated output there
+    symbol: str = "acc"
+    output_symbol: str = "acc"
 
     @property
     def name(self) -> str:

@@ -258,7 +258,8 @@ def _gyro_lines(run: CalibrationRun) -> list[str]:
         from imucal.report.gyro import gyro_report  # measured start-up: only a run with a gyroscope
 
         L.append(gyro_report(run.gyro))
-        C, c, D = cal.gyro.rate_map()
+        a = cal.gyro.affine()
+        C, c, D = a.A, a.c, -a.B
         L.append("[[Gyro apply map]]  omega = C raw + c - D a  (rad/s, the accelerometer's frame; "
                  "a: calibrated acceleration)")
         for i in range(3):

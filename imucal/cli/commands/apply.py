@@ -65,6 +65,7 @@ def run(args: argparse.Namespace) -> int:
     from imucal.files.output import check_outputs, write_text_atomic
     from imucal.gyro.run import gyro_on_accel_samples
     from imucal.model.channels import covariate_values
+    from imucal.model.sensor import ACCELEROMETER, GYROSCOPE
 
     cfg = options.run_config(args, args.config)
     gyro_file = args.gyro_data or options.data_path(cfg, gyro=True)
@@ -84,10 +85,10 @@ def run(args: argparse.Namespace) -> int:
                               fix=f"apply the calibration made for data in this unit, or give data in its unit "
                                   f"({cal.raw_unit}); --no-gravity-check writes the output anyway")
         sys.stderr.write(f"imucal: warning: {_rest_words(chk)}\n")
-    cols, body = ["ax", "ay", "az"], [a]
     raw_g = None if cal.gyro is None else gyro_on_accel_samples(rec, None if gyro_file is None else str(gyro_file))
-    if raw_g is not None:
-        cols, body = cols + ["gx", "gy", "gz"], body + [cal.gyro.apply(raw_g, a)]
+    out = cal.apply_all({ACCELEROMETER: rec.raw, GYROSCOPE: raw_g}, covs, acc=a)  # every sensor, one frame
+    done = [s for s in cal.all_sensors if s.kind in out]
+    cols, body = [c for s in done for c in s.model.output.columns], [out[s.kind] for s in done]
     ts, tfmt = _time_column(rec)
     buf = io.StringIO()
     buf.write(",".join(["t", *cols]) + "\n")  # imucal's layout (examples/codegen reads it)

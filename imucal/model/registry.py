@@ -1,0 +1,32 @@
+"""Every sensor kind imucal knows, by the name its calibration file section carries (issue 26).
+
+The accelerometer's description depends on its effects (imucal.model.sensor.build_model); every other
+kind names the module and function that build its description, imported only when a file or run holds
+one (measured start-up: an accelerometer-only run never builds the others). A new sensor adds one line.
+"""
+from __future__ import annotations
+
+import importlib
+
+from imucal.errors import ImucalError, short
+from imucal.model.sensor import ACCELEROMETER, GYROSCOPE, SensorModel
+
+#: kind -> (module, function) of its description
+DESCRIPTIONS: dict[str, tuple[str, str]] = {
+    GYROSCOPE: ("imucal.model.gyroscope", "gyro_model"),
+}
+#: the order of a calibration's sensors: the accelerometer (the frame) first, then as listed
+KINDS = (ACCELEROMETER, *DESCRIPTIONS)
+
+
+def describe(kind: str, label: str | None = None, where: str | None = None, file: str | None = None) -> SensorModel:
+    """The description of a sensor ``kind``; ``label`` (a file's model name) must be its name."""
+    if kind not in DESCRIPTIONS:
+        raise ImucalError(f"unknown sensor {short(kind)}", file=file, field=where or "sensors",
+                          fix=f"this imucal knows {', '.join(KINDS)}; upgrade imucal for others")
+    module, fn = DESCRIPTIONS[kind]
+    model = getattr(importlib.import_module(module), fn)()
+    if label is not None and label != model.name:
+        raise ImucalError(f"model {short(label)} is not this imucal's {kind} model {model.name!r}", file=file,
+                          field=f"{where or kind}.model", fix="regenerate the file with this imucal, or upgrade imucal")
+    return model
