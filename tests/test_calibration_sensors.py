@@ -28,10 +28,11 @@ def test_a_version_2_gyroscope_section_reads_into_the_named_parameters(v2):
     gy = cal.gyro
     assert cal.sensors == ("accelerometer", "gyroscope") and gy.kind == "gyroscope" and gy.raw_unit == "raw"
     np.testing.assert_array_equal(gy.vector(SCALE_NAMES), g2["parameters"]["scale"])
-    np.testing.assert_array_equal(gy.vector(MIS_NAMES), misalignment_entries(np.array(g2["parameters"]["misalignment"])))
+    mis = misalignment_entries(np.array(g2["parameters"]["misalignment"]))
+    np.testing.assert_array_equal(gy.vector(MIS_NAMES), mis)
     scale = np.array(g2["parameters"]["scale"])
-    np.testing.assert_allclose(gy.vector(GSENS_NAMES).reshape(3, 3), scale[:, None] * np.array(g2["parameters"]["gsens"]),
-                               rtol=1e-15)
+    H = scale[:, None] * np.array(g2["parameters"]["gsens"])
+    np.testing.assert_allclose(gy.vector(GSENS_NAMES).reshape(3, 3), H, rtol=1e-15)
     np.testing.assert_array_equal(gy.vector(SCALE_NAMES, std=True), g2["std"]["scale"])
     assert dict(gy.fit) == g2["fit"]
     # its map is the file's own derived map, omega = C raw + c - D a, and the model's (conftest.gyro_rate)

@@ -87,3 +87,22 @@ def test_descriptions_say_what_they_read_and_write() -> None:
         GYROSCOPE, ANGULAR_RATE, ("ax", "ay", "az"), ("gx", "gy", "gz"), "rad/s")
     assert gyro.reads == (ANGULAR_RATE, ACCELERATION, TIME)
     assert len(set(gyro.names)) == len(gyro.names) == 21
+
+
+def test_an_evidence_may_read_other_inputs_than_the_map() -> None:
+    """The magnetometer's rows read their kind and the calibrated acceleration, its map nothing: the
+    description's ``evidence_inputs`` sizes the rows' covariates (least_squares.row_functions)."""
+    from imucal.model.channels import ACCELERATION as MAG  # any channel: the test's sensor is made up
+    from imucal.solve.least_squares import Rows, residuals, row_functions
+
+    raw, inp, p = ca.SX.sym("raw", 3), ca.SX.sym("inputs", 0), ca.SX.sym("p", 2)
+    cov, g = ca.SX.sym("cov", 2), ca.SX.sym("g")
+    y = p[0] * (raw - p[1])
+    fns = {"apply": ca.Function("apply", [raw, inp, p], [y]),
+           "residual": ca.Function("residual", [raw, cov, p, g], [ca.norm_2(y) - g + cov[0] * cov[1]])}
+    model = SensorModel(effects=(), names=("k", "o"), inputs=(), functions=fns, kind="made-up", label="made-up",
+                        channel=MAG, output=MAG, evidence_inputs=("kind", "ax"))
+    assert model.covariates == () and model.evidence_covariates == ("kind", "ax")
+    rows = Rows(np.array([[3.0, 4.0, 1.0], [0.0, 0.0, 2.0]]), np.array([[1.0, 0.5], [0.0, 7.0]]))
+    r = residuals(row_functions(model, ("k",)), rows, [2.0], [2.0, 1.0], 1.0)
+    np.testing.assert_allclose(r, [2 * np.sqrt(4 + 9) - 1 + 0.5 * 1.0, 2 * np.sqrt(3) - 1 + 7.0 * 0.0])

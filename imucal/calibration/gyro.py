@@ -119,8 +119,8 @@ def _check_derived(g: SensorCalibration, apply: Any, path: str) -> None:
             got = np.array(apply.get(key), dtype=float) if isinstance(apply, Mapping) else None
         except (TypeError, ValueError, OverflowError):
             got = None
-        if got is None or got.shape != want.shape or not np.allclose(got, want, rtol=DERIVED_RTOL,
-                                                                    atol=DERIVED_RTOL * np.abs(want).max(initial=1e-300)):
+        tol = DERIVED_RTOL * np.abs(want).max(initial=1e-300)
+        if got is None or got.shape != want.shape or not np.allclose(got, want, rtol=DERIVED_RTOL, atol=tol):
             raise ImucalError("does not match the parameters (edited by hand?)", file=path,
                               field=f"gyroscope.apply.{key}",
                               fix="edit the parameters, not the derived apply map, or restore the file")

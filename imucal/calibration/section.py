@@ -160,8 +160,9 @@ def check_sensor(s: SensorCalibration, path: str) -> None:
             raise ImucalError(f"{short(n)} is not a parameter name", file=path, field=f"{s.kind}.parameters", fix=REGEN)
         check_unit(p.unit, f"{s.kind}.parameters.{n}.unit", path, REGEN)
         if not p.admits(p.value):
-            raise ImucalError(f"{n} = {p.value:.6g} {p.unit} is outside the file's bounds [{p.lower:.6g}, {p.upper:.6g}]",
-                              file=path, field=f"{s.kind}.parameters.{n}.value", fix=REGEN)
+            raise ImucalError(f"{n} = {p.value:.6g} {p.unit} is outside the file's bounds "
+                              f"[{p.lower:.6g}, {p.upper:.6g}]", file=path, field=f"{s.kind}.parameters.{n}.value",
+                              fix=REGEN)
     if s.model.affine is not None:
         A = s.affine().A
         scale = np.prod(np.linalg.norm(A, axis=1))

@@ -212,68 +212,78 @@ def source(c: "_Context", s: SensorCalibration, k: "Kernel") -> list[str]:
            *[f"  (void){src}; /* B = 0: not read */" for src in unread],
            *([] if any(r.startswith(loc) for r in reads) else [f"  (void){n['raw']};"]),
            k.body(), "}", "",
-           f"void {p}_{n['fn']}_batch(const {real} *{n['raw']}{_batch_args(s, real)}, {real} *{n['out']}, size_t n)",
-           "{", "  size_t i;",
+           f"void {p}_{n['fn']}_batch(const {real} *{n['raw']}{_batch_args(s, real)}, {real} *{n['out']}, "
+           "size_t n)", "{", "  size_t i;",
            f"  for (i = 0; i < n; ++i) {p}_{n['fn']}({n['raw']} + 3 * i"
            + "".join(f", {src if src in unread else call[src]}" for src in srcs)
            + f", {n['out']} + 3 * i);" + (f" /* {', '.join(unread)} unread */" if unread else ""), "}", ""]
     for itype, sfx in (("int16_t", "i16"), ("uint16_t", "u16")):
         out += [f"void {p}_{n['fn']}_{sfx}(const {itype} {n['raw']}[3]{_args(c, s, real)}, {real} {n['out']}[3])",
-                "{", f"  const {real} {loc}[3] = {{({real}){n['raw']}[0], ({real}){n['raw']}[1], ({real}){n['raw']}[2]}};",
+                "{", _converted(real, loc, n["raw"]),
                 f"  {p}_{n['fn']}({loc}" + "".join(f", {src}" for src in srcs) + f", {n['out']});", "}", ""]
     return out
+
+
+def _converted(real: str, name: str, raw: str) -> str:
+    """A local float copy of a raw integer (or aliased) array."""
+    return f"  const {real} {name}[3] = {{({real}){raw}[0], ({real}){raw}[1], ({real}){raw}[2]}};"
+
+
+def _lists(real: str, sensors: tuple[SensorCalibration, ...], itype: str | None = None) -> dict[str, str]:
+    """The argument lists of NAME_apply_imu after the accelerometer's: raw arrays, outputs, batch pointers."""
+    nm = [names(s) for s in sensors]
+    return {"raws": "".join(f", const {itype or real} {x['raw']}[3]" for x in nm),
+            "outs": "".join(f", {real} {x['out']}[3]" for x in nm),
+            "raw_ptrs": "".join(f", const {real} *{x['raw']}" for x in nm),
+            "out_ptrs": "".join(f", {real} *{x['out']}" for x in nm),
+            "raw_at": "".join(f", {x['raw']} + 3 * i" for x in nm),
+            "out_at": "".join(f", {x['out']} + 3 * i" for x in nm)}
 
 
 def imu_declarations(c: "_Context", sensors: tuple[SensorCalibration, ...]) -> list[str]:
     """NAME_apply_imu: every sensor of one sample, the accelerometer first."""
     p, P, real = c.prefix, c.P, c.real
-    raws = "".join(f", const {real} {names(s)['raw']}[3]" for s in sensors)
-    outs = "".join(f", {real} {names(s)['out']}[3]" for s in sensors)
+    L = _lists(real, sensors)
     what = ", ".join(f"{names(s)['out']} ({p}_{names(s)['fn']})" for s in sensors)
-    if not c.covariates:
-        return [*_block(f"Every sensor of one sample: acc from raw_a ({p}_apply), then {what}. The outputs may "
-                        "alias the inputs."), f"void {p}_apply_imu(const {real} raw_a[3]{raws}, {real} acc[3]{outs});", "",
-                f"/* {p}_apply_imu over n samples, each array stored as x y z x y z ... */",
-                f"void {p}_apply_imu_batch(const {real} *raw_a{''.join(f', const {real} *' + names(s)['raw'] for s in sensors)}, "
-                f"{real} *acc{''.join(f', {real} *' + names(s)['out'] for s in sensors)}, size_t n);", "",
-                f"/* {p}_apply_imu on integer counts of every sensor (exact conversion). */",
-                *(f"void {p}_apply_imu_{sfx}(const {it} raw_a[3]{''.join(f', const {it} ' + names(s)['raw'] + '[3]' for s in sensors)}, "
-                  f"{real} acc[3]{outs});" for it, sfx in (("int16_t", "i16"), ("uint16_t", "u16"))), ""]
-    return [*_block(f"Every sensor of one sample: acc from raw_a and the covariates ({p}_apply_cov), then {what}. "
-                    "The outputs may alias the inputs."),
-            f"void {p}_apply_imu_cov(const {real} raw_a[3]{raws}, const {real} cov[{P}_N_COV],",
-            f"                       {real} acc[3]{outs});", ""]
+    if c.covariates:
+        return [*_block(f"Every sensor of one sample: acc from raw_a and the covariates ({p}_apply_cov), then "
+                        f"{what}. The outputs may alias the inputs."),
+                f"void {p}_apply_imu_cov(const {real} raw_a[3]{L['raws']}, const {real} cov[{P}_N_COV],",
+                f"                       {real} acc[3]{L['outs']});", ""]
+    out = [*_block(f"Every sensor of one sample: acc from raw_a ({p}_apply), then {what}. The outputs may alias "
+                   "the inputs."), f"void {p}_apply_imu(const {real} raw_a[3]{L['raws']}, {real} acc[3]{L['outs']});",
+           "", f"/* {p}_apply_imu over n samples, each array stored as x y z x y z ... */",
+           f"void {p}_apply_imu_batch(const {real} *raw_a{L['raw_ptrs']}, {real} *acc{L['out_ptrs']}, size_t n);", "",
+           f"/* {p}_apply_imu on integer counts of every sensor (exact conversion). */"]
+    for itype, sfx in (("int16_t", "i16"), ("uint16_t", "u16")):
+        out.append(f"void {p}_apply_imu_{sfx}(const {itype} raw_a[3]{_lists(real, sensors, itype)['raws']}, "
+                   f"{real} acc[3]{L['outs']});")
+    return out + [""]
 
 
 def imu_source(c: "_Context", sensors: tuple[SensorCalibration, ...]) -> list[str]:
     p, P, real = c.prefix, c.P, c.real
     nm = [names(s) for s in sensors]
+    L = _lists(real, sensors)
     copies = [f"  const {real} {x['local']}[3] = {{{x['raw']}[0], {x['raw']}[1], {x['raw']}[2]}}; "
               "/* acc may alias it */" for x in nm]
 
-    def calls(cov: bool) -> list[str]:
-        out = [f"  {p}_apply_cov(raw_a, cov, acc);" if cov else f"  {p}_apply(raw_a, acc);"]
-        for s, x in zip(sensors, nm):
-            args = "".join(f", {src}" for src, _ in sources(s))
-            out.append(f"  {p}_{x['fn']}({x['local']}{args}, {x['out']});")
-        return out
+    def calls(first: str) -> list[str]:
+        return [first] + [f"  {p}_{x['fn']}({x['local']}{''.join(', ' + src for src, _ in sources(s))}, {x['out']});"
+                          for s, x in zip(sensors, nm)]
 
-    raws = "".join(f", const {real} {x['raw']}[3]" for x in nm)
-    outs = "".join(f", {real} {x['out']}[3]" for x in nm)
     if c.covariates:
-        return [f"void {p}_apply_imu_cov(const {real} raw_a[3]{raws}, const {real} cov[{P}_N_COV],",
-                f"                       {real} acc[3]{outs})", "{", *copies, *calls(True), "}", ""]
-    out = [f"void {p}_apply_imu(const {real} raw_a[3]{raws}, {real} acc[3]{outs})", "{", *copies, *calls(False), "}", "",
-           f"void {p}_apply_imu_batch(const {real} *raw_a{''.join(f', const {real} *' + x['raw'] for x in nm)}, "
-           f"{real} *acc{''.join(f', {real} *' + x['out'] for x in nm)}, size_t n)", "{", "  size_t i;",
-           f"  for (i = 0; i < n; ++i) {p}_apply_imu(raw_a + 3 * i{''.join(', ' + x['raw'] + ' + 3 * i' for x in nm)}, "
-           f"acc + 3 * i{''.join(', ' + x['out'] + ' + 3 * i' for x in nm)});", "}", ""]
+        return [f"void {p}_apply_imu_cov(const {real} raw_a[3]{L['raws']}, const {real} cov[{P}_N_COV],",
+                f"                       {real} acc[3]{L['outs']})", "{", *copies,
+                *calls(f"  {p}_apply_cov(raw_a, cov, acc);"), "}", ""]
+    out = [f"void {p}_apply_imu(const {real} raw_a[3]{L['raws']}, {real} acc[3]{L['outs']})", "{", *copies,
+           *calls(f"  {p}_apply(raw_a, acc);"), "}", "",
+           f"void {p}_apply_imu_batch(const {real} *raw_a{L['raw_ptrs']}, {real} *acc{L['out_ptrs']}, size_t n)", "{",
+           "  size_t i;",
+           f"  for (i = 0; i < n; ++i) {p}_apply_imu(raw_a + 3 * i{L['raw_at']}, acc + 3 * i{L['out_at']});",
+           "}", ""]
     for itype, sfx in (("int16_t", "i16"), ("uint16_t", "u16")):
-        conv = [f"  const {real} a[3] = {{({real})raw_a[0], ({real})raw_a[1], ({real})raw_a[2]}};"]
-        conv += [f"  const {real} {x['local']}[3] = {{({real}){x['raw']}[0], ({real}){x['raw']}[1], ({real}){x['raw']}[2]}};"
-                 for x in nm]
-        body = [f"  {p}_apply(a, acc);"] + [f"  {p}_{x['fn']}({x['local']}{''.join(', ' + src for src, _ in sources(s))}, "
-                                            f"{x['out']});" for s, x in zip(sensors, nm)]
-        out += [f"void {p}_apply_imu_{sfx}(const {itype} raw_a[3]{''.join(f', const {itype} ' + x['raw'] + '[3]' for x in nm)}, "
-                f"{real} acc[3]{outs})", "{", *conv, *body, "}", ""]
+        conv = [_converted(real, "a", "raw_a")] + [_converted(real, x["local"], x["raw"]) for x in nm]
+        out += [f"void {p}_apply_imu_{sfx}(const {itype} raw_a[3]{_lists(real, sensors, itype)['raws']}, "
+                f"{real} acc[3]{L['outs']})", "{", *conv, *calls(f"  {p}_apply(a, acc);"), "}", ""]
     return out

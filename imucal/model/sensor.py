@@ -114,6 +114,10 @@ class SensorModel:
     #: name of its calibrated output there
     symbol: str = "acc"
     output_symbol: str = "acc"
+    #: the other inputs of its evidence's residual (the ``cov`` of imucal.solve.least_squares.row_functions)
+    #: when they are not its map's covariates (the magnetometer's rows: their kind and the calibrated
+    #: acceleration); None: ``covariates``
+    evidence_inputs: tuple[str, ...] | None = None
 
     @property
     def name(self) -> str:
@@ -128,6 +132,11 @@ class SensorModel:
     def covariates(self) -> tuple[str, ...]:
         """The inputs that are covariates of the recording (temp, time), in the layout of ``cov``."""
         return tuple(k for k in self.inputs if k in COVARIATES)
+
+    @property
+    def evidence_covariates(self) -> tuple[str, ...]:
+        """The layout of its evidence residual's ``cov`` input (``evidence_inputs``, else ``covariates``)."""
+        return self.covariates if self.evidence_inputs is None else self.evidence_inputs
 
     @property
     def reads(self) -> tuple[Channel, ...]:
