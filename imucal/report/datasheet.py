@@ -70,32 +70,33 @@ def accelerometer_rows(cal: Calibration) -> list[DatasheetRow]:
 
 
 def gyroscope_rows(cal: Calibration) -> list[DatasheetRow]:
+    from imucal.gyro.result import GyroArrays  # only a calibration with a gyroscope
+
     g = cal.gyro
     assert g is not None
-    unit, nominal = g.unit, NOMINAL_SCALE.get(g.unit)
-    sd = {k: np.asarray(v, float) for k, v in g.std.items()}
+    unit, nominal = g.raw_unit, NOMINAL_SCALE.get(g.raw_unit)
+    a = GyroArrays.of(g.params, g.std)
     rows = []
-    for j, a in enumerate(AXES):
-        s, b = float(g.bias[j]), float(g.scale[j])
-        ds, db = float(sd["bias"][j]), float(sd["scale"][j])
-        rows.append(DatasheetRow(f"bias {a}", s / b * DEG_PER_RAD, _ratio_std(s, ds, b, db) * DEG_PER_RAD, "deg/s",
-                                 f"s_{a}", s, ds, unit))
-    for j, a in enumerate(AXES):
-        b, db = float(g.scale[j]), float(sd["scale"][j])
-        rows.append(_scale_rows(a, f"b_{a}", b, db, unit, "rad/s", 1.0 / DEG_PER_RAD, nominal))
+    for j, ax in enumerate(AXES):
+        s, b, ds, db = float(a.bias[j]), float(a.scale[j]), float(a.bias_std[j]), float(a.scale_std[j])
+        rows.append(DatasheetRow(f"bias {ax}", s / b * DEG_PER_RAD, _ratio_std(s, ds, b, db) * DEG_PER_RAD, "deg/s",
+                                 f"s_{ax}", s, ds, unit))
+    for j, ax in enumerate(AXES):
+        b, db = float(a.scale[j]), float(a.scale_std[j])
+        rows.append(_scale_rows(ax, f"b_{ax}", b, db, unit, "rad/s", 1.0 / DEG_PER_RAD, nominal))
     for i in range(3):
         for j in range(3):
             if i != j:
-                m, dm = float(g.misalignment[i, j]), float(sd["misalignment"][i, j])
+                m, dm = float(a.misalignment[i, j]), float(a.misalignment_std[i, j])
                 rows.append(DatasheetRow(f"misalignment {AXES[i]}{AXES[j]}", m * 1e3, dm * 1e3, "mrad",
                                          f"m_{AXES[i]}{AXES[j]}", m, dm, "1"))
     k = DEG_PER_RAD * STANDARD_GRAVITY  # (rad/s)/(m/s^2) -> (deg/s)/g
     for i in range(3):
-        if np.any(g.gsens[i]):
+        if np.any(a.gsens[i]):
             for j in range(3):
-                rows.append(DatasheetRow(f"g-sensitivity {AXES[i]}{AXES[j]}", float(g.gsens[i, j]) * k,
-                                         float(sd["gsens"][i, j]) * k, "(deg/s)/g", f"G_{AXES[i]}{AXES[j]}",
-                                         float(g.gsens[i, j]), float(sd["gsens"][i, j]), "(rad/s)/(m/s^2)"))
+                rows.append(DatasheetRow(f"g-sensitivity {AXES[i]}{AXES[j]}", float(a.gsens[i, j]) * k,
+                                         float(a.gsens_std[i, j]) * k, "(deg/s)/g", f"G_{AXES[i]}{AXES[j]}",
+                                         float(a.gsens[i, j]), float(a.gsens_std[i, j]), "(rad/s)/(m/s^2)"))
     return rows
 
 

@@ -171,7 +171,8 @@ def _gyroscope_html(run: CalibrationRun) -> str:
     rows = [[esc(n), num(p.value, ".10g"), "fixed" if p.fixed else num(res.std.get(n, math.nan), ".4g"), esc(p.unit)]
             for n, p in res.params.items()]
     m = motions(res)
-    C, c, D = g.rate_map()
+    aff = g.affine()  # omega = A raw + c + B a (the description's apply), D = -B
+    C, c, D = aff.A, aff.c, -aff.B
     apply_rows = [[f"ω<sub>{'xyz'[i]}</sub>"] + [num(v, "+.9e") for v in C[i]] + [num(c[i], "+.9e")]
                   + [num(v, "+.3e") for v in D[i]] for i in range(3)]
     still = "".join(f"<li>{esc(line.strip())}</li>" for line in [*still_lines(m.still), *gap_lines(m.gapped)]
