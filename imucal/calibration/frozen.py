@@ -138,8 +138,9 @@ class Calibration:
         """Every sensor whose raw readings ``raw`` holds by kind ({"accelerometer": (N, 3), "gyroscope": ...}),
         each in the accelerometer's frame: {kind: calibrated (N, 3)} (imucal.calibration.sensor.apply_sensors).
         ``acc``: the accelerometer's calibrated readings when already computed (``apply``)."""
-        if acc is None and raw.get(ACCELEROMETER) is not None:  # its checks and covariates as ``apply``'s
-            acc = self.apply(raw[ACCELEROMETER], covariates)
+        raw_acc = raw.get(ACCELEROMETER)
+        if acc is None and raw_acc is not None:  # its checks and covariates as ``apply``'s
+            acc = self.apply(raw_acc, covariates)
         if acc is None:
             return apply_sensors(self.attached, raw, covariates)
         columns = {**(covariates or {}), **dict(zip(self.accelerometer.model.output.columns, np.atleast_2d(acc).T))}
