@@ -77,3 +77,16 @@ def test_figures_are_drawn_without_pyplot(counts_recording, tmp_path):
             "print('matplotlib.pyplot' in sys.modules, 'matplotlib.figure' in sys.modules)\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, check=True)
     assert out.stdout.split() == ["False", "True"]
+
+
+def test_fleet_histograms_keep_every_text_inside(saved):
+    from imucal.fleet import report as fleet_report
+
+    # values whose axes carry an offset or a power of ten beside their ticks (1e6 + ..., 1e-5 ...)
+    scales = [1e6, -3e6, 16384.0, 1e-5, 0.1, 1.0, 1.5707, 1.5708, 1.5709, 2e-5]
+    rows = [{"status": fleet_report.OK, "verdict": "pass" if k else "fail", "outlier": "", "raw_unit": "counts",
+             **{n: v * (1.0 + 1e-5 * k) for n, v in zip(fleet_report.HISTOGRAMS, scales)}} for k in range(12)]
+    table = fleet_report.FleetTable(rows, None)
+    for name in fleet_report.HISTOGRAMS:
+        fleet_report.histogram(table, name, io.BytesIO())
+        assert outside(saved[-1]) == [], name

@@ -159,9 +159,8 @@ def load_writers(figures: bool) -> threading.Thread:
             import pyarrow  # noqa: F401
             import pandas  # noqa: F401 - pyarrow loads it to build a table
         if figures:
-            from imucal.report.figures import _plt
-
-            _plt()
+            import matplotlib.figure  # noqa: F401 - what imucal.report.canvas draws with
+            import matplotlib.backends.backend_agg  # noqa: F401
 
     thread = threading.Thread(target=load, name="imucal-report-writers")
     thread.start()
@@ -185,13 +184,13 @@ def parquet_writer(table: FleetTable):
 
 def histogram(table: FleetTable, name: str, path: Path) -> None:
     """Histogram of one column over the converged units, outliers and failures marked."""
-    from imucal.report.figures import _plt
+    from imucal.report.canvas import Margins, new_figure, save_png
 
-    plt = _plt()
     ok = [r for r in table.rows if r["status"] == OK and r[name] is not None]
     x = np.array([r[name] for r in ok], float)
     bad = np.array([r[name] for r in ok if r["verdict"] == "fail" or r["outlier"]], float)
-    fig, ax = plt.subplots(figsize=(6, 3.6), dpi=100)
+    fig, axes = new_figure(6, 3.6, Margins(top=0.15), dpi=HISTOGRAM_DPI)
+    ax = axes[0, 0]
     ax.hist(x, bins=min(40, max(5, int(np.sqrt(max(x.size, 1))) * 2)), color="#4477aa", alpha=0.85,
             label=f"{x.size} converged units")
     if bad.size:
@@ -202,11 +201,11 @@ def histogram(table: FleetTable, name: str, path: Path) -> None:
     ax.set_xlabel(f"{name} [{unit}]")
     ax.set_ylabel("units calibrated [#]")
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, format="png")
-    plt.close(fig)
+    save_png(fig, path)
 
 
+#: Resolution of the fleet's histograms [dots per inch]: 600 x 360 px, ten of them on the page.
+HISTOGRAM_DPI = 100
 #: Columns with a histogram: the nine parameters and the fit's RMS.
 HISTOGRAMS = (*BASE_NAMES, "rms_residual")
 

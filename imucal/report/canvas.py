@@ -41,11 +41,11 @@ class Margins:
 
 
 def new_figure(width: float, height: float, margins: Margins = Margins(), nrows: int = 1, ncols: int = 1,
-               **subplots: Any) -> tuple["Figure", np.ndarray]:
+               dpi: int = DPI, **subplots: Any) -> tuple["Figure", np.ndarray]:
     """A width x height [in] figure and its nrows x ncols axes (always a 2-D array), placed by margins."""
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(width, height), dpi=DPI)
+    fig = Figure(figsize=(width, height), dpi=dpi)
     fig.subplots_adjust(left=margins.left / width, right=1 - margins.right / width,
                         bottom=margins.bottom / height, top=1 - margins.top / height,
                         wspace=margins.wspace, hspace=margins.hspace)
