@@ -48,15 +48,21 @@ def parameter_entries(params: Parameters, std: Mapping[str, float]) -> dict[str,
 
 
 def equation(s: SensorCalibration) -> str:
-    """The section's apply equation in words of its columns."""
-    out, inputs = "[" + ", ".join(s.model.output.columns) + "]", "[" + ", ".join(s.model.inputs) + "]"
-    tail = f" + input_matrix @ {inputs}  ({', '.join(s.model.inputs)}: the map's inputs)" if s.model.inputs else ""
+    """The section's apply equation in words of its columns (a map that reads covariates: at their reference,
+    the parameters' terms moving it with them)."""
+    r = s.at_reference()
+    out, inputs = "[" + ", ".join(r.model.output.columns) + "]", "[" + ", ".join(r.model.inputs) + "]"
+    tail = f" + input_matrix @ {inputs}  ({', '.join(r.model.inputs)}: the map's inputs)" if r.model.inputs else ""
+    ref = s.reference_inputs()
+    if ref:
+        tail += ("; at " + ", ".join(f"{k} = {v:.6g}" for k, v in ref.items())
+                 + f": the parameters' terms move it with {', '.join(ref)}")
     return f"{out} = matrix @ raw + offset{tail}"
 
 
 def to_section(s: SensorCalibration) -> dict[str, Any]:
-    """The file section of one sensor."""
-    a = s.affine()
+    """The file section of one sensor; its apply map at its covariates' reference (``at_reference``)."""
+    a = s.at_reference().affine()
     return {"kind": s.kind, "model": s.model.name,
             "units": {"input": s.raw_unit, "output": s.model.output.unit},
             "inputs": list(s.model.inputs),
@@ -163,8 +169,8 @@ def check_sensor(s: SensorCalibration, path: str) -> None:
             raise ImucalError(f"{n} = {p.value:.6g} {p.unit} is outside the file's bounds "
                               f"[{p.lower:.6g}, {p.upper:.6g}]", file=path, field=f"{s.kind}.parameters.{n}.value",
                               fix=REGEN)
-    if s.model.affine is not None:
-        A = s.affine().A
+    if s.at_reference().model.affine is not None:
+        A = s.at_reference().affine().A
         scale = np.prod(np.linalg.norm(A, axis=1))
         if not (np.all(np.isfinite(A)) and abs(np.linalg.det(A)) > MIN_RELATIVE_DET * scale):
             raise ImucalError(f"the {s.kind} parameters give a singular map (a direction lost)", file=path,
@@ -175,7 +181,7 @@ def _check_derived(s: SensorCalibration, apply: Any, path: str) -> None:
     """The stored apply map must be the parameters' (a hand edit of a derived value is refused)."""
     if apply is None:
         return
-    a = s.affine()
+    a = s.at_reference().affine()
     fix = "edit the parameters, not the derived apply map, or restore the file"
     for key, want in (("matrix", a.A), ("offset", a.c), ("input_matrix", a.B)):
         try:

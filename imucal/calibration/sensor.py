@@ -9,13 +9,15 @@ y = A raw + c + B inputs, and ``forward`` the same map as the peers write it, ra
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Mapping, Sequence
 
+import casadi as ca
 import numpy as np
 
 from imucal.errors import ImucalError
 from imucal.model.parameters import Parameters
+from imucal.model.channels import COVARIATES
 from imucal.model.sensor import SensorModel
 from imucal.solve.vectorize import apply_values
 
@@ -59,6 +61,36 @@ class SensorCalibration:
     def vector(self, names: Sequence[str], std: bool = False) -> np.ndarray:
         """The values (or standard errors) of ``names``, in order."""
         return np.array([float(self.std.get(n, float("nan"))) if std else self.params[n].value for n in names])
+
+    @property
+    def covariates(self) -> tuple[str, ...]:
+        """The covariates its map reads (temp: the gyroscope's bias(T) terms), in the order of its inputs."""
+        return tuple(k for k in self.model.inputs if k in COVARIATES)
+
+    def reference_inputs(self) -> dict[str, float]:
+        """Each covariate at its reference (temp: the terms' T_ref, time: t0, or 0 from the start)."""
+        out = {}
+        for key in self.covariates:
+            refs = [f"{e.name}_{r}" for e in self.model.effects if key in e.covariates for r in ("tref", "t0")]
+            out[key] = next((self.params[n].value for n in refs if n in self.params), 0.0)
+        return out
+
+    def at_reference(self) -> "SensorCalibration":
+        """This sensor with its covariates held at ``reference_inputs``: a map affine in its raw reading and
+        its other inputs (the file's apply map for people, the C's header, the peers that hold no
+        temperature term). Itself when its map reads no covariate."""
+        if not self.covariates:
+            return self
+        ref = self.reference_inputs()
+        f = self.model.functions["apply"]
+        keep = tuple(k for k in self.model.inputs if k not in ref)
+        raw, inp, p = ca.SX.sym("raw", 3), ca.SX.sym("inputs", len(keep)), ca.SX.sym("p", len(self.model.names))
+        full = ca.vertcat(*[inp[keep.index(k)] if k in keep else ca.SX(ref[k]) for k in self.model.inputs])
+        g = ca.Function("apply", [raw, inp, p], [f(raw, full, p)], ["raw", "inputs", "p"], ["calibrated"])
+        at = ", ".join(f"{k} = {v:.6g}" for k, v in ref.items())
+        model = replace(self.model, effects=(), inputs=keep, functions={"apply": g},
+                        label=f"{self.model.name} at {at}")
+        return replace(self, model=model)
 
     def affine(self) -> Affine:
         """The map as y = A raw + c + B inputs; refused for a map that is not affine (a nonlinear effect)."""

@@ -141,6 +141,36 @@ def thermal(cal: Calibration) -> tempcal.TempPolynomial | None:
     return tempcal.polynomial(cal)
 
 
+def gyro_thermal(cal: Calibration) -> tempcal.TempPolynomial | None:
+    """The gyroscope's bias polynomial in temperature [rad/s of the driver's reading: s(T) / k], when its
+    description has a bias term (imucal.model.gyroscope); its range must be the accelerometer's (one per IMU)."""
+    gfit = gyro_fit(cal)
+    p = None if gfit is None else tempcal.sensor_polynomial(cal.gyro)
+    if p is None:
+        return None
+    a = thermal(cal)
+    if a is not None and not np.allclose([a.tmin, a.tmax], [p.tmin, p.tmax], rtol=0, atol=1e-9):
+        raise ImucalError(f"the gyroscope's temperature range {p.tmin:.4g}..{p.tmax:.4g} degC is not the "
+                          f"accelerometer's {a.tmin:.4g}..{a.tmax:.4g}: the autopilots hold one range per IMU",
+                          field="gyroscope.fit.temperature_range",
+                          fix="calibrate both sensors' temperature terms from one sweep (imucal discover)")
+    k = gfit.sensitivity
+    return replace(p, s_ref=p.s_ref / k, coeffs=p.coeffs / k)
+
+
+def _gyro_thermal_note(cal: Calibration, what: str) -> list[str]:
+    p = gyro_thermal(cal)
+    if p is None:
+        return []
+    if what == "ArduPilot":
+        return [f"gyroscope temperature: the bias terms are written exactly as INS_TCAL1_GYR* and INS_GYR1_CALTEMP "
+                f"(INS_GYROFFS = the offset at T_ref = {p.tref:g} degC); ArduPilot measures INS_GYROFFS and "
+                "INS_GYR1_CALTEMP again at each boot unless INS_GYR_CAL = 0, and the curve then corrects from the "
+                "boot temperature"]
+    return [f"gyroscope temperature: the bias terms are written exactly as TC_G_ENABLE and TC_G0_* (CAL_GYRO0_*OFF "
+            f"= the offset at TC_G0_TREF = {p.tref:g} degC); set TC_G0_ID to the gyroscope's device id"]
+
+
 def _thermal_notes(cal: Calibration, what: str) -> list[str]:
     """What happens to the temperature terms, and what else is dropped."""
     names = "INS_TCAL1_* and INS_ACC1_CALTEMP" if what == "ArduPilot" else "TC_A_ENABLE and TC_A0_*"
@@ -153,7 +183,7 @@ def _thermal_notes(cal: Calibration, what: str) -> list[str]:
     if part is not None and (loss := tempcal.loss_sentence(part, what)):
         notes.append(loss)
     rest = tuple(e for e in cal.effects if e[0] not in (tempcal.BIAS_TERMS if p is not None else ()))
-    return notes + list(dropped_effects(replace(cal, effects=rest)) if rest else ())
+    return notes + _gyro_thermal_note(cal, what) + list(dropped_effects(replace(cal, effects=rest)) if rest else ())
 
 
 def reading_factor(cal: Calibration, fit: DiagonalFit, what: str) -> float:
@@ -231,6 +261,10 @@ def _values(cal: Calibration, fit: DiagonalFit, acc_names: tuple[str, ...], gyro
     gfit = gyro_fit(cal)
     if gfit is not None:
         out += list(zip(gyro_names, map(float, gfit.offset)))
+    gp = gyro_thermal(cal)
+    if gp is not None:  # the gyroscope's curve in the driver's rad/s; ArduPilot's range is the IMU's, written once
+        out += (tempcal.ardupilot_lines(gp, "GYR", shared=p is None) if acc_names[0].startswith("INS_")
+                else tempcal.px4_lines(gp, "G"))
     return out
 
 

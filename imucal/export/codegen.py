@@ -479,6 +479,7 @@ def generate_c(cal: Calibration, prefix: str = DEFAULT_PREFIX, precision: str = 
     effects = tuple(n for n, _ in cal.effects)
     model = _model(cal) if effects else None
     covs: tuple[str, ...] = model.covariates if model is not None else ()
+    _check_covariates(cal, covs)
     raw_in = ["r0", "r1", "r2"]
     acc_out = [["acc[0]", "acc[1]", "acc[2]"]]
     k_prep = kernel(prepare_function(), [[f"params[{i}]" for i in range(9)]],
@@ -506,6 +507,17 @@ def generate_c(cal: Calibration, prefix: str = DEFAULT_PREFIX, precision: str = 
     _check_generated(src, f"{prefix}.c")
     return GeneratedC(prefix, precision, header, src, k_apply.ops if k_apply else None, k_coef.ops,
                       k_cov.ops if k_cov else None, {sc.kind: k.ops for sc, k in ks})
+
+
+def _check_covariates(cal: Calibration, covs: tuple[str, ...]) -> None:
+    """Every covariate an attached sensor reads is in the accelerometer's cov (NAME_apply_imu_cov passes one)."""
+    for sc in cal.attached:
+        extra = [k for k in sc.covariates if k not in covs]
+        if extra:
+            raise ImucalError(f"the {sc.kind} reads {', '.join(extra)} but the accelerometer's map does not: the "
+                              "generated C passes one cov array, the accelerometer's", field=f"{sc.kind}.inputs",
+                              fix=f"calibrate the accelerometer's {', '.join(extra)} terms too (imucal discover on the "
+                                  f"sweep), or drop the {sc.kind}'s")
 
 
 def write_c(cal: Calibration, out_dir: str | os.PathLike, prefix: str = DEFAULT_PREFIX,

@@ -118,14 +118,17 @@ def doc(c: "_Context", s: SensorCalibration, k: "Kernel") -> list[str]:
     """Header comment lines: its model, values with standard errors, units, frame, error bound and cost."""
     t = c.text
     n, p, real = names(s), c.prefix, c.real
-    a, f = s.affine(), s.forward()
+    r = s.at_reference()  # a map with bias(T) terms: A, s and the bound at T_ref
+    a, f = r.affine(), r.forward()
     unit = t(s.raw_unit)
     u = UNIT_ROUNDOFF[real]
     k_in = a.B.shape[1]
     at_rest = np.full((1, k_in), c.cal.gravity / math.sqrt(3)) if k_in else None
-    rest = affine_float_error_bound(s, f.s, at_rest, real).max()
+    rest = affine_float_error_bound(r, f.s, at_rest, real).max()
     per_out = (k_in + 5) * u * (np.abs(a.A) @ np.abs(f.P)).sum(axis=1).max()  # |raw - s| = |P y| at inputs 0
-    ins = ", ".join(s.model.inputs)
+    ins = ", ".join(r.model.inputs)
+    ref = s.reference_inputs()
+    terms = ", ".join(e.name for e in s.model.effects)
 
     def wrap(text: str) -> list[str]:
         return textwrap.wrap(text, 94, initial_indent=" *   ", subsequent_indent=" *     ")
@@ -138,10 +141,13 @@ def doc(c: "_Context", s: SensorCalibration, k: "Kernel") -> list[str]:
         " *",
         *textwrap.wrap(head, 94, initial_indent=" * ", subsequent_indent=" *   "),
         *wrap(f"parameters (the calibration file's, with standard errors): {values}."),
+        *(wrap(f"Terms in {', '.join(ref)} ({t(terms)}): the map below is at " + ", ".join(
+            f"{k} = {_fmt(v, '.6g')}" for k, v in ref.items()) + f"; {p}_{n['fn']} reads {', '.join(ref)} from cov "
+            f"and adds the terms (the parameters above). The error bound is at the reference.") if ref else []),
         *wrap(f"s [{unit}] = " + ", ".join(_fmt(x, ".10g") for x in f.s)),
         *wrap(f"A [{s.model.output.unit} per {unit}] = " + _matrix_text(a.A)),
-        *(wrap(f"B = {_matrix_text(a.B)}" if s.reads_inputs() else
-               f"B = 0: {p}_{n['fn']} does not read {', '.join(src for src, _ in sources(s))}") if k_in else []),
+        *(wrap(f"B = {_matrix_text(a.B)}" if r.reads_inputs() else
+               f"B = 0: {p}_{n['fn']} does not read {', '.join(_unread(s, k))}") if k_in else []),
         f" * Units: {n['raw']} in [{unit}] (the recording's unit); {n['out']} in [{s.model.output.unit}], in the",
         " * same frame f as acc (the accelerometer's orthonormal frame above).",
         " *",
@@ -155,6 +161,11 @@ def doc(c: "_Context", s: SensorCalibration, k: "Kernel") -> list[str]:
         f" * Cost of {p}_{n['fn']}: {k.ops}; no branch, no heap, no",
         " * mutable static state.",
     ]
+
+
+def _unread(s: SensorCalibration, k: "Kernel") -> list[str]:
+    """The input arrays (acc, cov) its emitted function never reads (exact zeros dropped)."""
+    return [src for src, _ in sources(s) if not any(r.startswith({"acc": "f", "cov": "c"}[src]) for r in k.reads)]
 
 
 def _args(c: "_Context", s: SensorCalibration, real: str, const: bool = True) -> str:
@@ -204,7 +215,7 @@ def source(c: "_Context", s: SensorCalibration, k: "Kernel") -> list[str]:
     reads += [f"f{i} = acc[{i}]" for i in range(3) if f"f{i}" in k.reads]
     reads += [f"{v} = cov[{v[1:]}]" for v in sorted(r for r in k.reads if r.startswith("c"))]
     srcs = [src for src, _ in sources(s)]
-    unread = [src for src in srcs if not any(r.startswith({"acc": "f", "cov": "c"}[src]) for r in k.reads)]
+    unread = _unread(s, k)
     call = {"acc": "acc + 3 * i", "cov": f"cov + {c.P}_N_COV * i"}
     out = [f"/* {n['out']} = A ({n['raw']} - s) + B inputs with this calibration's values ({k.ops}). */",
            f"void {p}_{n['fn']}(const {real} {n['raw']}[3]{_args(c, s, real)}, {real} {n['out']}[3])", "{",

@@ -108,7 +108,7 @@ def to_imutk(cal: Calibration, opts: ExportOptions) -> Exported:
     gyro = None
     if cal.gyro is not None:
         gyro = _calib_text(*imutk_factors(cal.gyro))
-        if cal.gyro.reads_inputs():
+        if cal.gyro.at_reference().reads_inputs():
             notes += (gsens_sentence("imu_tk", cal.gyro, cal.gravity),)
     return Exported(_calib_text(A @ np.linalg.inv(K), K, s), notes, gyro)
 

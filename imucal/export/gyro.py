@@ -40,7 +40,8 @@ class Forward:
 
 
 def forward(g: SensorCalibration) -> Forward:
-    a, f = g.affine(), g.forward()
+    r = g.at_reference()  # bias(T) terms at T_ref: the peers hold none (imucal.export.tempcal writes them)
+    a, f = r.affine(), r.forward()
     return Forward(P=f.P, F=f.F, s=f.s, C=a.A, D=-a.B)
 
 

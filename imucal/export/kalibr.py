@@ -157,7 +157,7 @@ def to_kalibr(cal: Calibration, opts: ExportOptions) -> Exported:
               f"imucal_accelerometer_offset: {_flow(s.tolist())}  "
               + hash_comment(f"b_a = s [{cal.raw_unit}], not a Kalibr key")]
     if g is not None:
-        lines.append(f"imucal_gyroscope_offset: {_flow(g.forward().s.tolist())}  "
+        lines.append(f"imucal_gyroscope_offset: {_flow(g.at_reference().forward().s.tolist())}  "
                      + hash_comment(f"b_g = s_g [{g.raw_unit}], not a Kalibr key"))
     if n is None:
         notes.append(f"noise fields are null: {how}")

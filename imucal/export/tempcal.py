@@ -25,10 +25,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
 from imucal.calibration.frozen import Calibration
+from imucal.calibration.sensor import SensorCalibration
 from imucal.errors import ImucalError
 from imucal.model.effects import MIN_TEMPERATURE_SPREAD
 from imucal.model.parameters import BASE_NAMES, Parameters
@@ -95,13 +97,9 @@ def _affine_at(cal: Calibration, temp: float, probe: float) -> tuple[np.ndarray,
 ABSOLUTE_ZERO, MAX_TEMPERATURE = -273.15, 1000.0
 
 
-def polynomial(cal: Calibration) -> TempPolynomial | None:
-    """s(T) of the temperature terms, exactly (a cubic through NODES samples; module docstring)."""
-    part = temperature_part(cal)
-    if part is None:
-        return None
-    tref = float(next(part.params[n].value for n in part.params.names if n.endswith("_tref")))
-    rng = cal.fit.get("temperature_range") if isinstance(cal.fit, dict) else None
+def _range(fit: object, tref: float) -> tuple[float, float, str]:
+    """[degC] the range the terms were fitted over (the calibration's ``temperature_range``), checked."""
+    rng = fit.get("temperature_range") if isinstance(fit, Mapping) else None
     if rng:
         tmin, tmax, note = float(rng[0]), float(rng[1]), "the calibration data's temperature range"
         if not (ABSOLUTE_ZERO <= tmin and tmax <= MAX_TEMPERATURE):  # the peers' parameters are in degC
@@ -116,22 +114,60 @@ def polynomial(cal: Calibration) -> TempPolynomial | None:
     else:
         tmin, tmax = tref - DEFAULT_HALF_RANGE, tref + DEFAULT_HALF_RANGE
         note = f"no temperature range recorded: T_ref +- {DEFAULT_HALF_RANGE:g} degC"
-    probe = float(np.max(np.abs(cal.values[3:6])))
+    return tmin, tmax, note
+
+
+def _cubic(affine_at: Callable[[float], tuple[np.ndarray, np.ndarray]], effects: Sequence[str], tref: float,
+           fit: object, size: float) -> TempPolynomial:
+    """s(T) read from a map's ``affine_at(T)`` -> (A(T), s(T)) at NODES temperatures (exact: a polynomial of
+    the terms' degree), and the scale terms' loss at a reading of ``size`` (module docstring)."""
+    tmin, tmax, note = _range(fit, tref)
     temps = tref + (tmax - tmin) / 2 * np.cos(np.pi * (np.arange(NODES) + 0.5) / NODES) + (tmin + tmax) / 2 - tref
-    maps = [_affine_at(part, float(t), probe) for t in temps]
-    S = np.array([s for _, s in maps])
-    degree = max((BIAS_TERMS.index(n) + 1 for n, _ in part.effects if n in BIAS_TERMS), default=0)
+    S = np.array([affine_at(float(t))[1] for t in temps])
+    degree = max((BIAS_TERMS.index(n) + 1 for n in effects if n in BIAS_TERMS), default=0)
     coeffs = np.zeros((4, 3))
     coeffs[:degree + 1] = np.linalg.lstsq(np.vander(temps - tref, degree + 1, increasing=True), S, rcond=None)[0]
-    A_ref, s_ref = _affine_at(part, tref, probe)
-    if not any(n in SCALE_TERMS for n, _ in part.effects):  # nothing dropped (not rounding's 1e-15 m/s^2)
+    A_ref, s_ref = affine_at(tref)
+    if not any(n in SCALE_TERMS for n in effects):  # nothing dropped (not rounding's 1e-15 m/s^2)
         return TempPolynomial(tref=tref, tmin=tmin, tmax=tmax, s_ref=s_ref, coeffs=coeffs, range_note=note)
     grid = np.linspace(tmin, tmax, LOSS_POINTS)  # the ends included: a scale term's loss peaks there
-    lost = [np.eye(3) - A_ref @ np.linalg.inv(_affine_at(part, float(t), probe)[0]) for t in grid]
-    g = float(cal.gravity)
+    lost = [np.eye(3) - A_ref @ np.linalg.inv(affine_at(float(t))[0]) for t in grid]
     return TempPolynomial(tref=tref, tmin=tmin, tmax=tmax, s_ref=s_ref, coeffs=coeffs, range_note=note,
-                          scale_max=g * max(float(np.linalg.norm(D, 2)) for D in lost),
-                          scale_rms=g * math.sqrt(float(np.mean([np.sum(D**2) for D in lost])) / 3))
+                          scale_max=size * max(float(np.linalg.norm(D, 2)) for D in lost),
+                          scale_rms=size * math.sqrt(float(np.mean([np.sum(D**2) for D in lost])) / 3))
+
+
+def polynomial(cal: Calibration) -> TempPolynomial | None:
+    """The accelerometer's s(T) of the temperature terms, exactly (a cubic through NODES samples; module
+    docstring); the scale terms' loss at |a| = g."""
+    part = temperature_part(cal)
+    if part is None:
+        return None
+    tref = float(next(part.params[n].value for n in part.params.names if n.endswith("_tref")))
+    probe = float(np.max(np.abs(cal.values[3:6])))
+    return _cubic(lambda t: _affine_at(part, t, probe), [n for n, _ in part.effects], tref, cal.fit,
+                  float(cal.gravity))
+
+
+def _sensor_affine_at(s: SensorCalibration, temp: float, probe: float) -> tuple[np.ndarray, np.ndarray]:
+    """A(T), s(T) of an attached sensor's map y = A(T) (raw - s(T)) + B inputs, its other inputs at 0."""
+    raw = np.vstack([np.zeros(3), probe * np.eye(3)])
+    inputs = np.array([[temp if k == "temp" else 0.0 for k in s.model.inputs]] * 4)
+    y = s.apply(raw, inputs)
+    A = (y[1:] - y[0]).T / probe
+    return A, -np.linalg.solve(A, y[0])
+
+
+def sensor_polynomial(s: SensorCalibration, size: float = 1.0) -> TempPolynomial | None:
+    """An attached sensor's (the gyroscope's) bias s(T) [its raw unit], read from its own map as the
+    accelerometer's is; None without a temperature bias term. The scale terms' loss at a reading of ``size``
+    [its output unit] (the gyroscope: 1 rad/s)."""
+    names = [e.name for e in s.model.effects if "temp" in e.covariates]
+    if not any(n in BIAS_TERMS for n in names):
+        return None
+    tref = s.reference_inputs()["temp"]
+    probe = 1.0 / float(np.max(np.abs(s.at_reference().affine().A)))  # one output unit of raw reading
+    return _cubic(lambda t: _sensor_affine_at(s, t, probe), names, tref, s.fit, size)
 
 
 def loss_sentence(p: TempPolynomial, what: str) -> str | None:
@@ -142,21 +178,25 @@ def loss_sentence(p: TempPolynomial, what: str) -> str | None:
             f"{p.scale_max:.3g} m/s^2, RMS {p.scale_rms:.3g} m/s^2 over {p.tmin:.4g}..{p.tmax:.4g} degC at |a| = g")
 
 
-def ardupilot_lines(p: TempPolynomial) -> list[tuple[str, float]]:
-    """INS_TCAL1_* and INS_ACC1_CALTEMP (module docstring); the enable flag is an integer."""
+def ardupilot_lines(p: TempPolynomial, sensor: str = "ACC", shared: bool = True) -> list[tuple[str, float]]:
+    """INS_TCAL1_<sensor>k_* and INS_<sensor>1_CALTEMP (module docstring; ``sensor`` ACC or GYR), after the
+    instance's INS_TCAL1_ENABLE, _TMIN, _TMAX when ``shared`` (one range per IMU: the accelerometer's and the
+    gyroscope's curves share it); the enable flag is an integer."""
     d = p.about(ARDUPILOT_TREF)
-    out: list[tuple[str, float]] = [("INS_TCAL1_ENABLE", 1), ("INS_TCAL1_TMIN", p.tmin), ("INS_TCAL1_TMAX", p.tmax),
-           ("INS_ACC1_CALTEMP", p.tref)]
+    out: list[tuple[str, float]] = [("INS_TCAL1_ENABLE", 1), ("INS_TCAL1_TMIN", p.tmin),
+                                    ("INS_TCAL1_TMAX", p.tmax)] if shared else []
+    out.append((f"INS_{sensor}1_CALTEMP", p.tref))
     for k in (1, 2, 3):
-        out += [(f"INS_TCAL1_ACC{k}_{a}", float(d[k, i] * ARDUPILOT_SCALE)) for i, a in enumerate("XYZ")]
+        out += [(f"INS_TCAL1_{sensor}{k}_{a}", float(d[k, i] * ARDUPILOT_SCALE)) for i, a in enumerate("XYZ")]
     return out
 
 
-def px4_lines(p: TempPolynomial) -> list[tuple[str, float]]:
-    """TC_A_ENABLE and TC_A0_* (module docstring); TC_A0_ID 0: the user sets the device id. The
-    enable flag and the id are integers (int32 in PX4)."""
-    out: list[tuple[str, float]] = [("TC_A_ENABLE", 1), ("TC_A0_ID", 0), ("TC_A0_TREF", p.tref), ("TC_A0_TMIN", p.tmin),
-           ("TC_A0_TMAX", p.tmax)]
+def px4_lines(p: TempPolynomial, sensor: str = "A") -> list[tuple[str, float]]:
+    """TC_<sensor>_ENABLE and TC_<sensor>0_* (module docstring; ``sensor`` A or G); TC_<sensor>0_ID 0: the user
+    sets the device id. The enable flag and the id are integers (int32 in PX4)."""
+    t = f"TC_{sensor}0"
+    out: list[tuple[str, float]] = [(f"TC_{sensor}_ENABLE", 1), (f"{t}_ID", 0), (f"{t}_TREF", p.tref),
+                                    (f"{t}_TMIN", p.tmin), (f"{t}_TMAX", p.tmax)]
     for k in range(4):
-        out += [(f"TC_A0_X{k}_{i}", 0.0 if k == 0 else float(p.coeffs[k, i])) for i in range(3)]
+        out += [(f"{t}_X{k}_{i}", 0.0 if k == 0 else float(p.coeffs[k, i])) for i in range(3)]
     return out

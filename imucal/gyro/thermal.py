@@ -20,7 +20,7 @@ confounded (the real sweep: x drifts about -0.8 mrad/s per day).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -48,6 +48,8 @@ class AxisFit:
     rss: float
     dof: int
     residual: np.ndarray  #: (n,) [rad/s]
+    offset: float = 0.0  #: [rad/s] the mean of the poses' constants: the bias (with the Earth's rate averaged)
+    offset_std: float = float("nan")
 
 
 @dataclass(frozen=True)
@@ -64,6 +66,17 @@ class GyroThermal:
     drift_std: np.ndarray
     drift_correlation: np.ndarray  #: (3,) correlation of the drift with the linear temperature coefficient
     tref: float
+    #: (3,) [rad/s] the bias at the terms' zero: the mean of the poses' constants (each holds the Earth's rate
+    #: projected on the axis in that pose, at most 0.073 mrad/s: not told apart from the bias by still poses)
+    offset: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    offset_std: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+
+    def effects(self) -> list:
+        """The grammar's terms this fit holds (bias_temperature{,2,3} on the axes of at least that order), as
+        the gyroscope's description takes them (imucal.model.gyroscope.gyro_model)."""
+        from imucal.model.effects import make_effect
+        return [make_effect(name, [i for i, o in enumerate(self.orders) if o >= k])
+                for k, name in TERMS.items() if max(self.orders) >= k]
 
     def bias(self, temp: np.ndarray) -> np.ndarray:
         """(n, 3) bias(T) - bias(T_ref) [rad/s] at temperatures ``temp``."""
@@ -91,7 +104,10 @@ def _fit(y: np.ndarray, X: np.ndarray, k: int) -> AxisFit:
     rss = float(r @ r)
     cov = unscaled_covariance(np.linalg.qr(X, mode="r")) * (rss / dof if dof > 0 else 1.0)
     tail = slice(X.shape[1] - k, X.shape[1])
-    return AxisFit(k, coef[tail], np.sqrt(np.clip(np.diag(cov)[tail], 0, None)), rss, dof, r)
+    w = np.zeros(X.shape[1])
+    w[:X.shape[1] - k] = 1.0 / (X.shape[1] - k)  # the mean of the poses' constants
+    return AxisFit(k, coef[tail], np.sqrt(np.clip(np.diag(cov)[tail], 0, None)), rss, dof, r,
+                   float(w @ coef), float(np.sqrt(max(w @ cov @ w, 0.0))))
 
 
 def _select(y: np.ndarray, P: np.ndarray, B: np.ndarray, alpha: float) -> tuple[AxisFit, tuple[float, ...]]:
@@ -126,7 +142,8 @@ def gyro_bias_temperature(rows: ThermalRows, alpha: float = ALPHA) -> GyroTherma
     after = np.column_stack([f.residual for f in fits])
     drift, dstd, corr = _drift(rows, P, B, fits)
     return GyroThermal(params=params, std=std, orders=tuple(f.order for f in fits), p_values=tuple(pvals),
-                       before=before, after=after, drift=drift, drift_std=dstd, drift_correlation=corr, tref=a[0])
+                       before=before, after=after, drift=drift, drift_std=dstd, drift_correlation=corr, tref=a[0],
+                       offset=np.array([f.offset for f in fits]), offset_std=np.array([f.offset_std for f in fits]))
 
 
 def _parameters(fits: list[AxisFit], a: list[float], b: list[float]) -> tuple[Parameters, dict[str, float]]:

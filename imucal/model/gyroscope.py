@@ -13,19 +13,28 @@ inputs ax, ay, az). The bias is subtracted first (c = -C s_g cancels for offset-
 
 Its evidence is the motion segments between still poses (imu_tk's residual R_k^T u0 - u1 after
 integrating ``apply``'s rate with the RK4 step of imucal.gyro.model: imucal.gyro.attitude).
+
+Temperature (issue 27): the grammar's terms (imucal.model.effects, a target x a basis: ``bias_temperature``,
+``_temperature2``, ``_temperature3``, the drift and scale terms alike) make the bias and the scale functions of
+a covariate, s_g -> s_g + c_i p_k(T), b_g -> b_g (1 + c_i p_k(T)), exactly as they do the accelerometer's
+shifts and scales; the covariate (``temp``) is then one more input of the map, after ax, ay, az, and the
+terms' coefficients and fixed references (T_ref, the orthogonal polynomials' constants) follow the 21 names.
+Without terms the description is the one above, unchanged.
 """
 from __future__ import annotations
 
+import re
 from functools import lru_cache
-from typing import Iterable
+from typing import Iterable, Mapping, Sequence
 
 import casadi as ca
 import numpy as np
 
 from imucal.constants import SI_RATE_UNIT
+from imucal.errors import ImucalError, short
 from imucal.model.channels import ACCELERATION, ANGULAR_RATE, TIME
 from imucal.model.parameters import Parameter, Parameters
-from imucal.model.sensor import GYROSCOPE, SensorModel
+from imucal.model.sensor import GYROSCOPE, Effect, SensorModel
 
 AXES = "xyz"
 #: M_g's free entries: m_ij is row i (gyro axis), column j (frame axis)
@@ -66,21 +75,102 @@ def misalignment_entries(M: np.ndarray) -> np.ndarray:
     return np.array([M[i, j] for i, j in MIS_INDEX])
 
 
-def _apply() -> ca.Function:
-    raw, a, p = ca.SX.sym("raw", 3), ca.SX.sym("inputs", 3), ca.SX.sym("p", len(NAMES))
+def _apply(effects: tuple[Effect, ...] = ()) -> ca.Function:
+    names, covs = _names(effects), _covariates(effects)
+    raw, a, p = ca.SX.sym("raw", 3), ca.SX.sym("inputs", len(INPUTS) + len(covs)), ca.SX.sym("p", len(names))
+    acc = a[0:3]
     s, scale, mis = p[0:3], p[3:6], p[6:12]
+    if effects:  # the grammar's terms on the bias and the scale (imucal.model.effects.Term.shift_scale)
+        pd = {n: p[i] for i, n in enumerate(names)}
+        cd = {c: a[len(INPUTS) + i] for i, c in enumerate(covs)}
+        sl, bl = [s[i] for i in range(3)], [scale[i] for i in range(3)]
+        for e in effects:
+            sl, bl = e.shift_scale(sl, bl, cd, pd)
+        s, scale = ca.vertcat(*sl), ca.vertcat(*bl)
     H = ca.reshape(p[12:21], 3, 3).T  # row-major
     C = ca.mtimes(ca.inv(misalignment_matrix(mis)), ca.diag(1.0 / scale))  # M_g^-1 B_g^-1
-    omega = ca.mtimes(C, raw - s) - ca.mtimes(ca.mtimes(C, H), a)  # C (raw - s_g) - D a, D = M_g^-1 G_s
+    omega = ca.mtimes(C, raw - s) - ca.mtimes(ca.mtimes(C, H), acc)  # C (raw - s_g) - D a, D = M_g^-1 G_s
     return ca.Function("apply", [raw, a, p], [omega], ["raw", "inputs", "p"], ["calibrated"])
 
 
-@lru_cache(maxsize=1)
-def gyro_model() -> SensorModel:
-    """The gyroscope's description (built once)."""
-    return SensorModel(effects=(), names=NAMES, inputs=INPUTS, functions={"apply": _apply()}, kind=GYROSCOPE,
-                       label=LABEL, channel=ANGULAR_RATE, output=ANGULAR_RATE.with_unit(SI_RATE_UNIT),
-                       evidence_reads=(TIME,), symbol="gyro", output_symbol="omega")
+def _covariates(effects: Sequence[Effect]) -> tuple[str, ...]:
+    return tuple(sorted({c for e in effects for c in e.covariates}))
+
+
+def _names(effects: Sequence[Effect]) -> tuple[str, ...]:
+    return NAMES + tuple(p.name for e in effects for p in e.parameters(None))  # type: ignore[arg-type]
+
+
+def _checked(effects: Iterable[Effect]) -> tuple[Effect, ...]:
+    """The terms the gyroscope takes: the grammar's shift and scale terms (no specific-force term)."""
+    from imucal.model.effects import EFFECTS, Term
+    out = tuple(effects)
+    for e in out:
+        if not isinstance(e, Term):
+            raise ImucalError(f"the gyroscope takes no {short(e.name)} term", field="gyroscope.model",
+                              fix=f"use the bias and scale terms: {', '.join(n for n, c in EFFECTS.items() if issubclass(c, Term))}")
+    return out
+
+
+def label(effects: Sequence[Effect] = ()) -> str:
+    """The description's name: LABEL, then each term as the accelerometer's model names it."""
+    return LABEL + "".join(f"+{e.name}[{''.join(AXES[i] for i in e.axes)}]" for e in effects)
+
+
+@lru_cache(maxsize=16)
+def _cached(key: tuple, effects: tuple[Effect, ...]) -> SensorModel:
+    covs = _covariates(effects)
+    return SensorModel(effects=effects, names=_names(effects), inputs=INPUTS + covs,
+                       functions={"apply": _apply(effects)}, kind=GYROSCOPE, label=label(effects),
+                       channel=ANGULAR_RATE, output=ANGULAR_RATE.with_unit(SI_RATE_UNIT), evidence_reads=(TIME,),
+                       symbol="gyro", output_symbol="omega")
+
+
+def gyro_model(effects: Iterable[Effect] = ()) -> SensorModel:
+    """The gyroscope's description, with the grammar's temperature (or drift) terms ``effects`` (built once
+    per set)."""
+    effs = _checked(effects)
+    return _cached(tuple(e.key for e in effs), effs)
+
+
+_TERM = re.compile(r"\+([a-z0-9_]+)\[([xyz]+)\]")
+
+
+def described(name: str) -> SensorModel | None:
+    """The description a file's model name names (``label``), or None when it is not a gyroscope's
+    (imucal.model.registry.describe's hook)."""
+    from imucal.model.effects import EFFECTS, make_effect
+    if not name.startswith(LABEL):
+        return None
+    rest, effects = name[len(LABEL):], []
+    for m in _TERM.finditer(rest):
+        if m.group(1) not in EFFECTS:
+            return None
+        effects.append(make_effect(m.group(1), sorted(AXES.index(c) for c in m.group(2))))
+    if "".join(m.group(0) for m in _TERM.finditer(rest)) != rest:
+        return None
+    model = gyro_model(effects)
+    return model if model.name == name else None
+
+
+def term_parameters(effects: Sequence[Effect], unit: str, values: Mapping[str, float], nominal: float = 1.0
+                    ) -> list[Parameter]:
+    """The terms' parameters for a gyroscope read in ``unit``: each coefficient (a bias term's in ``unit`` per
+    unit of its basis, its solver unit the grammar's generous magnitude times ``nominal`` [unit per rad/s]; a
+    scale term's relative) and the fixed references, valued from ``values`` (the sweep's fit)."""
+    out = []
+    for e in effects:
+        for prm in e.parameters(None):  # type: ignore[arg-type]
+            v = float(values.get(prm.name, prm.value))
+            if prm.fixed:
+                out.append(Parameter(prm.name, v, unit=prm.unit, fixed=True, scale=max(abs(v), 1.0),
+                                     description=prm.description))
+                continue
+            bias = getattr(e, "target", "") == "bias"
+            out.append(Parameter(prm.name, v, lower=prm.lower, upper=prm.upper,
+                                 unit=e.unit.replace("{raw}", unit), scale=e.typical * (nominal if bias else 1.0),
+                                 description=f"gyroscope {prm.description}"))
+    return out
 
 
 def gyro_parameters(unit: str, bias: Iterable[float], scale: Iterable[float], mis: Iterable[float] = (0.0,) * 6,

@@ -2,7 +2,9 @@
 
 The accelerometer's description depends on its effects (imucal.model.sensor.build_model); every other
 kind names the module and function that build its description, imported only when a file or run holds
-one (measured start-up: an accelerometer-only run never builds the others). A new sensor adds one line.
+one (measured start-up: an accelerometer-only run never builds the others). A new sensor adds one line; a
+module whose description takes terms (the gyroscope's temperature terms) also has ``described(name)``, the
+description a file's model name names (None when it names none).
 """
 from __future__ import annotations
 
@@ -25,7 +27,11 @@ def describe(kind: str, label: str | None = None, where: str | None = None, file
         raise ImucalError(f"unknown sensor {short(kind)}", file=file, field=where or "sensors",
                           fix=f"this imucal knows {', '.join(KINDS)}; upgrade imucal for others")
     module, fn = DESCRIPTIONS[kind]
-    model = getattr(importlib.import_module(module), fn)()
+    mod = importlib.import_module(module)
+    model = getattr(mod, fn)()
+    if label is not None and label != model.name and hasattr(mod, "described"):
+        # a description with terms (the gyroscope's bias(T)): the module reads its own name back
+        model = mod.described(label) or model
     if label is not None and label != model.name:
         raise ImucalError(f"model {short(label)} is not this imucal's {kind} model {model.name!r}", file=file,
                           field=f"{where or kind}.model", fix="regenerate the file with this imucal, or upgrade imucal")

@@ -23,6 +23,7 @@ from imucal.report.verdict import Check, SensorVerdict, Verdict, chi2_consistent
 
 if TYPE_CHECKING:  # discovery pages only: `imucal calibrate` does not import the discovery modules
     from imucal.analysis.discover import Discovery
+    from imucal.calibration.sensor import SensorCalibration
 
 
 def _checks_html(checks: tuple[Check, ...]) -> str:
@@ -162,16 +163,27 @@ def _accelerometer_html(run: CalibrationRun, figures: Mapping[str, bytes]) -> st
     return "\n".join(parts)
 
 
+def _gyroscope_held_html(g: SensorCalibration) -> str:
+    """A gyroscope the run did not fit to rotations: its parameters as the calibration holds them."""
+    rows = [[esc(n), num(p.value, ".10g"), num(g.std.get(n, math.nan), ".4g") + (" (held)" if p.fixed else ""),
+             esc(p.unit)] for n, p in g.params.items()]
+    what = g.fit.get("evidence", "") if isinstance(g.fit, Mapping) else ""
+    return "\n".join(["<h3>Parameters</h3>", f"<p class=\"meta\">{esc(what)}</p>" if what else "",
+                      table_html(["parameter", "value", "standard error", "unit"], rows, [False, True, True, False])])
+
+
 def _gyroscope_html(run: CalibrationRun) -> str:
     from imucal.gyro.result import arrays, motions  # only a run with a gyroscope
     from imucal.report.gyro import gap_lines, still_lines
 
     res, g = run.gyro, run.calibration.gyro
-    assert res is not None and g is not None
+    assert g is not None
+    if res is None:  # a gyroscope from other evidence than rotations (a temperature sweep's bias(T))
+        return _gyroscope_held_html(g)
     rows = [[esc(n), num(p.value, ".10g"), "fixed" if p.fixed else num(res.std.get(n, math.nan), ".4g"), esc(p.unit)]
             for n, p in res.params.items()]
     m = motions(res)
-    aff = g.affine()  # omega = A raw + c + B a (the description's apply), D = -B
+    aff = g.at_reference().affine()  # omega = A raw + c + B a (the description's apply), D = -B
     C, c, D = aff.A, aff.c, -aff.B
     apply_rows = [[f"ω<sub>{'xyz'[i]}</sub>"] + [num(v, "+.9e") for v in C[i]] + [num(c[i], "+.9e")]
                   + [num(v, "+.3e") for v in D[i]] for i in range(3)]

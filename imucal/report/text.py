@@ -258,7 +258,7 @@ def _gyro_lines(run: CalibrationRun) -> list[str]:
         from imucal.report.gyro import gyro_report  # measured start-up: only a run with a gyroscope
 
         L.append(gyro_report(run.gyro))
-        a = cal.gyro.affine()
+        a = cal.gyro.at_reference().affine()
         C, c, D = a.A, a.c, -a.B
         L.append("[[Gyro apply map]]  omega = C raw + c - D a  (rad/s, the accelerometer's frame; "
                  "a: calibrated acceleration)")

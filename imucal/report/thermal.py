@@ -60,12 +60,13 @@ def gap_lines(tc: ThermalCalibration, alpha: float) -> list[str]:
 
 
 def gyro_lines(tc: ThermalCalibration) -> list[str]:
-    """The gyroscope's bias(T) from the same rows, and its drift beside it (evidence, not in the file yet)."""
+    """The gyroscope's bias(T) from the same rows (the calibration's gyroscope section), and its drift beside it."""
     g = tc.gyro
     if g is None:
         return []
     rms = lambda x: np.sqrt(np.mean(x ** 2, axis=0)) * 1e3  # noqa: E731  [mrad/s]
-    out = ["gyroscope bias(T) (evidence: the calibration file does not hold it yet): orders x, y, z = "
+    out = ["gyroscope bias(T) (in the calibration's gyroscope section; scale and misalignment held at nominal): "
+           "orders x, y, z = "
            + ", ".join(map(str, g.orders)) + "; rows about their poses "
            + ", ".join(f"{b:.3g} -> {a:.3g}" for b, a in zip(rms(g.before), rms(g.after))) + " mrad/s"]
     out += [f"    {n} = {g.params[n].value:.4g} +/- {g.std[n]:.2g} {g.params[n].unit}" for n in g.params.free_names]
