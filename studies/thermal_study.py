@@ -7,7 +7,8 @@ The run file holds what three one-axis-down poses cannot determine (the scales a
 fit.fix); the calibration is the product's (imucal.thermal.run.thermal_calibration: the orders chosen
 by the data on each split's fit part). Judged on the four long poses (over LONG_POSE_H hours): the RMS
 in mg of 10-minute means of each calibrated axis about its pose's mean (over the judged part), and the
-same for the gyroscope's bias(T) (imucal.gyro.thermal) in mrad/s.
+same for the gyroscope in mrad/s, calibrated by the same calibration (its gyroscope section's bias(T) terms,
+imucal.gyro.thermal, through Calibration.apply_all: what `imucal apply` writes).
 
 Splits (the fit part chooses the orders and fits the terms; the judged part is not seen):
   in sample       fit everything, judge everything
@@ -35,7 +36,6 @@ import numpy as np
 from imucal.calibration.frozen import Calibration
 from imucal.config.run import config_from_dict
 from imucal.constants import STANDARD_GRAVITY
-from imucal.gyro.thermal import gyro_bias_temperature
 from imucal.report.thermal import residual_temperature_figure
 from imucal.thermal.evidence import thermal_rows
 from imucal.thermal.run import Sweep, sweep_of, thermal_calibration
@@ -109,9 +109,13 @@ def run_split(sweep: Sweep, long: list[int], s: Split) -> dict:
     rows = thermal_rows(rec, sweep.intervals, keep=fit)
     tc = thermal_calibration(Sweep(sweep.config, rec, sweep.intervals, rows))
     judge = part(sweep, long, s.judge)
-    acc = rms_about_poses(block_means(sweep, long, judge, calibrated(tc.final.calibration, sweep)))
-    gt = gyro_bias_temperature(rows)
-    gyro = rms_about_poses(block_means(sweep, long, judge, rec.gyro - gt.bias(rec.temp)))
+    cal = tc.final.calibration
+    acc = rms_about_poses(block_means(sweep, long, judge, calibrated(cal, sweep)))
+    gt = tc.gyro
+    assert gt is not None and cal.gyro is not None, "the sweep's calibration holds its gyroscope"
+    # the gyroscope as the calibration file carries it: its bias(T) terms in the one apply map (issue 27)
+    omega = cal.apply_all({"accelerometer": rec.raw, "gyroscope": rec.gyro}, {"temp": rec.temp, "time": rec.t})
+    gyro = rms_about_poses(block_means(sweep, long, judge, omega["gyroscope"]))
     return {"split": s.name, "rows": rows.n, "mg": acc / MG,
             "terms": {n: "".join("xyz"[a] for a in ax) for n, ax in tc.effects.items()},
             "gyro_mrad_s": gyro * 1e3, "gyro_orders": list(gt.orders), "tc": tc, "gt": gt}
@@ -145,7 +149,9 @@ def markdown(res: list[dict], unc: dict, sweep: Sweep, seconds: float, png: str,
          f"{lo:.1f}..{hi:.1f} degC in the rows). Run file: the scales and angles held at nominal (`fit.fix`), "
          "what three one-axis-down poses cannot determine. Judged: the RMS of 10-minute means of each calibrated "
          f"axis about its pose's mean, over the {len(res[0]['tc'].support.poses)} poses that sweep and the four "
-         f"long ones judged; the orders are chosen by the data on each split's fit part. {seconds:.0f} s.",
+         f"long ones judged; the orders are chosen by the data on each split's fit part. The gyroscope is "
+         "calibrated by the same calibration's gyroscope section (its bias(T) terms in the one apply map, what "
+         f"`imucal apply` writes). {seconds:.0f} s.",
          "",
          "| split | rows | terms chosen | accelerometer [mg] | gyroscope bias(T) [mrad/s] | gyro orders x, y, z |",
          "|---|---|---|---|---|---|",

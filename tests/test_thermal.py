@@ -234,10 +234,16 @@ def test_the_real_thermal_sweep_workflow(run_cli, tmp_path):
     assert not any("drift" in n or "warmup" in n for n, _ in cal.effects)
     assert "gyroscope bias(T)" in r.out and "confounded" in r.out
     assert cal.raw_unit == "m/s^2"
+    # the gyroscope's bias(T) is in the file (issue 27): its section's terms, applied with the temp column
+    assert cal.gyro is not None and cal.gyro.raw_unit == "rad/s"
+    assert any(e.name == "bias_temperature" for e in cal.gyro.model.effects) and "temp" in cal.gyro.model.inputs
     flight = tmp_path / "flight.csv"
-    flight.write_text("t,ax,ay,az,temp\n0,-0.2,0.7,-10.4,5\n1,-0.2,0.7,-10.4,20\n")
+    flight.write_text("t,ax,ay,az,gx,gy,gz,temp\n0,-0.2,0.7,-10.4,0.01,0.02,0.03,5\n"
+                      "1,-0.2,0.7,-10.4,0.01,0.02,0.03,20\n")
     r = run_cli(["apply", tmp_path / "cal" / "calibration.yaml", "--data", flight, "--out", tmp_path / "o.csv"])
     assert r.code == 0, r.err
+    out = np.loadtxt(tmp_path / "o.csv", delimiter=",", skiprows=1)
+    assert np.abs(out[0, 4:7] - out[1, 4:7]).max() > 1e-4  # the gyro's temperature terms act [rad/s]
 
 
 def test_the_gyroscope_bias_over_temperature_orders_values_and_drift():

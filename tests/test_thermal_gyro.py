@@ -237,3 +237,37 @@ def test_the_generated_c_corrects_the_gyro_bias_over_temperature(cal_path, run_c
                           cov[0].ctypes.data_as(ctypes.c_void_p), o.ctypes.data_as(ctypes.c_void_p))
     want = load_calibration(cal_path).gyro.apply(counts.astype(float), np.r_[acc[0], cov[0]].astype(float)[None])
     assert np.abs(o - want[0]).max() < tol * 100
+
+
+def test_codegen_refuses_a_gyro_temperature_the_accelerometer_map_does_not_read(cal_path, run_cli, tmp_path):
+    """The C passes one cov array, the accelerometer's: a gyroscope with bias(T) beside an accelerometer without
+    temperature terms is refused with what to do, and nothing is written."""
+    from imucal.calibration.frozen import Calibration
+    from imucal.model.parameters import BASE_NAMES, Parameters
+
+    cal = load_calibration(cal_path)
+    plain = Calibration(params=Parameters([cal.params[n] for n in BASE_NAMES]), std={}, gravity=cal.gravity,
+                        raw_unit=cal.raw_unit, attached=(cal.gyro,))
+    path = tmp_path / "plain.yaml"
+    plain.save(path)
+    r = run_cli(["codegen", path, "--out", tmp_path / "c"])
+    assert r.code == 2 and r.err.count("\n") == 1
+    assert "gyroscope.inputs: the gyroscope reads temp but the accelerometer's map does not" in r.err
+    assert "(fix: calibrate the accelerometer's temp terms too" in r.err
+    assert not (tmp_path / "c").exists()
+
+
+def test_discover_writes_the_gyroscope_section_and_its_report(cal_path, run_cli, tmp_path):
+    """`imucal discover --config run.yaml --out cal` on the sweep: the file's gyroscope section holds bias(T), the
+    text report names it as in the file, report.html shows the gyroscope's parameters."""
+    cfg = tmp_path / "run.yaml"
+    cfg.write_text(f"data: {{path: {cal_path.parent / 'sweep.csv'}, time_unit: s, gyro_unit: rad/s}}\n"
+                   f"fit:\n  fix: {NOMINAL}\n".replace("'", ""))
+    r = run_cli(["discover", "--config", cfg, "--out", tmp_path / "cal"])
+    assert r.code == 0, r.err
+    assert "gyroscope bias(T) (in the calibration's gyroscope section" in r.out
+    cal = load_calibration(tmp_path / "cal" / "calibration.yaml")
+    assert cal.gyro is not None and [e.name for e in cal.gyro.model.effects] == ["bias_temperature",
+                                                                                  "bias_temperature2"]
+    page = (tmp_path / "cal" / "report.html").read_text()
+    assert "bias_temperature2_y" in page and "still poses over a temperature sweep" in page
