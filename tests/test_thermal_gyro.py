@@ -239,9 +239,10 @@ def test_the_generated_c_corrects_the_gyro_bias_over_temperature(cal_path, run_c
     assert np.abs(o - want[0]).max() < tol * 100
 
 
-def test_codegen_refuses_a_gyro_temperature_the_accelerometer_map_does_not_read(cal_path, run_cli, tmp_path):
-    """The C passes one cov array, the accelerometer's: a gyroscope with bias(T) beside an accelerometer without
-    temperature terms is refused with what to do, and nothing is written."""
+@pytest.mark.skipif(GCC is None, reason="gcc not found")
+def test_the_c_of_a_gyro_temperature_beside_an_accelerometer_without_terms(cal_path, run_cli, tmp_path):
+    """cov then holds what the gyroscope alone reads: NAME_apply stays (raw only), NAME_N_COV is 1 and
+    NAME_apply_imu_cov calibrates both, equal to Calibration.apply_all."""
     from imucal.calibration.frozen import Calibration
     from imucal.model.parameters import BASE_NAMES, Parameters
 
@@ -250,11 +251,20 @@ def test_codegen_refuses_a_gyro_temperature_the_accelerometer_map_does_not_read(
                         raw_unit=cal.raw_unit, attached=(cal.gyro,))
     path = tmp_path / "plain.yaml"
     plain.save(path)
-    r = run_cli(["codegen", path, "--out", tmp_path / "c"])
-    assert r.code == 2 and r.err.count("\n") == 1
-    assert "gyroscope.inputs: the gyroscope reads temp but the accelerometer's map does not" in r.err
-    assert "(fix: calibrate the accelerometer's temp terms too" in r.err
-    assert not (tmp_path / "c").exists()
+    r = run_cli(["codegen", path, "--out", tmp_path / "c", "--precision", "double", "--prefix", "pg"])
+    assert r.code == 0, r.err
+    header = (tmp_path / "c" / "pg.h").read_text()
+    assert "#define PG_N_COV 1" in header and "void pg_apply(const double raw[3], double acc[3]);" in header
+    assert "#define PG_COV_TEMP 0" in header
+    lib = tmp_path / "c" / "libpg.so"
+    subprocess.run([GCC, "-std=c99", "-pedantic", "-Wall", "-Wextra", "-Werror", "-O2", "-fPIC", "-shared", "-o",
+                    str(lib), str(tmp_path / "c" / "pg.c"), "-lm"], check=True, capture_output=True, text=True)
+    dll = ctypes.CDLL(str(lib))
+    raw_a, raw_g, temp = np.array([0.1, -0.2, -9.7]), truth(np.array([8.0]))[0] + 0.2, np.array([8.0])
+    acc, omega = np.zeros(3), np.zeros(3)
+    dll.pg_apply_imu_cov(*(x.ctypes.data_as(ctypes.c_void_p) for x in (raw_a, raw_g, temp, acc, omega)))
+    want = load_calibration(path).apply_all({"accelerometer": raw_a[None], "gyroscope": raw_g[None]}, {"temp": temp})
+    assert np.abs(acc - want["accelerometer"][0]).max() < 1e-12 and np.abs(omega - want["gyroscope"][0]).max() < 1e-13
 
 
 def test_discover_writes_the_gyroscope_section_and_its_report(cal_path, run_cli, tmp_path):

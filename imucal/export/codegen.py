@@ -479,7 +479,6 @@ def generate_c(cal: Calibration, prefix: str = DEFAULT_PREFIX, precision: str = 
     effects = tuple(n for n, _ in cal.effects)
     model = _model(cal) if effects else None
     covs: tuple[str, ...] = model.covariates if model is not None else ()
-    _check_covariates(cal, covs)
     raw_in = ["r0", "r1", "r2"]
     acc_out = [["acc[0]", "acc[1]", "acc[2]"]]
     k_prep = kernel(prepare_function(), [[f"params[{i}]" for i in range(9)]],
@@ -496,28 +495,19 @@ def generate_c(cal: Calibration, prefix: str = DEFAULT_PREFIX, precision: str = 
     else:
         k_cov = kernel(apply_cov_function(cal), [raw_in, [f"cov[{i}]" for i in range(len(covs))]],
                        acc_out, precision)
-    # every other sensor through the same emitter: its raw in locals g0.., acc in f0.., covariates in c0..
-    cov_index = {n: i for i, n in enumerate(covs)}
+    # every other sensor through the same emitter: its raw in locals g0.., acc in f0.., covariates in c0..; cov
+    # holds the accelerometer's covariates first, then those only another sensor reads (the gyroscope's temp)
+    every = covs + tuple(dict.fromkeys(k for sc in cal.attached for k in sc.covariates if k not in covs))
+    cov_index = {n: i for i, n in enumerate(every)}
     ks = tuple((sc, kernel(sensor_function(sc), *sensor_c.kernel_io(sc, cov_index), precision)) for sc in cal.attached)
-    ctx = _Context(cal, prefix, real, source, effects, covs,
-                   model_label(model.name if model is not None else "nakov-ivanov-9", cal.params))
+    ctx = _Context(cal, prefix, real, source, effects, every,
+                   model_label(model.name if model is not None else "nakov-ivanov-9", cal.params), covs)
     header = _header(ctx, k_apply, k_cov, ks)
     src = _source(ctx, k_prep, k_coef, k_apply, k_cov, ks)
     _check_generated(header, f"{prefix}.h")
     _check_generated(src, f"{prefix}.c")
     return GeneratedC(prefix, precision, header, src, k_apply.ops if k_apply else None, k_coef.ops,
                       k_cov.ops if k_cov else None, {sc.kind: k.ops for sc, k in ks})
-
-
-def _check_covariates(cal: Calibration, covs: tuple[str, ...]) -> None:
-    """Every covariate an attached sensor reads is in the accelerometer's cov (NAME_apply_imu_cov passes one)."""
-    for sc in cal.attached:
-        extra = [k for k in sc.covariates if k not in covs]
-        if extra:
-            raise ImucalError(f"the {sc.kind} reads {', '.join(extra)} but the accelerometer's map does not: the "
-                              "generated C passes one cov array, the accelerometer's", field=f"{sc.kind}.inputs",
-                              fix=f"calibrate the accelerometer's {', '.join(extra)} terms too (imucal discover on the "
-                                  f"sweep), or drop the {sc.kind}'s")
 
 
 def write_c(cal: Calibration, out_dir: str | os.PathLike, prefix: str = DEFAULT_PREFIX,
@@ -544,8 +534,9 @@ class _Context:
     real: str
     source: str | os.PathLike | None
     effects: tuple[str, ...]  #: effect names; () for the paper's model
-    covariates: tuple[str, ...]
+    covariates: tuple[str, ...]  #: the layout of cov: the accelerometer's covariates, then the other sensors'
     model_name: str
+    acc_covariates: tuple[str, ...] = ()  #: the accelerometer's map's (NAME_apply_cov; none: NAME_apply)
 
     @property
     def P(self) -> str:
@@ -672,8 +663,10 @@ def _header_apply_decls(c: _Context, ks: tuple[tuple[SensorCalibration, Kernel],
         out += [
             f"/* This calibration's parameters s1 s2 s3 b1 b2 b3 phi psi theta, as {p}_prepare takes them. */",
             f"#define {P}_PARAMS {{{vals}}}", ""]
-    if not c.covariates:
-        out += [f"#define {P}_N_COV 0 /* no covariates: {p}_apply takes raw only */", ""]
+    if not c.acc_covariates:
+        out += [f"#define {P}_N_COV 0 /* no covariates: {p}_apply takes raw only */", ""] if not c.covariates else [
+            *_cov_block(c, f"{p}_apply takes raw only; the other sensors read covariates: "),
+            f"#define {P}_N_COV {len(c.covariates)}", ""]
         what = ("this calibration baked in" if not c.effects else
                 f"this calibration baked in, effects ({comment_text(', '.join(c.effects))}) included")
         out += [
@@ -687,11 +680,9 @@ def _header_apply_decls(c: _Context, ks: tuple[tuple[SensorCalibration, Kernel],
             f"void {p}_apply_i16(const int16_t raw[3], {real} acc[3]);",
             f"void {p}_apply_u16(const uint16_t raw[3], {real} acc[3]);", ""]
     else:
-        cov_doc = ", ".join(f"cov[{i}] = {comment_text(n)} [{COVARIATE_UNITS.get(n, 'see the effect documentation')}]"
-                            for i, n in enumerate(c.covariates))
         out += [
             f"/* This calibration has effects ({comment_text(', '.join(c.effects))}): its map depends on covariates,",
-            f" * so there is no {p}_apply. Covariates: {cov_doc}. */",
+            *_cov_block(c, f"so there is no {p}_apply. Covariates: ", " * "),
             f"#define {P}_N_COV {len(c.covariates)}", "",
             f"/* acc = calibrated acceleration [{SI_ACCEL_UNIT}, frame f] from raw [{comment_text(cal.raw_unit)}] and the",
             " * covariates, this calibration baked in, effects included. acc may alias raw. */",
@@ -709,6 +700,13 @@ def _header_apply_decls(c: _Context, ks: tuple[tuple[SensorCalibration, Kernel],
             *(f"#define {P}_COV_{n.upper()} {c.covariates.index(n) if n in c.covariates else -1}"
               f" /* {n} [{u}] */" for n, u in COVARIATE_UNITS.items()), ""]
     return out
+
+
+def _cov_block(c: _Context, lead: str, first: str = "/* ") -> list[str]:
+    """The comment lines naming cov's layout: cov[i] = name [unit]."""
+    cov_doc = ", ".join(f"cov[{i}] = {comment_text(n)} [{COVARIATE_UNITS.get(n, 'see the effect documentation')}]"
+                        for i, n in enumerate(c.covariates))
+    return textwrap.wrap(f"{lead}{cov_doc}. */", 97, initial_indent=first, subsequent_indent=" * ")
 
 
 def _header(c: _Context, k_apply: Kernel | None, k_cov: Kernel | None,

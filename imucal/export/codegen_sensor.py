@@ -9,7 +9,7 @@ CasADi map with its values baked in (``codegen.sensor_function``, through the on
   NAME_apply_S_batch, NAME_apply_S_i16, NAME_apply_S_u16
   NAME_HAS_S, NAME_S_USES_ACC              what the firmware can test
 
-and NAME_apply_imu (with _batch, _i16, _u16; _cov when the accelerometer reads covariates) runs every
+and NAME_apply_imu (with _batch, _i16, _u16; _cov when a sensor reads covariates) runs every
 sensor of one sample in order. Its error bound in the header is ``affine_float_error_bound``'s.
 """
 from __future__ import annotations
@@ -257,8 +257,9 @@ def imu_declarations(c: "_Context", sensors: tuple[SensorCalibration, ...]) -> l
     L = _lists(real, sensors)
     what = ", ".join(f"{names(s)['out']} ({p}_{names(s)['fn']})" for s in sensors)
     if c.covariates:
-        return [*_block(f"Every sensor of one sample: acc from raw_a and the covariates ({p}_apply_cov), then "
-                        f"{what}. The outputs may alias the inputs."),
+        acc = (f"raw_a and the covariates ({p}_apply_cov)" if c.acc_covariates else f"raw_a ({p}_apply)")
+        return [*_block(f"Every sensor of one sample: acc from {acc}, then {what}, each reading the covariates "
+                        "it needs from cov. The outputs may alias the inputs."),
                 f"void {p}_apply_imu_cov(const {real} raw_a[3]{L['raws']}, const {real} cov[{P}_N_COV],",
                 f"                       {real} acc[3]{L['outs']});", ""]
     out = [*_block(f"Every sensor of one sample: acc from raw_a ({p}_apply), then {what}. The outputs may alias "
@@ -286,7 +287,8 @@ def imu_source(c: "_Context", sensors: tuple[SensorCalibration, ...]) -> list[st
     if c.covariates:
         return [f"void {p}_apply_imu_cov(const {real} raw_a[3]{L['raws']}, const {real} cov[{P}_N_COV],",
                 f"                       {real} acc[3]{L['outs']})", "{", *copies,
-                *calls(f"  {p}_apply_cov(raw_a, cov, acc);"), "}", ""]
+                *calls(f"  {p}_apply_cov(raw_a, cov, acc);" if c.acc_covariates else f"  {p}_apply(raw_a, acc);"),
+                "}", ""]
     out = [f"void {p}_apply_imu(const {real} raw_a[3]{L['raws']}, {real} acc[3]{L['outs']})", "{", *copies,
            *calls(f"  {p}_apply(raw_a, acc);"), "}", "",
            f"void {p}_apply_imu_batch(const {real} *raw_a{L['raw_ptrs']}, {real} *acc{L['out_ptrs']}, size_t n)", "{",
