@@ -52,12 +52,12 @@ def truth(temp: np.ndarray) -> np.ndarray:
     return G0 + np.outer(dT, G1) + np.outer(dT ** 2, G2)
 
 
-def gyro_sweep(path: Path) -> Path:
-    """test_thermal's sweep with gx, gy, gz [rad/s] (module docstring)."""
+def gyro_sweep(path: Path, per_rad_s: float = 1.0) -> Path:
+    """test_thermal's sweep with gx, gy, gz [rad/s, or ``per_rad_s`` units per rad/s] (module docstring)."""
     acc = np.loadtxt(sweep(path.with_suffix(".acc.csv"), truth=ACC, seed=11, hours=HOURS), delimiter=",", skiprows=1)
     pose = np.minimum((acc[:, 0] // (HOURS * 3600 + 120)).astype(int), 2)
     g = truth(acc[:, 4]) + EARTH[pose] + np.random.default_rng(5).normal(0, NOISE, (acc.shape[0], 3))
-    np.savetxt(path, np.column_stack([acc[:, :4], g, acc[:, 4]]), delimiter=",",
+    np.savetxt(path, np.column_stack([acc[:, :4], g * per_rad_s, acc[:, 4]]), delimiter=",",
                header="t,ax,ay,az,gx,gy,gz,temp", comments="", fmt="%.10g")
     return path
 
@@ -281,3 +281,28 @@ def test_discover_writes_the_gyroscope_section_and_its_report(cal_path, run_cli,
                                                                                   "bias_temperature2"]
     page = (tmp_path / "cal" / "report.html").read_text()
     assert "bias_temperature2_y" in page and "still poses over a temperature sweep" in page
+
+
+def test_the_peers_without_temperature_terms_say_what_they_drop(cal_path, run_cli, tmp_path):
+    """Kalibr holds no temperature term: the gyroscope's map is written at T_ref, and the note says so."""
+    r = run_cli(["export", cal_path, "--format", "kalibr", "--out", tmp_path / "imu.yaml"])
+    assert r.code == 0, r.err
+    assert ("gyroscope terms not exported: bias_temperature (xy), bias_temperature2 (y); its map written is the "
+            "calibration's at temp = ") in r.out + r.err
+    g = load_calibration(cal_path).gyro
+    offset = yaml.safe_load((tmp_path / "imu.yaml").read_text())["imucal_gyroscope_offset"]
+    np.testing.assert_allclose(offset, g.at_reference().forward().s, rtol=1e-12)
+
+
+def test_a_sweep_in_deg_s_is_calibrated_in_its_own_unit(tmp_path, run_cli):
+    """gx, gy, gz in deg/s: the section's raw unit and coefficients in deg/s, apply's output in rad/s."""
+    k = 180.0 / np.pi
+    path = gyro_sweep(tmp_path / "deg.csv", per_rad_s=k)
+    d = discover(config_from_dict({"data": {"path": str(path), "time_unit": "s", "gyro_unit": "deg/s"},
+                                   "fit": {"fix": dict(NOMINAL)}}))
+    g = d.calibration_run.calibration.gyro
+    assert g is not None and g.raw_unit == "deg/s" and g.params["bias_temperature_x"].unit == "deg/s/degC"
+    assert g.params["scale_x"].value == pytest.approx(k)
+    T = np.linspace(5.5, 24.5, 20)
+    omega = g.apply(truth(T) * k, np.column_stack([np.zeros((20, 3)), T]))
+    assert np.abs(omega).max() < 1e-4 and np.ptp(omega, axis=0).max() < 2e-5

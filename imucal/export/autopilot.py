@@ -183,7 +183,7 @@ def _thermal_notes(cal: Calibration, what: str) -> list[str]:
     if part is not None and (loss := tempcal.loss_sentence(part, what)):
         notes.append(loss)
     rest = tuple(e for e in cal.effects if e[0] not in (tempcal.BIAS_TERMS if p is not None else ()))
-    return notes + _gyro_thermal_note(cal, what) + list(dropped_effects(replace(cal, effects=rest)) if rest else ())
+    return notes + _gyro_thermal_note(cal, what) + list(dropped_effects(replace(cal, effects=rest), attached=False) if rest else ())
 
 
 def reading_factor(cal: Calibration, fit: DiagonalFit, what: str) -> float:

@@ -73,10 +73,24 @@ def affine(cal: Calibration) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(A, float), np.asarray(cal.values[0:3], float)
 
 
-def dropped_effects(cal: Calibration) -> tuple[str, ...]:
-    """What an affine format loses of a calibration with effects, in one sentence (or nothing)."""
+def dropped_terms(cal: Calibration) -> tuple[str, ...]:
+    """What an affine format loses of the other sensors' terms (the gyroscope's bias(T)): one sentence each."""
+    out = []
+    for s in cal.attached:
+        ref = s.reference_inputs()
+        if ref:
+            names = ", ".join(f"{e.name} ({''.join('xyz'[a] for a in e.axes)})" for e in s.model.effects)
+            at = " and ".join(f"{k} = {v:g}" + (" degC" if k == "temp" else " s") for k, v in ref.items())
+            out.append(f"{s.kind} terms not exported: {names}; its map written is the calibration's at {at} "
+                       "(`imucal codegen` and the ArduPilot and PX4 exports keep them)")
+    return tuple(out)
+
+
+def dropped_effects(cal: Calibration, attached: bool = True) -> tuple[str, ...]:
+    """What an affine format loses of a calibration with effects, in one sentence (or nothing); with
+    ``attached``, the other sensors' terms too (``dropped_terms``)."""
     if not cal.effects:
-        return ()
+        return dropped_terms(cal) if attached else ()
     names = ", ".join(f"{n} ({''.join('xyz'[a] for a in ax)})" for n, ax in cal.effects)
     where = []
     tref = sorted({p.value for n, p in cal.params.items() if n.endswith("_tref")})
@@ -87,7 +101,7 @@ def dropped_effects(cal: Calibration) -> tuple[str, ...]:
     if any(n == "scale_nonlinearity" for n, _ in cal.effects):
         where.append("without the quadratic term")
     return (f"effects not exported: {names}; the map written is the calibration's {' and '.join(where)} "
-            "(`imucal codegen` keeps every effect)",)
+            "(`imucal codegen` keeps every effect)",) + (dropped_terms(cal) if attached else ())
 
 
 def _num(x: float) -> str:
