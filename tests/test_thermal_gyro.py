@@ -239,18 +239,39 @@ def test_the_generated_c_corrects_the_gyro_bias_over_temperature(cal_path, run_c
     assert np.abs(o - want[0]).max() < tol * 100
 
 
-@pytest.mark.skipif(GCC is None, reason="gcc not found")
-def test_the_c_of_a_gyro_temperature_beside_an_accelerometer_without_terms(cal_path, run_cli, tmp_path):
-    """cov then holds what the gyroscope alone reads: NAME_apply stays (raw only), NAME_N_COV is 1 and
-    NAME_apply_imu_cov calibrates both, equal to Calibration.apply_all."""
+def _plain(cal_path: Path, tmp: Path) -> Path:
+    """The sweep's calibration with an accelerometer without temperature terms (its base parameters only)."""
     from imucal.calibration.frozen import Calibration
     from imucal.model.parameters import BASE_NAMES, Parameters
 
     cal = load_calibration(cal_path)
     plain = Calibration(params=Parameters([cal.params[n] for n in BASE_NAMES]), std={}, gravity=cal.gravity,
                         raw_unit=cal.raw_unit, attached=(cal.gyro,))
-    path = tmp_path / "plain.yaml"
+    path = tmp / "plain.yaml"
     plain.save(path)
+    return path
+
+
+def test_apply_reads_temp_for_the_gyroscope_alone_and_refuses_data_without_it(cal_path, run_cli, tmp_path):
+    """The accelerometer's map reads no covariate, the gyroscope's reads temp: apply takes the temp column for it;
+    data without one are refused in one line, naming the column, and nothing is written."""
+    path = _plain(cal_path, tmp_path)
+    T = np.array([6.0, 24.0])
+    omega = _apply(run_cli, path, truth(T), T, tmp_path)
+    assert np.abs(omega).max() < 1e-4
+    src = tmp_path / "notemp.csv"
+    src.write_text("t,ax,ay,az,gx,gy,gz\n0,0,0,-9.8,0.01,0.02,0.03\n1,0,0,-9.8,0.01,0.02,0.03\n")
+    r = run_cli(["apply", path, "--data", src, "--out", tmp_path / "o.csv"])
+    assert r.code == 2 and r.err.count("\n") == 1 and not (tmp_path / "o.csv").exists()
+    assert "notemp.csv: data.columns.temp: the calibration has a temperature effect but the data have no temp " \
+           "column (fix: add temp (degC)" in r.err
+
+
+@pytest.mark.skipif(GCC is None, reason="gcc not found")
+def test_the_c_of_a_gyro_temperature_beside_an_accelerometer_without_terms(cal_path, run_cli, tmp_path):
+    """cov then holds what the gyroscope alone reads: NAME_apply stays (raw only), NAME_N_COV is 1 and
+    NAME_apply_imu_cov calibrates both, equal to Calibration.apply_all."""
+    path = _plain(cal_path, tmp_path)
     r = run_cli(["codegen", path, "--out", tmp_path / "c", "--precision", "double", "--prefix", "pg"])
     assert r.code == 0, r.err
     header = (tmp_path / "c" / "pg.h").read_text()

@@ -73,7 +73,13 @@ def run(args: argparse.Namespace) -> int:
     check_outputs(inputs, [args.out])
     cal = load_calibration(args.calibration)
     rec = load_recording(cfg.data, cfg.base_dir)
-    covs = covariate_values(cal.covariates, temp=rec.temp, time=rec.t, source=rec.source, what="the calibration")
+    raw_g = None if cal.gyro is None else gyro_on_accel_samples(rec, None if gyro_file is None else str(gyro_file))
+    raws = {ACCELEROMETER: rec.raw, GYROSCOPE: raw_g}
+    # the covariates of every sensor the data hold (the gyroscope's bias(T) reads temp even when the
+    # accelerometer's map does not)
+    keys = tuple(dict.fromkeys([*cal.covariates, *(k for s in cal.attached if raws.get(s.kind) is not None
+                                                   for k in s.covariates)]))
+    covs = covariate_values(keys, temp=rec.temp, time=rec.t, source=rec.source, what="the calibration")
     a = cal.apply(rec.raw, covs)
     chk = None
     if rec.n >= 3:  # |a| at rest, where the data have still spans, must be the calibration's gravity
@@ -85,8 +91,7 @@ def run(args: argparse.Namespace) -> int:
                               fix=f"apply the calibration made for data in this unit, or give data in its unit "
                                   f"({cal.raw_unit}); --no-gravity-check writes the output anyway")
         sys.stderr.write(f"imucal: warning: {_rest_words(chk)}\n")
-    raw_g = None if cal.gyro is None else gyro_on_accel_samples(rec, None if gyro_file is None else str(gyro_file))
-    out = cal.apply_all({ACCELEROMETER: rec.raw, GYROSCOPE: raw_g}, covs, acc=a)  # every sensor, one frame
+    out = cal.apply_all(raws, covs, acc=a)  # every sensor, one frame
     done = [s for s in cal.all_sensors if s.kind in out]
     cols, body = [c for s in done for c in s.model.output.columns], [out[s.kind] for s in done]
     ts, tfmt = _time_column(rec)
