@@ -27,7 +27,7 @@ from imucal.data.static import Intervals, detect_static
 from imucal.solve.misfit import excess_residuals  # one rule for every sensor's fit
 from imucal.report.misfit import excess_words
 from imucal.model.effects_registry import effects_from_specs
-from imucal.model.effects import EFFECTS, fit_to_data, prepare_parameters
+from imucal.model.effects import EFFECTS, check_given, fit_to_data, given_names, prepare_parameters
 from imucal.thermal.determine import interval_advice
 from imucal.thermal.evidence import thermal_rows
 
@@ -132,13 +132,14 @@ def make_parameters(guess: InitialGuess, config: RunConfig, gravity: float, mode
     b0 = [init.get(f"b{i+1}", guess.b[i]) for i in range(3)]
     base = base_parameters(s0, b0, angles0, angle_tol=fs.angle_tolerance, raw_unit=raw_unit, gravity=gravity)
     base = base.with_fixed(fs.fix)
-    return effect_initial(model.parameters(base), config)
+    return effect_initial(model.parameters(base), config, given_names(model.effects))
 
 
-def effect_initial(params: Parameters, config: RunConfig) -> Parameters:
-    """``fit.initial`` values of free effect parameters (coefficients, the warm-up's tau)."""
+def effect_initial(params: Parameters, config: RunConfig, given: tuple[str, ...] = ()) -> Parameters:
+    """``fit.initial`` values of free effect parameters (coefficients, the warm-up's tau) and of the fixed
+    ones a run file gives (``given``: a bias step's time)."""
     init = {n: v for n, v in config.fit.initial.items() if n not in BASE_NAMES}
-    bad = [n for n in init if n not in params.names or params[n].fixed]
+    bad = [n for n in init if n not in params.names or (params[n].fixed and n not in given)]
     if bad:
         raise ImucalError(f"{bad[0]} is not a free parameter of this model", file=config.source,
                           field=f"fit.initial.{bad[0]}", fix="name a base parameter or a coefficient of fit.effects")
@@ -311,7 +312,8 @@ def _problem(config: RunConfig, rec: Recording | RecordingSummary, iv: Intervals
             params = fit_to_data(model.effects, params, covariates).with_fixed(held, values=held)
         elif model.effects:  # covariate spread, enough intervals, reference temperature (imucal.model.effects)
             params = prepare_parameters(model.effects, params, covariates, iv.n, rec.source)
-            params = effect_initial(params, config)  # a given start wins over the data's
+            params = effect_initial(params, config, given_names(model.effects))  # a given start wins
+            check_given(model.effects, params, rec.source)
             _check_initial_bounds(params, config)
         samples = None
         if config.fit.mode == "samples":

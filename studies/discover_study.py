@@ -16,6 +16,10 @@ at the 1e-3 level discovery uses. No method can name a term more often than its 
     python studies/discover_study.py                 # the full study over the grammar (15 terms)
     python studies/discover_study.py --quick         # a reduced run (2 cases per cell, SNR 10 and 40)
     python studies/discover_study.py --classic       # the five effects before the grammar (studies/results/discover_study.md)
+    python studies/discover_study.py --new-terms     # issue 28's terms: asymmetric scale, bias step, hysteresis,
+                                                     # angles in temperature, single and in pairs, and the
+                                                     # cross-axis term on two axes nearly cancelling
+                                                     # (studies/results/discover_new_terms_study.md)
     python studies/discover_study.py --visible       # SNR = sqrt(lambda) (studies/results/discover_visible_study.md)
     python studies/discover_study.py --visible --revisit --snr 10 20 --cases 16
                                                      # every pose held twice (studies/results/discover_revisit_visible_study.md)
@@ -233,7 +237,8 @@ def run_case(args: tuple) -> dict:
                 "redchi_after": math.nan, "gap_after": math.nan, "gap_before": math.nan, "counts": False,
                 "seconds": 0.0, "lam": 0.0, "lam_rel": 0.0, "oracle": 0.0, "genie": 0.0, "genie_by_penalty": {},
                 "snr_size": math.nan}
-    case = draw_effect_case(seed, effect=effect, snr=phys, noise_mg=noise_mg, revisit=revisit)
+    case = (cancelling_cross_case(seed, phys, noise_mg) if effect == CROSS_TWO
+            else draw_effect_case(seed, effect=effect, snr=phys, noise_mg=noise_mg, revisit=revisit))
     sim = case.config.run()
     with tempfile.TemporaryDirectory() as d:
         path = os.path.join(d, "case.csv")
@@ -249,10 +254,11 @@ def run_case(args: tuple) -> dict:
     subset = (len(res.effects) == 1 and res.effects[0].name == case.effect and EFFECTS[case.effect].axes_observable
               and set(res.effects[0].axes) < set(case.axes)
               and set(case.axes) - set(res.effects[0].axes) <= set(res.effects[0].unresolved_axes))
+    on_time = step_on_time(case, res)
     if case.effect is None:
         outcome = "clean-ok" if not got else "false-positive"
-    elif got == [(case.effect, case.axes)] or (not EFFECTS[case.effect].axes_observable
-                                               and [n for n, _ in got] == [case.effect]):
+    elif (got == [(case.effect, case.axes)] and on_time) or (
+            effect != CROSS_TWO and not EFFECTS[case.effect].axes_observable and [n for n, _ in got] == [case.effect]):
         outcome = "correct"
     elif not got:
         outcome = "missed"
@@ -263,7 +269,8 @@ def run_case(args: tuple) -> dict:
     else:
         outcome = "wrong-effect"
     return {"seed": seed, "effect": effect, "snr": snr, "noise_mg": noise_mg, "outcome": outcome,
-            "found": [f"{n}[{''.join('xyz'[a] for a in ax)}]" for n, ax in got], "truth": case.label,
+            "found": [e.label for e in res.effects], "truth": case.label, "step_on_time": on_time,
+            "stochastic_called": stochastic_called(res), "verdict": res.verdict.outcome.value,
             "ambiguous": any(e.ambiguous_with for e in res.effects), "size_mg": case.size / STANDARD_GRAVITY * 1e3,
             "sigma_mean_mg": case.sigma_mean / STANDARD_GRAVITY * 1e3, "redchi_after": res.final.result.redchi,
             "gap_after": res.rms_after / res.rms_noise, "gap_before": res.rms_before / res.rms_noise,
@@ -293,6 +300,47 @@ def visible_snr(seed: int, effect: str, snr: float, noise_mg: float, path: str, 
     return _REFERENCE_SNR * snr / math.sqrt(lam0) if lam0 > 1e-9 else math.inf
 
 
+#: Issue 28's terms (docs/discover.md): what real MEMS do beyond the grammar before it.
+NEW_TERMS = ("scale_asymmetry", "bias_step", "bias_hysteresis", "angle_temperature")
+#: The cross-axis term on two axes whose coefficients nearly cancel (q_j = -1.1 q_i): |a| sees their small sum
+#: to first order and each one's square to second order, so the SNR of these cells is far larger.
+CROSS_TWO = "cross_axis_nonlinearity:2"
+CROSS_TWO_SNR = (250.0, 500.0, 1000.0)
+
+
+def cancelling_cross_case(seed: int, snr: float, noise_mg: float):
+    """A cross-axis term on two random axes, the second coefficient -1.1 times the first (the issue's case:
+    q_y = +0.0047, q_z = -0.0052 leaves a first-order sum a tenth of either)."""
+    import dataclasses
+
+    from imucal.analysis.simulate import draw_effect_case
+
+    rng = np.random.default_rng([seed, 28])
+    axes = tuple(sorted(int(a) for a in rng.choice(3, 2, replace=False)))
+    case = draw_effect_case(seed, effect="cross_axis_nonlinearity", axes=axes, snr=snr, noise_mg=noise_mg)
+    q = case.config.sensor.effects["cross_axis_nonlinearity"]
+    names = sorted(q)
+    q = {names[0]: q[names[0]], names[1]: -1.1 * q[names[0]]}
+    sensor = dataclasses.replace(case.config.sensor, effects={"cross_axis_nonlinearity": q})
+    return dataclasses.replace(case, config=dataclasses.replace(case.config, sensor=sensor))
+
+
+def step_on_time(case, res) -> bool:
+    """A hidden bias step found inside its reported confidence set of change points (True for other terms)."""
+    if case.effect != "bias_step":
+        return True
+    t = case.config.sensor.effects["bias_step"]["bias_step_t"]
+    return any(e.change_point is not None and e.change_point.lower <= t <= e.change_point.upper
+               for e in res.effects if e.name == "bias_step")
+
+
+def stochastic_called(res) -> bool:
+    """The verdict names a stochastic bias (alone or beside terms)."""
+    from imucal.analysis.discover import Outcome
+
+    return res.verdict.outcome in (Outcome.STOCHASTIC, Outcome.TERMS_AND_STOCHASTIC)
+
+
 def run_pair(seed: int, snr: float, noise_mg: float, pool: tuple[str, ...]) -> dict:
     """Two different effects, one axis each, same SNR: are both named, and nothing else?"""
     from imucal.config.run import config_from_dict
@@ -308,7 +356,7 @@ def run_pair(seed: int, snr: float, noise_mg: float, pool: tuple[str, ...]) -> d
         res = discover(config_from_dict({"data": {"path": path, "unit": c1.config.sensor.unit}}))
         dt = time.perf_counter() - t0
     def label(name: str, axes) -> str:  # the cross-axis term's axis is a convention
-        return name if not EFFECTS[name].axes_observable else f"{name}[{''.join('xyz'[a] for a in axes)}]"
+        return name if not EFFECTS[name].axes_observable else f"{name}[{EFFECTS[name].axis_label(axes)}]"
 
     found = sorted(label(e.name, e.axes) for e in res.effects)
     truth = sorted([label(c1.effect, c1.axes), label(c2.effect, c2.axes)])
@@ -318,7 +366,8 @@ def run_pair(seed: int, snr: float, noise_mg: float, pool: tuple[str, ...]) -> d
             "size_mg": c1.size / STANDARD_GRAVITY * 1e3, "sigma_mean_mg": c1.sigma_mean / STANDARD_GRAVITY * 1e3,
             "redchi_after": res.final.result.redchi, "seconds": dt, "counts": c1.config.sensor.unit == "raw",
             "gap_after": res.rms_after / res.rms_noise, "gap_before": res.rms_before / res.rms_noise,
-            "lookahead": any(s.jointly_with for s in res.steps)}
+            "lookahead": any(s.jointly_with for s in res.steps), "stochastic_called": stochastic_called(res),
+            "verdict": res.verdict.outcome.value}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -334,6 +383,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true", help="a reduced run: 2 cases per cell, SNR 10 and 40, 1 noise")
     ap.add_argument("--classic", action="store_true", help="only the five effects before the grammar, with the "
                     "classic study's sizes (noise 0.1 0.3 1, SNR 10-60, 20 cases, 40 clean, pairs at SNR 20 and 40)")
+    ap.add_argument("--new-terms", action="store_true", help="issue 28's terms (NEW_TERMS) at SNR 5-40, 16 cases a cell, "
+                    "their pairs with the classic five at SNR 20 and 40, the cancelling two-axis cross-axis term "
+                    "(CROSS_TWO_SNR) and 200 clean cases; writes studies/results/discover_new_terms_study.md")
     ap.add_argument("--effects", nargs="+", choices=list(EFFECTS), help="terms to hide (default: the grammar)")
     ap.add_argument("--visible", action="store_true", help="SNR = sqrt(lambda), what the data can see of the "
                     "effect (its coefficient in standard errors beside the base model), instead of size / sigma_mean; "
@@ -360,6 +412,8 @@ def main(argv: list[str] | None = None) -> int:
         size.update(snr=[5, 10, 20], pairs=0, pair_snr=[])
     if a.revisit:
         size.update(pairs=0, pair_snr=[])
+    if a.new_terms:
+        size.update(noise=[0.3], snr=[5, 10, 20, 40], cases=16, clean=200, pairs=20, pair_snr=[20, 40])
     if a.quick:
         size.update(noise=[0.3], snr=[10, 40], cases=2, clean=4, pairs=2, pair_snr=[40])
     for k, v in size.items():
@@ -367,11 +421,13 @@ def main(argv: list[str] | None = None) -> int:
             setattr(a, k, v)
     if a.out is None:
         a.out = str(ROOT / "studies" / "results" / ("discover_study.md" if a.classic else
+                                     "discover_new_terms_study.md" if a.new_terms else
                                      ("discover_revisit_" if a.revisit else "discover_") +
                                      ("coefficient_tau_known_study.md" if a.visible and a.tau_known else
                                       "coefficient_study.md" if a.visible and a.coefficient else
                                       "visible_study.md" if a.visible else "grammar_study.md")))
-    a.terms = tuple(a.effects or (CLASSIC if a.classic else EFFECTS))
+    a.terms = tuple(a.effects or (CLASSIC if a.classic else NEW_TERMS if a.new_terms else EFFECTS))
+    a.pool = (*NEW_TERMS, *CLASSIC) if a.new_terms else a.terms  # the pairs' terms
     if a.coefficient and not a.visible:
         ap.error("--coefficient is a definition of the visible SNR: use it with --visible")
     if a.tau_known and not a.coefficient:
@@ -386,11 +442,15 @@ def main(argv: list[str] | None = None) -> int:
         for eff in a.terms:
             for snr in a.snr:
                 for _ in range(a.cases):
-                    jobs.append((seed, eff, snr, noise, a.terms, mode, a.revisit))
+                    jobs.append((seed, eff, snr, noise, a.pool, mode, a.revisit))
                     seed += 1
+        for snr in (CROSS_TWO_SNR if a.new_terms else ()):
+            for _ in range(a.cases):
+                jobs.append((seed, CROSS_TWO, snr, noise, a.pool, mode, a.revisit))
+                seed += 1
         for snr in a.pair_snr:
             for _ in range(a.pairs):
-                jobs.append((seed, "pair", snr, noise, a.terms, mode, a.revisit))
+                jobs.append((seed, "pair", snr, noise, a.pool, mode, a.revisit))
                 seed += 1
     t0 = time.perf_counter()
     rows = []
@@ -502,6 +562,39 @@ def visibility(rows: list[dict], cells: dict, a: argparse.Namespace) -> list[str
     return L + [""]
 
 
+def new_terms_block(rows: list[dict], a: argparse.Namespace) -> list[str]:
+    """Issue 28's targets: each new term named exactly at SNR >= 10, the cancelling cross-axis pair, a
+    deterministic truth called stochastic, clean cases named nothing."""
+    det = [r for r in rows if r["effect"] is not None and r["outcome"] != "invisible" and r["snr"] >= 10]
+    called = [r for r in det if r.get("stochastic_called")]
+    L = ["<!-- begin:new_terms -->", "| term | SNR 5 | SNR 10 | SNR 20 | SNR 40 | at SNR >= 10 |", "|---|---|---|---|---|---|"]
+    for t in a.terms:
+        cs = {s: [r for r in rows if r["effect"] == t and r["snr"] == s] for s in a.snr}
+        ok = [r["outcome"] == "correct" for s in a.snr if s >= 10 for r in cs[s]]
+        L.append(f"| {t} | " + " | ".join(f"{sum(r['outcome'] == 'correct' for r in cs[s])}/{len(cs[s])}" for s in a.snr)
+                 + f" | {np.mean(ok):.0%} |")
+    cross = [r for r in rows if r["effect"] == CROSS_TWO]
+    L += ["", "The cross-axis term on two axes, q_j = -1.1 q_i (SNR of each coefficient's size; "
+          "named right = the term on exactly its two axes):", "",
+          "| SNR | q_i [1/(m/s^2)] (median) | named right | the term on other axes | nothing |", "|---|---|---|---|---|"]
+    for s in sorted({r["snr"] for r in cross}):
+        cs = [r for r in cross if r["snr"] == s]
+        L.append(f"| {s:g} | {np.median([r['size_mg'] for r in cs]) * 1e-3 * STANDARD_GRAVITY / (STANDARD_GRAVITY**2 / 2):.2g} "
+                 f"| {sum(r['outcome'] == 'correct' for r in cs)}/{len(cs)} | "
+                 f"{sum(r['outcome'] in ('wrong-axes', 'correct+extra') for r in cs)} | {sum(r['outcome'] == 'missed' for r in cs)} |")
+    clean = [r for r in rows if r["effect"] is None]
+    L += ["", f"A deterministic truth (a single term at SNR >= 10, a pair, or the cancelling cross-axis pair) called "
+          f"\"stochastic\" (the verdict names a stochastic bias): {len(called)} of {len(det)}.",
+          f"Clean recordings that named an effect: {sum(r['outcome'] == 'false-positive' for r in clean)} of {len(clean)}; "
+          f"that named a stochastic bias: {sum(bool(r.get('stochastic_called')) for r in clean)}.",
+          "<!-- end:new_terms -->", ""]
+    if called:
+        L += ["| seed | truth | SNR | found | verdict |", "|---|---|---|---|---|"]
+        L += [f"| {r['seed']} | {r['truth']} | {r['snr']:g} | {', '.join(r['found'])} | {r.get('verdict')} |" for r in called]
+        L.append("")
+    return L
+
+
 def summary_block(rows: list[dict], a: argparse.Namespace) -> list[str]:
     """The pooled results (the README's block): correct share and oracle by SNR, pairs, clean cases."""
     single = [r for r in rows if r["effect"] not in (None, "pair") and r["outcome"] != "invisible"]
@@ -564,6 +657,7 @@ def report(rows: list[dict], a: argparse.Namespace, wall: float) -> str:
          "noise-free effect adds to the base fit (what the data can see of it), *oracle* = P(chi2_1(lambda) > 10.83).",
          ""]
     L += summary_block(rows, a)
+    L += new_terms_block(rows, a) if a.new_terms else []
     clean = [r for r in rows if r["effect"] is None]
     L += ["## False positives on clean data", "", "| noise per sample [mg] | clean cases | effects named |",
           "|---|---|---|"]

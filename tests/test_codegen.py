@@ -503,8 +503,10 @@ def test_each_library_effect_through_the_cli(cases, work, effect, capsys):
     values = {q.name: (float(np.clip(3 * q.scale * (-1) ** i, q.lower, q.upper)) if not q.fixed else q.value)
               for i, q in enumerate(extra)}
     values.update({n: 40.0 for n in eff.shape_names})  # the warm-up's tau [s]
+    values.update({n: 1800.0 for n in eff.given_names})  # a bias step's time [s]
     cov_values = {"temp": np.random.default_rng(12).uniform(-10, 60, 20_000),
-                  "time": np.random.default_rng(13).uniform(0, 3600, 20_000)}
+                  "time": np.random.default_rng(13).uniform(0, 3600, 20_000),
+                  "temp_rate": np.random.default_rng(14).uniform(-0.05, 0.05, 20_000)}
     if getattr(eff, "target", None) == "scale":  # b_i (1 + c f) stays a correction (|c f| <= 0.2), not a sign flip
         f = np.abs(eff.basis.value(cov_values[eff.basis.covariate], values, effect)).max()
         values.update({n: float(np.clip(values[n], -0.2 / f, 0.2 / f)) for n in eff.coefficient_names})

@@ -45,17 +45,21 @@ def test_every_effect_adds_named_parameters_with_units():
              "bias_temperature2": "raw/degC^2", "scale_temperature2": "1/degC^2",
              "bias_temperature3": "raw/degC^3", "scale_temperature3": "1/degC^3",
              "bias_drift2": "raw/s^2", "scale_drift2": "1/s^2", "bias_warmup": "raw", "scale_warmup": "1",
-             "scale_nonlinearity3": "1/(m/s^2)^2", "cross_axis_nonlinearity": "1/(m/s^2)"}
+             "scale_nonlinearity3": "1/(m/s^2)^2", "cross_axis_nonlinearity": "1/(m/s^2)",
+             "scale_asymmetry": "1", "bias_step": "raw", "bias_hysteresis": "raw", "angle_temperature": "rad/degC"}
     assert set(EFFECTS) == set(units)
     for name, unit in units.items():
         e = make_effect(name, (0, 2))
+        first, last = e.coefficient_names  # axes x and z (an angle term's phi and theta)
         ps = {p.name: p for p in e.parameters(base)}
-        assert f"{name}_x" in ps and f"{name}_z" in ps and f"{name}_y" not in ps
-        assert ps[f"{name}_x"].unit == unit and not ps[f"{name}_x"].fixed
-        assert ps[f"{name}_x"].value == (ps[f"{name}_x"].scale if "warmup" in name else 0.0)
-        assert ps[f"{name}_x"].scale > 0
+        assert len({n for n in ps if n.startswith(name + "_") and not ps[n].fixed and n not in e.shape_names}) == 2
+        assert ps[first].unit == unit and not ps[first].fixed and ps[last].unit == unit
+        assert ps[first].value == (ps[first].scale if "warmup" in name else 0.0)
+        assert ps[first].scale > 0
         if "temp" in e.covariates:  # the reference temperature is a fixed parameter of the file
             assert ps[f"{name}_tref"].fixed and ps[f"{name}_tref"].unit == "degC"
+        for n in e.given_names:  # a step's time: fixed, given by a run file or discovery, not by the data
+            assert ps[n].fixed and ps[n].unit == "s" and not np.isfinite(ps[n].value)
         if name.endswith(("2", "3")) and "nonlinearity" not in name:  # orthogonal-polynomial constants
             assert ps[f"{name}_a2"].fixed and ps[f"{name}_b2"].unit.endswith("^2")
         if "warmup" in name:  # tau fitted, bounded positive
@@ -121,7 +125,7 @@ def test_simulate_effects_refuses_bad_specs():
         effects_from_coefficients({"wobble": {"x": 1.0}})
     sensor = SensorSpec(effects={"bias_temperature": {"bias_temperature_x": 1.0}})
     with pytest.raises(ImucalError, match="temperature effect but the simulation has no temperature profile"):
-        simulate_effects(sensor, np.zeros((3, 3)), np.arange(3.0), None, np.zeros((3, 3)))
+        simulate_effects(sensor, np.zeros((3, 3)), np.arange(3.0), None)
 
 
 # --- known truth: simulate, fit, recover -------------------------------------------------------

@@ -109,6 +109,11 @@ def test_base_model_jacobian_equals_the_models_jacobian():
 
 
 # --- effects against an independent forward model (the formulas of imucal/model/effects.py's table) ---------
+def true_force(m: np.ndarray, angles=ANGLES) -> np.ndarray:
+    """The specific force a whose projections on the axes at ``angles`` are m (m = E^T a, Lemma 1)."""
+    return np.linalg.solve(frame_np(np.asarray(angles)).T, m.T).T
+
+
 def forward(name: str, s, b, m, t, T, k):
     """raw = s + b m with each effect's published term; written here, not imported."""
     dT = T - REFERENCE_TEMPERATURE
@@ -138,7 +143,7 @@ def test_effects_match_an_independent_forward_model(name):
     want = forward(name, s, b, m, t, T, k)
     coeffs = {f"{name}_{a}": float(v) for a, v in zip("xyz", k)}
     sensor = SensorSpec(s=tuple(s), b=tuple(b), angles=tuple(ANGLES), effects={name: coeffs})
-    np.testing.assert_allclose(sensor.forward(m, t, T), want, rtol=1e-12, atol=1e-12)  # the simulator
+    np.testing.assert_allclose(sensor.forward(true_force(m), t, T), want, rtol=1e-12, atol=1e-12)  # the simulator
     model = build_model([make_effect(name, (0, 1, 2))])
     values = {**sensor.values(), f"{name}_tref": REFERENCE_TEMPERATURE}
     p = np.array([values[nm] for nm in model.names])
@@ -205,7 +210,7 @@ def test_grammar_terms_match_an_independent_forward_model(name):
     if eff.shape_names:
         refs[f"{name}_tau"] = TAU
     sensor = SensorSpec(s=tuple(s), b=tuple(b), angles=tuple(ANGLES), effects={name: {**coeffs, **refs}})
-    np.testing.assert_allclose(sensor.forward(m, t, T), want, rtol=1e-12, atol=1e-12)  # the simulator
+    np.testing.assert_allclose(sensor.forward(true_force(m), t, T), want, rtol=1e-12, atol=1e-12)  # the simulator
     model = build_model([eff])
     values = {**sensor.values(), **refs}
     p = np.array([values[nm] for nm in model.names])
@@ -217,9 +222,11 @@ def test_grammar_terms_match_an_independent_forward_model(name):
 
 
 @pytest.mark.parametrize("name,q", [("scale_nonlinearity3", 3e-4), ("scale_nonlinearity3", -3e-4),
-                                    ("cross_axis_nonlinearity", 2e-3), ("cross_axis_nonlinearity", -2e-3)])
+                                    ("cross_axis_nonlinearity", 6e-3), ("cross_axis_nonlinearity", -6e-3),
+                                    ("scale_asymmetry", 0.05), ("scale_asymmetry", -0.05)])
 def test_iterative_inverses_converge_at_the_coefficient_bounds(name, q):
-    """Newton (cubic) and fixed-point (cross-axis) inverses reach rounding at |m| = 2.5 g and the bounds."""
+    """Newton (cubic), fixed-point (cross-axis) and exact (asymmetry) inverses reach rounding at |m| = 2.5 g and
+    the bounds."""
     eff = make_effect(name, (0, 1, 2))
     assert make_effect(name, (0,)).parameters(base_parameters_for_test())[0].upper == pytest.approx(abs(q))
     rng = np.random.default_rng(5)
@@ -254,3 +261,82 @@ def test_grammar_pair_composes_in_the_models_order():
     p = np.array([sensor.values()[nm] for nm in model.names])
     got = np.asarray(model.measured.map(40)(raw.T, np.zeros((0, 40)), p)).T
     np.testing.assert_allclose(got, m, rtol=1e-11, atol=1e-11)
+
+
+# --- issue 28's terms: what real MEMS do, against forward models written here ----------------------------------
+def frame_by_cholesky(angles: np.ndarray) -> np.ndarray:
+    """E with G = E^T E, upper triangular with a positive diagonal: the Gram matrix (Eq. eq:12) factored
+    here by numpy, not by the model's frame (each row of ``angles`` one sample)."""
+    c = np.cos(np.atleast_2d(angles))
+    G = np.stack([np.stack([np.ones(len(c)), c[:, 0], c[:, 1]], -1), np.stack([c[:, 0], np.ones(len(c)), c[:, 2]], -1),
+                  np.stack([c[:, 1], c[:, 2], np.ones(len(c))], -1)], 1)
+    return np.transpose(np.linalg.cholesky(G), (0, 2, 1))
+
+
+def local_slope(t: np.ndarray, T: np.ndarray, half: float = 10.0) -> np.ndarray:
+    """dT/dt as the published definition says: the least-squares slope over +-half seconds of each row
+    (at least the three nearest rows), by np.polyfit row by row."""
+    out = []
+    for k in range(len(t)):
+        idx = np.flatnonzero(np.abs(t - t[k]) <= half)
+        if idx.size < 3:
+            idx = np.argsort(np.abs(t - t[k]), kind="stable")[:3]
+        out.append(np.polyfit(t[idx], T[idx], 1)[0])
+    return np.array(out)
+
+
+ISSUE28 = {"scale_asymmetry": [0.02, -0.01, 0.015], "bias_step": [0.05, -0.03, 0.02],
+           "bias_hysteresis": [0.04, -0.02, 0.03], "angle_temperature": [3e-4, -2e-4, 1e-4]}
+STEP_T, R0 = 137.0, 0.01
+
+
+def issue28_forward(name: str, s, b, a, t, T, k):
+    """raw for one of the new terms from the true specific force a (frame f)."""
+    E = frame_by_cholesky(ANGLES)[0]
+    m = a @ E  # m_i = e_i . a, Lemma 1
+    if name == "scale_asymmetry":
+        return s + b * (m + k * np.abs(m))
+    if name == "bias_step":
+        return s + k * (t >= STEP_T)[:, None] + b * m
+    if name == "bias_hysteresis":
+        return s + k * np.clip(local_slope(t, T) / R0, -1, 1)[:, None] + b * m
+    angles = ANGLES + np.outer(T - REFS["tref"], k)  # phi(T) = phi + c (T - T_ref), psi and theta alike
+    return s + b * np.einsum("nj,nji->ni", a, frame_by_cholesky(angles))
+
+
+@pytest.mark.parametrize("name", sorted(ISSUE28))
+def test_issue28_terms_match_an_independent_forward_model(name):
+    """Simulated by SensorSpec.forward and inverted by the model: the calibrated acceleration (Theorem,
+    at each sample's angles) is the true one."""
+    rng = np.random.default_rng(7)
+    n = 60
+    s, b = np.array([0.3, -0.1, 0.2]), np.array([1.02, 0.98, 1.01])
+    a = rng.normal(size=(n, 3)) * 8
+    a *= np.minimum(1.0, 2.5 * G0 / np.linalg.norm(a, axis=1))[:, None]
+    t = np.linspace(0, 300, n)
+    T = 25 + 12 * np.sin(t / 40)  # warms and cools
+    k = np.array(ISSUE28[name])
+    want = issue28_forward(name, s, b, a, t, T, k)
+    eff = make_effect(name, (0, 1, 2))
+    coeffs = {eff.coefficient(i): float(v) for i, v in enumerate(k)}
+    fixed = {f"{name}_tref": REFS["tref"], f"{name}_t": STEP_T, f"{name}_r0": R0}
+    refs = {n_: fixed[n_] for n_ in (*eff.reference_names, *eff.given_names)}
+    sensor = SensorSpec(s=tuple(s), b=tuple(b), angles=tuple(ANGLES), effects={name: {**coeffs, **refs}})
+    np.testing.assert_allclose(sensor.forward(a, t, T), want, rtol=1e-12, atol=1e-12)  # the simulator
+    model = build_model([eff])
+    p = np.array([{**sensor.values(), **refs}[nm] for nm in model.names])
+    cov = {"temp": T, "time": t, "temp_rate": local_slope(t, T)}
+    C = np.vstack([cov[c] for c in model.covariates]) if model.covariates else np.zeros((0, n))
+    got = np.asarray(model.accel.map(n)(want.T, C, p)).T  # the fit's model inverts it
+    np.testing.assert_allclose(got, a, rtol=1e-10, atol=1e-10)
+    assert float(np.abs(want - (s + b * (a @ frame_by_cholesky(ANGLES)[0]))).max()) > 1e-3  # the effect is there
+
+
+def test_the_temperature_rate_is_the_published_slope():
+    """imucal.model.channels.temperature_rate (prefix sums) equals the slope written here, on uneven rows."""
+    from imucal.model.channels import temperature_rate
+
+    rng = np.random.default_rng(8)
+    t = np.sort(rng.uniform(0, 200, 80))
+    T = 25 + 8 * np.sin(t / 30) + rng.normal(0, 0.05, t.size)
+    np.testing.assert_allclose(temperature_rate(t, T), local_slope(t, T), rtol=1e-9, atol=1e-12)

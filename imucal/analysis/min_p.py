@@ -55,20 +55,27 @@ def column_basis(A: np.ndarray, scale: float | None = None) -> np.ndarray:
     return U[:, s > _RANK_TOL * max(ref, 1e-300)]
 
 
+def screen_ids(profiled: bool | Sequence[int], n: int) -> list[int]:
+    """The screens a candidate is profiled over: all ``n`` (True), the first (False), or those listed."""
+    if isinstance(profiled, bool):
+        return list(range(n)) if profiled else [0]
+    return list(profiled)
+
+
 def min_p_null(screens: Sequence[np.ndarray], base_cols: Sequence[int],
-               candidates: Sequence[tuple[Sequence[int], int, bool]], draws: int = DRAWS,
+               candidates: Sequence[tuple[Sequence[int], int, bool | Sequence[int]]], draws: int = DRAWS,
                seed: int = SEED) -> MinPNull:
     """Null distribution of min_c p_c over a round's candidates.
 
     ``screens``: whitened Jacobians (rows / sigma, one per screened shape value; the base columns
-    are the same in each); ``candidates``: (columns it adds, k for its p, profiled over the
-    screens) each, as the round scores them.
+    are the same in each); ``candidates``: (columns it adds, k for its p, the screens it is profiled
+    over: True for all, False for the first, or their indices) each, as the round scores them.
     """
     J0 = screens[0]
     B = column_basis(J0[:, list(base_cols)])
     blocks, ks = [], []
     for cols, k, profiled in candidates:
-        for Jw in (screens if profiled else screens[:1]):
+        for Jw in (screens[i] for i in screen_ids(profiled, len(screens))):
             A = Jw[:, list(cols)]
             Q = column_basis(A - B @ (B.T @ A), scale=float(np.linalg.norm(A)))  # what the base model leaves
             if Q.shape[1]:

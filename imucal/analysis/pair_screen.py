@@ -17,7 +17,7 @@ from typing import Sequence
 
 import numpy as np
 
-from imucal.analysis.min_p import column_basis
+from imucal.analysis.min_p import column_basis, screen_ids
 
 #: Eigenvalues of G_S below this share of the largest squared column norm before projection are
 #: directions the current model (or the other member) already spans: the pseudo-inverse drops them.
@@ -25,13 +25,15 @@ _RCOND = 1e-12
 
 
 def pair_chi2(screens: Sequence[np.ndarray], rw: np.ndarray, base_cols: Sequence[int],
-              members: Sequence[tuple[Sequence[int], bool]], pairs: Sequence[tuple[int, int]]) -> np.ndarray:
+              members: Sequence[tuple[Sequence[int], bool | Sequence[int]]],
+              pairs: Sequence[tuple[int, int]]) -> np.ndarray:
     """Linearised chi-square after adding each pair of ``members`` to the current model.
 
     ``screens``: whitened Jacobians at the current fit (one per screened shape value; the base
     columns are the same in each); ``rw``: whitened residual; ``members``: (columns a candidate
-    adds, whether it is profiled over the screens); ``pairs``: indices into ``members``.
-    A pair with a profiled member takes the best screen, as a single candidate does.
+    adds, the screens it is profiled over: True for all, False for the first, or their indices);
+    ``pairs``: indices into ``members``. A pair takes the best of its members' screens, as a single
+    candidate does.
     """
     out = np.full(len(pairs), np.inf)
     if not len(pairs):
@@ -41,7 +43,11 @@ def pair_chi2(screens: Sequence[np.ndarray], rw: np.ndarray, base_cols: Sequence
     r2 = float(rp @ rp)
     cols = sorted({c for m, _ in members for c in m})
     pos = {c: i for i, c in enumerate(cols)}
-    profiled = np.array([bool(members[i][1] or members[j][1]) for i, j in pairs])
+    own = np.zeros((len(members), len(screens)), bool)  # the screens of each member
+    for k, (_, p) in enumerate(members):
+        own[k, screen_ids(p, len(screens))] = True
+    ends = np.asarray(pairs, int).reshape(-1, 2)
+    uses = own[ends[:, 0]] | own[ends[:, 1]]  # a pair takes its members' screens
     # Pairs grouped by how many columns they add (a batch of k x k problems each), once for all screens.
     grouped: dict[int, tuple[list[int], list[list[int]]]] = defaultdict(lambda: ([], []))
     for q, (i, j) in enumerate(pairs):
@@ -50,17 +56,16 @@ def pair_chi2(screens: Sequence[np.ndarray], rw: np.ndarray, base_cols: Sequence
         grouped[len(S)][1].append(S)
     groups = [(np.array(qs), np.array(S)) for qs, S in grouped.values()]
     for s, Jw in enumerate(screens):
-        if s and not profiled.any():
-            break  # the other screens differ only in profiled members' columns
+        if not uses[:, s].any():
+            continue  # the screens differ only in profiled members' columns
         C = Jw[:, cols]
         Cp = C - B @ (B.T @ C)
         G, b = Cp.T @ Cp, Cp.T @ rp
         size = np.sum(C * C, axis=0)  # a column the base model absorbs has |C_p|^2 << |C|^2
         for qs, S in groups:
-            if s:
-                qs, S = qs[profiled[qs]], S[profiled[qs]]
-                if not qs.size:
-                    continue
+            qs, S = qs[uses[qs, s]], S[uses[qs, s]]
+            if not qs.size:
+                continue
             w, V = np.linalg.eigh(G[S[:, :, None], S[:, None, :]])
             keep = w > _RCOND * size[S].max(axis=1, keepdims=True)
             c = np.einsum("nij,ni->nj", V, b[S])  # b_S in the eigenbasis of G_S

@@ -23,7 +23,9 @@ from imucal.model.sensor import frame_np, gram_det_np
 from imucal.config.limits import MAX_SIM_POSES, MAX_SIM_SAMPLES, check_seed
 from imucal.files.schema import fill, rule
 from imucal.files.yamlio import check_structure, read_yaml
-from imucal.model.effects import CLASSIC, EFFECTS, Term, effects_from_coefficients, make_effect, simulate_effects
+from imucal.model.channels import temperature_rate
+from imucal.model.effects import (CLASSIC, EFFECTS, STEP_MIN_SIDE, Term, effects_from_coefficients, make_effect,
+                                  simulate_effects)
 
 
 def frame_matrix(angles: np.ndarray) -> np.ndarray:
@@ -58,12 +60,12 @@ class SensorSpec:
             v.update({k: float(x) for k, x in coeffs.items()})
         return v
 
-    def forward(self, m: np.ndarray, t: np.ndarray, temp: np.ndarray | None) -> np.ndarray:
-        """raw from measured values m (N x 3), noise-free. Effects add their terms."""
-        raw = np.asarray(self.s) + np.asarray(self.b) * m
+    def forward(self, a: np.ndarray, t: np.ndarray, temp: np.ndarray | None) -> np.ndarray:
+        """raw from the true specific force a (N x 3, frame f), noise-free: m = E^T a (Lemma 1),
+        raw = s + b m (Eq. theModel); effects add their terms (and may turn the axes)."""
         if self.effects:
-            raw = simulate_effects(self, m, t, temp, raw)
-        return raw
+            return simulate_effects(self, a, t, temp)
+        return np.asarray(self.s) + np.asarray(self.b) * (a @ frame_matrix(np.asarray(self.angles)))
 
 
 def mems_counts_sensor(rng: np.random.Generator, lsb_per_g: float = 16384.0, noise_counts: float = 4.0,
@@ -195,9 +197,8 @@ def simulate(sensor: SensorSpec, plan: PosePlan, gravity: float = STANDARD_GRAVI
     n = a.shape[0]
     t = np.arange(n) / plan.rate
     temp = temperature.sample(t, rng) if temperature is not None else None
-    E = frame_matrix(np.asarray(sensor.angles))
-    m = a @ E  # m_i = e_i . a (Lemma 1), E's columns are e_i
-    raw = sensor.forward(m, t, temp) + rng.normal(0, 1, (n, 3)) * np.asarray(sensor.noise)
+    frame_matrix(np.asarray(sensor.angles))  # (refuses angles with no valid frame)
+    raw = sensor.forward(a, t, temp) + rng.normal(0, 1, (n, 3)) * np.asarray(sensor.noise)
     raw = raw + _stochastic_bias(sensor, t, np.array(bounds), rng)
     if sensor.quantum > 0:
         raw = np.round(raw / sensor.quantum) * sensor.quantum
@@ -443,7 +444,7 @@ class EffectCase:
     def label(self) -> str:
         if self.effect is None:
             return "clean"
-        return f"{self.effect}[{''.join('xyz'[a] for a in self.axes)}]"
+        return f"{self.effect}[{EFFECTS[self.effect].axis_label(self.axes)}]"
 
 
 def _axis_subsets() -> list[tuple[int, ...]]:
@@ -511,8 +512,8 @@ def draw_effect_case(seed: int, effect: str | None = "random", axes: tuple[int, 
             raise ImucalError(f"unknown effect {short(name)}", field="effect", fix=f"choose from {', '.join(EFFECTS)}")
         subsets = _axis_subsets()
         ax = tuple(axes) if axes is not None else subsets[int(rng.integers(len(subsets)))]
-        if not EFFECTS[name].axes_observable:  # only the sum over axes reaches |a|: hide it on one axis
-            ax = ax[:1]
+        if not EFFECTS[name].axes_observable and axes is None:  # only the sum over axes reaches |a| (to
+            ax = ax[:1]  # first order): hide it on one axis unless told otherwise
         lo, hi = (snr, snr) if isinstance(snr, (int, float)) else snr
         size = float(np.exp(rng.uniform(np.log(lo), np.log(hi)))) * sigma_mean
         e = make_effect(name, ax)
@@ -524,9 +525,11 @@ def draw_effect_case(seed: int, effect: str | None = "random", axes: tuple[int, 
             hold_cov = {"time": t_mid, "temp": clean.sample(t_mid, rng) if clean is not None else None}
             refs = {n: v for n, v in e.data_values(hold_cov).items() if n in e.reference_names}
             refs.update({n: float(rng.uniform(0.05, 0.3)) * duration for n in e.shape_names})
+            refs.update({n: _step_time(len(dirs), plan, rng) for n in e.given_names})
         span = 0.0
         if isinstance(e, Term):
-            cov = {"time": t, "temp": temp_clean}
+            cov = {"time": t, "temp": temp_clean,
+                   "temp_rate": None if temp_clean is None else temperature_rate(t, temp_clean)}
             span = float(np.ptp(e.basis.value(cov[e.basis.covariate], {**e.default_values(), **refs}, e.name)))
         coeffs = {e.coefficient(a): sign * e.coefficient_for_size(size, float(sensor.b[a]), span, g)
                   for a, sign in zip(e.axes, signs)}
@@ -534,6 +537,13 @@ def draw_effect_case(seed: int, effect: str | None = "random", axes: tuple[int, 
         sensor = replace(sensor, effects={name: coeffs})
     cfg = SimulationConfig(sensor=sensor, plan=plan, temperature=temperature, gravity=g, seed=int(seed))
     return EffectCase(seed=int(seed), effect=name, axes=tuple(ax), size=size, sigma_mean=sigma_mean, config=cfg)
+
+
+def _step_time(n_holds: int, plan: PosePlan, rng: np.random.Generator) -> float:
+    """A bias step's time: in the middle of a transition between holds, with at least
+    imucal.model.effects.STEP_MIN_SIDE holds on each side (the sensor knocked while it was moved)."""
+    k = int(rng.integers(STEP_MIN_SIDE, n_holds - STEP_MIN_SIDE + 1))  # holds before the step
+    return k * plan.hold + (k - 0.5) * plan.transition + (plan.initial_hold or 0.0)
 
 
 def draw_pair_case(seed: int, snr: float = 40.0, noise_mg: float | None = None,

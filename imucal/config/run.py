@@ -93,9 +93,10 @@ class EffectSpec:
             raise ImucalError(f"axes {short(self.axes)} must be a list of x, y, z", field="fit.effects.axes")
 
 
-#: A free effect parameter's name: a coefficient <effect>_x|y|z or a shape parameter <effect>_tau
-#: (checked against the model's parameters when the model is built).
-EFFECT_PARAMETER = re.compile(r"[a-z][a-z0-9_]{0,60}_(x|y|z|tau)\Z")
+#: An effect parameter a run file may start or give: a coefficient <effect>_x|y|z (an angle term's
+#: <effect>_phi|psi|theta), a shape parameter <effect>_tau or a bias step's time <effect>_t (checked
+#: against the model's parameters when the model is built).
+EFFECT_PARAMETER = re.compile(r"[a-z][a-z0-9_]{0,60}_(x|y|z|phi|psi|theta|tau|t)\Z")
 
 
 @dataclass(frozen=True)

@@ -47,7 +47,7 @@ from imucal.model.registry import DESCRIPTIONS, describe
 from imucal.constants import SI_ACCEL_UNIT
 from imucal.errors import ImucalError, short
 from imucal.files.inputs import read_input_bytes
-from imucal.model.channels import COVARIATES
+from imucal.model.channels import COVARIATE_UNITS
 from imucal.model.parameters import BASE_NAMES, model_label
 from imucal.model.sensor import build_model, gram_det
 from imucal.files.output import OutputSet
@@ -56,8 +56,8 @@ PRECISIONS = ("float", "double")
 DEFAULT_PREFIX = "imucal"
 #: Smallest accepted Gram determinant; the same threshold as calibration.validate_parameters.
 MIN_GRAM_DET = 1e-12
-#: Unit of each covariate an effect may use (its channel's unit).
-COVARIATE_UNITS = {key: ch.unit for key, ch in COVARIATES.items()}
+#: Unit of each covariate an effect may use (temp_rate, derived from the temperature, in degC/s).
+COVARIATE_UNITS = dict(COVARIATE_UNITS)
 #: Unit roundoff of each precision (2^-24, 2^-53).
 UNIT_ROUNDOFF = {"float": 2.0**-24, "double": 2.0**-53}
 
@@ -70,6 +70,9 @@ _IDENT = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
 #: calls none (checked in tests); prepare calls the first three; effects may need the others.
 _MATH = {"sin": "sinf", "cos": "cosf", "sqrt": "sqrtf", "pow": "powf", "exp": "expf", "log": "logf",
          "fabs": "fabsf", "tan": "tanf", "atan": "atanf", "atan2": "atan2f", "tanh": "tanhf"}
+#: CasADi's helpers for non-smooth operations and their C99 <math.h> names (double, float): an asymmetric
+#: scale's |m| (fabs), a hysteresis's clip to [-1, 1] (fmin, fmax).
+_HELPERS = {"casadi_fabs": ("fabs", "fabsf"), "casadi_fmin": ("fmin", "fminf"), "casadi_fmax": ("fmax", "fmaxf")}
 
 
 # --- the kernels, as CasADi functions -----------------------------------------------------------
@@ -185,7 +188,7 @@ class Kernel:
         return "\n".join(indent + line for line in (*self.declarations, *self.statements))
 
 
-_TOKEN = re.compile(r"\s*(?:(?P<num>(?:\d+\.\d*|\.\d+|\d+)(?:[eE][+-]?\d+)?)|(?P<var>a\d+)|"
+_TOKEN = re.compile(r"\s*(?:(?P<num>(?:\d+\.\d*|\.\d+|\d+)(?:[eE][+-]?\d+)?)|(?P<var>a\d+)|(?P<cmp><=|<|==|!=)|"
                     r"(?P<fn>[A-Za-z_]\w*)(?=\()|(?P<op>[-+*/(),]))")
 
 
@@ -225,6 +228,9 @@ def _expression(expr: str, precision: str, kernel: str) -> tuple[str, OpCount]:
         elif m.group("var"):
             out.append(m.group("var"))
             prev_operand = True
+        elif m.group("cmp"):  # a comparison (a bias step's t_s <= t): 0 or 1, no branch
+            out.append(m.group("cmp"))
+            prev_operand = False
         elif m.group("fn"):
             fn = m.group("fn")
             if fn == "casadi_sq":  # CasADi's x*x helper: inline it
@@ -237,9 +243,12 @@ def _expression(expr: str, precision: str, kernel: str) -> tuple[str, OpCount]:
                 pos = close + 1
                 prev_operand = True
                 continue
-            if fn not in _MATH:
+            if fn in _HELPERS:
+                out.append(_HELPERS[fn][precision == "float"])
+            elif fn in _MATH:
+                out.append(_MATH[fn] if precision == "float" else fn)
+            else:
                 raise RuntimeError(f"codegen: function {fn!r} not allowed in {kernel}")
-            out.append(_MATH[fn] if precision == "float" else fn)
             counts["calls"] += 1
             prev_operand = False
         else:

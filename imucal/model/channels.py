@@ -6,7 +6,9 @@ has (``Recording.channels``); ``missing`` compares the two, so a calibration tha
 and data without it fail with one message, wherever the check happens.
 
 Covariates are the scalar channels the effects depend on (Section 5 of the docs: temperature, time);
-their keys (``temp``, ``time``) are the ones effects declare in ``Effect.covariates``.
+their keys (``temp``, ``time``) are the ones effects declare in ``Effect.covariates``. ``temp_rate`` is
+derived from the temperature: its rate of change dT/dt [degC/s] (``temperature_rate``), the covariate of
+a hysteresis (a bias that differs between warming and cooling).
 """
 from __future__ import annotations
 
@@ -37,8 +39,16 @@ MAGNETIC_FIELD = Channel("magnetic_field", ("mx", "my", "mz"), "raw", "magnetic 
 TEMPERATURE = Channel("temperature", ("temp",), "degC", "sensor temperature")
 TIME = Channel("time", ("t",), "s", "time from the first sample")
 
-#: covariate key (as effects declare it) -> channel
-COVARIATES: Mapping[str, Channel] = {"temp": TEMPERATURE, "time": TIME}
+#: covariate key (as effects declare it) -> the channel it is read from
+COVARIATES: Mapping[str, Channel] = {"temp": TEMPERATURE, "time": TIME, "temp_rate": TEMPERATURE}
+#: Units of the covariates (temp_rate is derived from the temperature channel).
+COVARIATE_UNITS: Mapping[str, str] = {"temp": "degC", "time": "s", "temp_rate": "degC/s"}
+#: The window of ``temperature_rate`` [s]: the slope of the temperature over +-10 s of each row. Long
+#: enough that a temperature's noise (0.02 degC at 100 Hz) moves the slope by 1e-4 degC/s, short enough
+#: to follow a swing of a few minutes; a firmware gives dT/dt over the last 20 s.
+TEMPERATURE_RATE_WINDOW = 20.0
+#: Rows the slope of ``temperature_rate`` takes at least (the nearest in time when the window holds fewer).
+_RATE_MIN_ROWS = 3
 
 
 def covariate_channels(keys: tuple[str, ...]) -> tuple[Channel, ...]:
@@ -80,7 +90,8 @@ def covariate_values(keys: tuple[str, ...], *, temp: np.ndarray | None, time: np
     The one place that turns covariate keys into arrays; a temperature effect without a temperature
     channel is refused here with the column to add.
     """
-    given = {"temp": temp, "time": time}
+    given = {"temp": temp, "time": time,
+             "temp_rate": None if temp is None or "temp_rate" not in keys else temperature_rate(time, temp)}
     out: dict[str, np.ndarray] = {}
     for ch, key in zip(covariate_channels(keys), keys):
         v = given[key]
@@ -93,3 +104,28 @@ def covariate_values(keys: tuple[str, ...], *, temp: np.ndarray | None, time: np
 def covariate_matrix(keys: tuple[str, ...], values: Mapping[str, np.ndarray], n: int) -> np.ndarray:
     """Rows x len(keys), the layout of the CasADi model's ``cov`` input."""
     return np.column_stack([values[k] for k in keys]) if keys else np.zeros((n, 0))
+
+
+def temperature_rate(time: np.ndarray, temp: np.ndarray, window: float = TEMPERATURE_RATE_WINDOW) -> np.ndarray:
+    """dT/dt [degC/s] at each row: the least-squares slope of the temperature against time over the rows
+    within +-window/2 [s] of it (at least the ``_RATE_MIN_ROWS`` nearest in time). The same definition for
+    interval means and for samples, so a fit on the means and the apply on samples read one covariate."""
+    t, T = np.asarray(time, float), np.asarray(temp, float)
+    if t.size < 2:
+        return np.zeros(t.size)
+    order = np.argsort(t, kind="stable")
+    ts, Ts = t[order] - t[order[0]], T[order] - T[order[0]]
+    lo = np.searchsorted(ts, ts - window / 2, side="left")
+    hi = np.searchsorted(ts, ts + window / 2, side="right")
+    k = np.arange(t.size)
+    need = np.minimum(_RATE_MIN_ROWS, t.size)
+    short = hi - lo < need
+    lo = np.where(short, np.clip(k - need // 2, 0, t.size - need), lo)
+    hi = np.where(short, lo + need, hi)
+    c = [np.concatenate([[0.0], np.cumsum(v)]) for v in (np.ones_like(ts), ts, Ts, ts * ts, ts * Ts)]
+    n, st, sT, stt, stT = (v[hi] - v[lo] for v in c)
+    var = stt - st * st / n
+    slope = np.where(var > 0, (stT - st * sT / n) / np.where(var > 0, var, 1.0), 0.0)
+    out = np.empty(t.size)
+    out[order] = slope
+    return out

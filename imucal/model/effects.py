@@ -13,12 +13,18 @@ basis f of a covariate, named ``<target>_<basis>``:
           drift         t (seconds since the recording's start)   s
           drift2        p2(t), orthogonal quadratic in t          s^2
           warmup        1 - exp(-t / tau), tau fitted (> 0)       1
+          step          H(t - t_s): 0 before t_s, 1 from it       1   (bias only; t_s given, not fitted)
+          hysteresis    clip(dT/dt / r0, -1, 1): +1 warming,      1   (bias only; r0 fixed from the data)
+                        -1 cooling, 0 at a steady temperature
+  target  angle   phi -> phi + c f (psi, theta alike)     c [rad / unit of f]   (temperature only:
+                  the angles between the axes, misalignment, linear in temperature)
 
 and three terms in the specific force itself, u_i = m_i + ..., raw_i = s_i + b_i u_i:
 
   scale_nonlinearity        u_i = m_i + q_i m_i^2       q_i [1/(m/s^2)]
   scale_nonlinearity3       u_i = m_i + q_i m_i^3       q_i [1/(m/s^2)^2]
   cross_axis_nonlinearity   u_i = m_i + q_i m_j m_k     q_i [1/(m/s^2)], j, k the other two axes
+  scale_asymmetry           u_i = m_i + a_i |m_i|       a_i [1]: scale b_i (1 + a_i) for m_i > 0, b_i (1 - a_i) below
 
 Orders are not confounded: the polynomial bases are the monic orthogonal polynomials of the
 recording's interval covariate values (three-term recurrence, p1 = x - a1,
@@ -32,8 +38,12 @@ temperature, as before the grammar: files with those effects load and apply unch
 The same term code serves the symbolic model (CasADi SX) and the simulator (numpy arrays):
 ``shift_scale`` uses arithmetic (and exp for the warm-up) only. Specific-force terms are written
 forward in ``distort`` (what the sensor does) and inverted in ``correct`` (what the calibration
-does): exactly for the quadratic, by Newton steps for the cubic, by fixed-point steps for the
-cross-axis term, each converged to rounding within the coefficient bounds (tested).
+does): exactly for the quadratic and the asymmetry, by Newton steps for the cubic, by fixed-point steps
+for the cross-axis term, each converged to rounding within the coefficient bounds (tested).
+
+A bias step's time t_s is not a parameter the fit can move (the data hold no gradient in it between
+two still intervals): discovery profiles it over the gaps between the intervals and a run file gives it
+(``fit.initial.bias_step_t``), like a reference, but stored as the calibration's fixed parameter.
 """
 from __future__ import annotations
 
@@ -45,6 +55,8 @@ import casadi as ca
 import numpy as np
 
 from imucal.errors import ImucalError, short
+from imucal.model.channels import temperature_rate
+from imucal.model.geometry import frame_np
 from imucal.model.sensor import Effect
 from imucal.model.parameters import Parameter, Parameters
 
@@ -58,12 +70,19 @@ MIN_DOF = 3
 #: Newton steps inverting u = m + q m^3, and fixed-point steps inverting the cross-axis term:
 #: enough for rounding-level agreement within the coefficient bounds up to |m| = 2.5 g (tested).
 CUBIC_NEWTON_STEPS = 6
-CROSS_FIXED_POINT_STEPS = 12
+CROSS_FIXED_POINT_STEPS = 32
 #: Warm-up time constant: bounds [s] in a file or simulation; in a fit, bounds, start and scale
 #: as fractions of the last interval time (beyond it 1 - exp(-t/tau) is a straight line, the drift).
 WARMUP_TAU_BOUNDS = (1.0, 1.0e5)
 WARMUP_TAU_FIT = (0.02, 1.0)
 WARMUP_TAU_START = 0.2
+#: A hysteresis's deadband r0 [degC/s]: a tenth of the rows' typical (median) rate of change, and at least
+#: STEADY_RATE (0.5 degC/h, imucal.thermal's): below r0 the temperature counts as steady. (A share of the
+#: fastest rate hid the cooling of a swing behind a fast warm-up's rate.)
+HYSTERESIS_DEADBAND = 0.1
+STEADY_RATE = 0.5 / 3600.0
+#: The angles' names, the "axes" of an angle term (phi between x and y, psi x and z, theta y and z).
+ANGLE_AXES = ("phi", "psi", "theta")
 
 
 class AxisEffect(Effect):
@@ -85,6 +104,8 @@ class AxisEffect(Effect):
     axes_observable: bool = True
     #: the nested simpler term this one tends to (warm-up with tau beyond the recording -> drift)
     simpler: str | None = None
+    #: the names of its "axes" 0, 1, 2 (the sensor axes; an angle term's are the angles)
+    axis_names: tuple[str, str, str] = AXIS_NAMES
 
     def __init__(self, axes: Sequence[int] = (0, 1, 2)) -> None:
         super().__init__(axes)
@@ -93,7 +114,13 @@ class AxisEffect(Effect):
                               field=f"effects.{self.name}.axes")
 
     def coefficient(self, axis: int) -> str:
-        return f"{self.name}_{AXIS_NAMES[axis]}"
+        return f"{self.name}_{self.axis_names[axis]}"
+
+    @classmethod
+    def axis_label(cls, axes: Sequence[int]) -> str:
+        """The axes as written in a label: ``xy`` (sensor axes), ``phi,theta`` (angles)."""
+        sep = "" if all(len(n) == 1 for n in cls.axis_names) else ","
+        return sep.join(cls.axis_names[a] for a in axes)
 
     @property
     def coefficient_names(self) -> tuple[str, ...]:
@@ -117,6 +144,16 @@ class AxisEffect(Effect):
     def shape_names(self) -> tuple[str, ...]:
         """Free parameters shared by the axes (the warm-up's tau)."""
         return tuple(p.name for p in self._extra(None) if not p.fixed)
+
+    @property
+    def given_names(self) -> tuple[str, ...]:
+        """Fixed parameters that no data set: a run file gives them (``fit.initial``), discovery profiles
+        them (a bias step's time)."""
+        return ()
+
+    def profile_grid(self, covariates: Mapping[str, np.ndarray | None]) -> list[dict[str, float]]:
+        """The values of ``given_names`` discovery tries for these rows (none: nothing to profile)."""
+        return []
 
     def _extra(self, base: Parameters | None) -> list[Parameter]:
         return []
@@ -187,6 +224,14 @@ class Basis:
 
     def data_bounds(self, x: np.ndarray | None, prefix: str) -> dict[str, tuple[float, float, float]]:
         return {}
+
+    def given(self, prefix: str) -> tuple[str, ...]:
+        """Fixed constants a run file gives (``AxisEffect.given_names``)."""
+        return ()
+
+    def grid(self, x: np.ndarray | None, prefix: str) -> list[dict[str, float]]:
+        """Values of the given constants to profile over these rows (``AxisEffect.profile_grid``)."""
+        return []
 
 
 def recurrence(x: np.ndarray, order: int, a1: float | None = None) -> tuple[list[float], list[float]]:
@@ -281,6 +326,60 @@ class Warmup(Basis):
         return {f"{prefix}_tau": (WARMUP_TAU_FIT[0] * t, WARMUP_TAU_FIT[1] * t, t)}
 
 
+#: Still intervals a bias step needs on each side of it, so that each side holds a shift of its own.
+STEP_MIN_SIDE = 3
+
+
+class Step(Basis):
+    """H(t - t_s): a bias that jumps at t_s [s] (the sensor knocked); t_s given (``_t``), not fitted."""
+
+    name, covariate, unit = "step", "time", ""
+    typical = {"bias": 2e-3}
+    bound = {"bias": math.inf}
+
+    def extra(self, prefix, base):
+        return [Parameter(f"{prefix}_t", math.nan, unit="s", fixed=True, scale=60.0,
+                          description=f"time of the step of {prefix} [s from the recording's start] (given)")]
+
+    def value(self, x, p, prefix):
+        return 1.0 * (x >= p[f"{prefix}_t"])  # H(t - t_s)
+
+    def given(self, prefix):
+        return (f"{prefix}_t",)
+
+    def grid(self, x, prefix):
+        """The midpoints between consecutive row times with ``STEP_MIN_SIDE`` rows on each side."""
+        if x is None or len(x) < 2 * STEP_MIN_SIDE:
+            return []
+        ts = np.unique(np.asarray(x, float))
+        mids = 0.5 * (ts[STEP_MIN_SIDE - 1:len(ts) - STEP_MIN_SIDE] + ts[STEP_MIN_SIDE:len(ts) - STEP_MIN_SIDE + 1])
+        return [{f"{prefix}_t": float(m)} for m in mids]
+
+
+class Hysteresis(Basis):
+    """clip(dT/dt / r0, -1, 1): +1 while the temperature rises, -1 while it falls, 0 while it is steady
+    (|dT/dt| < r0): a bias that differs between warming and cooling. r0 (``_r0``) is fixed from the data."""
+
+    name, covariate, unit = "hysteresis", "temp_rate", ""
+    typical = {"bias": 1e-3}
+    bound = {"bias": math.inf}
+
+    def extra(self, prefix, base):
+        return [Parameter(f"{prefix}_r0", STEADY_RATE, unit="degC/s", fixed=True, scale=STEADY_RATE,
+                          description=f"deadband of {prefix}: a temperature changing slower is steady (fixed)")]
+
+    def value(self, x, p, prefix):
+        v = x / p[f"{prefix}_r0"]
+        if isinstance(v, (ca.SX, ca.MX, ca.DM)):
+            return ca.fmin(ca.fmax(v, -1.0), 1.0)
+        return np.clip(v, -1.0, 1.0)
+
+    def data_values(self, x, prefix):
+        if x is None or not len(x):
+            return {}
+        return {f"{prefix}_r0": max(STEADY_RATE, HYSTERESIS_DEADBAND * float(np.median(np.abs(x))))}
+
+
 def _t_end(x: np.ndarray) -> float:
     lo, hi = WARMUP_TAU_BOUNDS
     return float(np.clip(np.max(x), lo / WARMUP_TAU_FIT[0], hi))
@@ -288,7 +387,7 @@ def _t_end(x: np.ndarray) -> float:
 
 BASES: dict[str, Basis] = {b.name: b for b in (
     Polynomial("temperature", "temp", 1, "degC", "tref", REFERENCE_TEMPERATURE,
-               {"bias": 1e-3, "scale": 1e-3}, {"bias": math.inf, "scale": 0.01}),
+               {"bias": 1e-3, "scale": 1e-3, "angle": 1e-4}, {"bias": math.inf, "scale": 0.01, "angle": 0.01}),
     Polynomial("temperature2", "temp", 2, "degC^2", "tref", REFERENCE_TEMPERATURE,
                {"bias": 1e-4, "scale": 1e-4}, {"bias": math.inf, "scale": 1e-3}),
     Polynomial("temperature3", "temp", 3, "degC^3", "tref", REFERENCE_TEMPERATURE,
@@ -297,9 +396,12 @@ BASES: dict[str, Basis] = {b.name: b for b in (
     Polynomial("drift2", "time", 2, "s^2", "t0", 0.0, {"bias": 1e-6, "scale": 1e-7},
                {"bias": math.inf, "scale": 1e-5}),
     Warmup(),
+    Step(),
+    Hysteresis(),
 )}
 
-_MEANING = {"bias": "change of the shift s_i per unit of", "scale": "relative change of the scale b_i per unit of"}
+_MEANING = {"bias": "change of the shift s_i per unit of", "scale": "relative change of the scale b_i per unit of",
+            "angle": "change of the angle between two axes [rad] per unit of"}
 
 
 class Term(AxisEffect):
@@ -311,13 +413,27 @@ class Term(AxisEffect):
     def _extra(self, base):
         return self.basis.extra(self.name, base)
 
+    def _rows(self, covariates: Mapping[str, np.ndarray | None]) -> np.ndarray | None:
+        """The basis's covariate over the rows (temp_rate derived from temp and time)."""
+        key = self.basis.covariate
+        if covariates.get(key) is not None:
+            return np.asarray(covariates[key], float)
+        if key == "temp_rate" and covariates.get("temp") is not None and covariates.get("time") is not None:
+            return temperature_rate(covariates["time"], covariates["temp"])
+        return None
+
     def data_values(self, covariates):
-        x = covariates.get(self.basis.covariate)
-        return self.basis.data_values(None if x is None else np.asarray(x, float), self.name)
+        return self.basis.data_values(self._rows(covariates), self.name)
 
     def data_bounds(self, covariates):
-        x = covariates.get(self.basis.covariate)
-        return self.basis.data_bounds(None if x is None else np.asarray(x, float), self.name)
+        return self.basis.data_bounds(self._rows(covariates), self.name)
+
+    @property
+    def given_names(self):
+        return self.basis.given(self.name)
+
+    def profile_grid(self, covariates):
+        return self.basis.grid(self._rows(covariates), self.name)
 
     def start(self, base, axis):
         # A warm-up amplitude starts at its scale: at 0 its tau would not enter the model, and the
@@ -325,6 +441,8 @@ class Term(AxisEffect):
         return self._scale(base, axis) if isinstance(self.basis, Warmup) else 0.0
 
     def shift_scale(self, s, b, cov, p):
+        if self.target == "angle":
+            return s, b
         f = self.basis.value(cov[self.basis.covariate], p, self.name)
         s, b = list(s), list(b)
         for a in self.axes:
@@ -335,15 +453,33 @@ class Term(AxisEffect):
                 b[a] = b[a] * (1 + c * f)  # b_i (1 + c_i f)
         return s, b
 
+    def base_parameter(self, axis: int) -> str:
+        """The paper's parameter the term modulates on ``axis``: s_i, b_i, or the angle."""
+        return {"bias": f"s{axis + 1}", "scale": f"b{axis + 1}", "angle": ANGLE_AXES[axis]}[self.target]
+
+    def angles(self, ang, cov, p):
+        if self.target != "angle":
+            return ang
+        f = self.basis.value(cov[self.basis.covariate], p, self.name)
+        ang = list(ang)
+        for a in self.axes:
+            ang[a] = ang[a] + p[self.coefficient(a)] * f  # phi + c f: the Gram matrix of Eq. (eq:12) at T
+        return ang
+
     def coefficient_for_size(self, size, b, span, gravity):
+        # an angle moved by c span turns a reading at 1 g by about g c span, as a scale c span does
         return size * b / span if self.target == "bias" else size / (gravity * span)
+
+
+_TARGET_UNIT = {"bias": "{raw}", "scale": "1", "angle": "rad"}
 
 
 def _term(target: str, basis: Basis) -> type[Term]:
     unit = basis.unit and ("/" + basis.unit)
     return type("".join(w.capitalize() for w in f"{target}_{basis.name}".split("_")), (Term,), {
         "name": f"{target}_{basis.name}", "target": target, "basis": basis,
-        "unit": ("{raw}" + unit if unit else "{raw}") if target == "bias" else ("1" + unit if unit else "1"),
+        "axis_names": ANGLE_AXES if target == "angle" else AXIS_NAMES,
+        "unit": _TARGET_UNIT[target] + unit,
         "covariates": (basis.covariate,), "typical": basis.typical[target], "bound": basis.bound[target], "raw_coefficient": target == "bias",
         "meaning": f"{_MEANING[target]} {basis.name}",
         "simpler": f"{target}_drift" if isinstance(basis, Warmup) else None,
@@ -421,18 +557,21 @@ class CrossAxisNonlinearity(AxisEffect):
     """Axis i responds to the product of the other two: raw_i = s_i + b_i (m_i + q_i m_j m_k).
 
     Inverted by fixed-point steps m_i <- u_i - q_i m_j m_k from m = u (a contraction with factor
-    below 0.1 inside the bound up to |m| = 2.5 g).
+    below 0.3 inside the bound up to |m| = 2.5 g: CROSS_FIXED_POINT_STEPS reach rounding).
 
     Observability: to first order |u|^2 = |m|^2 + 2 (q_x + q_y + q_z) m_x m_y m_z, so a
     calibration from |a| alone determines the sum of the coefficients, not which axis carries it
-    (the axis is a convention; discovery fits one axis and says so).
+    (the axis is a convention; discovery fits one axis and says so). To second order |u|^2 gains
+    q_i^2 (m_j m_k)^2 per axis, which tells the axes apart once the coefficients are large (two that
+    nearly cancel in the sum, say): discovery then tries two and three axes and reports the sum, the
+    observable combination, beside them.
     """
 
     name = "cross_axis_nonlinearity"
     axes_observable = False
     unit = "1/(m/s^2)"
     typical = 1e-3  # 0.5 % of g at 1 g split between two axes
-    bound = 2e-3
+    bound = 6e-3  # 3 % of g at 1 g; the fixed-point steps contract by < 0.3 up to |m| = 2.5 g
     meaning = "coefficient of the product of the other two axes' readings"
 
     @staticmethod
@@ -461,11 +600,43 @@ class CrossAxisNonlinearity(AxisEffect):
         return size / (gravity**2 / 2)  # |m_j m_k| <= g^2 / 2 at 1 g
 
 
+class ScaleAsymmetry(AxisEffect):
+    """A different scale for positive and negative inputs: raw_i = s_i + b_i (m_i + a_i |m_i|), i.e. the
+    scale b_i (1 + a_i) for m_i > 0 and b_i (1 - a_i) for m_i < 0 (very common in MEMS).
+
+    The calibration inverts it exactly: with u = (raw_i - s_i)/b_i (Eq. theModel), sign(u) = sign(m)
+    for |a| < 1, so m = u / (1 + a sign(u)) = (u - a |u|) / (1 - a^2).
+    """
+
+    name = "scale_asymmetry"
+    unit = "1"
+    typical = 2e-3  # 0.2 % between the two halves of the range
+    bound = 0.05  # keeps both half-scales within 5 % of b_i
+    meaning = "half the relative difference of the scale for positive and negative readings"
+
+    def correct(self, m, raw, cov, p):
+        m = list(m)
+        for a in self.axes:
+            q = p[self.coefficient(a)]
+            m[a] = (m[a] - q * abs(m[a])) / (1 - q * q)  # exact inverse of u = m + q |m|
+        return m
+
+    def distort(self, m, p):
+        m = list(m)
+        for a in self.axes:
+            m[a] = m[a] + p[self.coefficient(a)] * abs(m[a])  # u = m + q |m|
+        return m
+
+    def coefficient_for_size(self, size, b, span, gravity):
+        return size / gravity  # a reading at 1 g moves by a g
+
+
 #: Effect name -> class. Order = the order candidates are listed in reports (today's five first).
 EFFECTS: dict[str, type[AxisEffect]] = {cls.name: cls for cls in (
     BiasTemperature, ScaleTemperature, BiasDrift, ScaleDrift, ScaleNonlinearity,
     *(_term(t, BASES[b]) for b in ("temperature2", "temperature3", "drift2", "warmup") for t in ("bias", "scale")),
-    ScaleNonlinearity3, CrossAxisNonlinearity)}
+    ScaleNonlinearity3, CrossAxisNonlinearity, ScaleAsymmetry, _term("bias", BASES["step"]),
+    _term("bias", BASES["hysteresis"]), _term("angle", BASES["temperature"]))}
 #: The five effects of the library before the grammar.
 CLASSIC = ("bias_temperature", "scale_temperature", "bias_drift", "scale_drift", "scale_nonlinearity")
 
@@ -494,7 +665,7 @@ def check_effects(effects: Sequence[Effect], covariates: Mapping[str, np.ndarray
     of the whole model (base + effects).
     """
     for e in effects:
-        if "temp" in e.covariates:
+        if any(c in ("temp", "temp_rate") for c in e.covariates):
             temp = covariates.get("temp")
             if temp is None:
                 raise ImucalError(f"effect {e.name} needs temperature but the data have no temp column",
@@ -506,10 +677,40 @@ def check_effects(effects: Sequence[Effect], covariates: Mapping[str, np.ndarray
                                   f"(interval means span {spread:.3g} degC < {MIN_TEMPERATURE_SPREAD} degC)",
                                   file=source, field="fit.effects",
                                   fix="record while the sensor warms up or cools down, or drop the temperature effect")
+        if "temp_rate" in e.covariates:
+            _check_both_ways(e, covariates, source)
     if effects and n_rows - n_free < MIN_DOF:
         raise ImucalError(f"{n_rows} static intervals are too few for {n_free} free parameters with effects "
                           f"(need at least {n_free + MIN_DOF})", file=source, field="intervals",
                           fix="record more static orientations or drop effects")
+
+
+#: Rows a hysteresis needs warming, and as many cooling, so that its two offsets are told from the shift.
+MIN_ROWS_EACH_WAY = 2
+
+
+def _check_both_ways(e: Effect, covariates: Mapping[str, np.ndarray | None], source: str | None) -> None:
+    """A hysteresis needs rows where the temperature rises and rows where it falls (faster than r0)."""
+    h = e.basis.value(e._rows(covariates), e.data_values(covariates), e.name)
+    up, down = int(np.sum(h >= 1.0)), int(np.sum(h <= -1.0))
+    if min(up, down) < MIN_ROWS_EACH_WAY:
+        raise ImucalError(f"effect {e.name} needs the temperature to rise and to fall, but {up} intervals warm and "
+                          f"{down} cool (at least {MIN_ROWS_EACH_WAY} each)", file=source, field="fit.effects",
+                          fix="record while the sensor warms up and cools down, or drop the hysteresis")
+
+
+def given_names(effects: Sequence[Effect]) -> tuple[str, ...]:
+    """The fixed parameters of ``effects`` that a run file gives (``AxisEffect.given_names``)."""
+    return tuple(n for e in effects if isinstance(e, AxisEffect) for n in e.given_names)
+
+
+def check_given(effects: Sequence[Effect], params: Parameters, source: str | None = None) -> None:
+    """Refuse an effect whose given parameter (a bias step's time) the run file did not give."""
+    for n in given_names(effects):
+        if not math.isfinite(params[n].value):
+            raise ImucalError(f"{n} is not given: the effect needs the time of its step", file=source,
+                              field=f"fit.initial.{n}", fix=f"give fit.initial.{n} in {params[n].unit} from the "
+                              "recording's start (imucal discover finds it)")
 
 
 def reference_values(effects: Sequence[Effect], covariates: Mapping[str, np.ndarray | None]
@@ -570,6 +771,10 @@ def effects_from_coefficients(spec: Mapping[str, Mapping[str, float]]) -> list[A
         if not axes:
             raise ImucalError(f"effect {name} has no coefficient", field=f"sensor.effects.{name}",
                               fix=f"give at least one of {', '.join(proto.coefficient_names)}")
+        missing = [n for n in proto.given_names if n not in coeffs]
+        if missing:
+            raise ImucalError(f"effect {name} needs {missing[0]}", field=f"sensor.effects.{name}",
+                              fix=f"give {missing[0]} (the time of the step [s from the start])")
         lo, hi = WARMUP_TAU_BOUNDS
         for n in proto.shape_names:
             if n in coeffs and not lo <= coeffs[n] <= hi:
@@ -578,26 +783,38 @@ def effects_from_coefficients(spec: Mapping[str, Mapping[str, float]]) -> list[A
     return out
 
 
-def simulate_effects(sensor, m: np.ndarray, t: np.ndarray, temp: np.ndarray | None,
-                     raw: np.ndarray) -> np.ndarray:
-    """Noise-free raw readings of ``sensor`` (a SensorSpec) with its effects' forward terms.
+def _covariates(effects: Sequence[AxisEffect], t: np.ndarray, temp: np.ndarray | None) -> dict[str, np.ndarray]:
+    """The simulated samples' covariates (temp_rate as the calibration derives it, imucal.model.channels)."""
+    cov: dict[str, np.ndarray] = {"time": np.asarray(t, float)}
+    if any(c in ("temp", "temp_rate") for e in effects for c in e.covariates):
+        if temp is None:
+            raise ImucalError("the sensor has a temperature effect but the simulation has no temperature profile",
+                              field="temperature", fix="add a temperature: section or drop the effect")
+        cov["temp"] = np.asarray(temp, float)
+        cov["temp_rate"] = temperature_rate(cov["time"], cov["temp"])
+    return cov
 
-    ``raw`` is the paper's s + b m (Eq. theModel) without effects; it is recomputed here as
-    raw_i = s_i(T, t) + b_i(T, t) * u_i with u = distort(m) (the sensor's forward model; several
-    specific-force terms compose in the model's order, and the model inverts them in reverse).
+
+def simulate_effects(sensor, a: np.ndarray, t: np.ndarray, temp: np.ndarray | None) -> np.ndarray:
+    """Noise-free raw readings of ``sensor`` (a SensorSpec) with its effects' forward terms, for the true
+    specific force ``a`` (N x 3, frame f).
+
+    raw_i = s_i(T, t) + b_i(T, t) * u_i with u = distort(m) and m_i = e_i(T) . a (Lemma 1, the axes at the
+    angles the effects give each sample): the sensor's forward model; several specific-force terms
+    compose in the model's order, and the model inverts them in reverse.
     """
     effects = effects_from_coefficients(sensor.effects)
     p: dict[str, float] = {}
     for e in effects:
         p.update(e.default_values())
     p.update(sensor.values())
-    n = m.shape[0]
-    cov: dict[str, np.ndarray] = {"time": np.asarray(t, float)}
-    if any("temp" in e.covariates for e in effects):
-        if temp is None:
-            raise ImucalError("the sensor has a temperature effect but the simulation has no temperature profile",
-                              field="temperature", fix="add a temperature: section or drop the effect")
-        cov["temp"] = np.asarray(temp, float)
+    n = a.shape[0]
+    cov = _covariates(effects, t, temp)
+    ang = [np.full(n, float(p[k])) for k in ("phi", "psi", "theta")]
+    for e in effects:
+        ang = e.angles(ang, cov, p)
+    E = frame_np(np.column_stack(ang))  # (N, 3, 3), columns e_i (Eq. eq:125)
+    m = np.einsum("nj,nji->ni", np.asarray(a, float), E)
     s = [np.full(n, float(sensor.s[i])) for i in range(3)]
     b = [np.full(n, float(sensor.b[i])) for i in range(3)]
     for e in effects:

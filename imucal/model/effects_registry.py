@@ -4,7 +4,7 @@ from __future__ import annotations
 from typing import Sequence
 
 from imucal.errors import ImucalError, short
-from imucal.model.effects import EFFECTS, make_effect
+from imucal.model.effects import AXIS_NAMES, EFFECTS, make_effect
 
 
 def effects_from_specs(specs: Sequence, source: str | None = None) -> list:
@@ -16,12 +16,14 @@ def effects_from_specs(specs: Sequence, source: str | None = None) -> list:
         if s.name not in EFFECTS:
             raise ImucalError(f"unknown effect {short(s.name)}", file=source, field=f"fit.effects[{i}].name",
                               fix=f"choose from {', '.join(EFFECTS)}")
-        bad = [a for a in s.axes if a not in ("x", "y", "z")]
-        if bad or not s.axes:
-            raise ImucalError(f"axes {short(list(s.axes))} must be a non-empty list of x, y, z", file=source,
-                              field=f"fit.effects[{i}].axes")
+        names = EFFECTS[s.name].axis_names
+        axes = names if tuple(s.axes) == AXIS_NAMES else tuple(s.axes)  # the default: all of its axes
+        bad = [a for a in axes if a not in names]
+        if bad or not axes:
+            raise ImucalError(f"axes {short(list(s.axes))} must be a non-empty list of {', '.join(names)}",
+                              file=source, field=f"fit.effects[{i}].axes")
         if any(e.name == s.name for e in out):
             raise ImucalError(f"effect {s.name} is listed twice", file=source, field=f"fit.effects[{i}]",
                               fix=f"list it once with all its axes, e.g. {{name: {s.name}, axes: [x, y]}}")
-        out.append(make_effect(s.name, tuple("xyz".index(a) for a in s.axes)))
+        out.append(make_effect(s.name, tuple(names.index(a) for a in axes)))
     return out

@@ -33,8 +33,8 @@ from imucal.model.parameters import base_parameters
 class Effect:
     """A named physical effect: extra parameters and terms in the sensor model.
 
-    Subclasses override ``shift_scale`` (to make s, b depend on covariates) and/or
-    ``correct`` (to change the measured value m). ``key`` identifies the effect for caching.
+    Subclasses override ``shift_scale`` (to make s, b depend on covariates), ``correct`` (to
+    change the measured value m) and/or ``angles`` (to make the angles between the axes depend on them). ``key`` identifies the effect for caching.
     """
 
     name: str = "effect"
@@ -65,6 +65,10 @@ class Effect:
 
     def correct(self, m: list, raw: ca.SX, cov: Mapping[str, ca.SX], p: Mapping[str, ca.SX]) -> list:
         return m
+
+    def angles(self, ang: list, cov: Mapping[str, ca.SX], p: Mapping[str, ca.SX]) -> list:
+        """The angles phi, psi, theta (Eq. eq:12) as the effect makes them depend on covariates."""
+        return ang
 
 
 #: The sensor kinds (``SensorModel.kind``; a calibration file's section names).
@@ -195,7 +199,10 @@ def _build(effects: tuple[Effect, ...], names: tuple[str, ...]) -> dict:
     for e in reversed(effects):  # the sensor applies its specific-force terms in order: undo them in reverse
         m = e.correct(m, raw, cd, pd)
     m = ca.vertcat(*m)
-    phi, psi, theta = pd["phi"], pd["psi"], pd["theta"]
+    ang = [pd["phi"], pd["psi"], pd["theta"]]
+    for e in effects:
+        ang = e.angles(ang, cd, pd)
+    phi, psi, theta = ang
     abar = ca.mtimes(tbar(phi, psi, theta), m)  # Lemma 2
     norm = ca.sqrt(ca.dot(m, abar))  # Proposition 2: |a|^2 = m^T G^-1 m
     L = frame_inverse_transpose(phi, psi, theta)

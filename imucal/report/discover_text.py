@@ -10,7 +10,7 @@ import math
 from imucal.analysis.discover import Discovery, Outcome, Shortfall, Verdict, Withheld
 from imucal.analysis.discover.verdict import StochasticPart
 from imucal.constants import STANDARD_GRAVITY
-from imucal.model.effects import AXIS_NAMES
+from imucal.model.effects import EFFECTS
 from imucal.report.thermal import gap_lines, thermal_json, thermal_lines
 
 #: [m/s^2] one milli-g (standard gravity / 1000): the unit a sweep's verdict gives residuals in.
@@ -134,15 +134,34 @@ def _effect_lines(d: Discovery) -> list[str]:
         amb = f"  (ambiguous with {', '.join(e.ambiguous_with)})" if e.ambiguous_with else ""
         L.append(f"    {e.label}: LR = {e.lr:.4g}, p (adjusted) = {e.p_value:.3g}{amb}")
         if e.unresolved_axes:
-            L.append(f"        not ruled out on {', '.join(AXIS_NAMES[a] for a in e.unresolved_axes)}: "
+            L.append(f"        not ruled out on {', '.join(EFFECTS[e.name].axis_names[a] for a in e.unresolved_axes)}: "
                      "these poses barely see the term there (see the notes)")
         for n, v in e.coefficients.items():
             L.append(f"        {n} = {v:.6g} +/- {e.std[n]:.3g} {e.units[n]}")
+        L += _change_point_lines(e) + _sum_lines(e)
         for n, v in e.reference.items():
             L.append(f"        {n} = {v:.6g} {e.units.get(n, '')} (fixed reference)")
     L.append("[[Where the base model disagrees]]  chi-square a single-axis effect would remove (linearised)")
     L += [f"    {p:<28s} {v:10.4g}" for p, v in d.disagreement[:8]]
     return L
+
+
+def _change_point_lines(e) -> list[str]:
+    c = e.change_point
+    if c is None:
+        return []
+    return [f"        step at t = {c.time:.6g} s: between the still intervals ending {c.gap[0]:.6g} s and starting "
+            f"{c.gap[1]:.6g} s; 95 % confidence set of change points {c.lower:.6g} .. {c.upper:.6g} s "
+            f"({c.gaps} of {c.tried} gaps)"]
+
+
+def _sum_lines(e) -> list[str]:
+    if e.observable_sum is None:
+        return []
+    v, sd = e.observable_sum
+    unit = next(iter(e.units.values()), "")
+    return [f"        observable combination (first order): sum over {EFFECTS[e.name].axis_label(e.axes)} = "
+            f"{v:.6g} +/- {sd:.3g} {unit}"]
 
 
 def _round_lines(s) -> list[str]:
@@ -201,10 +220,14 @@ def discovery_report(d: Discovery) -> str:
 
 
 def _effects_json(d: Discovery) -> list[dict]:
-    return [{"name": e.name, "axes": [AXIS_NAMES[a] for a in e.axes], "label": e.label,
+    return [{"name": e.name, "axes": list(e.axis_names), "label": e.label,
              "coefficients": e.coefficients, "std": {k: _num(v) for k, v in e.std.items()},
              "units": e.units, "reference": e.reference, "lr": _num(e.lr), "p_value": _num(e.p_value),
-             "ambiguous_with": list(e.ambiguous_with), "unresolved_axes": [AXIS_NAMES[a] for a in e.unresolved_axes]}
+             "ambiguous_with": list(e.ambiguous_with),
+             "unresolved_axes": [EFFECTS[e.name].axis_names[a] for a in e.unresolved_axes],
+             "change_point": e.change_point.to_json() if e.change_point is not None else None,
+             "observable_sum": None if e.observable_sum is None else
+             {"value": _num(e.observable_sum[0]), "std": _num(e.observable_sum[1])}}
             for e in d.effects]
 
 
@@ -212,7 +235,7 @@ def _steps_json(d: Discovery) -> list[dict]:
     return [{"round": s.index, "chi2_before": s.chi2_before, "dof_before": s.dof_before, "scale": s.scale,
              "p_scan": _num(s.p_scan), "chosen": s.chosen.label if s.chosen else None, "jointly_with": s.jointly_with,
              "ambiguous_with": [c.label for c in s.ambiguous_with],
-             "candidates": [{"effect": c.label, "new_axes": [AXIS_NAMES[a] for a in c.new_axes],
+             "candidates": [{"effect": c.label, "new_axes": [EFFECTS[c.name].axis_names[a] for a in c.new_axes],
                              "chi2_screen": _num(c.chi2_screen), "chi2": _num(c.chi2), "dof": c.dof, "lr": _num(c.lr),
                              "p_adjusted": _num(c.p_adjusted), "fitted": c.fitted, "significant": c.significant}
                             for c in s.candidates]}

@@ -11,15 +11,29 @@ from imucal.solve.fit import FitResult, jacobian_rows
 from imucal.solve.stats import power_chi2_1
 
 
+def observable_sum(name: str, axes: tuple[int, ...], res: FitResult) -> tuple[float, float]:
+    """The sum of a term's coefficients over its axes and its standard error (the covariance's 1^T C 1):
+    what |a| sees of a cross-axis term to first order."""
+    names = make_effect(name, axes).coefficient_names
+    value = sum(res.params[c].value for c in names)
+    idx = [res.free_names.index(c) for c in names if c in res.free_names]
+    var = float(np.sum(res.covariance[np.ix_(idx, idx)])) if idx else float("nan")
+    return value, float(np.sqrt(max(var, 0.0)))
+
+
 def axis_notes(effects: Effects, found: set[str], final: CalibrationRun, notes: list[str]) -> None:
-    """Effects whose axis static poses cannot tell (the sum of their coefficients is determined)."""
+    """Effects whose axes static poses tell apart only through second-order terms, if at all: the sum of
+    their coefficients is what |a| sees to first order."""
     for n, ax in effects.items():
-        if n in found and not EFFECTS[n].axes_observable:
-            e = make_effect(n, ax)
-            v = sum(final.result.params[c].value for c in e.coefficient_names)
-            notes.append(f"{n}: static poses determine only the sum of its coefficients over the axes "
-                         f"({v:.4g} {final.result.params[e.coefficient_names[0]].unit}; |a|^2 changes by 2 (q_x + q_y "
-                         f"+ q_z) m_x m_y m_z), not which axis carries it: axis {label(n, ax)[-2]} is a convention")
+        if n not in found or EFFECTS[n].axes_observable:
+            continue
+        v, sd = observable_sum(n, ax, final.result)
+        unit = final.result.params[make_effect(n, ax).coefficient_names[0]].unit
+        head = (f"{n}: static poses determine to first order only the sum of its coefficients over the axes "
+                f"({v:.4g} +/- {sd:.2g} {unit}; |a|^2 changes by 2 (q_x + q_y + q_z) m_x m_y m_z)")
+        notes.append(head + (f", not which axis carries it: axis {label(n, ax)[-2]} is a convention" if len(ax) == 1
+                             else f"; the split between {EFFECTS[n].axis_label(ax)} comes from the second-order terms "
+                                  "q_i^2 (m_j m_k)^2, which large coefficients make visible"))
 
 
 def unresolved(prob: Problem, res: FitResult, effects: Effects, name: str, penalty: float,
@@ -51,22 +65,34 @@ def unresolved(prob: Problem, res: FitResult, effects: Effects, name: str, penal
         power = power_chi2_1(lam, penalty)
         if power < RESOLVED_POWER:
             out[a] = lam
-            notes.append(f"{label(name, have)}: axis {AXIS_NAMES[a]} not ruled out: a coefficient there as large as "
+            ax = EFFECTS[name].axis_names[a]
+            notes.append(f"{label(name, have)}: axis {ax} not ruled out: a coefficient there as large as "
                          f"{ref} ({abs(res.params[ref].value):.3g} {res.params[ref].unit}) would add only {lam:.3g} "
                          f"chi-square and be kept in {power:.0%} of such recordings; these poses barely see "
-                         f"{name} on {AXIS_NAMES[a]}: to test it, {where_to_look(name, a, res)}")
+                         f"{name} on {ax}: to test it, {where_to_look(name, a, res)}")
     return out
+
+
+#: Which holds show a term of each covariate (``where_to_look``).
+_WHEN = {"temp": " at the coldest and the warmest times", "temp_rate": " while it warms and while it cools"}
 
 
 def where_to_look(name: str, axis: int, res: FitResult) -> str:
     """Which holds show a term on an axis: that axis along gravity (a bias or scale change on axis i
-    moves |a| by m_i times it, m_i^2 for a scale), where the term's basis changes most."""
+    moves |a| by m_i times it, m_i^2 for a scale), or both axes of an angle at 45 degrees to gravity
+    (an angle moves |a| by m_i m_j times it), where the term's basis changes most."""
     e = make_effect(name, (axis,))
-    hold = f"hold the {AXIS_NAMES[axis]} axis up and down"
+    if getattr(e, "target", None) == "angle":
+        pair = {0: "x and y", 1: "x and z", 2: "y and z"}[axis]
+        hold = f"hold the {pair} axes at 45 degrees to gravity, both signs"
+    else:
+        hold = f"hold the {AXIS_NAMES[axis]} axis up and down"
     if not isinstance(e, Term):  # a term in the specific force: any time
         return hold
-    if e.basis.covariate == "temp":
-        return hold + " at the coldest and the warmest times"
+    if e.basis.covariate in _WHEN:
+        return hold + _WHEN[e.basis.covariate]
     if e.shape_names:  # a warm-up
         return hold + f" within the first {2 * res.params[e.shape_names[0]].value:.3g} s (twice the fitted tau)"
+    if e.given_names:  # a step
+        return hold + f" before and after {res.params[e.given_names[0]].value:.4g} s"
     return hold + " at the start and at the end of the recording"

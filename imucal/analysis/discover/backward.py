@@ -38,14 +38,15 @@ def prune(prob: Problem, current: FitResult, effects: Effects, found_names: set[
                     res = prob.fit(canonical(reduced), current.values())
                 except ImucalError:
                     continue
-                k = 1 + (0 if rest else len(make_effect(n, (0,)).shape_names))
+                e = make_effect(n, (0,))
+                k = 1 + (0 if rest else len(e.shape_names) + len(e.given_names))
                 trials.append(((res.chi2 - current.chi2) / scale / k, n, a, res, reduced))
         if not trials:
             return current, effects
         cost, n, a, res, reduced = min(trials, key=lambda t: t[0])
         if cost >= settings.penalty:
             return current, effects
-        notes.append(f"dropped {n} on axis {'xyz'[a]} after the later effects: it removed only "
+        notes.append(f"dropped {n} on axis {EFFECTS[n].axis_names[a]} after the later effects: it removed only "
                      f"{max(cost, 0.0):.3g} of scaled chi-square (< {settings.penalty:.3g} per coefficient)")
         current, effects = res, reduced
 
@@ -103,10 +104,12 @@ def shape_check(prob: Problem, current: FitResult, effects: Effects, found_names
     out: dict[str, ShapeFailure] = {}
     for n in terms:
         e = make_effect(n, effects[n])
+        if any(e.base_parameter(a) not in col for a in e.axes):
+            continue  # (the shift, scale or angle it modulates is held by the run file)
         x = np.asarray(prob.cov[e.basis.covariate], float)
         edges = np.quantile(x, np.linspace(0, 1, SHAPE_BINS + 1)[1:-1])
         ind = np.eye(SHAPE_BINS)[np.searchsorted(edges, x, side="right")]  # one-hot bin of each row
-        extra = np.hstack([J[:, [col[f"{'s' if e.target == 'bias' else 'b'}{a + 1}"]]] * ind for a in e.axes])
+        extra = np.hstack([J[:, [col[e.base_parameter(a)]]] * ind for a in e.axes])
         A = np.hstack([J[:, base_cols], extra])
         sol, *_ = np.linalg.lstsq(A, -rw, rcond=None)
         chi2_bins = float(np.sum((rw + A @ sol) ** 2))

@@ -7,7 +7,8 @@ from typing import Callable, Sequence
 import numpy as np
 
 from imucal.config.run import RunConfig
-from imucal.model.effects import AXIS_NAMES, EFFECTS, AxisEffect, fit_to_data, make_effect, prepare_parameters
+from imucal.model.channels import temperature_rate
+from imucal.model.effects import EFFECTS, AxisEffect, fit_to_data, given_names, make_effect, prepare_parameters
 from imucal.model.sensor import build_model
 from imucal.pipeline import CalibrationRun, fit_data, make_parameters, observability
 from imucal.solve.f_test import f_sf
@@ -34,8 +35,8 @@ def as_dict(effects: Sequence) -> Effects:
 
 
 def label(name: str, axes: tuple[int, ...]) -> str:
-    """``name[xy]``: an effect on its axes."""
-    return f"{name}[{''.join(AXIS_NAMES[a] for a in axes)}]"
+    """``name[xy]``: an effect on its axes (an angle term's: ``angle_temperature[phi,theta]``)."""
+    return f"{name}[{EFFECTS[name].axis_label(axes)}]"
 
 
 def labels(names: Sequence[str], effects: Effects) -> tuple[str, ...]:
@@ -67,7 +68,8 @@ class Problem:
         self.iv = base.intervals
         self.rec = base.recording
         self.gravity = base.calibration.gravity
-        self.cov = {"temp": self.iv.temp, "time": self.iv.t_mid}
+        self.cov = {"temp": self.iv.temp, "time": self.iv.t_mid,
+                    "temp_rate": None if self.iv.temp is None else temperature_rate(self.iv.t_mid, self.iv.temp)}
         g = base.guess  # the interval directions of imucal.pipeline.initial_guess
         d = (self.iv.mean - g.s) / g.b
         self.directions = d / np.linalg.norm(d, axis=1, keepdims=True)
@@ -79,7 +81,8 @@ class Problem:
             params = prepare_parameters(model.effects, params, self.cov, self.iv.n, self.rec.source)
         else:  # the screening model holds every candidate at once: only its Jacobian is used
             params = fit_to_data(model.effects, params, self.cov)
-        keep = {n: v for n, v in start.items() if n in params.names and not params[n].fixed}
+        given = set(given_names(model.effects))  # (a step's time: set by discovery, fixed in the fit)
+        keep = {n: v for n, v in start.items() if n in params.names and (not params[n].fixed or n in given)}
         return model, params.with_values(keep)
 
     def data(self, model) -> FitData:

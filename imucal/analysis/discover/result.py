@@ -8,9 +8,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from imucal.analysis import stochastic as stoch
+from imucal.analysis.discover.changepoint import ChangePoint
 from imucal.analysis.discover.problem import label
 from imucal.analysis.discover.settings import DiscoverSettings
 from imucal.analysis.discover.verdict import Verdict
+from imucal.model.effects import EFFECTS
 from imucal.pipeline import CalibrationRun
 
 
@@ -74,10 +76,20 @@ class FoundEffect:
     ambiguous_with: tuple[str, ...] = ()
     #: axes the term lacks that these poses cannot rule out (``axes.unresolved``): it may be there too
     unresolved_axes: tuple[int, ...] = ()
+    #: a bias step's time and its uncertainty (``changepoint``)
+    change_point: ChangePoint | None = None
+    #: what static poses see of a cross-axis term to first order: the sum of its coefficients and its
+    #: standard error (``axes.observable_sum``)
+    observable_sum: tuple[float, float] | None = None
 
     @property
     def label(self) -> str:
         return label(self.name, self.axes)
+
+    @property
+    def axis_names(self) -> tuple[str, ...]:
+        """Its axes by name (x, y, z; an angle term's phi, psi, theta)."""
+        return tuple(EFFECTS[self.name].axis_names[a] for a in self.axes)
 
 
 @dataclass(frozen=True)

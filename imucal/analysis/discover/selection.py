@@ -32,6 +32,14 @@ def fit_candidate(prob: Problem, current: FitResult, effects: Effects, c: Candid
     return res, ""
 
 
+def _may_be_loose(c: Candidate) -> bool:
+    """Whether the poses may leave a fitted candidate undetermined where its coefficients alone are not:
+    a shape (a warm-up's tau), a given time (a step's), or a cross-axis term on more than one axis
+    (told apart by its second-order terms only)."""
+    e = make_effect(c.name, c.axes)
+    return bool(e.shape_names or e.given_names or (not e.axes_observable and len(c.axes) > 1))
+
+
 def _picked(scan: Scan, settings: DiscoverSettings) -> list[int]:
     """Which screened candidates to fit in full: the best few by the screening score, and every
     non-nested competitor close enough to the best to matter for the ambiguity check."""
@@ -62,8 +70,7 @@ def _fit_picked(prob: Problem, current: FitResult, effects: Effects, scan: Scan,
         # Judged by the calibration's own observability check at the fitted values (noise only: the
         # misfit a candidate leaves is the LR test's to weigh, and scaling by it here refused a
         # correct warm-up whenever another term was still missing).
-        shapes = make_effect(c.name, c.axes).shape_names
-        loose = prob.undetermined(canonical({**effects, c.name: c.axes}), res) if shapes else ()
+        loose = prob.undetermined(canonical({**effects, c.name: c.axes}), res) if _may_be_loose(c) else ()
         if loose:  # the final calibration would refuse it
             notes.append(f"{c.label}: the poses leave {', '.join(loose)} undetermined, not counted")
             continue
@@ -131,7 +138,8 @@ def _screened_pairs(prob: Problem, current: FitResult, scan: Scan, cands: tuple[
                  n_distinct, prob.iv.n - MIN_DOF)]
     if not pairs:
         return [], 0
-    members = [([scan.col[x] for x in make_effect(c.name, c.new_axes).coefficient_names], c.extra > 0) for c in cands]
+    members = [([scan.col[x] for x in make_effect(c.name, c.new_axes).coefficient_names], ids)
+               for c, ids in zip(cands, scan.ids)]
     chi2 = pair_chi2(scan.screens, scan.rw, scan.base_cols, members, pairs)
     score = chi2 / scale + settings.penalty * np.array([cands[i].k + cands[j].k for i, j in pairs])
     order = [q for q in np.argsort(score, kind="stable") if score[q] < beat + SCREEN_SLACK]

@@ -13,7 +13,8 @@ from imucal.analysis.discover import backward as bw
 from imucal.analysis.discover import stochastic as noise
 from imucal.analysis.discover.candidates import candidates, found_effect, testable
 from imucal.analysis.discover.problem import EFFECT_ORDER, Effects, Problem, as_dict, canonical, labels, p_noise
-from imucal.analysis.discover.result import Discovery, Step
+from imucal.analysis.discover.changepoint import change_point
+from imucal.analysis.discover.result import Discovery, FoundEffect, Step
 from imucal.analysis.discover.screening import scan
 from imucal.analysis.discover.selection import round_
 from imucal.analysis.discover.settings import DiscoverSettings
@@ -21,7 +22,7 @@ from imucal.analysis.discover.sweep import sweep_discovery
 from imucal.analysis.discover.verdict import Shortfall, decide, stochastic_part
 from imucal.config.run import EffectSpec, RunConfig
 from imucal.errors import ImucalError
-from imucal.model.effects import AXIS_NAMES, EFFECTS, MIN_DOF
+from imucal.model.effects import EFFECTS, MIN_DOF, given_names, make_effect
 from imucal.model.parameters import BASE_NAMES
 from imucal.pipeline import CalibrationRun, calibrate_accelerometer
 from imucal.thermal.run import Sweep, sweep_of
@@ -121,12 +122,13 @@ def final_config(config: RunConfig, effects: Effects, current: FitResult) -> Run
     """``config`` with the effects found, every free parameter starting where discovery left it (so the
     calibration's observability check judges the model at the values discovery judged it,
     imucal.pipeline.observability)."""
-    specs = tuple(EffectSpec(n, tuple(AXIS_NAMES[a] for a in ax)) for n, ax in
+    specs = tuple(EffectSpec(n, tuple(EFFECTS[n].axis_names[a] for a in ax)) for n, ax in
                   sorted(effects.items(), key=lambda kv: EFFECT_ORDER[kv[0]]))
     names = {n for e in canonical(effects) for n in (*e.coefficient_names, *e.shape_names)}
     start = {n: min(max(p.value, p.lower), p.upper)  # (IPOPT may end a hair outside a bound)
              for n in current.free_names if n not in config.fit.initial and (n in BASE_NAMES or n in names)
              for p in [current.params[n]]}
+    start.update({n: current.params[n].value for n in given_names(canonical(effects))})  # a step's time
     return dataclasses.replace(config, fit=dataclasses.replace(config.fit, effects=specs,
                                                                initial={**config.fit.initial, **start}))
 
@@ -194,6 +196,25 @@ def _calibrated(config: RunConfig, base: CalibrationRun, st: State, settings: Di
     return final_run(config, base, st, notes), st
 
 
+def _found_effects(prob: Problem, final: CalibrationRun, st: State, settings: DiscoverSettings,
+                   notes: list[str]) -> tuple[FoundEffect, ...]:
+    """The effects kept, with their coefficients at the final calibration, the axes not ruled out, a
+    step's time and uncertainty, and a cross-axis term's observable sum."""
+    last = {n: (lr, p, amb) for n, lr, p, amb in st.found}
+    out = []
+    for n, ax in sorted(st.effects.items(), key=lambda kv: EFFECT_ORDER[kv[0]]):
+        if n not in last:
+            continue
+        unresolved = ax_.unresolved(prob, final.result, st.effects, n, settings.penalty, notes)
+        e = found_effect(n, ax, final.result, *last[n], tuple(unresolved))
+        if make_effect(n, ax).given_names:
+            e = dataclasses.replace(e, change_point=change_point(prob, final.result, st.effects, n))
+        if not EFFECTS[n].axes_observable:
+            e = dataclasses.replace(e, observable_sum=ax_.observable_sum(n, ax, final.result))
+        out.append(e)
+    return tuple(out)
+
+
 def _kept(asked: RunConfig, config: RunConfig, st: State, p_after: float, settings: DiscoverSettings,
           notes: list[str]) -> CalibrationRun | None:
     """With weights auto asked and the residual above the noise: the calibration with those weights."""
@@ -226,9 +247,7 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings(),
     found = {f[0] for f in st.found}
     ax_.axis_notes(st.effects, found, final, notes)
     last = {n: (lr, p, amb) for n, lr, p, amb in st.found}
-    unresolved = {n: ax_.unresolved(prob, final.result, st.effects, n, settings.penalty, notes) for n in last}
-    effects = tuple(found_effect(n, ax, final.result, *last[n], tuple(unresolved[n])) for n, ax in
-                    sorted(st.effects.items(), key=lambda kv: EFFECT_ORDER[kv[0]]) if n in last)
+    effects = _found_effects(prob, final, st, settings, notes)
     p_after = p_noise(final.result)
     sto = noise.assess(final, settings)
     in_temp = st.shortfall is Shortfall.SHAPE and "temp" in st.shape_covariates
