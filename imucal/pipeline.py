@@ -313,7 +313,7 @@ def _problem(config: RunConfig, rec: Recording | RecordingSummary, iv: Intervals
         elif model.effects:  # covariate spread, enough intervals, reference temperature (imucal.model.effects)
             params = prepare_parameters(model.effects, params, covariates, iv.n, rec.source)
             params = effect_initial(params, config, given_names(model.effects))  # a given start wins
-            check_given(model.effects, params, rec.source)
+            check_given(model.effects, params, config.source)
             _check_initial_bounds(params, config)
         samples = None
         if config.fit.mode == "samples":

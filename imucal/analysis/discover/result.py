@@ -40,10 +40,19 @@ class Candidate:
     def label(self) -> str:
         return label(self.name, self.axes)
 
+    #: the parameters it is priced at when ranked (None: ``k``): a step's time searched over ~20 gaps gains
+    #: 2-3.4 chi-square on pure noise where a warm-up's tau gains 0.6-1 (imucal.analysis.min_p.search_gain)
+    priced: float | None = None
+
     @property
     def k(self) -> int:
         """Free parameters the candidate adds: its new coefficients and shape parameters."""
         return len(self.new_axes) + self.extra
+
+    @property
+    def price(self) -> float:
+        """The parameters it is ranked at: ``k``, or more for a search that gains more on noise."""
+        return float(self.k) if self.priced is None else self.priced
 
 
 @dataclass(frozen=True)

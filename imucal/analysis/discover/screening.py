@@ -10,6 +10,7 @@ the shift's, zero before the step).
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -19,7 +20,7 @@ from imucal.analysis.discover.candidates import extra
 from imucal.analysis.discover.problem import Effects, Problem, canonical
 from imucal.analysis.discover.result import Candidate
 from imucal.analysis.discover.settings import TAU_GRID
-from imucal.analysis.min_p import MinPNull, min_p_null
+from imucal.analysis.min_p import MinPNull, min_p_null, search_gain
 from imucal.model.effects import make_effect
 from imucal.solve.fit import FitResult, jacobian_rows
 from imucal.solve.stats import chi2_sf
@@ -102,6 +103,20 @@ def screen_candidate(screens: list[Screen], rw: np.ndarray, base_cols: list[int]
     return best
 
 
+def _priced(screened: list[Candidate], Js: list[np.ndarray], base_cols: list[int], family: list) -> list[Candidate]:
+    """Each candidate searched over several screens priced at what its search gains on noise beyond its
+    columns (``search_gain``), at least one parameter per shape or given value (as ``k`` counts them)."""
+    searched = [i for i, (_, _, ids) in enumerate(family) if len(ids) > 1]
+    if not searched:
+        return screened
+    gain = search_gain(Js, base_cols, [(family[i][0], family[i][2]) for i in searched])
+    out = list(screened)
+    for g, i in zip(gain, searched):
+        c = out[i]
+        out[i] = dataclasses.replace(c, priced=len(c.new_axes) + max(float(c.extra), g - len(c.new_axes)))
+    return out
+
+
 @dataclass(frozen=True)
 class Scan:
     """A round's screen: every candidate's linearised chi-square, and the min-p null over them."""
@@ -131,5 +146,6 @@ def scan(prob: Problem, current: FitResult, effects: Effects, names: Sequence[st
         family.append(([col[x] for x in make_effect(n, new).coefficient_names], c.k, ids[-1]))
     Js = [s.J for s in screens]
     null = min_p_null(Js, base_cols, family)
+    screened = _priced(screened, Js, base_cols, family)
     p_best = min((chi2_sf(max(0.0, current.chi2 - c.chi2_screen), c.k) for c in screened), default=1.0)
     return Scan(screened, null, null.adjust(p_best), Js, rw, col, base_cols, ids, [s.values for s in screens])

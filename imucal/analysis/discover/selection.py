@@ -46,7 +46,7 @@ def _picked(scan: Scan, settings: DiscoverSettings) -> list[int]:
     screened = scan.screened
 
     def pre(c: Candidate) -> float:
-        return c.chi2_screen + settings.penalty * c.k
+        return c.chi2_screen + settings.penalty * c.price
 
     order = sorted(range(len(screened)), key=lambda i: pre(screened[i]))
     top = screened[order[0]]
@@ -96,7 +96,7 @@ def round_(prob: Problem, current: FitResult, effects: Effects, scan: Scan, sett
     # among all fitted ones when none is significant, for the report).
     common = max(1.0, min((fits[i].redchi for i in (sig or fits)), default=1.0))
     for i in fits:
-        screened[i] = dataclasses.replace(screened[i], score=screened[i].chi2 / common + settings.penalty * screened[i].k)
+        screened[i] = dataclasses.replace(screened[i], score=screened[i].chi2 / common + settings.penalty * screened[i].price)
     if not sig:
         step = Step(index, current.chi2, current.dof, tuple(screened), None, scale=common, p_scan=scan.p)
         return lookahead(prob, current, effects, scan, step, fits, settings, notes, level)
@@ -141,7 +141,7 @@ def _screened_pairs(prob: Problem, current: FitResult, scan: Scan, cands: tuple[
     members = [([scan.col[x] for x in make_effect(c.name, c.new_axes).coefficient_names], ids)
                for c, ids in zip(cands, scan.ids)]
     chi2 = pair_chi2(scan.screens, scan.rw, scan.base_cols, members, pairs)
-    score = chi2 / scale + settings.penalty * np.array([cands[i].k + cands[j].k for i, j in pairs])
+    score = chi2 / scale + settings.penalty * np.array([cands[i].price + cands[j].price for i, j in pairs])
     order = [q for q in np.argsort(score, kind="stable") if score[q] < beat + SCREEN_SLACK]
     return [pairs[q] for q in order[: settings.lookahead]], len(pairs)
 
@@ -174,7 +174,7 @@ def _fit_pair(prob: Problem, current: FitResult, effects: Effects, cands: tuple[
     s2 = max(1.0, res_cd.redchi)
     lr = [max(0.0, (alone[1 - m].chi2 - res_cd.chi2) / s2) for m in (0, 1)]  # each given the other
     p = [min(1.0, p_lr(lr[m], e.k, res_cd, settings.alpha_noise) * m2) for m, e in enumerate((c, d))]
-    total = res_cd.chi2 / max(scale, s2) + settings.penalty * (c.k + d.k)
+    total = res_cd.chi2 / max(scale, s2) + settings.penalty * (c.price + d.price)
     if max(p) >= level or total >= beat:
         return None
     first = int(p[1] < p[0])
