@@ -37,6 +37,7 @@ Writes studies/results/discover_grammar_study.md (studies/results/discover_study
 from __future__ import annotations
 
 import argparse
+import json
 import multiprocessing as mp
 import os
 import sys
@@ -148,7 +149,7 @@ def visible_chi2(case, path: str, rel: bool = True, genie: bool = False,
     from imucal.analysis.discover import DiscoverSettings
     from imucal.analysis.discover.candidates import candidates as _candidates, extra as _extra, testable as _testable
     from imucal.analysis.discover.problem import Problem as _Problem, canonical as _canonical
-    from imucal.analysis.discover.screening import screen as _screen
+    from imucal.analysis.discover.screening import own_screens as _own, screen as _screen
     from imucal.config.run import config_from_dict
     from imucal.model.effects import make_effect
     from imucal.pipeline import calibrate_accelerometer
@@ -163,7 +164,7 @@ def visible_chi2(case, path: str, rel: bool = True, genie: bool = False,
     prob = _Problem(cfg, base)
     e = make_effect(case.effect, case.axes)
     truth = sensor.effects[case.effect]
-    start = {**base.result.values(), **{n: v for n, v in truth.items() if n in e.shape_names}}
+    start = {**base.result.values(), **{n: v for n, v in truth.items() if n in (*e.shape_names, *e.given_names)}}
     every = (0, 1, 2) if EFFECTS[case.effect].axes_observable else case.axes  # the truth's term on any axes
     model, params = prob.parameters(_canonical({case.effect: every}), start, check=False)
     params = params.with_values({n: 0.0 for n in make_effect(case.effect, every).coefficient_names})
@@ -196,20 +197,20 @@ def visible_chi2(case, path: str, rel: bool = True, genie: bool = False,
         eff = make_effect(n, new)
         coef = eff.coefficient_names
         cols, k = [col2[c] for c in coef], len(new) + _extra(n, {})
-        blocks = lambda grid: [Jw[:, cols] for Jw, _ in (grid if eff.shape_names else grid[:1])]  # noqa: E731
+        blocks = lambda grid: [grid[i].J[:, cols] for i in _own(grid, n, new)]  # noqa: E731  (tau, a step's time)
         own_tau = [J[:, [col[c] for c in coef]]] if n == case.effect and all(c in col for c in coef) else []
         options.append((n, ax, k, blocks(screens) + own_tau))  # the truth's term also at its own tau
         profiled.append((n, ax, k, blocks(fine)))
         if n == case.effect and (set(case.axes) <= set(ax) or not EFFECTS[n].axes_observable):
             continue  # the truth itself, or a model containing it
-        rel = min(rel, *(left(Jw[:, base_cols + cols]) for Jw, _ in screens))
+        rel = min(rel, *(left(g.J[:, base_cols + cols]) for g in screens))
     if not genie:
         return lam, rel, {}
     truth = (case.effect, tuple(case.axes))
     if not EFFECTS[case.effect].axes_observable:
         options, profiled = ([(n, (ax if n != case.effect else truth[1]), k, b) for n, ax, k, b in o]
                              for o in (options, profiled))
-    base_J = screens[0][0][:, base_cols]
+    base_J = screens[0].J[:, base_cols]
     own = DiscoverSettings().penalty
     pens = (own, *sorted(set(GENIE_PENALTIES) - {own}))
     shapes = tuple(_extra(n, {}) for n, *_ in options)
@@ -398,10 +399,11 @@ def main(argv: list[str] | None = None) -> int:
                     "its tau held at the true value, which no fit knows (smaller errors, so smaller warm-ups)")
     ap.add_argument("--revisit", action="store_true", help="every pose held twice, the second pass in reverse order "
                     "(36-52 holds; imucal.analysis.simulate.draw_effect_case); no pairs")
+    ap.add_argument("--rows", help="re-render the page from a run's rows (OUT.rows.json) instead of running the cases")
     ap.add_argument("--out", help="markdown file to write (default studies/results/discover_grammar_study.md)")
     a = ap.parse_args(argv)
     given = list(sys.argv[1:] if argv is None else argv)  # the command as run, less what does not change results
-    for opt in ("--out", "--jobs"):
+    for opt in ("--out", "--jobs", "--rows"):
         while opt in given:
             i = given.index(opt)
             del given[i:i + 2]
@@ -452,20 +454,31 @@ def main(argv: list[str] | None = None) -> int:
             for _ in range(a.pairs):
                 jobs.append((seed, "pair", snr, noise, a.pool, mode, a.revisit))
                 seed += 1
-    t0 = time.perf_counter()
-    rows = []
-    with mp.get_context("fork").Pool(a.jobs) as pool, progress("cases", total=len(jobs), unit="case") as step:
-        for row in pool.imap_unordered(run_case, jobs, chunksize=2):
-            rows.append(row)
-            step()
-    rows.sort(key=lambda r: r["seed"])
-    wall = time.perf_counter() - t0
-    text = report(rows, a, wall)
     from imucal.files.output import write_text_atomic
 
+    rows_path = Path(a.out).with_suffix(".rows.json")  # every case's row: the page re-rendered without a rerun
+    if a.rows:
+        saved = json.loads(Path(a.rows).read_text())
+        rows, wall = saved["rows"], saved["wall"]
+    else:
+        t0 = time.perf_counter()
+        rows = []
+        with mp.get_context("fork").Pool(a.jobs) as pool, progress("cases", total=len(jobs), unit="case") as step:
+            for row in pool.imap_unordered(run_case, jobs, chunksize=2):
+                rows.append(row)
+                step()
+        rows.sort(key=lambda r: r["seed"])
+        wall = time.perf_counter() - t0
+        write_text_atomic(rows_path, json.dumps({"command": a.command, "wall": wall, "rows": rows}, default=_plain))
+    text = report(rows, a, wall)
     write_text_atomic(a.out, text)
     print(text)
     return 0
+
+
+def _plain(x):
+    """JSON for the rows' numpy scalars and tuples."""
+    return x.item() if hasattr(x, "item") else list(x)
 
 
 #: lambda bins of the pooled table [chi-square].
@@ -545,7 +558,7 @@ def visibility(rows: list[dict], cells: dict, a: argparse.Namespace) -> list[str
                     L.append(f"| {s:g} | {eff or 'all terms'} | "
                              + " | ".join(f"{np.mean([r['genie_by_tau'][t] for r in es]):.0%}" for t in taus)
                              + f" | {np.mean([r['genie'] for r in es]):.0%} |")
-    shaped = [n for n in dict.fromkeys(r["effect"] for r in single) if make_effect(n, (0,)).shape_names]
+    shaped = [n for n in dict.fromkeys(r["effect"] for r in single) if n in EFFECTS and make_effect(n, (0,)).shape_names]
     if shaped and any(math.isfinite(r.get("genie_profiled", math.nan)) for r in single):
         L += ["", "The selection oracle gives the truth's term its exact tau and every other warm-up candidate only "
               "discover's screening grid. *Profiled*: every warm-up candidate, the truth's included, profiled over "
