@@ -93,3 +93,49 @@ def test_the_verdict_is_typed_in_the_json(tmp_path):
     assert js["outcome"]["outcome"] == "explained" and js["outcome"]["terms"] == ["bias_hysteresis[x]"]
     assert js["verdict"] == verdict_text(d.verdict) and js["verdict"].startswith("explained: after adding")
     assert js["effects"][0]["reference"]["bias_hysteresis_r0"] > 0
+
+
+# --- structure before noise: every term found is weighed against a bias random walk ------------------------------
+#: A bias random walk moving WALK_SIGMAS noise sigmas of an interval mean over the ~110 s recording.
+WALK_SIGMAS = {"walk_alone": 20.0, "walk_and_term": 5.0}
+#: A temperature that rises smoothly with time (no swing): a walk's trend can pass for a polynomial in it.
+SMOOTH_RISE = dict(start=18.0, plateau=40.0, tau=150.0, swing=0.0, period=300.0, noise=0.02)
+
+
+def _walk_case(seed: int, sigmas: float, effect: str | None, smooth: bool):
+    from imucal.analysis.simulate import TemperatureProfile
+
+    case = (draw_effect_case(seed, effect=effect, counts=False, noise_mg=0.3, snr=40.0) if effect
+            else draw_effect_case(seed, effect=None, counts=False, noise_mg=0.3))
+    q = sigmas * case.sigma_mean / np.sqrt(110.0)
+    sensor = dataclasses.replace(case.config.sensor, random_walk=(q, q, q))
+    temp = TemperatureProfile(**SMOOTH_RISE) if smooth else case.config.temperature
+    return dataclasses.replace(case.config, sensor=sensor, temperature=temp)
+
+
+def test_a_walk_does_not_pass_for_a_temperature_term(tmp_path):
+    """The issue's case: a bias random walk named and a temperature term claimed beside it, the temperature
+    rising smoothly with time. Only time terms were weighed against the walk; now every term found is: with
+    per-visit offsets and the walk re-estimated, bias_temperature3 adds nothing the walk (needed anyway for the
+    excess left) does not, and is dropped; the report gives both explanations and the test."""
+    cfg = _walk_case(111, WALK_SIGMAS["walk_alone"], None, smooth=True)
+    d = _discover(cfg.run(), cfg.sensor.unit, tmp_path / "c.csv")
+    assert "bias_temperature3" not in {e.name for e in d.effects}
+    assert d.verdict.outcome in (Outcome.STOCHASTIC, Outcome.TERMS_AND_STOCHASTIC), verdict_text(d.verdict)
+    lost = [r for r in d.rivals if r.term == "bias_temperature3"]
+    assert lost and lost[0].preferred.value == "random_walk" and lost[0].p_adjusted >= 1e-3 and lost[0].q > 0
+    text = discovery_report(d)
+    assert "[[Structure or noise]]" in text and "the data prefer the walk; bias_temperature3[" in text
+    js = discovery_json(d)["structure_or_noise"]
+    assert {j["term"] for j in js} == {r.term for r in d.rivals} and all(j["lr"] >= 0 for j in js)
+
+
+def test_a_true_temperature_term_beats_the_walk_beside_it(tmp_path):
+    """A bias in temperature (swinging, not monotonic) beside a walk: the term beats the walk (LR tens) and is
+    kept; a drift the walk explains as well is dropped; the report says both and which the data prefer."""
+    cfg = _walk_case(203, WALK_SIGMAS["walk_and_term"], "bias_temperature", smooth=False)
+    d = _discover(cfg.run(), cfg.sensor.unit, tmp_path / "c.csv")
+    assert [e.name for e in d.effects] == ["bias_temperature"]
+    pref = {r.term: r.preferred.value for r in d.rivals}
+    assert pref == {"bias_temperature": "term", "bias_drift": "random_walk"}
+    assert "the data prefer bias_temperature[" in discovery_report(d)

@@ -10,11 +10,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from enum import Enum
 
 import numpy as np
 
 from imucal.analysis.noise import allan_deviation, estimate
-from imucal.model.effects import EFFECTS, make_effect
+from imucal.model.effects import make_effect
 from imucal.pipeline import CalibrationRun, fit_data
 from imucal.model.sensor import build_model
 from imucal.solve import least_squares as lsq
@@ -46,50 +47,77 @@ def assess(run: CalibrationRun, alpha: float = 1e-3) -> StochasticFit | None:
                              alpha)
 
 
-def beaten_terms(run: CalibrationRun, names: set[str], alpha: float = 1e-3) -> dict[str, str]:
-    """Terms in time that a bias random walk explains as well: {name: note}.
+class Preferred(str, Enum):
+    """Which explanation of one excess the data prefer."""
 
-    A random walk has trends of its own, so a drift found by the search (which weighs the means as
-    independent) must beat the walk. Under the null (the time terms removed, linearised: r0 = r -
-    J_term beta_term, exact for amplitudes) the REML test runs; if it names the random walk, each term
-    is tested by the full-likelihood ratio of the nested models with and without it, both with
-    per-visit offsets and the walk re-estimated (ML), LR ~ chi-square(k), Bonferroni over the terms.
-    Those not significant are returned.
+    TERM = "term"  #: the term adds significantly to the walk
+    WALK = "random_walk"  #: it does not, and the terms leave an excess the walk is needed for anyway: dropped
+    EITHER = "either"  #: it does not, but the terms leave no excess: the data cannot tell; the term is kept
+
+
+@dataclass(frozen=True)
+class Rival:
+    """A deterministic term and a bias random walk that both explain one excess, and the test between them:
+    the full-likelihood ratio of the walk with and without the term (per-visit offsets and the walk
+    re-estimated by ML), LR ~ chi-square(k), Bonferroni over the terms weighed."""
+
+    term: str  #: the effect's name
+    axes: tuple[int, ...]
+    lr: float  #: 2 (loglik with the term - loglik without it), both beside the walk
+    k: int  #: the term's parameters (coefficients and a warm-up's tau)
+    p_adjusted: float
+    q: float  #: the walk's density under the null, no term [m/s^2/sqrt(s)]
+    preferred: Preferred
+
+    def to_json(self) -> dict:
+        return {"term": self.term, "axes": list(self.axes), "lr": self.lr, "k": self.k, "p_adjusted": self.p_adjusted,
+                "random_walk_q": self.q, "q_unit": "m/s^2/sqrt(s)", "preferred": self.preferred.value}
+
+
+def walk_rivals(run: CalibrationRun, effects: dict[str, tuple[int, ...]], alpha: float = 1e-3,
+                excess: bool = True) -> tuple[Rival, ...]:
+    """Each term of ``effects`` weighed against a bias random walk that would explain the same excess.
+
+    A random walk has trends of its own, so a drift, a step or a temperature polynomial found by the search
+    (which weighs the means as independent) must beat the walk; a term of the specific force (a scale
+    asymmetry) can meet a walk's trend by the order of the poses, and is weighed too. Under the null (those terms removed, linearised:
+    r0 = r - J_term beta_term, exact for amplitudes) the REML test runs; if it names no random walk, no walk
+    rivals them (empty). Otherwise each term is tested by the full-likelihood ratio of the nested models with
+    and without it (``Rival``). One not significant at ``alpha`` loses to the walk when the terms leave an
+    ``excess`` (the walk is needed anyway and the term adds nothing to it); without one, either explains the
+    data (a drift and a walk are one trend in one recording) and the term, which corrects, is kept.
     """
-    terms = [n for n in names if "time" in EFFECTS[n].covariates]
+    terms = sorted(effects)
     if not terms or not stochastic.feasible(run.intervals.n):
-        return {}
+        return ()
     res = run.result
-    ax = dict(run.calibration.effects)
     model = build_model(run.calibration.effect_objects())
     data = fit_data(model, run.intervals, run.recording, "means", run.recording.source)
     free = list(res.free_names)
     fns, rows = lsq.row_functions(model, tuple(free)), lsq.Rows(data.raw, data.cov)
     pfix, pfree = np.array(res.params.values(), float), np.array([res.params[n].value for n in free])
     r, J, Jraw = lsq.jacobians(fns, rows, pfree, pfix, res.gravity)
-    cols = {n: [free.index(c) for c in (*make_effect(n, ax[n]).coefficient_names, *make_effect(n, ax[n]).shape_names)
-                if c in free] for n in terms}
-    amp = {n: [free.index(c) for c in make_effect(n, ax[n]).coefficient_names if c in free] for n in terms}
-    drop = sorted({i for n in terms for i in cols[n]})
-    r0 = r - J[:, sorted({i for n in terms for i in amp[n]})] @ pfree[sorted({i for n in terms for i in amp[n]})]
+    made = {n: make_effect(n, effects[n]) for n in terms}
+    cols = {n: [free.index(c) for c in (*e.coefficient_names, *e.shape_names) if c in free] for n, e in made.items()}
+    amp = sorted({free.index(c) for e in made.values() for c in e.coefficient_names if c in free})
+    drop = {i for n in terms for i in cols[n]}
+    r0 = r - J[:, amp] @ pfree[amp]
     keep = [i for i in range(len(free)) if i not in drop]
     sigma0 = lsq.noise_sigma(fns, rows, data.raw_var, pfree, pfix, res.gravity)
     b = np.array([res.params[f"b{i}"].value for i in (1, 2, 3)])
     c = stochastic.components(r0, sigma0, J[:, keep], Jraw * b, data.t)
     sto = stochastic.select(c, alpha)
     if RANDOM_WALK not in sto.named:
-        return {}
+        return ()
     ll0 = stochastic.fit_model(c, "both", ml=True).loglik
-    out = {}
+    out = []
     for n in terms:
         c1 = stochastic.components(r0, sigma0, J[:, keep + cols[n]], Jraw * b, data.t)
-        lr = 2.0 * (stochastic.fit_model(c1, "both", ml=True).loglik - ll0)
-        p = chi2_sf(max(lr, 0.0), len(cols[n])) * len(terms)
-        if p >= alpha:
-            out[n] = (f"{n} dropped: with a bias random walk (q = {sto.q:.3g} m/s^2/sqrt(s)) and per-visit offsets "
-                      f"re-estimated, it raises the likelihood by LR {lr:.3g} on {len(cols[n])} parameter(s) "
-                      f"(p adjusted {min(p, 1.0):.2g}): the walk explains the trend")
-    return out
+        lr = max(0.0, 2.0 * (stochastic.fit_model(c1, "both", ml=True).loglik - ll0))
+        p = min(1.0, chi2_sf(lr, len(cols[n])) * len(terms))
+        out.append(Rival(n, tuple(effects[n]), lr, len(cols[n]), p, sto.q,
+                         Preferred.TERM if p < alpha else Preferred.WALK if excess else Preferred.EITHER))
+    return tuple(out)
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,9 @@ import dataclasses
 import math
 
 from imucal.analysis.discover import Discovery, Outcome, Shortfall, Verdict, Withheld
+from imucal.analysis.discover.problem import label
 from imucal.analysis.discover.verdict import StochasticPart
+from imucal.analysis.stochastic import Preferred
 from imucal.constants import STANDARD_GRAVITY
 from imucal.model.effects import EFFECTS
 from imucal.report.thermal import gap_lines, thermal_json, thermal_lines
@@ -201,6 +203,25 @@ def _stochastic_lines(d: Discovery) -> list[str]:
     return L
 
 
+def _rival_lines(d: Discovery) -> list[str]:
+    """Each term in time or temperature beside the bias random walk that explains the same excess: both
+    explanations, which the data prefer, and the test."""
+    if not d.rivals:
+        return []
+    L = ["[[Structure or noise]]  a term and a bias random walk explain the same excess: the likelihood ratio "
+         "of the walk with and without the term (per-visit offsets and the walk re-estimated, Bonferroni over the "
+         "terms)"]
+    for r in d.rivals:
+        name = label(r.term, r.axes)
+        verdict = {Preferred.TERM: f"the data prefer {name}; the walk alone does not explain its structure",
+                   Preferred.WALK: f"the data prefer the walk; {name} is dropped (it adds nothing a walk does not)",
+                   Preferred.EITHER: f"the data cannot tell them apart; {name} is kept (it leaves no excess for a "
+                                     "walk to explain, and it corrects)"}[r.preferred]
+        L.append(f"    {name} or a bias random walk (q = {r.q:.3g} m/s^2/sqrt(s)): LR {r.lr:.3g} on {r.k} "
+                 f"parameter(s), p adjusted {r.p_adjusted:.2g}: {verdict}")
+    return L
+
+
 def discovery_report(d: Discovery) -> str:
     """A text report: verdict, gap before/after, effects with coefficients, the rounds."""
     gap = _gap_lines(d)
@@ -212,7 +233,7 @@ def discovery_report(d: Discovery) -> str:
         L += _round_lines(s)
     if d.thermal is not None:
         L += thermal_lines(d.thermal)
-    L += _stochastic_lines(d)
+    L += _rival_lines(d) + _stochastic_lines(d)
     if d.notes:
         L.append("[[Notes]]")
         L.extend(f"    - {n}" for n in d.notes)
@@ -263,6 +284,7 @@ def discovery_json(d: Discovery) -> dict:
         "notes": list(d.notes),
         "settings": dataclasses.asdict(d.settings),
         "stochastic": d.stochastic.to_json() if d.stochastic is not None else None,
+        "structure_or_noise": [r.to_json() for r in d.rivals],
         "allan": d.allan.to_json() if d.allan is not None else None,
         "thermal": thermal_json(d.thermal) if d.thermal is not None else None,
     }

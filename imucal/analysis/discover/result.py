@@ -124,6 +124,9 @@ class Discovery:
     kept: CalibrationRun | None = None
     #: a temperature sweep's calibration (imucal.thermal.run.ThermalCalibration), when the recording is one
     thermal: object | None = None
+    #: each term in time or temperature weighed against a bias random walk explaining the same excess, and
+    #: which the data prefer (empty when no walk rivals them)
+    rivals: tuple["stoch.Rival", ...] = ()
 
     @property
     def calibration_run(self) -> CalibrationRun:

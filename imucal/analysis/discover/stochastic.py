@@ -1,5 +1,6 @@
-"""Structure against noise: the terms that a bias random walk explains as well are dropped, and the
-stochastic biases of the final fit are tested (imucal.analysis.stochastic)."""
+"""Structure against noise: the terms in time or temperature are weighed against a bias random walk (those
+it explains as well are dropped), and the stochastic biases of the final fit are tested
+(imucal.analysis.stochastic)."""
 from __future__ import annotations
 
 from imucal.analysis import stochastic as stoch
@@ -8,15 +9,17 @@ from imucal.analysis.discover.settings import DiscoverSettings
 from imucal.pipeline import CalibrationRun
 
 
-def beaten(final: CalibrationRun, found: list, effects: Effects, settings: DiscoverSettings,
-           notes: list[str]) -> tuple[set[str], Effects]:
-    """The terms in time that a bias random walk explains as well (imucal.analysis.stochastic.beaten_terms),
-    with their notes added, and the effects without them."""
-    if not found or p_noise(final.result) >= settings.alpha_noise:  # no excess left: nothing to beat
-        return set(), effects
-    out = stoch.beaten_terms(final, {f[0] for f in found}, settings.alpha_effect)
-    notes.extend(out.values())
-    return set(out), {n: ax for n, ax in effects.items() if n not in out}
+def rivals(final: CalibrationRun, found: list, effects: Effects, settings: DiscoverSettings
+           ) -> tuple[tuple["stoch.Rival", ...], Effects]:
+    """The terms found weighed against a bias random walk
+    (imucal.analysis.stochastic.walk_rivals), and the effects without those the walk explains as well."""
+    if not found:  # (weighed even when the terms leave no excess, for the report: a walk may explain them as well)
+        return (), effects
+    names = {f[0] for f in found}
+    out = stoch.walk_rivals(final, {n: ax for n, ax in effects.items() if n in names}, settings.alpha_effect,
+                            excess=p_noise(final.result) < settings.alpha_noise)
+    lost = {r.term for r in out if r.preferred is stoch.Preferred.WALK}
+    return out, {n: ax for n, ax in effects.items() if n not in lost}
 
 
 def assess(final: CalibrationRun, settings: DiscoverSettings) -> "stoch.StochasticFit | None":

@@ -46,6 +46,7 @@ class State:
     disagreement: list = field(default_factory=list)
     shortfall: Shortfall | None = None  #: why the search (or a later step) left the residual unexplained
     shape_covariates: tuple[str, ...] = ()  #: covariates the shape check found structure in
+    rivals: tuple = ()  #: the terms in time or temperature weighed against a bias random walk (stoch.Rival)
 
 
 def _next_round(prob: Problem, st: State, names: list[str], settings: DiscoverSettings, notes: list[str],
@@ -188,10 +189,11 @@ def _calibrated(config: RunConfig, base: CalibrationRun, st: State, settings: Di
         notes.append(f"the calibration with {', '.join(labels([f[0] for f in st.found], st.effects))} was "
                      f"refused: {exc.message}")
         return base, dataclasses.replace(st, found=[], effects={}, shortfall=Shortfall.REFUSED)
-    dropped, effects = noise.beaten(final, st.found, st.effects, settings, notes)
-    if not dropped:
+    rivals, effects = noise.rivals(final, st.found, st.effects, settings)
+    st = dataclasses.replace(st, rivals=rivals)
+    if effects == st.effects:
         return final, st
-    st = dataclasses.replace(st, found=[f for f in st.found if f[0] not in dropped], effects=effects,
+    st = dataclasses.replace(st, found=[f for f in st.found if f[0] in effects], effects=effects,
                              shortfall=Shortfall.RANDOM_WALK)
     return final_run(config, base, st, notes), st
 
@@ -266,4 +268,4 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings(),
                      consistent_before=p_before >= settings.alpha_noise,
                      consistent_after=p_after >= settings.alpha_noise, p_before=p_before, p_after=p_after,
                      disagreement=tuple(st.disagreement), notes=tuple(notes) + (sto.notes if sto else ()),
-                     settings=settings, stochastic=sto, allan=stoch.allan_view(final, sto))
+                     settings=settings, stochastic=sto, allan=stoch.allan_view(final, sto), rivals=st.rivals)
