@@ -385,7 +385,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--classic", action="store_true", help="only the five effects before the grammar, with the "
                     "classic study's sizes (noise 0.1 0.3 1, SNR 10-60, 20 cases, 40 clean, pairs at SNR 20 and 40)")
     ap.add_argument("--new-terms", action="store_true", help="issue 28's terms (NEW_TERMS) at SNR 5-40, 16 cases a cell, "
-                    "their pairs with the classic five at SNR 20 and 40, the cancelling two-axis cross-axis term "
+                    "their pairs with the classic five at SNR 10, 20 and 40, the cancelling two-axis cross-axis term "
                     "(CROSS_TWO_SNR) and 200 clean cases; writes studies/results/discover_new_terms_study.md")
     ap.add_argument("--effects", nargs="+", choices=list(EFFECTS), help="terms to hide (default: the grammar)")
     ap.add_argument("--visible", action="store_true", help="SNR = sqrt(lambda), what the data can see of the "
@@ -415,7 +415,7 @@ def main(argv: list[str] | None = None) -> int:
     if a.revisit:
         size.update(pairs=0, pair_snr=[])
     if a.new_terms:
-        size.update(noise=[0.3], snr=[5, 10, 20, 40], cases=16, clean=200, pairs=20, pair_snr=[20, 40])
+        size.update(noise=[0.3], snr=[5, 10, 20, 40], cases=16, clean=200, pairs=20, pair_snr=[10, 20, 40])
     if a.quick:
         size.update(noise=[0.3], snr=[10, 40], cases=2, clean=4, pairs=2, pair_snr=[40])
     for k, v in size.items():
