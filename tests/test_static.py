@@ -248,3 +248,16 @@ def test_the_real_thermal_sweep_finds_its_four_long_holds():
     assert hours[0, 0] < 0.5 and hours[-1, 1] > 74.0  # the cool-down of the first hour is kept
     assert 38.2 < hours[1, 1] < hours[2, 0] < 38.6  # split at the knock
     assert np.sum(hours[:, 1] - hours[:, 0]) > 73.0
+
+
+@pytest.mark.parametrize("k", range(1, 11))
+def test_row_sums_and_column_extremes_are_numpys_numbers(k):
+    """The moving variance's row sums and the rails' extremes, a column at a time (imucal.data.static):
+    bit for bit what numpy's axis reductions give, over values of very different sizes."""
+    from imucal.data.static import column_extremes, row_sums
+
+    rng = np.random.default_rng(k)
+    x = rng.normal(size=(5000, k)) * rng.choice([1e-9, 1.0, 1e9], size=(5000, k))
+    assert np.array_equal(row_sums(x), x.sum(axis=1))
+    lo, hi = column_extremes(x)
+    assert np.array_equal(lo, x.min(axis=0)) and np.array_equal(hi, x.max(axis=0))

@@ -166,6 +166,30 @@ VAR_BLOCK = 1 << 16
 _SWEEP = 1 << 20
 
 
+#: Columns up to which numpy adds a row's values one after the other (x0 + x1) + x2 ...; from 8 on its
+#: pairwise summation groups them otherwise (``row_sums`` then leaves the sum to numpy).
+_SEQUENTIAL_COLUMNS = 8
+
+
+def row_sums(x: np.ndarray) -> np.ndarray:
+    """``x.sum(axis=1)``, the same numbers, a column at a time: numpy reduces the three values of each
+    row of a long (n, 3) array some 18 times slower (1.0 against 0.06 ms at 65,536 rows)."""
+    if not 0 < x.shape[1] < _SEQUENTIAL_COLUMNS:
+        return x.sum(axis=1)
+    out = x[:, 0].copy()
+    for j in range(1, x.shape[1]):
+        out += x[:, j]
+    return out
+
+
+def column_extremes(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``x.min(axis=0)`` and ``x.max(axis=0)`` of a non-empty (n, k) array, a column at a time: numpy
+    reduces a long C-ordered (n, 3) array along its rows some 25 times slower (7.3 against 0.28 ms
+    at 280,000 rows)."""
+    return (np.array([x[:, j].min() for j in range(x.shape[1])]),
+            np.array([x[:, j].max() for j in range(x.shape[1])]))
+
+
 def _window_variance(seg: np.ndarray, w: int) -> np.ndarray:
     """Variance (ddof 1, summed over columns) of every window ``seg[j:j + w]``, by differences of
     cumulative sums (slices, no index arrays)."""
@@ -184,7 +208,7 @@ def _window_variance(seg: np.ndarray, w: int) -> np.ndarray:
     np.square(np.divide(s1, w, out=s1), out=s1)
     np.maximum(np.subtract(s2, s1, out=s2), 0.0, out=s2)
     np.divide(np.multiply(s2, w, out=s2), w - 1, out=s2)
-    return s2.sum(axis=1)
+    return row_sums(s2)
 
 
 _F32_MAX = float(np.finfo(np.float32).max)
@@ -757,7 +781,7 @@ def detect_static(t: np.ndarray, raw: np.ndarray, settings: StaticSettings = Sta
     thr = settings.threshold if settings.threshold is not None else auto_threshold(var, q)
     a, b = candidate_runs(var, thr, int(round(settings.trim / dt)))
     del var
-    lows, highs = raw.min(axis=0), raw.max(axis=0)
+    lows, highs = column_extremes(raw)
     m = edge_samples(dt)
     segs = [g for i, j in zip(a, b) if t[j - 1] - t[i] >= settings.min_duration
             and (g := still_segment(int(i), raw[i:j], t[i:j], None if temp is None else temp[i:j], lows, highs,

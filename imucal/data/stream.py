@@ -35,8 +35,8 @@ from imucal.data.recording import MAX_ABS_VALUE, RecordingSummary, StaticSamples
 from imucal.data.spec import DataSpec, as_spec, resolve_path
 from imucal.data.spill import RowSpill, temporary_file
 from imucal.data.static import (QUANTUM_ROWS, Intervals, MovingVariance, Segment, StaticSettings, VarianceStore,
-                                at_rate, auto_threshold, candidate_runs, edge_samples, intervals_from, quantum,
-                                still_segment, window_samples)
+                                at_rate, auto_threshold, candidate_runs, column_extremes, edge_samples, intervals_from,
+                                quantum, still_segment, window_samples)
 from imucal.data.timebase import (CLOCK_SPAN, GAP_STEPS, Decision, GapFinder, LagDiffs, StepStats, ValueCounts,
                                   clock_times, decide, gap_excess, rate_time_base, refine, time_base,
                                   time_unit_from_step)
@@ -171,7 +171,8 @@ class StreamedRecording:
             if p.big is None and p.order is None:
                 self.spill.add(arr)
                 raw = self._raw(arr)
-                p.lows, p.highs = np.minimum(p.lows, raw.min(axis=0)), np.maximum(p.highs, raw.max(axis=0))
+                lo, hi = column_extremes(raw)
+                p.lows, p.highs = np.minimum(p.lows, lo), np.maximum(p.highs, hi)
                 if sum(h.shape[0] for h in p.head_raw) < QUANTUM_ROWS:
                     p.head_raw.append(raw[:QUANTUM_ROWS])
                 if timing is None:  # a guess from the first block, checked once the file is read
