@@ -203,7 +203,7 @@ def _stochastic_lines(d: Discovery) -> list[str]:
     return L
 
 
-def _rival_lines(d: Discovery) -> list[str]:
+def rival_lines(d: Discovery) -> list[str]:
     """Each term in time or temperature beside the bias random walk that explains the same excess: both
     explanations, which the data prefer, and the test."""
     if not d.rivals:
@@ -233,7 +233,7 @@ def discovery_report(d: Discovery) -> str:
         L += _round_lines(s)
     if d.thermal is not None:
         L += thermal_lines(d.thermal)
-    L += _rival_lines(d) + _stochastic_lines(d)
+    L += rival_lines(d) + _stochastic_lines(d)
     if d.notes:
         L.append("[[Notes]]")
         L.extend(f"    - {n}" for n in d.notes)
