@@ -139,3 +139,17 @@ def test_a_true_temperature_term_beats_the_walk_beside_it(tmp_path):
     pref = {r.term: r.preferred.value for r in d.rivals}
     assert pref == {"bias_temperature": "term", "bias_drift": "random_walk"}
     assert "the data prefer bias_temperature[" in discovery_report(d)
+
+
+def test_the_c_header_says_how_to_compute_the_temperature_rate(tmp_path, run_cli):
+    """A hysteresis reads dT/dt: the generated header defines it (window, centred) for the firmware."""
+    from imucal.model.channels import TEMPERATURE_RATE_WINDOW
+
+    case = draw_effect_case(9402, effect="bias_hysteresis", axes=(0,), snr=60.0)
+    d = _discover(case.config.run(), case.config.sensor.unit, tmp_path / "c.csv")
+    d.final.calibration.save(tmp_path / "cal.yaml")
+    code, out, err = run_cli(["codegen", tmp_path / "cal.yaml", "--out", tmp_path / "c"])
+    header = " ".join((tmp_path / "c" / "imucal.h").read_text().split())
+    assert code == 0, err
+    assert (f"temp_rate [degC/s] (dT/dt: the least-squares slope of temp against time over the "
+            f"{TEMPERATURE_RATE_WINDOW:g} s centred on the sample") in header.replace(" * ", " ")

@@ -47,7 +47,7 @@ from imucal.model.registry import DESCRIPTIONS, describe
 from imucal.constants import SI_ACCEL_UNIT
 from imucal.errors import ImucalError, short
 from imucal.files.inputs import read_input_bytes
-from imucal.model.channels import COVARIATE_UNITS
+from imucal.model.channels import COVARIATE_DEFINITIONS, COVARIATE_UNITS
 from imucal.model.parameters import BASE_NAMES, model_label
 from imucal.model.sensor import build_model, gram_det
 from imucal.files.output import OutputSet
@@ -714,6 +714,7 @@ def _header_apply_decls(c: _Context, ks: tuple[tuple[SensorCalibration, Kernel],
 def _cov_block(c: _Context, lead: str, first: str = "/* ") -> list[str]:
     """The comment lines naming cov's layout: cov[i] = name [unit]."""
     cov_doc = ", ".join(f"cov[{i}] = {comment_text(n)} [{COVARIATE_UNITS.get(n, 'see the effect documentation')}]"
+                        + (f" ({comment_text(COVARIATE_DEFINITIONS[n])})" if n in COVARIATE_DEFINITIONS else "")
                         for i, n in enumerate(c.covariates))
     return textwrap.wrap(f"{lead}{cov_doc}. */", 97, initial_indent=first, subsequent_indent=" * ")
 

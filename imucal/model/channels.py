@@ -47,6 +47,11 @@ COVARIATE_UNITS: Mapping[str, str] = {"temp": "degC", "time": "s", "temp_rate": 
 #: enough that a temperature's noise (0.02 degC at 100 Hz) moves the slope by 1e-4 degC/s, short enough
 #: to follow a swing of a few minutes; a firmware gives dT/dt over the last 20 s.
 TEMPERATURE_RATE_WINDOW = 20.0
+#: How a covariate derived from another channel is computed, for a firmware that must compute it (the C header).
+COVARIATE_DEFINITIONS: Mapping[str, str] = {
+    "temp_rate": f"dT/dt: the least-squares slope of temp against time over the {TEMPERATURE_RATE_WINDOW:g} s "
+                 "centred on the sample (imucal.model.channels.temperature_rate); a firmware's slope over the last "
+                 f"{TEMPERATURE_RATE_WINDOW:g} s lags it by {TEMPERATURE_RATE_WINDOW / 2:g} s"}
 #: Rows the slope of ``temperature_rate`` takes at least (the nearest in time when the window holds fewer).
 _RATE_MIN_ROWS = 3
 
