@@ -134,6 +134,18 @@ def figure(sweep: Sweep, long: list[int], r: dict, path: Path) -> None:
                                 f"{', '.join(f'{n}[{a}]' for n, a in r['terms'].items())}")
 
 
+def _headline(unc: dict, res: list[dict]) -> str:
+    """The table in one sentence (the README quotes it): the range over each kind of split."""
+    def span(kind: str, key: str) -> str:
+        v = sorted(r[key] for r in res if r["split"].startswith(kind))
+        return f"{v[0]:.2f}" if len(v) == 1 else f"{v[0]:.2f}-{v[-1]:.2f}"
+    return (f"Accelerometer: {unc['mg']:.2f} mg uncorrected, {span('in sample', 'mg')} in sample, "
+            f"{span('interpolating', 'mg')} interpolating, {span('extrapolating', 'mg')} extrapolating. "
+            f"Gyroscope bias(T): {unc['gyro_mrad_s']:.2f} mrad/s uncorrected, {span('in sample', 'gyro_mrad_s')} "
+            f"in sample, {span('interpolating', 'gyro_mrad_s')} interpolating, "
+            f"{span('extrapolating', 'gyro_mrad_s')} extrapolating.")
+
+
 def markdown(res: list[dict], unc: dict, sweep: Sweep, seconds: float, png: str, even_in_sample: float) -> str:
     tc, gt = res[0]["tc"], res[0]["gt"]
     rows = tc.rows
@@ -153,6 +165,7 @@ def markdown(res: list[dict], unc: dict, sweep: Sweep, seconds: float, png: str,
          "calibrated by the same calibration's gyroscope section (its bias(T) terms in the one apply map, what "
          f"`imucal apply` writes). {seconds:.0f} s.",
          "",
+         "<!-- begin:table -->",
          "| split | rows | terms chosen | accelerometer [mg] | gyroscope bias(T) [mrad/s] | gyro orders x, y, z |",
          "|---|---|---|---|---|---|",
          f"| uncorrected | | | {unc['mg']:.2f} | {unc['gyro_mrad_s']:.2f} | |"]
@@ -161,7 +174,7 @@ def markdown(res: list[dict], unc: dict, sweep: Sweep, seconds: float, png: str,
         L.append(f"| {r['split']} | {r['rows']} | {terms} | {r['mg']:.2f} | {r['gyro_mrad_s']:.2f} | "
                  f"{', '.join(map(str, r['gyro_orders']))} |")
     lag = tc.lag
-    L += ["",
+    L += ["<!-- end:table -->", "", "<!-- begin:headline -->", _headline(unc, res), "<!-- end:headline -->", "",
           f"Targets (issue 27): interpolating <= {TARGETS['interpolating']} mg and extrapolating <= "
           f"{TARGETS['extrapolating']} mg (the first two splits of each), gyroscope <= {TARGETS['gyro_in_sample']} "
           f"mrad/s in sample and <= {TARGETS['gyro_extrapolating']} extrapolating. An independent least-squares "
