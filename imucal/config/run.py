@@ -114,6 +114,10 @@ class FitSettings:
     #: white-noise density (imucal.analysis.noise_model) instead of their own scatter
     noise: str | None = field(default=None, metadata=rule(
         min_len=1, msg="noise {value} must be a file name", fix="give the JSON of `imucal noise --json` or a Kalibr imu.yaml"))
+    #: a calibration file (a multi-pose log's calibration.yaml): its accelerometer's values start the fit, and
+    #: the parameters in ``fix`` are held at them (what a temperature sweep's few poses cannot determine)
+    base: str | None = field(default=None, metadata=rule(
+        min_len=1, msg="base {value} must be a file name", fix="give the calibration.yaml of a multi-pose log"))
 
     @classmethod
     def schema_input(cls, raw: Any) -> Any:
@@ -225,7 +229,30 @@ def _fix_shorthand(fx: Any) -> tuple[tuple[str, ...], dict[str, float]]:
 def config_from_dict(d: Any, path: str | None = None) -> RunConfig:
     """A RunConfig from a YAML mapping (imucal.files.schema: unknown keys, types, one-line errors)."""
     check_structure(d, path)
-    return replace(fill(RunConfig, d, path), source=path)
+    cfg = replace(fill(RunConfig, d, path), source=path)
+    return cfg if cfg.fit.base is None else with_base(cfg, path)
+
+
+def with_base(cfg: RunConfig, path: str | None = None) -> RunConfig:
+    """fit.base read: the base calibration's accelerometer values join ``fit.initial`` (the run file's own
+    initial values and values held by ``fix: {name: value}`` win), so ``fix`` holds them there."""
+    from imucal.calibration.frozen import load_calibration  # only a run file that names a base
+
+    assert cfg.fit.base is not None
+    p = Path(cfg.fit.base)
+    p = p if p.is_absolute() or cfg.base_dir is None else cfg.base_dir / p
+    try:
+        base = load_calibration(p)
+    except ImucalError as exc:
+        raise ImucalError(f"fit.base {short(cfg.fit.base)}: {exc.message}", file=path, field="fit.base",
+                          fix="give the calibration.yaml that imucal calibrate wrote for a multi-pose log") from None
+    if base.raw_unit != cfg.data.unit:
+        raise ImucalError(f"the base calibration's raw unit {short(base.raw_unit)} is not the data's "
+                          f"{short(cfg.data.unit)}", file=path, field="fit.base",
+                          fix="calibrate the base from a recording in the same unit, or set data.unit")
+    values = base.params.value_dict()
+    held = {n: float(values[n]) for n in BASE_NAMES if n in values}
+    return replace(cfg, fit=replace(cfg.fit, initial={**held, **cfg.fit.initial}))
 
 
 def load_config(path: str | os.PathLike) -> RunConfig:
