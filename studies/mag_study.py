@@ -32,6 +32,7 @@ from imucal.files.output import write_text_atomic  # noqa: E402
 from imucal.mag import evidence as ev  # noqa: E402
 from imucal.mag.calibrate import MagSettings, calibrate_mag  # noqa: E402
 from imucal.mag.frame import dip_angles  # noqa: E402
+from imucal.mag.model import vectorized  # noqa: E402
 from imucal.mag.simulate import simulate_mag, truth_from_soft_iron  # noqa: E402
 from imucal.pipeline import calibrate_accelerometer  # noqa: E402
 
@@ -181,7 +182,7 @@ def cross_validation(mag: np.ndarray, acc: np.ndarray, s_full: np.ndarray) -> li
             h = cal.apply(mag)
             n_imu = 100 * _rms((np.linalg.norm(h[~use], axis=1) - F) / F)
             sym_p = np.array(cal.symmetric.params.values(), float)
-            h_sym = np.asarray(cal.symmetric.model.vectorized("apply")(mag.T, sym_p)[0]).T
+            h_sym = np.asarray(vectorized(cal.symmetric.model, "field")(mag.T, sym_p)[0]).T
             w = _held_out_windows(mag, acc, s_full, use)
             a_w = w.means(acc)
             d_sym = np.degrees(np.std(dip_angles(a_w, w.means(h_sym))))
@@ -238,7 +239,7 @@ def lag_section(mag: np.ndarray, acc: np.ndarray, cal) -> list[str]:
     w = cal.poses
     vals = []
     for k in range(-3, 4):
-        h = np.asarray(cal.fit.model.vectorized("apply")(ev.shift(mag, float(k)).T, p)[0]).T
+        h = np.asarray(vectorized(cal.fit.model, "field")(ev.shift(mag, float(k)).T, p)[0]).T
         vals.append(np.degrees(np.std(dip_angles(w.means(acc), w.means(h)))))
     L += ["| dip scatter [deg] | " + " | ".join(f"{v:.3f}" for v in vals) + " |", "",
           f"The least scatter is at k = {int(np.argmin(vals)) - 3}: the magnetometer does not lag the accelerometer "

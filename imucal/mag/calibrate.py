@@ -20,12 +20,13 @@ from imucal.mag import evidence as ev
 from imucal.mag.checks import PoseOffset, coverage_error, field_steps, require_coverage
 from imucal.mag.fit import MagFitResult, SoftIronTest, fit_rows, soft_iron_test
 from imucal.mag.frame import AxesSearch, dip_angles, euler_angles, search_axes
-from imucal.mag.model import (DIP, IDENTITY, NORM, ROTATION_BOUND, ROTATION_NAMES, MagModel, build_mag_model,
-                              mag_parameters)
+from imucal.mag.model import (DIP, IDENTITY, NORM, ROTATION_BOUND, ROTATION_NAMES, build_mag_model,
+                              mag_parameters, vectorized)
 from imucal.mag.result import MagCalibration, MagReport, PoseFigures, Scatter
 from imucal.mag.field_model import EarthField, Place
 from imucal.mag.units import field_magnitude
 from imucal.model.parameters import BASE_NAMES, Parameters
+from imucal.model.sensor import SensorModel
 from imucal.solve.initial import ellipsoid_guess
 
 SOFT_IRON_CHOICES = ("auto", "symmetric", "full")
@@ -110,7 +111,7 @@ def _dip_setup(mag: np.ndarray, acc: np.ndarray, still: ev.Poses | None, params:
         raise ImucalError(f"only {poses.n} poses for the dip angle", file=source, field="ax, ay, az",
                           fix=f"hold the sensor still in at least {MIN_DIP_ROWS} orientations, or turn it slowly")
     rows = ev.dip_rows(mag_d, acc, poses, var_m, ev.sample_variance(acc))
-    h0 = np.asarray(build_mag_model().vectorized("apply")(rows.raw.T, p0)[0]).T
+    h0 = np.asarray(vectorized(build_mag_model(), "field")(rows.raw.T, p0)[0]).T
     search = search_axes(rows.cov[:, 1:], h0)
     P = np.array(search.best.axes, float).reshape(3, 3)
     r0 = euler_angles(search.closed_form.rotation @ P.T) if search.agrees else (0.0, 0.0, 0.0)
@@ -120,7 +121,7 @@ def _dip_setup(mag: np.ndarray, acc: np.ndarray, still: ev.Poses | None, params:
     return _DipSetup(lag, poses, rows, search, params.with_values(start))
 
 
-def _fits(model: MagModel, rows: ev.MagRows, params: Parameters, settings: MagSettings, dip: bool,
+def _fits(model: SensorModel, rows: ev.MagRows, params: Parameters, settings: MagSettings, dip: bool,
           source: str | None) -> tuple[MagFitResult, MagFitResult | None, SoftIronTest | None]:
     """The full and the symmetric fit, the test between them, and the chosen one (without DIP rows: the
     ellipsoid alone, its rotation and dip held)."""
@@ -168,7 +169,7 @@ def calibrate_mag(mag: np.ndarray, acc: np.ndarray | None = None, *, still: ev.P
                      source)
     extra = [] if params["F"].fixed else [ev.size_row(settings.size)]
     setup = None if acc is None else _dip_setup(mag, acc, still, params, settings, var_m, use, source)
-    model = build_mag_model(IDENTITY if setup is None else setup.search.best.axes)
+    model = build_mag_model(IDENTITY if setup is None else setup.search.best.axes, field_unit)
     params = params if setup is None else setup.params
     rows = ev.MagRows.stack(nrows, *([] if setup is None else [setup.rows]), *extra)
     step_poses = setup.poses if setup is not None else (still if still is not None and still.n >= MIN_STILL_POSES
@@ -202,13 +203,13 @@ def _outside(rows: ev.MagRows, offsets, dip_poses: ev.Poses | None) -> np.ndarra
 def _norm_pct(fit: MagFitResult, raw: np.ndarray) -> np.ndarray:
     p = np.array(fit.params.values(), float)
     F = fit.params["F"].value
-    return 100.0 * (fit.model.vectorized("norm")(raw.T, p)[0][0] - F) / F
+    return 100.0 * (vectorized(fit.model, "norm")(raw.T, p)[0][0] - F) / F
 
 
 def _dips(fit: MagFitResult, raw: np.ndarray, acc: np.ndarray) -> np.ndarray:
     """Each pose's dip minus the fitted dip [deg]."""
     p = np.array(fit.params.values(), float)
-    return np.degrees(fit.model.vectorized("dip")(raw.T, acc.T, p)[0][0] - fit.params["dip"].value)
+    return np.degrees(vectorized(fit.model, "dip")(raw.T, acc.T, p)[0][0] - fit.params["dip"].value)
 
 
 def _rms(x: np.ndarray) -> float:

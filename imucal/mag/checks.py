@@ -17,7 +17,7 @@ import numpy as np
 
 from imucal.errors import ImucalError
 from imucal.mag.evidence import MAD_TO_STD, MagRows, Poses
-from imucal.mag.model import MagModel
+from imucal.model.sensor import SensorModel
 from imucal.model.parameters import Parameters
 from imucal.solve import least_squares as lsq
 from imucal.solve import observability
@@ -56,7 +56,7 @@ def missing_directions(directions: np.ndarray) -> list[str]:
     return []
 
 
-def require_coverage(model: MagModel, rows: MagRows, params: Parameters, source: str | None = None
+def require_coverage(model: SensorModel, rows: MagRows, params: Parameters, source: str | None = None
                      ) -> observability.Observability:
     """Refuse a log whose field directions leave the hard and soft iron undetermined (NORM rows only).
 

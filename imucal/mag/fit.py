@@ -19,7 +19,8 @@ import numpy as np
 
 from imucal.errors import ImucalError
 from imucal.mag.evidence import MagRows
-from imucal.mag.model import DIP, NORM, SKEW_KINDS, MagModel
+from imucal.mag.model import DIP, NORM, SKEW_KINDS, vectorized
+from imucal.model.sensor import SensorModel
 from imucal.model.parameters import Parameters
 from imucal.solve import ipopt
 from imucal.solve import least_squares as lsq
@@ -40,7 +41,7 @@ BATCHES = 20
 class MagFitResult:
     """A fitted magnetometer: values, uncertainties, residuals by kind, the solver's status."""
 
-    model: MagModel
+    model: SensorModel
     params: Parameters
     std: Mapping[str, float]
     covariance: np.ndarray  #: over ``free_names``
@@ -78,10 +79,10 @@ def _full(params: Parameters, free: tuple[str, ...], p_free: np.ndarray) -> np.n
     return np.array([v[n] for n in params.names], float)
 
 
-def row_noise(model: MagModel, rows: MagRows, p: np.ndarray) -> np.ndarray:
+def row_noise(model: SensorModel, rows: MagRows, p: np.ndarray) -> np.ndarray:
     """sigma of every row's residual at the full parameter vector p (the model's ``noise``)."""
     out = np.empty(rows.n)
-    f = model.vectorized("noise")
+    f = vectorized(model, "noise")
     for s in range(0, rows.n, lsq.BLOCK):
         sl = slice(s, s + lsq.BLOCK)
         out[sl] = f(rows.raw[sl].T, rows.cov[sl].T, p, rows.target[sl][None, :], rows.var_raw[sl].T,
@@ -133,7 +134,7 @@ def _row_factors(kinds: np.ndarray, factors: Mapping[int, float]) -> np.ndarray:
     return np.array([factors.get(k, 1.0) for k in range(int(kinds.max(initial=0)) + 1)])[kinds]
 
 
-def fit_rows(model: MagModel, rows: MagRows, params: Parameters, factors: Mapping[int, float] | None = None,
+def fit_rows(model: SensorModel, rows: MagRows, params: Parameters, factors: Mapping[int, float] | None = None,
              source: str | None = None) -> MagFitResult:
     """Fit the free parameters of ``params`` to ``rows``; ``factors`` given: held (not re-estimated)."""
     free = params.free_names

@@ -30,17 +30,18 @@ Nothing else in the package writes these formulas: numpy evaluators are generate
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+import re
+from dataclasses import replace
 from functools import lru_cache
-from typing import Mapping
-
 import casadi as ca
 import numpy as np
 
 from imucal.constants import RIGHT_ANGLE
 from imucal.errors import ImucalError
+from imucal.model.channels import MAGNETIC_FIELD
 from imucal.model.geometry import frame, frame_inverse_transpose
 from imucal.model.parameters import BASE_NAMES, Parameter, Parameters, base_parameters
+from imucal.model.sensor import MAGNETOMETER, SensorModel
 from imucal.solve.vectorize import Vectorized
 
 #: Rotation to the accelerometer's frame [rad] (Euler angles, R = Rz Ry Rx), the field's magnitude and dip.
@@ -76,38 +77,53 @@ def rotation(rx, ry, rz):
                       ca.horzcat(-sy, cy * sx, cy * cx))
 
 
-@dataclass(frozen=True)
-class MagModel:
-    """The magnetometer model with its axis permutation ``axes`` (row-major signed permutation P).
+#: The model's name; its constants follow in brackets: the mounting P and the calibrated field's unit.
+LABEL = "magnetometer-ellipsoid"
+#: The label's bracket: axes as signed axis letters per row of P (+x+y+z is the identity), the field's unit.
+LABEL_PATTERN = re.compile(r"^" + re.escape(LABEL) + r"\[axes=((?:[+-][xyz]){3}),field=([A-Za-z0-9_/^.()*-]{1,32})\]$")
 
-    Functions (per row): apply(raw[3], p) -> h[3]; forward(h[3], p) -> raw[3] (its inverse, for
-    simulation); residual(raw[3], cov[4], p, g) -> r (``g`` the row's target: 0 but for the SIZE row);
-    noise(raw, cov, p, g, var_raw[3], var_acc[3]) -> sigma of r propagated from the readings' variance;
-    norm(raw, p) -> |h|; dip(raw, a[3], p) -> asin(a . h / |a||h|).
-    """
 
-    axes: tuple[int, ...]
-    names: tuple[str, ...]
-    covariates: tuple[str, ...]
-    functions: Mapping[str, ca.Function] = field(compare=False, repr=False)
+def axes_code(axes: tuple[int, ...]) -> str:
+    """P as signed axis letters, one per row (the magnetometer axis i reads frame axis j): +y+x-z."""
+    P = np.array(axes, int).reshape(3, 3)
+    return "".join(("+" if P[i, j] > 0 else "-") + "xyz"[j] for i in range(3) for j in range(3) if P[i, j])
 
-    @property
-    def name(self) -> str:
-        return "magnetometer-ellipsoid"
 
-    @property
-    def permutation(self) -> np.ndarray:
-        return np.array(self.axes, float).reshape(3, 3)
+def label_of(axes: tuple[int, ...], field_unit: str) -> str:
+    """The description's name: LABEL[axes=+x+y+z,field=uT] (the constants a file's section records)."""
+    return f"{LABEL}[axes={axes_code(axes)},field={field_unit}]"
 
-    def __getattr__(self, name: str) -> ca.Function:
-        fns = object.__getattribute__(self, "functions")
-        if name in fns:
-            return fns[name]
-        raise AttributeError(name)
 
-    def vectorized(self, name: str) -> Vectorized:
-        """The numpy evaluator of one function, generated once (imucal.solve.vectorize)."""
-        return _vectorized(self.functions[name])
+def mag_model() -> SensorModel:
+    """The magnetometer's default description (imucal.model.registry): the identity mounting, the field in the
+    sensor's raw unit."""
+    return build_mag_model()
+
+
+def described(label: str) -> SensorModel | None:
+    """The description a file's model name names (imucal.model.registry's hook), None when it names none."""
+    m = LABEL_PATTERN.match(label)
+    if m is None:
+        return None
+    code, unit = m.groups()
+    axes = [0] * 9
+    for i in range(3):
+        sign, j = code[2 * i], "xyz".index(code[2 * i + 1])
+        axes[3 * i + j] = 1 if sign == "+" else -1
+    try:
+        return build_mag_model(tuple(axes), unit)
+    except ImucalError:  # not a proper permutation (an axis twice, a left-handed frame)
+        return None
+
+
+def permutation(model: SensorModel) -> np.ndarray:
+    """The mounting P of a magnetometer description (a constant of its map)."""
+    return np.asarray(model.functions["permutation"].call([])[0], float).reshape(3, 3)
+
+
+def vectorized(model: SensorModel, name: str) -> Vectorized:
+    """The numpy evaluator of one of the description's functions, generated once (imucal.solve.vectorize)."""
+    return _vectorized(model.functions[name])
 
 
 @lru_cache(maxsize=64)
@@ -147,7 +163,9 @@ def _build(axes: tuple[int, ...]) -> dict[str, ca.Function]:
     araw = ca.SX.sym("a", 3)
     dip_of = ca.asin(ca.dot(araw, h) / (ca.norm_2(araw) * norm))
     return {
-        "apply": ca.Function("mag_apply", [raw, p], [h], ["raw", "p"], ["h"]),
+        "apply": ca.Function("apply", [raw, ca.SX.sym("inputs", 0), p], [h], ["raw", "inputs", "p"], ["calibrated"]),
+        "field": ca.Function("mag_field", [raw, p], [h], ["raw", "p"], ["h"]),
+        "permutation": ca.Function("permutation", [], [P]),
         "forward": ca.Function("mag_forward", [hin, p], [raw_f], ["h", "p"], ["raw"]),
         "residual": ca.Function("mag_residual", [raw, cov, p, g], [r], ["raw", "cov", "p", "g"], ["r"]),
         "noise": ca.Function("mag_noise", [raw, cov, p, g, var_raw, var_acc], [sigma],
@@ -157,15 +175,20 @@ def _build(axes: tuple[int, ...]) -> dict[str, ca.Function]:
     }
 
 
-@lru_cache(maxsize=32)
-def build_mag_model(axes: tuple[int, ...] = IDENTITY) -> MagModel:
-    """The magnetometer model for the axis permutation ``axes`` (built once per permutation)."""
+@lru_cache(maxsize=64)
+def build_mag_model(axes: tuple[int, ...] = IDENTITY, field_unit: str = "raw") -> SensorModel:
+    """The magnetometer's description for the axis permutation ``axes`` and the calibrated field's unit
+    (built once per pair): kind magnetometer, its map ``apply``(raw, [], p) -> h, its evidence's rows
+    reading ``COVARIATES`` (the row's kind and the calibrated acceleration)."""
     axes = tuple(int(v) for v in axes)
-    P = np.array(axes, float).reshape(3, 3)
-    if P.shape != (3, 3) or not np.allclose(P @ P.T, np.eye(3)) or not np.isclose(np.linalg.det(P), 1.0):
+    P = np.array(axes, float).reshape(3, 3) if len(axes) == 9 else np.zeros((3, 3))
+    if len(axes) != 9 or not np.allclose(P @ P.T, np.eye(3)) or not np.isclose(np.linalg.det(P), 1.0):
         raise ImucalError(f"axes {axes} are not a proper signed permutation", field="mag.axes",
                           fix="each row one +-1, a right-handed frame")
-    return MagModel(axes, NAMES, COVARIATES, _build(axes))
+    return SensorModel(effects=(), names=NAMES, inputs=(), functions=_build(axes), kind=MAGNETOMETER,
+                       label=label_of(axes, field_unit), channel=MAGNETIC_FIELD,
+                       output=MAGNETIC_FIELD.with_unit(field_unit), symbol="mag", output_symbol="mag",
+                       evidence_inputs=COVARIATES)
 
 
 def mag_parameters(s0, b0, angles0=(RIGHT_ANGLE,) * 3, field_magnitude: float = 1.0,

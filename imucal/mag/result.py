@@ -21,6 +21,7 @@ from imucal.mag.evidence import Lag, Poses
 from imucal.mag.fit import MagFitResult, SoftIronTest
 from imucal.mag.field_model import EarthField
 from imucal.mag.frame import AxesSearch, rotation_angle
+from imucal.mag.model import permutation, vectorized
 from imucal.model.parameters import Parameters
 
 
@@ -99,19 +100,16 @@ class MagCalibration:
     def misalignment(self) -> float:
         """The rotation beyond the symmetric soft iron [rad]: the angle of Q in the polar decomposition
         M = Q S of the soft iron in the magnetometer's permuted axes, M = P^T A (0 for the symmetric fit)."""
-        M = self.fit.model.permutation.T @ self.linear_map()[0]
+        M = permutation(self.fit.model).T @ self.linear_map()[0]
         U, _, Vt = np.linalg.svd(M)
         return rotation_angle(U @ Vt)
 
     def linear_map(self) -> tuple[np.ndarray, np.ndarray]:
         """(A, c) with h = A raw + c: the calibrated field in the accelerometer's frame."""
-        p = np.array(self.params.values(), float)
-        apply = self.fit.model.functions["apply"]
-        c = np.asarray(apply(np.zeros(3), p)).ravel()
-        A = np.column_stack([np.asarray(apply(e, p)).ravel() - c for e in np.eye(3)])
-        return A, c
+        A, c, _ = self.fit.model.affine(np.array(self.params.values(), float))  # SensorModel.affine
+        return np.asarray(A, float), np.asarray(c, float).ravel()
 
     def apply(self, raw: np.ndarray) -> np.ndarray:
         """Calibrated field (N x 3) in the accelerometer's frame, from the model's CasADi map."""
         p = np.array(self.params.values(), float)
-        return np.asarray(self.fit.model.vectorized("apply")(np.asarray(raw, float).T, p)[0]).T
+        return np.asarray(vectorized(self.fit.model, "field")(np.asarray(raw, float).T, p)[0]).T

@@ -20,7 +20,7 @@ import numpy as np
 from imucal.constants import RIGHT_ANGLE
 from imucal.mag.evidence import Poses, shift
 from imucal.mag.frame import euler_angles
-from imucal.mag.model import IDENTITY, NAMES, build_mag_model, rotation
+from imucal.mag.model import IDENTITY, NAMES, build_mag_model, rotation, vectorized
 
 
 @dataclass(frozen=True)
@@ -67,7 +67,7 @@ def truth_from_soft_iron(M: np.ndarray, s=(0.2, -0.1, 0.05), field: float = 0.5,
     angles = tuple(float(v) for v in np.arccos([cosm[0, 1], cosm[0, 2], cosm[1, 2]]))
     model = build_mag_model()
     p = np.array(list(MagTruth(s=(0.0, 0.0, 0.0), b=tuple(b), angles=angles).values().values()))
-    T = np.column_stack([np.asarray(model.functions["apply"](e, p)).ravel() for e in np.eye(3)])
+    T = np.column_stack([np.asarray(model.functions["field"](e, p)).ravel() for e in np.eye(3)])
     Q = np.asarray(rotation(*misalignment))
     P = np.array(axes, float).reshape(3, 3)
     R = P @ Q @ M @ np.linalg.inv(T) @ P.T
@@ -146,7 +146,7 @@ def simulate_mag(truth: MagTruth = MagTruth(), n_poses: int = 24, hold: int = 10
     h = shift(h, -truth.lag)  # late by lag: h'[k] = h(k - lag)
     model = build_mag_model(truth.axes)
     p = np.array(list(truth.values().values()), float)
-    mag = np.asarray(model.vectorized("forward")(h.T, p)[0]).T
+    mag = np.asarray(vectorized(model, "forward")(h.T, p)[0]).T
     mag = mag + rng.normal(0.0, truth.noise, mag.shape)
     acc = acc + rng.normal(0.0, truth.acc_noise, acc.shape)
     return MagSimulation(mag, acc, truth, holds, C)

@@ -4,18 +4,20 @@ The accelerometer's description depends on its effects (imucal.model.sensor.buil
 kind names the module and function that build its description, imported only when a file or run holds
 one (measured start-up: an accelerometer-only run never builds the others). A new sensor adds one line; a
 module whose description takes terms (the gyroscope's temperature terms) also has ``described(name)``, the
-description a file's model name names (None when it names none).
+description a file's model name names (None when it names none): the magnetometer's mounting and output unit
+are read back from its name so.
 """
 from __future__ import annotations
 
 import importlib
 
 from imucal.errors import ImucalError, short
-from imucal.model.sensor import ACCELEROMETER, GYROSCOPE, SensorModel
+from imucal.model.sensor import ACCELEROMETER, GYROSCOPE, MAGNETOMETER, SensorModel
 
 #: kind -> (module, function) of its description
 DESCRIPTIONS: dict[str, tuple[str, str]] = {
     GYROSCOPE: ("imucal.model.gyroscope", "gyro_model"),
+    MAGNETOMETER: ("imucal.mag.model", "mag_model"),
 }
 #: the order of a calibration's sensors: the accelerometer (the frame) first, then as listed
 KINDS = (ACCELEROMETER, *DESCRIPTIONS)
@@ -30,7 +32,8 @@ def describe(kind: str, label: str | None = None, where: str | None = None, file
     mod = importlib.import_module(module)
     model = getattr(mod, fn)()
     if label is not None and label != model.name and hasattr(mod, "described"):
-        # a description with terms (the gyroscope's bias(T)): the module reads its own name back
+        # a description with terms or constants (the gyroscope's bias(T), the magnetometer's mounting): the module
+        # reads its own name back
         model = mod.described(label) or model
     if label is not None and label != model.name:
         raise ImucalError(f"model {short(label)} is not this imucal's {kind} model {model.name!r}", file=file,

@@ -72,7 +72,7 @@ class Effect:
 
 
 #: The sensor kinds (``SensorModel.kind``; a calibration file's section names).
-ACCELEROMETER, GYROSCOPE = "accelerometer", "gyroscope"
+ACCELEROMETER, GYROSCOPE, MAGNETOMETER = "accelerometer", "gyroscope", "magnetometer"
 
 
 @dataclass(frozen=True)

@@ -65,10 +65,7 @@ def split_parameters(names: tuple[str, ...], free: tuple[str, ...]) -> tuple[ca.
 @lru_cache(maxsize=64)
 def row_functions(model: SensorModel, free: tuple[str, ...]) -> RowFunctions:
     """The row evaluators for ``model`` with ``free`` parameters, built once and cached."""
-    # the rows' covariates (SensorModel.evidence_covariates; a model that is no SensorModel yet, the
-    # magnetometer's MagModel, names them ``covariates``)
-    covs = getattr(model, "evidence_covariates", None)
-    raw, cov = ca.SX.sym("raw", 3), ca.SX.sym("cov", len(model.covariates if covs is None else covs))
+    raw, cov = ca.SX.sym("raw", 3), ca.SX.sym("cov", len(model.evidence_covariates))  # the rows' covariates
     pf, pfix, p = split_parameters(model.names, free)
     g = ca.SX.sym("g")
     r = model.residual(raw, cov, p, g)
