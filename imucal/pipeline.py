@@ -6,7 +6,7 @@ from contextlib import contextmanager
 import math
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -34,6 +34,7 @@ from imucal.thermal.evidence import thermal_rows
 if TYPE_CHECKING:  # imported only when used: the gyroscope's modules, the noise-model reader (fit.noise),
     from imucal.analysis.noise_model import NoiseModel  # the chunked reader (a file above STREAM_BYTES)
     from imucal.data.stream import StreamedRecording
+    from imucal.mag.result import MagCalibration
 
 
 @dataclass(frozen=True)
@@ -52,6 +53,7 @@ class CalibrationRun:
     sample_residuals: np.ndarray | None
     gravity_source: str
     gyro: FitResult | None = None  #: the gyroscope fit, when the recording has one
+    mag: "MagCalibration | None" = None  #: the magnetometer's calibration, when the recording has one
 
     @property
     def rms_residual_samples(self) -> float:
@@ -450,11 +452,29 @@ def calibrate_accelerometer(config: RunConfig, recording: Recording | None = Non
 
 def calibrate_imu(config: RunConfig, recording: Recording | None = None,
                   gyro_file: str | None = None) -> CalibrationRun:
-    """The accelerometer (``calibrate_accelerometer``), then the gyroscope when the recording has gx, gy, gz
-    or ``gyro_file`` (imu_tk's second file) is given: one calibration holding both sensors."""
+    """The accelerometer (``calibrate_accelerometer``), then every other sensor whose columns the recording
+    has: the gyroscope (gx, gy, gz, or ``gyro_file``: imu_tk's second file) and the magnetometer (mx, my, mz):
+    one calibration holding them all, each in the accelerometer's frame."""
     run = calibrate_accelerometer(config, recording)
-    if gyro_file is None and getattr(run.recording, "gyro", None) is None:
-        return run  # no gyroscope (a file read in chunks never has one)
+    if gyro_file is not None or getattr(run.recording, "gyro", None) is not None:
+        run = _with_gyro(run, config, gyro_file)
+    if getattr(run.recording, "mag", None) is not None:  # a file read in chunks never has one
+        run = _with_mag(run, config)
+    return run
+
+
+def _attach(run: CalibrationRun, sensor: Any, warnings: list[str], **fields: Any) -> CalibrationRun:
+    """``run`` with one more sensor attached to its calibration (in the registry's order) and its warnings."""
+    from imucal.model.registry import KINDS
+
+    cal = run.calibration
+    attached = tuple(sorted((*(s for s in cal.attached if s.kind != sensor.kind), sensor),
+                            key=lambda s: KINDS.index(s.kind)))
+    cal_fit = {**cal.fit, "warnings": [*cal.fit.get("warnings", []), *warnings]}
+    return replace(run, calibration=replace(cal, attached=attached, fit=cal_fit), **fields)
+
+
+def _with_gyro(run: CalibrationRun, config: RunConfig, gyro_file: str | None) -> CalibrationRun:
     from imucal.gyro.fit import GyroOptions  # here: 10 modules a run without a gyroscope skips
     from imucal.gyro.result import calibrated
     from imucal.gyro.run import calibrate_gyro
@@ -463,5 +483,17 @@ def calibrate_imu(config: RunConfig, recording: Recording | None = None,
     res = calibrate_gyro(run, gyro_file, GyroOptions(**asdict(config.gyro)))
     if res is None:
         return run
-    cal_fit = {**run.calibration.fit, "warnings": [*run.calibration.fit.get("warnings", []), *gyro_warnings(res)]}
-    return replace(run, gyro=res, calibration=replace(run.calibration, attached=(calibrated(res),), fit=cal_fit))
+    return _attach(run, calibrated(res), gyro_warnings(res), gyro=res)
+
+
+def _with_mag(run: CalibrationRun, config: RunConfig) -> CalibrationRun:
+    """The magnetometer fitted on the same samples: its dip rows read the calibrated acceleration, its poses
+    are the accelerometer's still intervals (imucal.mag.run)."""
+    from imucal.mag.run import calibrated, mag_of_run  # here: the magnetometer's modules, only with mx, my, mz
+    from imucal.report.mag import mag_warnings
+
+    rec, cal = run.recording, run.calibration
+    covs = covariate_values(cal.covariates, temp=rec.temp, time=rec.t, source=rec.source)
+    acc = cal.apply(rec.raw, covs)
+    res = mag_of_run(rec.mag, acc, run.intervals.start, run.intervals.end, config.mag, source=rec.source)
+    return _attach(run, calibrated(res), mag_warnings(res), mag=res)

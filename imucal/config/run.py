@@ -180,6 +180,44 @@ class GyroSettings:
             raise ImucalError(f"free_bias {short(self.free_bias)} must be true or false", field="gyro.free_bias")
 
 
+MAG_SOFT_IRON = ("auto", "symmetric", "full")
+
+
+@dataclass(frozen=True)
+class MagConfig:
+    """The magnetometer fit's choices (the YAML ``mag:`` section; imucal.mag.calibrate.MagSettings). The field's
+    magnitude from ``field`` (in ``field_unit``, default the sensor's), else from the IGRF at ``latitude``,
+    ``longitude``, ``date`` (the optional imucal-nlp[mag] extra), else fitted (the output then in the sensor's
+    unit, its overall size held)."""
+
+    field_unit: str | None = field(default=None, metadata=rule(msg="field_unit {value} is not text"))
+    dip_deg: float | None = field(default=None, metadata=rule(
+        msg="dip_deg {value} is not an angle in degrees", ge=-90, le=90, fix="the angle between field and gravity's plane"))
+    soft_iron: str = field(default="auto", metadata=rule(msg="soft_iron {value} is not text"))
+    window: int = field(default=25, metadata=rule(msg="window {value} is not a count of samples", ge=4, le=100000))
+    lag: float | None = field(default=None, metadata=rule(
+        msg="lag {value} is not a number of samples", ge=-10000, le=10000, fix="the magnetometer's delay in samples"))
+    latitude: float | None = field(default=None, metadata=rule(msg="latitude {value} is not a number of degrees",
+                                                               ge=-90, le=90))
+    longitude: float | None = field(default=None, metadata=rule(msg="longitude {value} is not a number of degrees",
+                                                                ge=-180, le=360))
+    height: float = field(default=0.0, metadata=rule(msg="height {value} is not a number of metres"))
+    date: str | None = field(default=None, metadata=rule(msg="date {value} is not a date such as 2024-05-17"))
+    #: last: the name shadows dataclasses.field in the class body
+    field: float | None = field(default=None, metadata=rule(
+        msg="field {value} is not a field magnitude", gt=0, fix="the local field's magnitude, e.g. 48.2 with field_unit: uT"))
+
+    def __post_init__(self) -> None:
+        check_choice(self.soft_iron, MAG_SOFT_IRON, "mag.soft_iron", "soft iron choice")
+        if self.field is not None and not (_is_real(self.field) and self.field > 0):
+            raise ImucalError(f"field {short(self.field)} is not a field magnitude", field="mag.field",
+                              fix="the local field's magnitude, e.g. 48.2 with field_unit: uT")
+        place = (self.latitude, self.longitude, self.date)
+        if any(v is not None for v in place) and any(v is None for v in place):
+            raise ImucalError("the field model needs latitude, longitude and date together", field="mag.latitude",
+                              fix="give all three, or the field's magnitude (mag.field)")
+
+
 @dataclass(frozen=True)
 class OutputSettings:
     dir: str = field(default="out", metadata=rule(msg="dir {value} must be a directory name", min_len=1))
@@ -200,6 +238,7 @@ class RunConfig:
     fit: FitSettings = FitSettings()
     output: OutputSettings = OutputSettings()
     gyro: GyroSettings = GyroSettings()
+    mag: MagConfig = MagConfig()
     #: the YAML file, for messages and relative paths (not a key of the file)
     source: str | None = field(default=None, metadata=rule(internal=True))
 

@@ -1,6 +1,7 @@
 """A calibration in the units of a datasheet, beside the fitted values: bias in mg or deg/s, scale as a
 sensitivity (raw per g, raw per deg/s) or an error in ppm of the nominal 1, axis misalignment in mrad,
-g-sensitivity in (deg/s)/g. Typed rows, one table per sensor the calibration holds; report/html.py
+g-sensitivity in (deg/s)/g, hard iron in uT, soft iron in % and mrad, the magnetometer's alignment in
+deg. Typed rows, one table per sensor the calibration holds; report/html.py
 renders them.
 
 The conversions are first order: a bias s/b has the standard error sqrt((ds/b)^2 + (s db/b^2)^2) with
@@ -14,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from imucal.calibration.fields import ACCELEROMETER, GYROSCOPE
+from imucal.model.sensor import MAGNETOMETER
 from imucal.calibration.frozen import Calibration
 from imucal.constants import RIGHT_ANGLE, SI_ACCEL_UNIT, STANDARD_GRAVITY
 
@@ -100,8 +102,37 @@ def gyroscope_rows(cal: Calibration) -> list[DatasheetRow]:
     return rows
 
 
+def magnetometer_rows(cal: Calibration) -> list[DatasheetRow]:
+    """Hard iron in uT (s_i / b_i in the field's unit), soft iron as each axis's scale against their mean (%) and
+    its non-orthogonality (mrad), the rotation to the accelerometer's frame in deg."""
+    from imucal.mag.units import FIELD_UNITS  # only a calibration with a magnetometer
+
+    m = cal.sensor(MAGNETOMETER)
+    assert m is not None
+    v, unit, out = m.params.value_dict(), m.raw_unit, m.model.output.unit
+    std = {n: float(m.std.get(n, math.nan)) for n in v}
+    to_ut, shown = (FIELD_UNITS[out], "uT") if out in FIELD_UNITS else (1.0, out)
+    rows = []
+    for i, a in enumerate(AXES, 1):
+        s, b, ds, db = v[f"s{i}"], v[f"b{i}"], std[f"s{i}"], std[f"b{i}"]
+        rows.append(DatasheetRow(f"hard iron {a}", s / b * to_ut, _ratio_std(s, ds, b, db) * to_ut, shown,
+                                 f"s{i}", s, ds, unit))
+    mean_b = float(np.prod([v[f"b{i}"] for i in (1, 2, 3)])) ** (1 / 3)
+    for i, a in enumerate(AXES, 1):
+        b, db = v[f"b{i}"], std[f"b{i}"]
+        rows.append(DatasheetRow(f"soft iron scale {a} (of the mean)", (b / mean_b - 1) * 100, db / mean_b * 100, "%",
+                                 f"b{i}", b, db, f"{unit} per {out}"))
+    for n, pair in (("phi", "x-y"), ("psi", "x-z"), ("theta", "y-z")):
+        rows.append(DatasheetRow(f"soft iron skew {pair} (from 90°)", (v[n] - RIGHT_ANGLE) * 1e3, std[n] * 1e3, "mrad",
+                                 n, math.degrees(v[n]), math.degrees(std[n]), "deg"))
+    for n in ("rx", "ry", "rz"):
+        rows.append(DatasheetRow(f"alignment about {n[1]} (to the accelerometer)", math.degrees(v[n]),
+                                 math.degrees(std[n]), "deg", n, v[n], std[n], "rad"))
+    return rows
+
+
 #: Each sensor kind's rows: a sensor a calibration holds without an entry here shows its raw values only.
-ROWS = {ACCELEROMETER: accelerometer_rows, GYROSCOPE: gyroscope_rows}
+ROWS = {ACCELEROMETER: accelerometer_rows, GYROSCOPE: gyroscope_rows, MAGNETOMETER: magnetometer_rows}
 
 
 def datasheet(cal: Calibration) -> dict[str, list[DatasheetRow]]:

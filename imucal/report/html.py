@@ -201,6 +201,36 @@ def _gyroscope_html(run: CalibrationRun) -> str:
                    [False] + [True] * 7)])
 
 
+def _magnetometer_html(run: CalibrationRun) -> str:
+    cal, m = run.mag, run.calibration.sensor("magnetometer")
+    assert cal is not None and m is not None
+    rows = [[esc(n), num(p.value, ".10g"), "fixed" if p.fixed else num(m.std.get(n, math.nan), ".4g"), esc(p.unit)]
+            for n, p in m.params.items()]
+    r = cal.report
+    fig = [["field-norm residual [% of the field, rms]", num(r.norm_pct.before, ".3g"), "", num(r.norm_pct.after, ".3g"),
+            num(r.norm_pct.floor, ".2g")]]
+    if r.dip_deg is not None:
+        fig.append(["dip-angle scatter [deg, std over poses]", num(r.dip_deg.before, ".3g"),
+                    num(r.dip_deg.unaligned, ".3g"), num(r.dip_deg.after, ".3g"), num(r.dip_deg.floor, ".2g")])
+    aff = m.affine()
+    apply_rows = [[f"h<sub>{'xyz'[i]}</sub>"] + [num(v, "+.9e") for v in aff.A[i]] + [num(aff.c[i], "+.9e")]
+                  for i in range(3)]
+    out = m.model.output.unit
+    return "\n".join([
+        _datasheet_html(datasheet(run.calibration)["magnetometer"]), DATASHEET_NOTE,
+        "<h3>Before and after</h3>",
+        table_html(["figure", "before", "hard and soft iron only", "after (aligned)", "noise floor"], fig,
+                   [False, True, True, True, True]),
+        f"<p class=\"meta\">Model {esc(m.model.name)}; soft iron {'full 3x3' if cal.full_soft_iron else 'symmetric'};"
+        f" alignment beyond the mounting {math.degrees(cal.misalignment):.3g}°; field {'given' if cal.field_given else 'fitted'}"
+        f"; {len(r.poses)} poses; IPOPT {esc(cal.fit.status)}, {cal.fit.iterations} iterations.</p>",
+        "<h3>Fitted parameters</h3>",
+        table_html(["parameter", "value", "standard error", "unit"], rows, [False, True, True, False]),
+        "<h3>Apply map</h3>",
+        f"<p>h = A raw + c, with h in {esc(out)} in the accelerometer's frame, raw in {esc(m.raw_unit)}.</p>",
+        table_html(["", "A[:, x]", "A[:, y]", "A[:, z]", f"c [{esc(out)}]"], apply_rows, [False] + [True] * 4)])
+
+
 def _recording_html(figures: Mapping[str, bytes]) -> str:
     if "recording.png" not in figures:
         return "<p class=\"meta\">Figures were not made for this run.</p>"
@@ -209,7 +239,8 @@ def _recording_html(figures: Mapping[str, bytes]) -> str:
 
 #: Each sensor kind's section (a calibration's sensors in its order); a new sensor adds one line.
 SENSOR_SECTIONS = {"accelerometer": ("Accelerometer", _accelerometer_html),
-                   "gyroscope": ("Gyroscope", lambda run, figures: _gyroscope_html(run))}
+                   "gyroscope": ("Gyroscope", lambda run, figures: _gyroscope_html(run)),
+                   "magnetometer": ("Magnetometer", lambda run, figures: _magnetometer_html(run))}
 
 
 def _calibration_sections(run: CalibrationRun, figures: Mapping[str, bytes] | None = None

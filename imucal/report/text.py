@@ -55,7 +55,7 @@ def fit_report(run: CalibrationRun, correl_min: float = CORREL_MIN) -> str:
     """
     L = [*_calibration_lines(run), *_statistics_lines(run), *_variable_lines(run.result),
          *_correlation_lines(run.result, correl_min), *_apply_lines(run.calibration), *_interval_lines(run),
-         *_gyro_lines(run)]
+         *_gyro_lines(run), *_mag_lines(run)]
     return "\n".join(L) + "\n"
 
 
@@ -268,6 +268,21 @@ def _gyro_lines(run: CalibrationRun) -> list[str]:
     return L
 
 
+def _mag_lines(run: CalibrationRun) -> list[str]:
+    """The magnetometer's report and apply map, when there is one."""
+    if run.mag is None:
+        return []
+    from imucal.report.mag import mag_lines  # measured start-up: only a run with a magnetometer
+
+    m = run.calibration.sensor("magnetometer")
+    assert m is not None
+    a = m.affine()
+    L = ["[[Magnetometer]]", *("    " + line for line in mag_lines(run.mag)),
+         f"[[Magnetometer apply map]]  h = A raw + c  ({m.model.output.unit}, the accelerometer's frame)"]
+    L += ["    " + " ".join(f"{v:+.9e}" for v in a.A[i]) + f"   | {a.c[i]:+.9e}" for i in range(3)]
+    return L
+
+
 def summary(run: CalibrationRun) -> dict:
     """The machine-readable summary of a run (``imucal calibrate --json``).
 
@@ -313,4 +328,13 @@ def summary(run: CalibrationRun) -> dict:
         "sensors": list(cal.sensors),
         "equation": cal.equation,
         **({"gyro": _gyro_json(run.gyro)} if run.gyro is not None else {}),
+        **({"mag": _mag_json(run)} if run.mag is not None else {}),
     }
+
+
+def _mag_json(run: CalibrationRun) -> dict:
+    """The magnetometer's parameters, standard errors and figures (its file section's numbers)."""
+    m = run.calibration.sensor("magnetometer")
+    assert m is not None
+    return {"model": m.model.name, "params": m.params.value_dict(),
+            "std": {n: (float(v) if math.isfinite(v) else None) for n, v in m.std.items()}, "fit": dict(m.fit)}

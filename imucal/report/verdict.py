@@ -142,9 +142,39 @@ def gyroscope_verdict(run: CalibrationRun) -> SensorVerdict:
     return SensorVerdict("gyroscope", checks, tuple(gyro_warnings(res)), summary, res.success)
 
 
+#: The field-norm residual after calibration passes when within this factor of its noise floor (the readings'
+#: noise propagated to |h|): more is soft iron or a disturbance the model does not hold.
+NORM_FLOOR_FACTOR = 2.0
+
+
+def magnetometer_verdict(run: CalibrationRun) -> SensorVerdict:
+    from imucal.report.mag import mag_warnings  # only a run with a magnetometer
+
+    cal = run.mag
+    assert cal is not None
+    n, d = cal.report.norm_pct, cal.report.dip_deg
+    steps = cal.steps
+    checks = [
+        Check("IPOPT converged", cal.fit.success, f"{cal.fit.status}; {cal.fit.iterations} iterations"),
+        Check("field-norm residual near the noise floor", n.after <= NORM_FLOOR_FACTOR * n.floor,
+              f"{n.after:.3g} % of the field rms after ({n.before:.3g} % before), noise floor {n.floor:.2g} %"),
+        Check("the field's magnitude steady between poses", None if steps is None else not steps.disturbed,
+              "not tested" if steps is None else
+              f"step test p = {steps.p:.3g}; {len(steps.outliers)} pose(s) standing out"),
+    ]
+    if d is not None:
+        checks.append(Check("the calibration steadies the dip angle", d.after <= d.before,
+                            f"dip scatter {d.after:.3g}° after, {d.before:.3g}° before (floor {d.floor:.2g}°)"))
+    summary = f"field-norm residual {n.after:.3g} % ({n.before:.3g} % before)" + (
+        f", dip scatter {d.after:.3g}° ({d.before:.3g}° before)" if d is not None else "")
+    return SensorVerdict("magnetometer", tuple(checks), tuple(mag_warnings(cal)), summary, cal.fit.success)
+
+
 def verdict(run: CalibrationRun) -> Verdict:
     """The verdict of every sensor the run calibrated."""
     sensors = [accelerometer_verdict(run)]
     if run.gyro is not None:
         sensors.append(gyroscope_verdict(run))
+    if run.mag is not None:
+        sensors.append(magnetometer_verdict(run))
     return Verdict(tuple(sensors))

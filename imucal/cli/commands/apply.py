@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
     from imucal.files.output import check_outputs, write_text_atomic
     from imucal.gyro.run import gyro_on_accel_samples
     from imucal.model.channels import covariate_values
-    from imucal.model.sensor import ACCELEROMETER, GYROSCOPE
+    from imucal.model.sensor import ACCELEROMETER, GYROSCOPE, MAGNETOMETER
 
     cfg = options.run_config(args, args.config)
     gyro_file = args.gyro_data or options.data_path(cfg, gyro=True)
@@ -74,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
     cal = load_calibration(args.calibration)
     rec = load_recording(cfg.data, cfg.base_dir)
     raw_g = None if cal.gyro is None else gyro_on_accel_samples(rec, None if gyro_file is None else str(gyro_file))
-    raws = {ACCELEROMETER: rec.raw, GYROSCOPE: raw_g}
+    raws = {ACCELEROMETER: rec.raw, GYROSCOPE: raw_g, MAGNETOMETER: rec.mag}
     # the covariates of every sensor the data hold (the gyroscope's bias(T) reads temp even when the
     # accelerometer's map does not)
     keys = tuple(dict.fromkeys([*cal.covariates, *(k for s in cal.attached if raws.get(s.kind) is not None
@@ -102,9 +102,10 @@ def run(args: argparse.Namespace) -> int:
     write_text_atomic(args.out, buf.getvalue())
     how = (f"the input's {rec.time_column} column as read ({rec.time_unit})" if rec.t_source is not None
            else "s from the first sample")
-    what = "[m/s^2] and angular rate [rad/s]" if raw_g is not None else "[m/s^2]"
-    note = ("; the calibration has a gyroscope but the data have none (gx, gy, gz or --gyro-data): "
-            "acceleration only" if cal.gyro is not None and raw_g is None else "")
+    what = " and ".join(f"{s.model.output.role.replace('_', ' ')} [{s.model.output.unit}]" for s in done)
+    lack = [s for s in cal.attached if s.kind not in out]
+    note = "".join(f"; the calibration has a {s.kind} but the data have none ({', '.join(s.model.channel.columns)}"
+                   f"{' or --gyro-data' if s.kind == GYROSCOPE else ''}): left out" for s in lack)
     rest = "; no still span: |a| at rest not checked" if chk is None else f"; {_rest_words(chk)}"
     print(f"wrote {rec.n} calibrated samples {what} to {args.out}; t is {how}{note}{rest}")
     return 0

@@ -17,6 +17,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     options.add_gravity_options(p)
     options.add_model_options(p, noise=True)
     options.add_gyro_options(p)
+    options.add_mag_options(p)
     p.add_argument("--out", help="output directory (default: config output.dir, else ./out)")
     p.add_argument("--json", help="also write a machine-readable summary to this file")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures (report.html then has none)")

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import re
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -18,7 +19,7 @@ from imucal.constants import GYRO_UNIT_CHOICES, TIME_UNIT_CHOICES
 from imucal.errors import ImucalError
 
 if TYPE_CHECKING:
-    from imucal.config.run import FitSettings, GravitySpec, GyroSettings, RunConfig
+    from imucal.config.run import FitSettings, GravitySpec, GyroSettings, MagConfig, RunConfig
 
 
 #: Suffixes of a YAML run file; any other file given where a run file or a recording may stand is a recording.
@@ -100,6 +101,44 @@ def add_gyro_options(p: argparse.ArgumentParser) -> None:
                         "when the poses' edges turn and the g-sensitivity found is modelled, else 0")
     g.add_argument("--gyro-free-bias", action="store_true",
                    help="also fit a gyro bias correction in the rotation fit (imu_tk's option)")
+
+
+def add_mag_options(p: argparse.ArgumentParser) -> None:
+    """The magnetometer fit's choices (the YAML mag: section)."""
+    g = p.add_argument_group("magnetometer (with mx, my, mz columns)")
+    g.add_argument("--mag-field", type=_mag_field, metavar="VALUE[UNIT]",
+                   help="the local field's magnitude, e.g. 48.2uT (the WMM/IGRF value for your place); a number "
+                        "alone is in the sensor's unit; default: fitted (the output then in the sensor's unit)")
+    g.add_argument("--mag-soft-iron", choices=("auto", "symmetric", "full"),
+                   help="soft iron: auto (default: full 3x3 when the dip's constancy shows a rotation), "
+                        "symmetric or full")
+
+
+#: --mag-field: a number and an optional unit (48.2uT, 48.2 uT, 0.482gauss)
+_MAG_FIELD = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([A-Za-z]*)\s*$")
+
+
+def _mag_field(text: str) -> tuple[float, str | None]:
+    m = _MAG_FIELD.match(text)
+    if m is None:
+        raise argparse.ArgumentTypeError(f"{text[:40]!r} is not a field magnitude such as 48.2uT")
+    return float(m.group(1)), m.group(2) or None
+
+
+def _mag(args: argparse.Namespace, cfg: RunConfig) -> MagConfig:
+    """cfg.mag with the --mag-* options given."""
+    over: dict = {}
+    if getattr(args, "mag_field", None) is not None:
+        over["field"], over["field_unit"] = args.mag_field
+    if getattr(args, "mag_soft_iron", None) is not None:
+        over["soft_iron"] = args.mag_soft_iron
+    if not over:
+        return cfg.mag
+    try:
+        return dataclasses.replace(cfg.mag, **over)
+    except ImucalError as exc:
+        raise ImucalError(exc.message, field="--mag-" + exc.field.split(".")[-1].replace("_", "-"),
+                          fix=exc.fix) from None
 
 
 def _lead_in(text: str) -> float | str:
@@ -192,7 +231,7 @@ def run_config(args: argparse.Namespace, config: str | None = None, data_overrid
     if getattr(args, "noise", None):
         fit = dataclasses.replace(fit, noise=str(resolve(args.noise, field="--noise")))
     grav = _gravity(args, cfg) if hasattr(args, "gravity") else cfg.gravity
-    return dataclasses.replace(cfg, data=data, gravity=grav, fit=fit, gyro=_gyro(args, cfg))
+    return dataclasses.replace(cfg, data=data, gravity=grav, fit=fit, gyro=_gyro(args, cfg), mag=_mag(args, cfg))
 
 
 def noise_path(cfg: RunConfig) -> Path | None:

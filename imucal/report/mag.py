@@ -1,0 +1,46 @@
+"""The magnetometer's results in words (issue 26): its warnings, lines of the text report. The values are
+typed in imucal.mag.result.MagCalibration; this module only renders them."""
+from __future__ import annotations
+
+import math
+
+from imucal.mag.result import MagCalibration
+
+
+def mag_warnings(cal: MagCalibration) -> list[str]:
+    """What the user must know about the magnetometer fit, one sentence each (as the accelerometer's)."""
+    out = []
+    if not cal.fit.success:
+        out.append(f"magnetometer: the solver stopped with {cal.fit.status}: check the fit before using it")
+    steps = cal.steps
+    if steps is not None and steps.step_after is not None:
+        out.append(f"magnetometer: the field's magnitude steps by {100 * steps.step:+.2g} % after pose "
+                   f"{steps.step_after + 1} (a disturbed environment: iron moved, a motor or a magnet near): "
+                   f"record again away from it")
+    if cal.excluded:
+        out.append(f"magnetometer: {len(cal.excluded)} pose(s) whose field stood out were left out of the fit "
+                   f"(samples {', '.join(f'{o.start}-{o.end}' for o in cal.excluded)})")
+    if cal.left_handed:
+        out.append("magnetometer: the fitted dip has the opposite sign of the field model's: one of its axes is "
+                   "probably inverted (a left-handed frame); check the axis signs")
+    if not cal.field_given:
+        out.append(f"magnetometer: the field's magnitude was fitted (its overall scale held): the calibrated "
+                   f"field is in the sensor's unit {cal.field_unit}; give mag.field (--mag-field) for a field unit")
+    return out
+
+
+def mag_lines(cal: MagCalibration) -> list[str]:
+    """The magnetometer's lines of the text report."""
+    r, p = cal.report, cal.params
+    out = [f"model: {cal.fit.model.name}",
+           f"hard iron: {', '.join(f'{v:.4g}' for v in (p['s1'].value, p['s2'].value, p['s3'].value))} "
+           f"{cal.raw_unit}",
+           f"field: {p['F'].value:.5g} {cal.field_unit} ({'given' if cal.field_given else 'fitted'})",
+           f"field-norm residual: {r.norm_pct.before:.3g} % before, {r.norm_pct.after:.3g} % after "
+           f"(noise floor {r.norm_pct.floor:.2g} %)"]
+    if r.dip_deg is not None:
+        out.append(f"dip scatter: {r.dip_deg.before:.3g} deg before, {r.dip_deg.after:.3g} deg after "
+                   f"(alignment {math.degrees(cal.misalignment):.3g} deg, soft iron "
+                   f"{'full 3x3' if cal.full_soft_iron else 'symmetric'})")
+    out.append(f"solver: {cal.fit.status}")
+    return out

@@ -1,0 +1,193 @@
+"""The magnetometer as the core's third sensor (issue 26): one description, and every output takes it from there.
+
+One simulated 9-axis log (imucal.mag.simulate: known hard iron, symmetric soft iron, the AK8963 mounting and a
+further 1.9 deg rotation) is calibrated once by the command line; the tests read its calibration file, its
+`apply` output and its generated C.
+"""
+from __future__ import annotations
+
+import ctypes
+import math
+
+import numpy as np
+import pytest
+import yaml
+
+from imucal.calibration.frozen import load_calibration
+from imucal.errors import ImucalError
+from imucal.mag.model import axes_code, build_mag_model, label_of, mag_model, permutation, vectorized
+from imucal.mag.simulate import simulate_mag, truth_from_soft_iron
+from imucal.model.registry import describe
+from imucal.model.sensor import MAGNETOMETER
+from imucal.solve.vectorize import apply_values
+
+AK8963 = (0, 1, 0, 1, 0, 0, 0, 0, -1)
+SOFT = np.array([[1.05, 0.03, -0.02], [0.03, 0.97, 0.01], [-0.02, 0.01, 1.01]])
+HARD = (10.0, -5.0, 3.0)  #: [raw]
+FIELD_UT = 48.0
+MISALIGNMENT_DEG = (1.0, -0.5, 1.5)
+#: The accelerometer's raw readings [g]: scales and offsets of a few per cent
+ACC_SCALE, ACC_SHIFT = np.array([1.02, 0.98, 1.01]), np.array([0.02, -0.01, 0.03])
+RATE = 100.0  #: [Hz]
+
+
+def write_log(path, seed: int = 1, columns=("t", "ax", "ay", "az", "mx", "my", "mz")) -> None:
+    """A 9-axis log: 24 still poses of 3 s with 1 s turns, the magnetometer in counts of a 1-uT-ish size."""
+    truth = truth_from_soft_iron(SOFT, s=HARD, field=FIELD_UT, axes=AK8963, misalignment=np.radians(MISALIGNMENT_DEG),
+                                 noise=0.1, acc_noise=0.002)
+    sim = simulate_mag(truth, n_poses=24, hold=300, transition=100, seed=seed)
+    data = {"t": np.arange(len(sim.acc)) / RATE}
+    acc = sim.acc * ACC_SCALE + ACC_SHIFT
+    data.update({c: acc[:, i] for i, c in enumerate(("ax", "ay", "az"))})
+    data.update({c: sim.mag[:, i] for i, c in enumerate(("mx", "my", "mz"))})
+    np.savetxt(path, np.column_stack([data[c] for c in columns]), delimiter=",", header=",".join(columns),
+               comments="", fmt="%.8g")
+
+
+@pytest.fixture(scope="module")
+def nine_axis(tmp_path_factory):
+    from imucal.cli.main import main
+
+    d = tmp_path_factory.mktemp("mag9")
+    write_log(d / "log.csv")
+    assert main(["calibrate", "--data", str(d / "log.csv"), "--mag-field", "48uT", "--out", str(d / "out"),
+                 "--no-figures", "--quiet"]) == 0
+    return d
+
+
+# --- the description -------------------------------------------------------------------------
+
+def test_the_description_is_named_by_its_mounting_and_field_unit_and_rebuilt_from_the_name():
+    m = build_mag_model(AK8963, "uT")
+    assert m.kind == MAGNETOMETER and m.name == "magnetometer-ellipsoid[axes=+y+x-z,field=uT]"
+    assert axes_code(AK8963) == "+y+x-z" and label_of(AK8963, "uT") == m.name
+    assert describe(MAGNETOMETER, m.name) is m and mag_model(m.name) is m
+    assert np.array_equal(permutation(m), np.array(AK8963, float).reshape(3, 3))
+    assert m.output.columns == ("mx", "my", "mz") and m.output.unit == "uT" and m.inputs == ()
+    assert m.evidence_covariates == ("evidence", "ax", "ay", "az")
+
+
+def test_apply_affine_and_generated_numpy_are_the_models_field_map():
+    rng = np.random.default_rng(4)
+    m = build_mag_model(AK8963, "uT")
+    p = np.array([0.3, -0.2, 0.1, 1.1, 0.9, 1.05, 1.62, 1.52, 1.6, 0.04, -0.07, 0.12, 48.0, -0.9])
+    raw = rng.normal(size=(20, 3)) * 40
+    want = np.asarray(vectorized(m, "field")(raw.T, p)[0]).T
+    assert np.allclose(apply_values(m, p, raw), want, rtol=0, atol=1e-12)
+    A, c, B = (np.asarray(v, float) for v in m.affine(p))
+    assert B.size == 0 and np.allclose(raw @ A.T + c.ravel(), want, rtol=0, atol=1e-11)
+
+
+def test_an_unknown_model_name_in_a_file_is_refused_in_one_line():
+    with pytest.raises(ImucalError) as e:
+        describe(MAGNETOMETER, "magnetometer-ellipsoid[axes=+x+x+z,field=uT]", MAGNETOMETER, "cal.yaml")
+    assert str(e.value).startswith("cal.yaml: magnetometer.model: ")
+    with pytest.raises(ImucalError, match="magnetometer.model: 'nonsense' is not a magnetometer model name"):
+        describe(MAGNETOMETER, "nonsense", MAGNETOMETER, "cal.yaml")
+
+
+# --- the run, the file, apply -------------------------------------------------------------------
+
+def test_calibrate_fits_the_magnetometer_and_the_file_holds_its_section(nine_axis):
+    doc = yaml.safe_load((nine_axis / "out" / "calibration.yaml").read_text())
+    sec = doc["magnetometer"]
+    assert doc["format_version"] == 3 and sec["kind"] == "magnetometer"
+    assert sec["model"] == "magnetometer-ellipsoid[axes=+y+x-z,field=uT]"  # the AK8963 mounting found
+    assert sec["units"] == {"input": "raw", "output": "uT"} and sec["inputs"] == []
+    f = sec["fit"]
+    assert f["norm_residual_pct"]["after"] < 1.5 * f["norm_residual_pct"]["floor"]
+    assert f["dip_scatter_deg"]["after"] < f["dip_scatter_deg"]["before"]
+    assert f["misalignment_deg"] == pytest.approx(np.linalg.norm(MISALIGNMENT_DEG), abs=0.1)
+    cal = load_calibration(nine_axis / "out" / "calibration.yaml")
+    m = cal.sensor(MAGNETOMETER)
+    assert cal.sensors == ("accelerometer", "magnetometer") and m is not None
+    for i, s in enumerate(HARD, 1):  # hard iron recovered within 5 standard errors
+        assert abs(m.params[f"s{i}"].value - s) < 5 * m.std[f"s{i}"]
+    assert m.params["F"].fixed and m.params["F"].value == FIELD_UT
+
+
+def test_the_file_round_trips_and_an_edited_apply_map_is_refused(nine_axis, tmp_path):
+    cal = load_calibration(nine_axis / "out" / "calibration.yaml")
+    cal.save(tmp_path / "again.yaml")
+    back = load_calibration(tmp_path / "again.yaml").sensor(MAGNETOMETER)
+    assert back is not None and back.params == cal.sensor(MAGNETOMETER).params
+    doc = yaml.safe_load((tmp_path / "again.yaml").read_text())
+    doc["magnetometer"]["apply"]["offset"][0] += 1.0
+    (tmp_path / "edited.yaml").write_text(yaml.safe_dump(doc))
+    with pytest.raises(ImucalError, match="magnetometer.apply.offset: does not match the parameters"):
+        load_calibration(tmp_path / "edited.yaml")
+
+
+def test_apply_writes_the_calibrated_field_beside_the_acceleration(nine_axis, run_cli):
+    out = nine_axis / "applied.csv"
+    r = run_cli(["apply", str(nine_axis / "out" / "calibration.yaml"), "--data", str(nine_axis / "log.csv"),
+                 "--out", str(out)])
+    assert r.code == 0 and "magnetic field [uT]" in r.out
+    head = out.read_text().splitlines()[0]
+    assert head == "t,ax,ay,az,mx,my,mz"
+    data = np.loadtxt(out, delimiter=",", skiprows=1)
+    h = data[:, 4:7]
+    assert np.sqrt(np.mean((np.linalg.norm(h, axis=1) / FIELD_UT - 1) ** 2)) < 0.005  # |h| = F within the noise
+    raw = np.loadtxt(nine_axis / "log.csv", delimiter=",", skiprows=1)[:, 4:7]
+    m = load_calibration(nine_axis / "out" / "calibration.yaml").sensor(MAGNETOMETER)
+    assert np.allclose(h, m.apply(raw), rtol=1e-8, atol=1e-6)
+
+
+def test_reports_carry_the_magnetometer(nine_axis):
+    html = (nine_axis / "out" / "report.html").read_text()
+    assert "Magnetometer" in html and "hard iron x" in html and "dip-angle scatter" in html
+    text = (nine_axis / "out" / "report.txt").read_text()
+    assert "[[Magnetometer]]" in text and "field-norm residual" in text
+
+
+# --- refusals -----------------------------------------------------------------------------------
+
+def test_mx_without_my_is_refused_in_one_line_and_nothing_is_written(tmp_path, run_cli, unchanged):
+    write_log(tmp_path / "log.csv", columns=("t", "ax", "ay", "az", "mx", "mz"))
+    with unchanged(tmp_path):
+        r = run_cli(["calibrate", "--data", str(tmp_path / "log.csv"), "--mag-field", "48uT", "--out",
+                     str(tmp_path / "out")])
+    assert r.code == 2 and r.err.count("\n") == 1 and r.err.startswith(f"imucal: error: {tmp_path / 'log.csv'}: ")
+    assert "my" in r.err
+
+
+def test_a_field_that_is_not_a_magnitude_is_refused_in_one_line(tmp_path, run_cli):
+    write_log(tmp_path / "log.csv")
+    r = run_cli(["calibrate", "--data", str(tmp_path / "log.csv"), "--mag-field", "-3uT", "--out",
+                 str(tmp_path / "out")])
+    assert r.code == 2 and r.err.count("\n") == 1 and "--mag-field" in r.err
+    assert not (tmp_path / "out").exists()
+
+
+# --- the C -----------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("precision", ["float", "double"])
+def test_generated_c_matches_python_within_the_a_priori_bound(nine_axis, tmp_path, precision):
+    from test_codegen import GCC, compile_shared
+
+    from imucal.export.codegen import write_c
+    from imucal.export.codegen_sensor import affine_float_error_bound
+
+    if GCC is None:
+        pytest.skip("gcc not found")
+    cal = load_calibration(nine_axis / "out" / "calibration.yaml")
+    m = cal.sensor(MAGNETOMETER)
+    write_c(cal, tmp_path, prefix="nine", precision=precision)
+    lib = compile_shared(tmp_path, "nine")
+    dtype = np.float32 if precision == "float" else np.float64
+    raw = np.loadtxt(nine_axis / "log.csv", delimiter=",", skiprows=1)[::7, 4:7]
+    raw = np.ascontiguousarray(raw.astype(dtype))
+    out = np.zeros_like(raw)
+    lib.nine_apply_mag_batch(ctypes.c_void_p(raw.ctypes.data), ctypes.c_void_p(out.ctypes.data), ctypes.c_size_t(raw.shape[0]))
+    ref = m.apply(raw.astype(float))
+    bound = affine_float_error_bound(m, raw.astype(float), None, precision) + 1e-12 * np.abs(ref)
+    assert np.all(np.abs(out - ref) <= bound)
+    ints = np.random.default_rng(5).integers(-32768, 32768, (500, 3)).astype(np.int16)
+    one = np.zeros(3, dtype)
+    for k in range(0, 500, 25):
+        v = (ctypes.c_int16 * 3)(*map(int, ints[k]))
+        lib.nine_apply_mag_i16(ctypes.byref(v), ctypes.c_void_p(one.ctypes.data))
+        want = m.apply(ints[k].astype(float))
+        assert np.all(np.abs(one - want) <= affine_float_error_bound(m, ints[k:k + 1].astype(float), None,
+                                                                     precision)[0] + 1e-12 * np.abs(want))
+    assert math.isfinite(float(np.max(np.abs(out - ref))))
