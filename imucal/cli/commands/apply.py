@@ -102,7 +102,8 @@ def run(args: argparse.Namespace) -> int:
     write_text_atomic(args.out, buf.getvalue())
     how = (f"the input's {rec.time_column} column as read ({rec.time_unit})" if rec.t_source is not None
            else "s from the first sample")
-    what = " and ".join(f"{s.model.output.role.replace('_', ' ')} [{s.model.output.unit}]" for s in done)
+    what = " and ".join((f"{s.model.output.role.replace('_', ' ')} " if k else "") + f"[{s.model.output.unit}]"
+                        for k, s in enumerate(done))  # the acceleration first, as the samples
     lack = [s for s in cal.attached if s.kind not in out]
     note = "".join(f"; the calibration has a {s.kind} but the data have none ({', '.join(s.model.channel.columns)}"
                    f"{' or --gyro-data' if s.kind == GYROSCOPE else ''}): left out" for s in lack)
