@@ -61,7 +61,8 @@ class CalibrationResult(CalibrationRun):
     @property
     def success(self) -> bool:
         """Every fit converged (exit status 0 of ``imucal calibrate``)."""
-        return self.result.success and (self.gyro is None or self.gyro.success)
+        return (self.result.success and (self.gyro is None or self.gyro.success)
+                and (self.mag is None or self.mag.fit.success))
 
     def report(self) -> str:
         """The text report, as ``imucal calibrate`` writes it into report.txt.
@@ -156,7 +157,8 @@ def _readings(values: Any, name: str, n: int | None = None) -> np.ndarray:
 def recording_from_arrays(acc: ArrayLike, t: Sequence[float] | np.ndarray | None = None,
                           temp: Sequence[float] | np.ndarray | None = None, fs: float | None = None,
                           unit: str = "raw", time_unit: str = "auto", name: str = "<arrays>", *,
-                          gyro: ArrayLike | None = None, gyro_unit: str = "raw") -> Recording:
+                          gyro: ArrayLike | None = None, gyro_unit: str = "raw", mag: ArrayLike | None = None
+                          ) -> Recording:
     """A recording built from arrays, checked as a file's would be.
 
     Args:
@@ -169,15 +171,17 @@ def recording_from_arrays(acc: ArrayLike, t: Sequence[float] | np.ndarray | None
         name: the recording's name in messages and reports.
         gyro: (N, 3) gyroscope readings on the same samples, or None.
         gyro_unit: the gyroscope's raw unit: raw (counts), deg/s or rad/s.
+        mag: (N, 3) magnetometer readings on the same samples, or None.
 
     Returns:
         The Recording the pipeline reads.
     """
     if getattr(acc, "columns", None) is not None:
-        acc, t, temp, gyro, _ = _frame_columns(acc, t, temp, gyro, None)
+        acc, t, temp, gyro, mag = _frame_columns(acc, t, temp, gyro, mag)
     raw = _readings(acc, "acc")
     n = raw.shape[0]
     rates = None if gyro is None else _readings(gyro, "gyro", n)
+    field = None if mag is None else _readings(mag, "mag", n)
     check_choice(gyro_unit, GYRO_UNIT_CHOICES, "gyro_unit", "gyro unit")
     DataSpec(path=name, sample_rate=fs, unit=unit, time_unit=time_unit)  # the same checks as a file
     if t is None:
@@ -197,7 +201,7 @@ def recording_from_arrays(acc: ArrayLike, t: Sequence[float] | np.ndarray | None
         raise ImucalError(f"temp must have {n} values, got shape {tc.shape}", field="temp")
     sha = hashlib.sha256(np.ascontiguousarray(raw).tobytes()).hexdigest()
     return Recording(t=tt, raw=raw, temp=tc, unit=unit, source=name, sha256=sha, t_source=stamps,
-                     time_unit=tu, time_note=note, time_base=tb, gyro=rates,
+                     time_unit=tu, time_note=note, time_base=tb, gyro=rates, mag=field,
                      gyro_unit="raw" if gyro_unit in ("auto", "counts") else gyro_unit)
 
 
@@ -220,6 +224,7 @@ def calibrate(acc: ArrayLike | RunConfig, gyro: ArrayLike | None = None, mag: Ar
               height: float = 0.0, unit: str = "raw", gyro_unit: str = "raw", time_unit: str = "auto",
               fix: Sequence[str] | Mapping[str, float] = (), fix_angles: bool = False, mode: str | None = None,
               weights: str | None = None, noise: str | os.PathLike[str] | None = None,
+              mag_field: float | None = None, mag_field_unit: str | None = None,
               config: RunConfig | None = None) -> CalibrationResult:
     """Calibrate an IMU from its readings, as ``imucal calibrate`` does from a file.
 
@@ -229,7 +234,8 @@ def calibrate(acc: ArrayLike | RunConfig, gyro: ArrayLike | None = None, mag: Ar
             RunConfig (the YAML's typed form: the file it names is calibrated, as the CLI does).
         gyro: (N, 3) gyroscope readings on the accelerometer's time base: the gyroscope is
             calibrated too, into the same calibration.
-        mag: (N, 3) magnetometer readings (not part of a calibration yet: refused in one line).
+        mag: (N, 3) magnetometer readings on the accelerometer's time base: the magnetometer is calibrated
+            too (hard and soft iron, the rotation to the accelerometer's frame), into the same calibration.
         t: N time stamps (unit inferred, or ``time_unit``); or give ``fs`` instead.
         temp: N temperatures [deg C], for temperature effects.
         fs: the sample rate [Hz] (without ``t``; beside it, checked against the stamps).
@@ -245,7 +251,10 @@ def calibrate(acc: ArrayLike | RunConfig, gyro: ArrayLike | None = None, mag: Ar
         weights: ``"auto"`` (default), ``"noise"`` or ``"uniform"`` (as imu_tk).
         noise: a noise file (``imucal noise --json`` output or a Kalibr imu.yaml) for the interval
             means' noise (imucal.analysis.noise_model), as ``--noise`` and ``fit.noise``.
-        config: a RunConfig whose settings (static detection, effects, gyro options) are used.
+        mag_field: the local field's magnitude (e.g. 48.2 with ``mag_field_unit="uT"``: the WMM/IGRF value for
+            the place); None: the ``config``'s ``mag:`` section, else fitted (the output in the sensor's unit).
+        mag_field_unit: the unit of ``mag_field`` (uT, nT, gauss, mG ...; None: the sensor's).
+        config: a RunConfig whose settings (static detection, effects, gyro and mag options) are used.
 
     Returns:
         A :class:`CalibrationResult`. Fit warnings are issued as :class:`imucal.errors.ImucalWarning`.
@@ -257,11 +266,7 @@ def calibrate(acc: ArrayLike | RunConfig, gyro: ArrayLike | None = None, mag: Ar
         return _finish(calibrate_imu(acc))
     if getattr(acc, "columns", None) is not None:
         acc, t, temp, gyro, mag = _frame_columns(acc, t, temp, gyro, mag)
-    if mag is not None:
-        raise ImucalError("magnetometer readings are not part of a calibration yet", field="mag",
-                          fix="calibrate the magnetometer with imucal.mag.calibrate.calibrate_mag(mag, acc), "
-                              "and the accelerometer and gyroscope here without mag=")
-    rec = recording_from_arrays(acc, t, temp, fs, unit, time_unit, gyro=gyro, gyro_unit=gyro_unit)
+    rec = recording_from_arrays(acc, t, temp, fs, unit, time_unit, gyro=gyro, gyro_unit=gyro_unit, mag=mag)
     base = config or config_from_dict({"data": {"path": rec.source}}, None)
     given: dict[str, Any] = {"data": {"path": rec.source, "unit": unit},
                              "fit": _fit_section(base, fix, fix_angles, mode, weights, noise)}
@@ -271,7 +276,13 @@ def calibrate(acc: ArrayLike | RunConfig, gyro: ArrayLike | None = None, mag: Ar
     cfg = config_from_dict(given, None)
     cfg = dataclasses.replace(base, data=cfg.data, fit=cfg.fit,
                               gravity=cfg.gravity if "gravity" in given else base.gravity)
-    log.info("calibrating %d samples (%s%s)", rec.n, "accelerometer", " and gyroscope" if gyro is not None else "")
+    if mag_field is not None or mag_field_unit is not None:  # checked as the YAML's mag: section is
+        field = {"field": mag_field, "field_unit": mag_field_unit}
+        cfg = dataclasses.replace(cfg, mag=config_from_dict({"data": {"path": rec.source}, "mag": {
+            **{k: v for k, v in dataclasses.asdict(base.mag).items() if v is not None},
+            **{k: v for k, v in field.items() if v is not None}}}, None).mag)
+    log.info("calibrating %d samples (%s%s%s)", rec.n, "accelerometer", " and gyroscope" if gyro is not None else "",
+             " and magnetometer" if mag is not None else "")
     return _finish(calibrate_imu(cfg, rec))
 
 

@@ -97,7 +97,8 @@ def test_gyro_arrays_take_their_unit(xsens):
 
 
 @pytest.mark.parametrize("kw, field, msg", [
-    ({"mag": np.zeros((5, 3))}, "mag", "magnetometer readings are not part of a calibration yet"),
+    ({"mag": np.zeros((5, 3))}, "mag", "mag has 5 rows, acc has 51175"),
+    ({"mag": np.zeros((51175, 3)), "mag_field": -1.0}, "mag.field", "field -1.0 is not a field magnitude"),
     ({"gyro": np.zeros((7, 3))}, "gyro", "gyro has 7 rows, acc has 51175"),
     ({"gyro": np.zeros((51175, 2))}, "gyro", "gyro must be an (N, 3) array"),
     ({"gyro_unit": "rpm"}, "gyro_unit", "unknown gyro unit 'rpm'"),
@@ -159,3 +160,16 @@ def test_one_function_is_called_calibrate():
              for node in ast.walk(ast.parse(p.read_text(encoding="utf-8")))
              if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and node.name == "calibrate"]
     assert found == ["imucal/api.py"]
+
+
+def test_mag_arrays_calibrate_the_magnetometer_into_the_same_calibration(tmp_path):
+    """``mag=`` beside ``acc`` (issue 26): the magnetometer fitted in the accelerometer's frame, the field given."""
+    from test_mag_plugin import FIELD_UT, write_log
+
+    write_log(tmp_path / "log.csv")
+    d = np.loadtxt(tmp_path / "log.csv", delimiter=",", skiprows=1)
+    res = imucal.calibrate(d[:, 1:4], mag=d[:, 4:7], t=d[:, 0], mag_field=FIELD_UT, mag_field_unit="uT")
+    assert res.calibration.sensors == ("accelerometer", "magnetometer") and res.success
+    h = res.calibration.apply_all({"accelerometer": d[:, 1:4], "magnetometer": d[:, 4:7]})["magnetometer"]
+    assert np.sqrt(np.mean((np.linalg.norm(h, axis=1) / FIELD_UT - 1) ** 2)) < 0.005
+    assert res.summary()["mag"]["fit"]["dip_scatter_deg"]["after"] < 0.1

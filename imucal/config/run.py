@@ -181,6 +181,8 @@ class GyroSettings:
 
 
 MAG_SOFT_IRON = ("auto", "symmetric", "full")
+#: A unit's name as a magnetometer's model name can carry it (imucal.mag.model.LABEL_PATTERN)
+MAG_UNIT = re.compile(r"[A-Za-z0-9_/^.()*-]{1,32}\Z")
 
 
 @dataclass(frozen=True)
@@ -194,6 +196,8 @@ class MagConfig:
     dip_deg: float | None = field(default=None, metadata=rule(
         msg="dip_deg {value} is not an angle in degrees", ge=-90, le=90, fix="the angle between field and gravity's plane"))
     soft_iron: str = field(default="auto", metadata=rule(msg="soft_iron {value} is not text"))
+    #: the readings' unit: raw (counts), or a field unit (uT, gauss, mG, nT: what the autopilots' exports need)
+    unit: str = field(default="raw", metadata=rule(msg="unit {value} is not text"))
     window: int = field(default=25, metadata=rule(msg="window {value} is not a count of samples", ge=4, le=100000))
     lag: float | None = field(default=None, metadata=rule(
         msg="lag {value} is not a number of samples", ge=-10000, le=10000, fix="the magnetometer's delay in samples"))
@@ -209,6 +213,10 @@ class MagConfig:
 
     def __post_init__(self) -> None:
         check_choice(self.soft_iron, MAG_SOFT_IRON, "mag.soft_iron", "soft iron choice")
+        for name, unit in (("unit", self.unit), ("field_unit", self.field_unit)):
+            if unit is not None and not (isinstance(unit, str) and MAG_UNIT.match(unit)):
+                raise ImucalError(f"{name} {short(unit)} is not a unit name", field=f"mag.{name}",
+                                  fix="e.g. uT, gauss, mG, nT, or raw for counts")
         if self.field is not None and not (_is_real(self.field) and self.field > 0):
             raise ImucalError(f"field {short(self.field)} is not a field magnitude", field="mag.field",
                               fix="the local field's magnitude, e.g. 48.2 with field_unit: uT")

@@ -53,7 +53,7 @@ from imucal.errors import ImucalError, short
 from imucal.export.escape import ardupilot_comment, free_text, hash_comment
 from imucal.export.formats import ExportOptions, Exported, affine, dropped_effects
 from imucal.export.gyro import OffsetFit, offset_fit
-from imucal.export import tempcal
+from imucal.export import mag_autopilot, tempcal
 from imucal.export.peers import AffineCalibration, ThermalOffset, _text_number, checked, checked_gyro
 from imucal.files.inputs import read_input_text
 
@@ -272,14 +272,16 @@ def to_ardupilot(cal: Calibration, opts: ExportOptions) -> Exported:
     """An ArduPilot parameter file (NAME,VALUE lines, as Mission Planner and MAVProxy load)."""
     fit = diagonal_fit(cal)
     c = reading_factor(cal, fit, "ArduPilot")
-    notes = _notes(cal, fit, "ArduPilot", "INS_ACCOFFS and INS_ACCSCAL", c)
+    mag_head, mag_values, mag_notes = mag_autopilot.ardupilot(cal)  # the magnetometer's part, when it has one
+    notes = _notes(cal, fit, "ArduPilot", "INS_ACCOFFS and INS_ACCSCAL", c) + mag_notes
     lines = _header(cal, "ArduPilot accelerometer" + (" and gyroscope" if cal.gyro else "") + " calibration", [
         "ArduPilot corrects each axis in the sensor frame (AP_InertialSensor_Backend.cpp,",
         "_rotate_and_correct_accel): a = (raw - INS_ACCOFFS) * INS_ACCSCAL, then rotates to the body.",
         _offset_formula(cal, "INS_ACCOFFS", "INS_ACCSCAL", c),
         *_gyro_header(cal, gyro_fit(cal), "INS_GYROFFS", "_rotate_and_correct_gyro: omega = reading - INS_GYROFFS, "
-                      "reading = raw / k")], notes, ardupilot_comment)
-    lines += [f"{n},{v!r}" for n, v in _values(cal, fit, ARDUPILOT_OFFSETS + ARDUPILOT_SCALES, ARDUPILOT_GYRO, c)]
+                      "reading = raw / k"), *mag_head], notes, ardupilot_comment)
+    lines += [f"{n},{v!r}" for n, v in [*_values(cal, fit, ARDUPILOT_OFFSETS + ARDUPILOT_SCALES, ARDUPILOT_GYRO, c),
+                                        *mag_values]]
     return Exported("\n".join(lines) + "\n", notes)
 
 
@@ -287,7 +289,8 @@ def to_px4(cal: Calibration, opts: ExportOptions) -> Exported:
     """A QGroundControl parameter file (vehicle, component, name, value, type; tab separated)."""
     fit = diagonal_fit(cal)
     c = reading_factor(cal, fit, "PX4")
-    notes = _notes(cal, fit, "PX4", "CAL_ACC0_*OFF and CAL_ACC0_*SCALE", c) + (
+    mag_head, mag_values, mag_notes = mag_autopilot.px4(cal)  # the magnetometer's part, when it has one
+    notes = _notes(cal, fit, "PX4", "CAL_ACC0_*OFF and CAL_ACC0_*SCALE", c) + mag_notes + (
         "set CAL_ACC0_ID" + (" and CAL_GYRO0_ID" if cal.gyro else "") + " to your sensors' device ids (PX4 uses a "
         "calibration only for its device)",)
     lines = _header(cal, "PX4 accelerometer" + (" and gyroscope" if cal.gyro else "")
@@ -296,10 +299,11 @@ def to_px4(cal: Calibration, opts: ExportOptions) -> Exported:
         "Correct()): a = rotation * ((raw - thermal_offset - CAL_ACC0_*OFF) .* CAL_ACC0_*SCALE).",
         _offset_formula(cal, "CAL_ACC0_*OFF", "CAL_ACC0_*SCALE", c),
         *_gyro_header(cal, gyro_fit(cal), "CAL_GYRO0_*OFF", "Gyroscope.hpp Correct(): omega = rotation * (reading - "
-                      "thermal_offset - CAL_GYRO0_*OFF), reading = raw / k")], notes, lambda t: [hash_comment(t)])
+                      "thermal_offset - CAL_GYRO0_*OFF), reading = raw / k"), *mag_head], notes,
+                    lambda t: [hash_comment(t)])
     lines.append("# Vehicle-Id\tComponent-Id\tName\tValue\tType")  # fixed text: QGroundControl's header
     lines += [f"1\t1\t{n}\t{v!r}\t{MAV_PARAM_TYPE_INT32 if isinstance(v, int) else MAV_PARAM_TYPE_REAL32}"
-              for n, v in _values(cal, fit, PX4_OFFSETS + PX4_SCALES, PX4_GYRO, c)]
+              for n, v in [*_values(cal, fit, PX4_OFFSETS + PX4_SCALES, PX4_GYRO, c), *mag_values]]
     return Exported("\n".join(lines) + "\n", notes)
 
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from imucal.errors import ImucalError
 from imucal.mag.evidence import MagRows
-from imucal.mag.model import DIP, NORM, SKEW_KINDS, vectorized
+from imucal.mag.model import DIP, NORM, SIZE, SKEW_KINDS, vectorized
 from imucal.model.sensor import SensorModel
 from imucal.model.parameters import Parameters
 from imucal.solve import ipopt
@@ -28,6 +28,10 @@ from imucal.solve.f_test import f_sf
 from imucal.solve.covariance import unscaled_covariance
 from imucal.solve.fit import solve_scaled
 
+#: Kinds of constraint rows: their noise is CONSTRAINT_SIGMA (imucal.mag.model), never floored.
+CONSTRAINT_KINDS = (SIZE, *SKEW_KINDS)
+#: A measurement row's noise is at least this fraction of its kind's median (a sample on a quantisation step).
+NOISE_FLOOR = 1e-3
 #: Passes of the fit, the variance components refreshed between them (they settle in two).
 PASSES = 3
 #: Kinds whose noise is scaled by their own reduced chi-square.
@@ -87,8 +91,15 @@ def row_noise(model: SensorModel, rows: MagRows, p: np.ndarray) -> np.ndarray:
         sl = slice(s, s + lsq.BLOCK)
         out[sl] = f(rows.raw[sl].T, rows.cov[sl].T, p, rows.target[sl][None, :], rows.var_raw[sl].T,
                     rows.var_acc[sl].T)[0][0]
-    floor = max(float(np.median(out[out > 0])) * 1e-3 if np.any(out > 0) else 1e-12, 1e-12)
-    return np.maximum(out, floor)
+    # a floor per kind of measurement (a row whose noise vanishes would weigh without bound), in its own unit;
+    # the constraint rows keep CONSTRAINT_SIGMA (a floor taken across kinds, in the field's unit, loosened them)
+    for k in np.unique(rows.kind):
+        m = rows.kind == k
+        if int(k) in CONSTRAINT_KINDS:
+            continue
+        pos = out[m][out[m] > 0]
+        out[m] = np.maximum(out[m], max(float(np.median(pos)) * NOISE_FLOOR if pos.size else 1e-12, 1e-12))
+    return out
 
 
 def batch_inflation(z: np.ndarray, batches: int = BATCHES) -> float:

@@ -94,7 +94,8 @@ class MagCalibration:
 
     @property
     def full_soft_iron(self) -> bool:
-        return self.soft_iron is not None and self.soft_iron.full
+        """The chosen fit is the full 3x3 soft iron (by the test, or as the settings asked)."""
+        return self.symmetric is not None and self.fit is not self.symmetric
 
     @property
     def misalignment(self) -> float:

@@ -38,11 +38,11 @@ def settings_of(cfg: MagConfig) -> MagSettings:
 
 
 def mag_of_run(mag: np.ndarray, acc: np.ndarray, start: np.ndarray, end: np.ndarray, cfg: MagConfig,
-               raw_unit: str = "raw", source: str | None = None) -> MagCalibration:
+               source: str | None = None) -> MagCalibration:
     """The magnetometer's calibration from its readings, the calibrated acceleration of the same samples and
     the accelerometer's still intervals [start, end)."""
     still = Poses(np.asarray(start, int), np.asarray(end, int), "still intervals")
-    return calibrate_mag(mag, acc, still=still, settings=settings_of(cfg), raw_unit=raw_unit, source=source)
+    return calibrate_mag(mag, acc, still=still, settings=settings_of(cfg), raw_unit=cfg.unit, source=source)
 
 
 def fit_section(cal: MagCalibration) -> dict[str, Any]:

@@ -109,6 +109,8 @@ def add_mag_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--mag-field", type=_mag_field, metavar="VALUE[UNIT]",
                    help="the local field's magnitude, e.g. 48.2uT (the WMM/IGRF value for your place); a number "
                         "alone is in the sensor's unit; default: fitted (the output then in the sensor's unit)")
+    g.add_argument("--mag-unit", metavar="UNIT",
+                   help="the magnetometer readings' unit: raw (default: counts) or a field unit (uT, gauss, mG, nT)")
     g.add_argument("--mag-soft-iron", choices=("auto", "symmetric", "full"),
                    help="soft iron: auto (default: full 3x3 when the dip's constancy shows a rotation), "
                         "symmetric or full")
@@ -132,6 +134,8 @@ def _mag(args: argparse.Namespace, cfg: RunConfig) -> MagConfig:
         over["field"], over["field_unit"] = args.mag_field
     if getattr(args, "mag_soft_iron", None) is not None:
         over["soft_iron"] = args.mag_soft_iron
+    if getattr(args, "mag_unit", None) is not None:
+        over["unit"] = args.mag_unit
     if not over:
         return cfg.mag
     try:
