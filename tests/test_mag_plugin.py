@@ -191,3 +191,30 @@ def test_generated_c_matches_python_within_the_a_priori_bound(nine_axis, tmp_pat
         assert np.all(np.abs(one - want) <= affine_float_error_bound(m, ints[k:k + 1].astype(float), None,
                                                                      precision)[0] + 1e-12 * np.abs(want))
     assert math.isfinite(float(np.max(np.abs(out - ref))))
+
+
+def test_batch_calibrates_the_magnetometer_of_every_unit(tmp_path, run_cli):
+    for k in (1, 2):
+        write_log(tmp_path / f"U{k}.csv", seed=k)
+    (tmp_path / "units.yaml").write_text("units:\n  - {id: U1, data: U1.csv}\n  - {id: U2, data: U2.csv}\n"
+                                         "settings:\n  mag: {field: 48.0, field_unit: uT}\n")
+    r = run_cli(["batch", str(tmp_path / "units.yaml"), "--out", str(tmp_path / "fleet"), "--workers", "1",
+                 "--no-figures"])
+    assert r.code == 0, r.err
+    for k in (1, 2):
+        m = load_calibration(tmp_path / "fleet" / f"U{k}" / "calibration.yaml").sensor(MAGNETOMETER)
+        assert m is not None and m.model.output.unit == "uT" and m.params["F"].value == FIELD_UT
+
+
+def test_the_symmetric_soft_iron_is_symmetric_whatever_the_field_unit():
+    """The SKEW rows hold P^T A symmetric to their 1e-6 for a field of 48 uT as for one of 0.5 gauss (a noise floor
+    taken across kinds of rows, in the field's unit, once loosened them to 1e-4)."""
+    from imucal.mag.calibrate import MagSettings, calibrate_mag
+
+    truth = truth_from_soft_iron(SOFT, s=HARD, field=FIELD_UT, axes=AK8963, misalignment=np.radians(MISALIGNMENT_DEG),
+                                 noise=0.1, acc_noise=0.002)
+    sim = simulate_mag(truth, n_poses=20, hold=60, transition=30, seed=2)
+    cal = calibrate_mag(sim.mag, sim.acc, still=sim.holds, settings=MagSettings(field=FIELD_UT, soft_iron="symmetric"))
+    M = permutation(cal.fit.model).T @ cal.linear_map()[0]
+    assert not cal.full_soft_iron and np.max(np.abs(M - M.T)) < 1e-5 * np.trace(M) / 3
+    assert math.degrees(cal.misalignment) < 1e-3
