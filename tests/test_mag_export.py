@@ -74,7 +74,8 @@ def test_px4_correct_on_the_file_gives_imucals_field(symmetric, run_cli):
     S = _symmetric([float(v[f"CAL_MAG0_{a}SCALE"]) for a in "XYZ"], [float(v[f"CAL_MAG0_{a}ODIAG"]) for a in "XYZ"])
     R = rotation_matrix(ROTATIONS[int(v["CAL_MAG0_ROT"])])
     raw, h = _raw_and_imucal(symmetric)
-    px4 = ((raw * GAUSS_PER_UT - off) @ S.T) @ R.T  # Magnetometer.hpp Correct(): _rotation * (_scale * (data - _offset))
+    # Magnetometer.hpp Correct(): _rotation * (_scale * (data - _offset))
+    px4 = ((raw * GAUSS_PER_UT - off) @ S.T) @ R.T
     assert np.max(np.abs(px4 - h * GAUSS_PER_UT)) < AGREE * FIELD_UT * GAUSS_PER_UT
 
 

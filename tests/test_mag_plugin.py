@@ -178,7 +178,8 @@ def test_generated_c_matches_python_within_the_a_priori_bound(nine_axis, tmp_pat
     raw = np.loadtxt(nine_axis / "log.csv", delimiter=",", skiprows=1)[::7, 4:7]
     raw = np.ascontiguousarray(raw.astype(dtype))
     out = np.zeros_like(raw)
-    lib.nine_apply_mag_batch(ctypes.c_void_p(raw.ctypes.data), ctypes.c_void_p(out.ctypes.data), ctypes.c_size_t(raw.shape[0]))
+    lib.nine_apply_mag_batch(ctypes.c_void_p(raw.ctypes.data), ctypes.c_void_p(out.ctypes.data),
+                             ctypes.c_size_t(raw.shape[0]))
     ref = m.apply(raw.astype(float))
     bound = affine_float_error_bound(m, raw.astype(float), None, precision) + 1e-12 * np.abs(ref)
     assert np.all(np.abs(out - ref) <= bound)

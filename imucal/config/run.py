@@ -194,7 +194,8 @@ class MagConfig:
 
     field_unit: str | None = field(default=None, metadata=rule(msg="field_unit {value} is not text"))
     dip_deg: float | None = field(default=None, metadata=rule(
-        msg="dip_deg {value} is not an angle in degrees", ge=-90, le=90, fix="the angle between field and gravity's plane"))
+        msg="dip_deg {value} is not an angle in degrees", ge=-90, le=90,
+        fix="the angle between field and gravity's plane"))
     soft_iron: str = field(default="auto", metadata=rule(msg="soft_iron {value} is not text"))
     #: the readings' unit: raw (counts), or a field unit (uT, gauss, mG, nT: what the autopilots' exports need)
     unit: str = field(default="raw", metadata=rule(msg="unit {value} is not text"))
@@ -209,7 +210,8 @@ class MagConfig:
     date: str | None = field(default=None, metadata=rule(msg="date {value} is not a date such as 2024-05-17"))
     #: last: the name shadows dataclasses.field in the class body
     field: float | None = field(default=None, metadata=rule(
-        msg="field {value} is not a field magnitude", gt=0, fix="the local field's magnitude, e.g. 48.2 with field_unit: uT"))
+        msg="field {value} is not a field magnitude", gt=0,
+        fix="the local field's magnitude, e.g. 48.2 with field_unit: uT"))
 
     def __post_init__(self) -> None:
         check_choice(self.soft_iron, MAG_SOFT_IRON, "mag.soft_iron", "soft iron choice")

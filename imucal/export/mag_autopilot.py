@@ -89,8 +89,9 @@ def _to_ut(unit: str, what: str, fmt: str) -> float:
 
     if unit not in FIELD_UNITS:
         raise ImucalError(f"the magnetometer's {what} unit {unit!r} is not a field unit", field=f"magnetometer.units",
-                          fix=f"{fmt} applies its numbers to a field in {'milligauss' if fmt == 'ArduPilot' else 'gauss'}:"
-                              f" calibrate readings given in uT, gauss or mG (mag.unit) with the field given (--mag-field)")
+                          fix=f"{fmt} applies its numbers to a field in "
+                              f"{'milligauss' if fmt == 'ArduPilot' else 'gauss'}: calibrate readings given in uT, "
+                              f"gauss or mG (mag.unit) with the field given (--mag-field)")
     return FIELD_UNITS[unit]
 
 

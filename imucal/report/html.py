@@ -207,8 +207,8 @@ def _magnetometer_html(run: CalibrationRun) -> str:
     rows = [[esc(n), num(p.value, ".10g"), "fixed" if p.fixed else num(m.std.get(n, math.nan), ".4g"), esc(p.unit)]
             for n, p in m.params.items()]
     r = cal.report
-    fig = [["field-norm residual [% of the field, rms]", num(r.norm_pct.before, ".3g"), "", num(r.norm_pct.after, ".3g"),
-            num(r.norm_pct.floor, ".2g")]]
+    fig = [["field-norm residual [% of the field, rms]", num(r.norm_pct.before, ".3g"), "",
+            num(r.norm_pct.after, ".3g"), num(r.norm_pct.floor, ".2g")]]
     if r.dip_deg is not None:
         fig.append(["dip-angle scatter [deg, std over poses]", num(r.dip_deg.before, ".3g"),
                     num(r.dip_deg.unaligned, ".3g"), num(r.dip_deg.after, ".3g"), num(r.dip_deg.floor, ".2g")])
@@ -222,7 +222,8 @@ def _magnetometer_html(run: CalibrationRun) -> str:
         table_html(["figure", "before", "hard and soft iron only", "after (aligned)", "noise floor"], fig,
                    [False, True, True, True, True]),
         f"<p class=\"meta\">Model {esc(m.model.name)}; soft iron {'full 3x3' if cal.full_soft_iron else 'symmetric'};"
-        f" alignment beyond the mounting {math.degrees(cal.misalignment):.3g}°; field {'given' if cal.field_given else 'fitted'}"
+        f" alignment beyond the mounting {math.degrees(cal.misalignment):.3g}°;"
+        f" field {'given' if cal.field_given else 'fitted'}"
         f"; {len(r.poses)} poses; IPOPT {esc(cal.fit.status)}, {cal.fit.iterations} iterations.</p>",
         "<h3>Fitted parameters</h3>",
         table_html(["parameter", "value", "standard error", "unit"], rows, [False, True, True, False]),
