@@ -15,7 +15,7 @@ import yaml
 
 from imucal.calibration.frozen import load_calibration
 from imucal.errors import ImucalError
-from imucal.mag.model import axes_code, build_mag_model, label_of, mag_model, permutation, vectorized
+from imucal.mag.model import axes_code, build_mag_model, described, label_of, permutation, vectorized
 from imucal.mag.simulate import simulate_mag, truth_from_soft_iron
 from imucal.model.registry import describe
 from imucal.model.sensor import MAGNETOMETER
@@ -61,7 +61,7 @@ def test_the_description_is_named_by_its_mounting_and_field_unit_and_rebuilt_fro
     m = build_mag_model(AK8963, "uT")
     assert m.kind == MAGNETOMETER and m.name == "magnetometer-ellipsoid[axes=+y+x-z,field=uT]"
     assert axes_code(AK8963) == "+y+x-z" and label_of(AK8963, "uT") == m.name
-    assert describe(MAGNETOMETER, m.name) is m and mag_model(m.name) is m
+    assert describe(MAGNETOMETER, m.name) is m and described(m.name) is m
     assert np.array_equal(permutation(m), np.array(AK8963, float).reshape(3, 3))
     assert m.output.columns == ("mx", "my", "mz") and m.output.unit == "uT" and m.inputs == ()
     assert m.evidence_covariates == ("evidence", "ax", "ay", "az")
@@ -81,8 +81,8 @@ def test_apply_affine_and_generated_numpy_are_the_models_field_map():
 def test_an_unknown_model_name_in_a_file_is_refused_in_one_line():
     with pytest.raises(ImucalError) as e:
         describe(MAGNETOMETER, "magnetometer-ellipsoid[axes=+x+x+z,field=uT]", MAGNETOMETER, "cal.yaml")
-    assert str(e.value).startswith("cal.yaml: magnetometer.model: ")
-    with pytest.raises(ImucalError, match="magnetometer.model: 'nonsense' is not a magnetometer model name"):
+    assert str(e.value).startswith("cal.yaml: magnetometer.model: model 'magnetometer-ellipsoid[axes=+x+x+z,")
+    with pytest.raises(ImucalError, match="magnetometer.model: model 'nonsense' is not this imucal's magnetometer"):
         describe(MAGNETOMETER, "nonsense", MAGNETOMETER, "cal.yaml")
 
 
