@@ -135,7 +135,7 @@ def test_apply_writes_the_calibrated_field_beside_the_acceleration(nine_axis, ru
 
 def test_reports_carry_the_magnetometer(nine_axis):
     html = (nine_axis / "out" / "report.html").read_text()
-    assert "Magnetometer" in html and "hard iron x" in html and "dip-angle scatter" in html
+    assert "Magnetometer" in html and "hard iron x" in html and "dip-angle scatter" in html and "Per pose" in html
     text = (nine_axis / "out" / "report.txt").read_text()
     assert "[[Magnetometer]]" in text and "field-norm residual" in text
 

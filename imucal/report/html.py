@@ -215,6 +215,10 @@ def _magnetometer_html(run: CalibrationRun) -> str:
     aff = m.affine()
     apply_rows = [[f"h<sub>{'xyz'[i]}</sub>"] + [num(v, "+.9e") for v in aff.A[i]] + [num(aff.c[i], "+.9e")]
                   for i in range(3)]
+    per_pose = [[str(k + 1), f"{q.start}–{q.end}", num(q.norm_before_pct, "+.3g"), num(q.norm_after_pct, "+.3g"),
+                 *(num(v, "+.3g") if v is not None else "" for v in (q.dip_before_deg, q.dip_unaligned_deg,
+                                                                      q.dip_after_deg))]
+                for k, q in enumerate(r.poses)]
     out = m.model.output.unit
     return "\n".join([
         _datasheet_html(datasheet(run.calibration)["magnetometer"]), DATASHEET_NOTE,
@@ -227,6 +231,11 @@ def _magnetometer_html(run: CalibrationRun) -> str:
         f"; {len(r.poses)} poses; IPOPT {esc(cal.fit.status)}, {cal.fit.iterations} iterations.</p>",
         "<h3>Fitted parameters</h3>",
         table_html(["parameter", "value", "standard error", "unit"], rows, [False, True, True, False]),
+        "<h3>Per pose</h3>",
+        "<p>|h| − F in % of the field (before: |raw| against its mean), and the dip minus its mean or fitted "
+        "value [deg], as read, with the hard and soft iron only, and aligned.</p>",
+        table_html(["pose", "samples", "norm before", "norm after", "dip before", "dip hard/soft only",
+                    "dip after"], per_pose, [False, False] + [True] * 5),
         "<h3>Apply map</h3>",
         f"<p>h = A raw + c, with h in {esc(out)} in the accelerometer's frame, raw in {esc(m.raw_unit)}.</p>",
         table_html(["", "A[:, x]", "A[:, y]", "A[:, z]", f"c [{esc(out)}]"], apply_rows, [False] + [True] * 4)])
