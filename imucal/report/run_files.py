@@ -42,8 +42,9 @@ class RunFiles:
 
     @property
     def success(self) -> bool:
-        """Both fits converged (exit status 0 of `imucal calibrate`)."""
-        return self.run.result.success and (self.gyro is None or self.gyro.success)
+        """Every fit converged (exit status 0 of `imucal calibrate`)."""
+        return (self.run.result.success and (self.gyro is None or self.gyro.success)
+                and (self.run.mag is None or self.run.mag.fit.success))
 
 
 def output_paths(out: Path, figures: bool) -> list[Path]:

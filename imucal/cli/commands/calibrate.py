@@ -75,7 +75,13 @@ def run(args: argparse.Namespace) -> int:
         from imucal.report.gyro import gyro_report
 
         print(gyro_report(gyro))
-    print(f"wrote {out / 'calibration.yaml'}" + (" (accelerometer and gyroscope)" if gyro else "")
+    if result.mag is not None and not args.quiet:
+        from imucal.report.mag import mag_lines
+
+        print("\n".join(["magnetometer calibration", *("  " + line for line in mag_lines(result.mag))]))
+    kinds = result.calibration.sensors
+    held = f" ({', '.join(kinds[:-1])} and {kinds[-1]})" if len(kinds) > 1 else ""
+    print(f"wrote {out / 'calibration.yaml'}" + held
           + f", {out / 'report.txt'}, {out / 'report.html'}"
           + (", figures" if figures else "") + (f", {args.json}" if args.json else ""))
     return 0 if files.success else 1  # EXIT_NOT_CONVERGED: the files say which fit
