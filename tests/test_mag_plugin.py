@@ -219,3 +219,19 @@ def test_the_symmetric_soft_iron_is_symmetric_whatever_the_field_unit():
     M = permutation(cal.fit.model).T @ cal.linear_map()[0]
     assert not cal.full_soft_iron and np.max(np.abs(M - M.T)) < 1e-5 * np.trace(M) / 3
     assert math.degrees(cal.misalignment) < 1e-3
+
+
+def test_a_magnetometer_whose_field_never_turns_is_refused_naming_what_to_record(tmp_path, run_cli, unchanged):
+    """The observability check through the command line: one line naming what the directions leave undetermined
+    and what to record, exit 2, nothing written (the accelerometer's part is not written either)."""
+    write_log(tmp_path / "log.csv")
+    d = np.loadtxt(tmp_path / "log.csv", delimiter=",", skiprows=1)
+    d[:, 4:7] = np.array([20.0, 5.0, -40.0]) + np.random.default_rng(0).normal(0, 0.1, (len(d), 3))
+    np.savetxt(tmp_path / "log.csv", d, delimiter=",", header="t,ax,ay,az,mx,my,mz", comments="", fmt="%.8g")
+    with unchanged(tmp_path):
+        r = run_cli(["calibrate", "--data", str(tmp_path / "log.csv"), "--mag-field", "48uT", "--out",
+                     str(tmp_path / "out")])
+    assert r.code == 2 and r.err.count("\n") == 1
+    assert r.err.startswith(f"imucal: error: {tmp_path / 'log.csv'}: mx, my, mz: the field's directions ")
+    assert "undetermined (fix: turn the sensor through more orientations, the field along every axis both ways)" \
+        in r.err
