@@ -205,6 +205,10 @@ def test_batch_calibrates_the_magnetometer_of_every_unit(tmp_path, run_cli):
     for k in (1, 2):
         m = load_calibration(tmp_path / "fleet" / f"U{k}" / "calibration.yaml").sensor(MAGNETOMETER)
         assert m is not None and m.model.output.unit == "uT" and m.params["F"].value == FIELD_UT
+    import csv
+
+    rows = list(csv.DictReader((tmp_path / "fleet" / "fleet.csv").open()))
+    assert all(float(r["mag_norm_residual_pct"]) < 0.5 and float(r["mag_dip_scatter_deg"]) < 0.1 for r in rows)
 
 
 def test_the_symmetric_soft_iron_is_symmetric_whatever_the_field_unit():

@@ -83,7 +83,21 @@ def _row(rec: dict) -> dict:
                redchi=s["redchi"], n_intervals=s["n_intervals"], raw_unit=s["raw_unit"])
     for e in s.get("effects", []):
         row.update(e["coefficients"])
+    row.update(_mag_columns(s.get("mag")))
     return row
+
+
+def _mag_columns(mag: dict | None) -> dict:
+    """A unit's magnetometer (its summary's ``mag``, imucal.report.text): the hard iron [raw], the field-norm
+    residual after [% of the field], the dip scatter after [deg] and the rotation beyond the mounting [deg]."""
+    if not mag:
+        return {}
+    f = mag["fit"]
+    out = {f"mag_s{i}": mag["params"][f"s{i}"] for i in (1, 2, 3)}
+    out["mag_norm_residual_pct"] = f["norm_residual_pct"]["after"]
+    out["mag_dip_scatter_deg"] = f.get("dip_scatter_deg", {}).get("after")
+    out["mag_misalignment_deg"] = f["misalignment_deg"]
+    return out
 
 
 def _tolerance_misses(row: dict, tol: Tolerances) -> list[str]:
