@@ -239,3 +239,18 @@ def test_a_magnetometer_whose_field_never_turns_is_refused_naming_what_to_record
     assert r.err.startswith(f"imucal: error: {tmp_path / 'log.csv'}: mx, my, mz: the field's directions ")
     assert "undetermined (fix: turn the sensor through more orientations, the field along every axis both ways)" \
         in r.err
+
+
+def test_a_field_that_steps_and_a_pose_far_off_are_named_in_the_warnings():
+    """The typed FieldSteps and excluded poses rendered to words in report/ (imucal.report.mag.mag_warnings)."""
+    from imucal.mag.calibrate import MagSettings, calibrate_mag
+    from imucal.report.mag import mag_warnings
+
+    truth = truth_from_soft_iron(SOFT, axes=AK8963, misalignment=np.radians(MISALIGNMENT_DEG))
+    sim = simulate_mag(truth, n_poses=24, seed=11, disturbed={k: 1.04 for k in range(14, 24)})
+    words = mag_warnings(calibrate_mag(sim.mag, sim.acc, still=sim.holds, settings=MagSettings(field=truth.field)))
+    step = [w for w in words if w.startswith("magnetometer: the field's magnitude steps by +")]
+    assert len(step) == 1 and "% after pose 14 (a disturbed environment" in step[0]
+    one = simulate_mag(truth, n_poses=24, seed=11, disturbed={7: 1.06})
+    cal = calibrate_mag(one.mag, one.acc, still=one.holds, settings=MagSettings(field=truth.field))
+    assert any("pose(s) whose field stood out were left out of the fit" in w for w in mag_warnings(cal))

@@ -11,7 +11,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Write calibrated acceleration [m/s^2] in the Theorem's orthonormal "
                                    "frame for every sample: the input's time column exactly as it was "
                                    "(name, unit, origin), then ax, ay, az; with a calibrated gyroscope "
-                                   "and gyro data, also gx, gy, gz [rad/s] in the same frame.")
+                                   "and gyro data, also gx, gy, gz [rad/s] in the same frame; with a "
+                                   "calibrated magnetometer and mx, my, mz data, also mx, my, mz (the "
+                                   "field's unit).")
     p.add_argument("calibration", help="calibration.yaml written by `imucal calibrate`")
     p.add_argument("--config", help="YAML run file: reuse its data section (columns, units, path)")
     options.add_data_options(p, gyro=True)
