@@ -459,7 +459,7 @@ def main(argv: list[str] | None = None) -> int:
     rows_path = Path(a.out).with_suffix(".rows.json")  # every case's row: the page re-rendered without a rerun
     if a.rows:
         saved = json.loads(Path(a.rows).read_text())
-        rows, wall = saved["rows"], saved["wall"]
+        rows, wall, a.jobs = saved["rows"], saved["wall"], saved.get("jobs", a.jobs)
         for r in rows:  # (JSON wrote the penalties and prices keying these as strings)
             for k in ("genie_by_penalty", "genie_by_tau"):
                 r[k] = {float(x): v for x, v in r.get(k, {}).items()}
@@ -472,7 +472,8 @@ def main(argv: list[str] | None = None) -> int:
                 step()
         rows.sort(key=lambda r: r["seed"])
         wall = time.perf_counter() - t0
-        write_text_atomic(rows_path, json.dumps({"command": a.command, "wall": wall, "rows": rows}, default=_plain))
+        write_text_atomic(rows_path, json.dumps({"command": a.command, "wall": wall, "jobs": a.jobs, "rows": rows},
+                                                  default=_plain))
     text = report(rows, a, wall)
     write_text_atomic(a.out, text)
     print(text)
@@ -654,7 +655,7 @@ def summary_block(rows: list[dict], a: argparse.Namespace) -> list[str]:
 def report(rows: list[dict], a: argparse.Namespace, wall: float) -> str:
     L = ["# Discover: detection rate, smallest detectable effect, false positives", "",
          f"Measured by `python studies/discover_study.py{a.command}` ({len(rows)} seeded cases, {wall / 60:.1f} min "
-         f"wall time on {a.jobs} processes, first seed {a.seed}; terms: {', '.join(a.terms)}; noise "
+         f"wall time on {a.jobs} process{'es' if a.jobs != 1 else ''}, first seed {a.seed}; terms: {', '.join(a.terms)}; noise "
          f"{', '.join(f'{n:g}' for n in a.noise)} mg; SNR {', '.join(f'{s:g}' for s in a.snr)}; {a.cases} cases per cell, "
          f"{a.clean} clean cases and {a.pairs} pairs per SNR {', '.join(f'{s:g}' for s in a.pair_snr)} per noise level). "
          "Each case: a random sensor (raw counts with "
