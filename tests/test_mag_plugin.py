@@ -254,3 +254,19 @@ def test_a_field_that_steps_and_a_pose_far_off_are_named_in_the_warnings():
     one = simulate_mag(truth, n_poses=24, seed=11, disturbed={7: 1.06})
     cal = calibrate_mag(one.mag, one.acc, still=one.holds, settings=MagSettings(field=truth.field))
     assert any("pose(s) whose field stood out were left out of the fit" in w for w in mag_warnings(cal))
+
+
+def test_a_large_file_with_magnetometer_columns_is_read_whole(tmp_path, monkeypatch, run_cli):
+    """The magnetometer's fit reads every sample, which a file read in chunks does not keep: auto reads a large
+    9-axis file whole (as one with a gyroscope), and --stream always is refused in one line naming it."""
+    import imucal.data.load as load_mod
+    from imucal.data.load import other_sensors, use_stream
+    from imucal.data.spec import DataSpec
+
+    write_log(tmp_path / "log.csv")
+    monkeypatch.setattr(load_mod, "STREAM_BYTES", 1000)
+    spec = DataSpec(path=str(tmp_path / "log.csv"))
+    assert other_sensors(spec) == ("magnetometer",) and not use_stream(spec)
+    r = run_cli(["calibrate", "--data", str(tmp_path / "log.csv"), "--out", str(tmp_path / "o"), "--stream", "always"])
+    assert r.code == 2 and "--stream: has magnetometer data, which reading in chunks does not keep" in r.err
+    assert not (tmp_path / "o").exists()

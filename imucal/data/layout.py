@@ -62,6 +62,10 @@ class Layout:
     def has_gyro(self) -> bool:
         return "gx" in self.roles
 
+    @property
+    def has_mag(self) -> bool:
+        return "mx" in self.roles
+
 
 def _no_header_layout(ncol: int, path: Path) -> dict[str, int]:
     """Column roles of a file without header and without a mapping."""

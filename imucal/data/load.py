@@ -60,7 +60,16 @@ def use_stream(spec: DataSpec, base_dir: str | os.PathLike | None = None) -> boo
             return False
     except OSError:
         return False  # the loader names the problem
-    return not has_gyro(spec, base_dir)  # the gyroscope fit needs every sample
+    return not other_sensors(spec, base_dir)  # the gyroscope's and the magnetometer's fits need every sample
+
+
+def other_sensors(spec: DataSpec, base_dir: str | os.PathLike | None = None) -> tuple[str, ...]:
+    """The sensors beside the accelerometer a recording holds (their fits read every sample, which a file read
+    in chunks does not keep): the gyroscope (a second file, or gx gy gz), the magnetometer (mx my mz)."""
+    if spec.gyro_path is not None:
+        return ("gyroscope",)
+    lay = head_layout(spec, resolve_path(spec, base_dir))
+    return tuple(k for k, has in (("gyroscope", lay.has_gyro), ("magnetometer", lay.has_mag)) if has)
 
 
 def has_gyro(spec: DataSpec, base_dir: str | os.PathLike | None = None) -> bool:

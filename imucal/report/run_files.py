@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from imucal.config.run import RunConfig
-from imucal.data.load import has_gyro, use_stream
+from imucal.data.load import other_sensors, use_stream
 from imucal.errors import ImucalError
 from imucal.files.output import OutputSet
 from imucal.pipeline import CalibrationRun, calibrate_imu
@@ -54,9 +54,12 @@ def output_paths(out: Path, figures: bool) -> list[Path]:
 
 def calibrate_files(config: RunConfig, gyro_file: str | Path | None = None) -> RunFiles:
     """Fit ``config``'s recording (and its gyroscope) and build the report and summary."""
-    if use_stream(config.data, config.base_dir) and (gyro_file is not None or has_gyro(config.data, config.base_dir)):
-        raise ImucalError("has gyroscope data, which reading in chunks does not keep", file=config.data.path,
-                          field="--stream", fix="give --stream never (data.stream: never) to read it whole")
+    if use_stream(config.data, config.base_dir):
+        others = ("gyroscope",) if gyro_file is not None else other_sensors(config.data, config.base_dir)
+        if others:
+            raise ImucalError(f"has {' and '.join(others)} data, which reading in chunks does not keep",
+                              file=config.data.path, field="--stream",
+                              fix="give --stream never (data.stream: never) to read it whole")
     run = calibrate_imu(config, gyro_file=None if gyro_file is None else str(gyro_file))
     return RunFiles(run=run, text=fit_report(run), summary=summary(run))
 
