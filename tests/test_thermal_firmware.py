@@ -68,35 +68,39 @@ def _export(cli, cal: Path, fmt: str, tmp: Path) -> dict[str, float]:
     return {p[2]: float(p[3]) for p in (ln.split("\t") for ln in rows)}
 
 
-def ardupilot(p: dict[str, float], raw: np.ndarray, temp: np.ndarray) -> np.ndarray:
+def ardupilot(p: dict[str, float], raw: np.ndarray, temp: np.ndarray, sensor: str = "ACC") -> np.ndarray:
+    """AP_InertialSensor_TCal's correction of ``sensor`` (ACC, GYR) as its float32 code does it, then the
+    offsets (and the accelerometer's scales)."""
     lo, hi = F(p["INS_TCAL1_TMIN"]), F(p["INS_TCAL1_TMAX"])
-    c = [np.array([p[f"INS_TCAL1_ACC{k}_{a}"] for a in "XYZ"], F) for k in (1, 2, 3)]
+    c = [np.array([p[f"INS_TCAL1_{sensor}{k}_{a}"] for a in "XYZ"], F) for k in (1, 2, 3)]
 
     def P(x):  # polynomial_eval
         x = F(x)
         return (c[0] + (c[1] + c[2] * x) * x) * x * F(1.0e-6)
 
+    cal_t = np.clip(F(p[f"INS_{sensor}1_CALTEMP"]), lo, hi)
+    off = np.array([p[f"INS_{sensor}OFFS_{a}" if sensor == "ACC" else f"INS_GYROFFS_{a}"] for a in "XYZ"], F)
+    scale = np.array([p[f"INS_ACCSCAL_{a}"] for a in "XYZ"], F) if sensor == "ACC" else np.ones(3, F)
     out = np.empty(raw.shape, F)
-    cal_t = np.clip(F(p["INS_ACC1_CALTEMP"]), lo, hi)
-    off = np.array([p[f"INS_ACCOFFS_{a}"] for a in "XYZ"], F)
-    scale = np.array([p[f"INS_ACCSCAL_{a}"] for a in "XYZ"], F)
     for k, (v, T) in enumerate(zip(raw.astype(F), temp.astype(F))):
         v = v - P(np.clip(T, lo, hi) - F(35.0)) + P(cal_t - F(35.0))  # correct_sensor
         out[k] = (v - off) * scale
     return out.astype(float)
 
 
-def px4(p: dict[str, float], raw: np.ndarray, temp: np.ndarray) -> np.ndarray:
-    tmin, tmax, tref = F(p["TC_A0_TMIN"]), F(p["TC_A0_TMAX"]), F(p["TC_A0_TREF"])
-    x = [np.array([p[f"TC_A0_X{k}_{i}"] for i in range(3)], F) for k in range(4)]
-    off = np.array([p[f"CAL_ACC0_{a}OFF"] for a in "XYZ"], F)
-    scale = np.array([p[f"CAL_ACC0_{a}SCALE"] for a in "XYZ"], F)
+def px4(p: dict[str, float], raw: np.ndarray, temp: np.ndarray, sensor: str = "A") -> np.ndarray:
+    """PX4's TemperatureCompensation of ``sensor`` (A, G) as its float32 code does it, then the offsets (and the
+    accelerometer's scales)."""
+    tmin, tmax, tref = F(p[f"TC_{sensor}0_TMIN"]), F(p[f"TC_{sensor}0_TMAX"]), F(p[f"TC_{sensor}0_TREF"])
+    x = [np.array([p[f"TC_{sensor}0_X{k}_{i}"] for i in range(3)], F) for k in range(4)]
+    cal = "CAL_ACC0" if sensor == "A" else "CAL_GYRO0"
+    off = np.array([p[f"{cal}_{a}OFF"] for a in "XYZ"], F)
+    scale = np.array([p[f"{cal}_{a}SCALE"] for a in "XYZ"], F) if sensor == "A" else np.ones(3, F)
     out = np.empty(raw.shape, F)
     for k, (v, T) in enumerate(zip(raw.astype(F), temp.astype(F))):
         dT = (tmax - tref) if T > tmax else ((tmin - tref) if T < tmin else (T - tref))
         dT2 = dT * dT
-        dT3 = dT2 * dT
-        o = x[0] + x[1] * dT + x[2] * dT2 + x[3] * dT3  # calc_thermal_offsets_3D
+        o = x[0] + x[1] * dT + x[2] * dT2 + x[3] * dT2 * dT  # calc_thermal_offsets_3D
         out[k] = (v - o - off) * scale
     return out.astype(float)
 

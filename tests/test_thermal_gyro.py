@@ -24,6 +24,7 @@ import pytest
 import yaml
 
 from test_thermal import MG, NOMINAL, sweep
+from test_thermal_firmware import _export, ardupilot, px4
 from imucal.analysis.discover import discover
 from imucal.calibration.frozen import load_calibration
 from imucal.config.run import config_from_dict
@@ -145,46 +146,6 @@ def test_the_file_loads_back_to_the_same_map_and_a_bad_term_name_is_refused(cal_
     assert not (tmp_path / "c").exists()
 
 
-def _export(cli, cal: Path, fmt: str, tmp: Path) -> dict[str, float]:
-    out = tmp / f"{fmt}.param"
-    r = cli(["export", cal, "--format", fmt, "--out", out])
-    assert r.code == 0, r.err
-    rows = [ln for ln in out.read_text().splitlines() if ln.strip() and not ln.startswith("#")]
-    if fmt == "ardupilot":
-        return {a: float(b) for a, b in (ln.split(",")[:2] for ln in rows)}
-    return {p[2]: float(p[3]) for p in (ln.split("\t") for ln in rows)}
-
-
-def ardupilot(p: dict[str, float], raw: np.ndarray, temp: np.ndarray) -> np.ndarray:
-    lo, hi = F(p["INS_TCAL1_TMIN"]), F(p["INS_TCAL1_TMAX"])
-    c = [np.array([p[f"INS_TCAL1_GYR{k}_{a}"] for a in "XYZ"], F) for k in (1, 2, 3)]
-
-    def P(x):  # polynomial_eval
-        x = F(x)
-        return (c[0] + (c[1] + c[2] * x) * x) * x * F(1.0e-6)
-
-    cal_t = np.clip(F(p["INS_GYR1_CALTEMP"]), lo, hi)
-    off = np.array([p[f"INS_GYROFFS_{a}"] for a in "XYZ"], F)
-    out = np.empty(raw.shape, F)
-    for k, (v, T) in enumerate(zip(raw.astype(F), temp.astype(F))):
-        v = v - P(np.clip(T, lo, hi) - F(35.0)) + P(cal_t - F(35.0))  # correct_sensor
-        out[k] = v - off
-    return out.astype(float)
-
-
-def px4(p: dict[str, float], raw: np.ndarray, temp: np.ndarray) -> np.ndarray:
-    tmin, tmax, tref = F(p["TC_G0_TMIN"]), F(p["TC_G0_TMAX"]), F(p["TC_G0_TREF"])
-    x = [np.array([p[f"TC_G0_X{k}_{i}"] for i in range(3)], F) for k in range(4)]
-    off = np.array([p[f"CAL_GYRO0_{a}OFF"] for a in "XYZ"], F)
-    out = np.empty(raw.shape, F)
-    for k, (v, T) in enumerate(zip(raw.astype(F), temp.astype(F))):
-        dT = (tmax - tref) if T > tmax else ((tmin - tref) if T < tmin else (T - tref))
-        dT2 = dT * dT
-        o = x[0] + x[1] * dT + x[2] * dT2 + x[3] * dT2 * dT  # calc_thermal_offsets_3D
-        out[k] = v - o - off
-    return out.astype(float)
-
-
 @pytest.mark.parametrize("fmt", ["ardupilot", "px4"])
 def test_the_autopilots_gyro_formula_gives_what_apply_gives(cal_path, run_cli, tmp_path, fmt):
     """Inside the range the firmware's own polynomial equals apply to float precision; outside it the firmware
@@ -196,7 +157,7 @@ def test_the_autopilots_gyro_formula_gives_what_apply_gives(cal_path, run_cli, t
     lo, hi = (params["INS_TCAL1_TMIN"], params["INS_TCAL1_TMAX"]) if fmt == "ardupilot" else \
         (params["TC_G0_TMIN"], params["TC_G0_TMAX"])
     assert (lo, hi) == pytest.approx(tuple(load_calibration(cal_path).gyro.fit["temperature_range"]), abs=1e-9)
-    firmware = (ardupilot if fmt == "ardupilot" else px4)(params, raw, temp)
+    firmware = ardupilot(params, raw, temp, "GYR") if fmt == "ardupilot" else px4(params, raw, temp, "G")
     ref = _apply(run_cli, cal_path, raw, np.clip(temp, lo, hi), tmp_path)
     assert np.abs(firmware - ref).max() < 1e-6  # float32 on readings of 0.5 rad/s
     inside = (temp > lo) & (temp < hi)
