@@ -20,7 +20,7 @@ import datetime as _dt
 import math
 import os
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Literal, Mapping
+from typing import Any, Literal, Mapping
 
 import numpy as np
 
@@ -38,8 +38,9 @@ from imucal.model.geometry import gram_det_np
 from imucal.model.channels import TEMPERATURE, TIME
 from imucal.model.parameters import ANGLE_NAMES, BASE_NAMES, Parameter, Parameters, model_label
 
-if TYPE_CHECKING:
-    from imucal.calibration.frozen import Calibration
+#: imucal.calibration.frozen.Calibration, which builds, saves and loads itself through this module: named here,
+#: not imported, so the two modules import in one direction only (tests/test_imports.py)
+Calibration = Any
 
 
 FORMAT = "imucal-calibration"
@@ -61,7 +62,7 @@ OUTPUT_FRAME = ("orthonormal frame f of the Theorem: f1 along sensor axis x, f2 
                 "axes x and y, f3 = f1 x f2")
 
 
-def to_dict(cal: "Calibration") -> dict[str, Any]:
+def to_dict(cal: Calibration) -> dict[str, Any]:
     """The file's mapping for ``cal`` (what ``save`` writes)."""
     A, c = cal.linear_map()
     return {
@@ -84,7 +85,7 @@ def to_dict(cal: "Calibration") -> dict[str, Any]:
     }
 
 
-def save(cal: "Calibration", path: str | os.PathLike) -> None:
+def save(cal: Calibration, path: str | os.PathLike) -> None:
     """Write ``cal`` atomically (never a partial file)."""
     write_text_atomic(path, dump_yaml(to_dict(cal), sort_keys=False, width=100))
 
@@ -201,7 +202,7 @@ def read_mapping(d: Mapping[str, Any], path: str = "<calibration>") -> FileConte
     return FileContent(values, f.model, f.apply)
 
 
-def check_built(cal: "Calibration", content: FileContent, path: str = "<calibration>") -> None:
+def check_built(cal: Calibration, content: FileContent, path: str = "<calibration>") -> None:
     """The checks of a calibration built from a file: its text fields, parameter names, bounds and
     fit numbers, and the model label and apply map the file derived (a hand edit is refused)."""
     check_text_fields(cal, path)
@@ -217,7 +218,7 @@ def read_file(path: str | os.PathLike) -> Any:
     return read_yaml(path, "calibration", "pass the calibration.yaml written by `imucal calibrate`")
 
 
-def _check_parameter_names(cal: "Calibration", path: str) -> None:
+def _check_parameter_names(cal: Calibration, path: str) -> None:
     """The parameters must be exactly the model's (base + each effect's)."""
     names = tuple(cal.params.names)
     if cal.effects:
@@ -258,7 +259,7 @@ def _attached(f: CalibrationFile, path: str) -> tuple[SensorCalibration, ...]:
     return tuple(from_section(k, f.sections[k], path) for k in want[1:])
 
 
-def check_text_fields(cal: "Calibration", path: str = "<calibration>") -> None:
+def check_text_fields(cal: Calibration, path: str = "<calibration>") -> None:
     """Refuse text that does not look like what it claims to be (dates as ISO 8601 dates, units,
     versions, names, SHA-256 digests). These fields reach generated C and reports."""
     def bad(field_: str, value: Any, what: str, fix: str) -> ImucalError:
@@ -292,7 +293,7 @@ def check_text_fields(cal: "Calibration", path: str = "<calibration>") -> None:
         raise bad("data.file", name, "a file name", regen)
 
 
-def _check_model_name(model: Any, cal: "Calibration", path: str) -> None:
+def _check_model_name(model: Any, cal: Calibration, path: str) -> None:
     """``model:`` must name this model: the label (nakov-ivanov-6 ...) or the plain model name."""
     if model is None:
         return
@@ -305,7 +306,7 @@ def _check_model_name(model: Any, cal: "Calibration", path: str) -> None:
                           field="model", fix="regenerate the file with `imucal calibrate`")
 
 
-def _check_derived(apply: Any, cal: "Calibration", path: str) -> None:
+def _check_derived(apply: Any, cal: Calibration, path: str) -> None:
     """apply.matrix / apply.offset are derived from the parameters: an edit of either is refused
     (the parameters are what imucal applies, so a disagreement means the file was altered)."""
     if apply is None:
@@ -333,7 +334,7 @@ def _check_derived(apply: Any, cal: "Calibration", path: str) -> None:
                               f"{dev / ref if ref else math.inf:.3g})", file=path, field=f"apply.{key}", fix=fix)
 
 
-def _check_bounds(cal: "Calibration", path: str) -> None:
+def _check_bounds(cal: Calibration, path: str) -> None:
     """Every value within the file's own bounds, and an effect's within the model's (a warm-up's tau
     in [1, 1e5] s, a scale coefficient that keeps the scale positive): a value outside them was never
     fitted, and the apply map or the generated C would return NaN or inf with it."""

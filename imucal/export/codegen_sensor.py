@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 import textwrap
-from typing import TYPE_CHECKING, Mapping
+from typing import Any, Mapping
 
 import numpy as np
 
@@ -24,8 +24,10 @@ from imucal.calibration.sensor import SensorCalibration
 from imucal.constants import SI_ACCEL_UNIT
 from imucal.model.channels import ACCELERATION, COVARIATES
 
-if TYPE_CHECKING:
-    from imucal.export.codegen import Kernel, _Context
+#: imucal.export.codegen's _Context (the run's settings) and Kernel (a CasADi function as C statements): named
+#: here, not imported, so codegen imports this module and not the other way round (tests/test_imports.py)
+Context = Any
+Kernel = Any
 
 UNIT_ROUNDOFF = {"float": 2.0**-24, "double": 2.0**-53}
 
@@ -114,7 +116,7 @@ def _fit_text(fit: Mapping) -> str:
     return "; ".join(out)
 
 
-def doc(c: "_Context", s: SensorCalibration, k: "Kernel") -> list[str]:
+def doc(c: Context, s: SensorCalibration, k: Kernel) -> list[str]:
     """Header comment lines: its model, values with standard errors, units, frame, error bound and cost."""
     t = c.text
     n, p, real = names(s), c.prefix, c.real
@@ -163,12 +165,12 @@ def doc(c: "_Context", s: SensorCalibration, k: "Kernel") -> list[str]:
     ]
 
 
-def _unread(s: SensorCalibration, k: "Kernel") -> list[str]:
+def _unread(s: SensorCalibration, k: Kernel) -> list[str]:
     """The input arrays (acc, cov) its emitted function never reads (exact zeros dropped)."""
     return [src for src, _ in sources(s) if not any(r.startswith({"acc": "f", "cov": "c"}[src]) for r in k.reads)]
 
 
-def _args(c: "_Context", s: SensorCalibration, real: str, const: bool = True) -> str:
+def _args(c: Context, s: SensorCalibration, real: str, const: bool = True) -> str:
     """The input arguments of its apply after raw: one array per source."""
     q = "const " if const else ""
     out = []
@@ -177,7 +179,7 @@ def _args(c: "_Context", s: SensorCalibration, real: str, const: bool = True) ->
     return "".join(", " + a for a in out)
 
 
-def declarations(c: "_Context", s: SensorCalibration, k: "Kernel") -> list[str]:
+def declarations(c: Context, s: SensorCalibration, k: Kernel) -> list[str]:
     n, p, P, real = names(s), c.prefix, c.P, c.real
     unit = c.text(s.raw_unit)
     uses_acc = any(r.startswith("f") for r in k.reads)
@@ -208,7 +210,7 @@ def _batch_args(s: SensorCalibration, real: str) -> str:
     return "".join(f", const {real} *{src}" for src, _ in sources(s))
 
 
-def source(c: "_Context", s: SensorCalibration, k: "Kernel") -> list[str]:
+def source(c: Context, s: SensorCalibration, k: Kernel) -> list[str]:
     n, p, real = names(s), c.prefix, c.real
     loc = n["local"]
     reads = [f"{loc}{i} = {n['raw']}[{i}]" for i in range(3) if f"{loc}{i}" in k.reads]
@@ -251,7 +253,7 @@ def _lists(real: str, sensors: tuple[SensorCalibration, ...], itype: str | None 
             "out_at": "".join(f", {x['out']} + 3 * i" for x in nm)}
 
 
-def imu_declarations(c: "_Context", sensors: tuple[SensorCalibration, ...]) -> list[str]:
+def imu_declarations(c: Context, sensors: tuple[SensorCalibration, ...]) -> list[str]:
     """NAME_apply_imu: every sensor of one sample, the accelerometer first."""
     p, P, real = c.prefix, c.P, c.real
     L = _lists(real, sensors)
@@ -273,7 +275,7 @@ def imu_declarations(c: "_Context", sensors: tuple[SensorCalibration, ...]) -> l
     return out + [""]
 
 
-def imu_source(c: "_Context", sensors: tuple[SensorCalibration, ...]) -> list[str]:
+def imu_source(c: Context, sensors: tuple[SensorCalibration, ...]) -> list[str]:
     p, P, real = c.prefix, c.P, c.real
     nm = [names(s) for s in sensors]
     L = _lists(real, sensors)
