@@ -24,7 +24,7 @@ from imucal.solve.observability import Observability, analyse, distinct_directio
 from imucal.constants import RIGHT_ANGLE
 from imucal.model.parameters import ANGLE_NAMES, BASE_NAMES, Parameters, base_parameters
 from imucal.data.static import Intervals, detect_static
-from imucal.solve.misfit import excess_residuals  # one rule for every sensor's fit
+from imucal.solve.misfit import POOR_FIT_P, excess_residuals  # one rule for every sensor's fit
 from imucal.report.misfit import excess_words
 from imucal.model.effects_registry import effects_from_specs
 from imucal.model.effects import EFFECTS, check_given, fit_to_data, given_names, prepare_parameters
@@ -255,9 +255,10 @@ def sample_residuals(cal: Calibration, model: SensorModel, samples: StaticSample
     return np.linalg.norm(cal.apply(samples.raw, covs), axis=1) - gravity
 
 
-def read_intervals(config: RunConfig, recording: Recording | None = None
+def read_intervals(config: RunConfig, recording: Recording | None = None, least: int = 2
                    ) -> tuple[Recording | RecordingSummary, Intervals, StreamedRecording | None]:
-    """The recording (or its streamed summary) and its static intervals; refuses too few of them."""
+    """The recording (or its streamed summary) and its static intervals; refuses fewer than ``least`` (2 for
+    a fit; 0 for an accelerometer taken from fit.base, whose intervals are only a check)."""
     declared = config.data.declared_rails
     streamed: StreamedRecording | None = None
     if recording is None and use_stream(config.data, config.base_dir):  # bounded memory (imucal.data.stream)
@@ -270,6 +271,8 @@ def read_intervals(config: RunConfig, recording: Recording | None = None
         rec = recording if recording is not None else load_recording(config.data, config.base_dir)
         iv = detect_static(rec.t, rec.raw, config.static, rec.temp, source=rec.source, rails=declared)
     dropped = iv.meta.get("dropped", [])
+    if iv.n >= least:
+        return rec, iv, streamed
     if iv.n < 2:
         from imucal.data.unit_hint import unit_hint  # measured start-up: only a run that finds too few poses
 
@@ -412,6 +415,8 @@ def calibrate_accelerometer(config: RunConfig, recording: Recording | None = Non
     the file ``config.data`` names): read -> detect -> guess -> fit -> result -> calibration.
     ``held``: parameters of the model (effect coefficients and their references) held at these
     values, determined by other evidence (a temperature sweep's poses, imucal.thermal.run)."""
+    if config.fit.takes_base and not held:
+        return taken_from_base(config, recording)
     rec, iv, streamed = read_intervals(config, recording)
     dropped = iv.meta.get("dropped", [])
     gravity, gsource = config.gravity.resolve()
@@ -448,6 +453,88 @@ def calibrate_accelerometer(config: RunConfig, recording: Recording | None = Non
     return CalibrationRun(config=config, recording=rec, intervals=iv, guess=pb.guess, observability=pb.obs,
                           result=res, calibration=cal, directions=directions, sample_residuals=samp_res,
                           gravity_source=gsource)
+
+
+def _base_check(params: Parameters, std: Mapping[str, float], model: SensorModel, means: FitData, gravity: float
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """|a| - g of each still interval's mean at the base's values [m/s^2], and its expected spread: the mean's
+    noise and the base's standard errors (their correlations are not in the file: taken as none), both
+    propagated to first order through the model's own rows (imucal.solve.least_squares)."""
+    from imucal.solve import least_squares as lsq
+
+    params = params.with_fixed(params.names, fixed=False)
+    free = params.free_names
+    fns, rows = lsq.row_functions(model, free), lsq.Rows(means.raw, means.cov)
+    p = np.array(params.values(), float)
+    r = lsq.residuals(fns, rows, p, p, gravity)
+    _, J, _ = lsq.jacobians(fns, rows, p, p, gravity)
+    noise = lsq.noise_sigma(fns, rows, means.raw_var, p, p, gravity)
+    spread = np.sqrt(noise**2 + (J**2) @ np.array([std[n] for n in free]) ** 2)
+    return np.asarray(r, float), spread
+
+
+def taken_warnings(base: str, chi2: float, n: int, rms: float) -> list[str]:
+    """What the user must know about an accelerometer taken from ``base``: whether this log's ``n`` still
+    intervals (chi-square against their noise and its standard errors, RMS |a| - g [m/s^2]) disagree with it."""
+    if (misfit := excess_residuals(chi2, n)) is None:  # a typed verdict; its words here, as fit_warnings'
+        return []
+    return [f"this log's {n} still intervals disagree with the accelerometer taken from {base}: reduced chi-square "
+            f"{misfit.redchi:.3g} against their noise and its standard errors (p < {POOR_FIT_P:g}), RMS |a|-g "
+            f"{rms:.3g} m/s^2; the sensor changed since, the base is another sensor's (or already corrects the "
+            "readings), or these intervals are not still"]
+
+
+def taken_from_base(config: RunConfig, recording: Recording | None = None) -> CalibrationRun:
+    """The accelerometer taken from fit.base, not fitted (``FitSettings.takes_base``: a hand-turned compass
+    log's few still parts cannot determine it): the base's values and standard errors, its file named with its
+    sha256; this log's still intervals, if any, only check it (|a| - g per interval against the noise and the
+    base's standard errors: a warning when they disagree)."""
+    import hashlib
+
+    from imucal.config.run import base_path, load_base
+
+    base = load_base(config, config.source)
+    digest = hashlib.sha256(base_path(config).read_bytes()).hexdigest()
+    rec, iv, streamed = read_intervals(config, recording, least=0)
+    model = build_model(())
+    params = base.params.with_fixed(base.params.names)
+    gravity = base.gravity
+    std = {n: float(base.std[n]) for n in params.names}
+    means = fit_data(model, iv, None, "means", rec.source)
+    r, spread = _base_check(params, std, model, means, gravity) if iv.n else (np.empty(0), np.empty(0))
+    chi2 = float(np.sum((r / spread) ** 2)) if iv.n else float("nan")
+    name = Path(config.fit.base).name
+    warnings = taken_warnings(name, chi2, iv.n, float(np.sqrt(np.mean(r**2))) if iv.n else float("nan"))
+    cal_fit: dict[str, Any] = {
+        "mode": "means", "taken": {"base": name, "sha256": digest},
+        "status": f"taken from {name}", "iterations": 0, "dof": iv.n,
+        "n_intervals": iv.n, "gravity_source": base.fit.get("gravity_source", "base"), "warnings": warnings,
+    }
+    if iv.n:
+        cal_fit.update(rms_residual=float(np.sqrt(np.mean(r**2))), chi2=chi2, redchi=chi2 / iv.n,
+                       redchi_noise=chi2 / iv.n)
+    cal = Calibration(params=params, std=std, gravity=gravity, raw_unit=rec.unit, fit=cal_fit,
+                      data={"file": Path(rec.source).name, "sha256": rec.sha256, "samples": rec.n,
+                            "time": rec.time_note, "dropped_intervals": [dict(d) for d in iv.meta.get("dropped", [])]},
+                      created=now_utc())
+    ai = cal.apply(iv.mean)
+    directions = ai / np.linalg.norm(ai, axis=1, keepdims=True) if iv.n else np.empty((0, 3))
+    n_distinct, labels = distinct_directions(directions)
+    obs = Observability(n_distinct=n_distinct, labels=labels, singular_values=np.empty(0), undetermined=(),
+                        predicted_z={})
+    pb = _Problem(model, InitialGuess(s=np.array([params[f"s{i}"].value for i in (1, 2, 3)]),
+                                      b=np.array([params[f"b{i}"].value for i in (1, 2, 3)]),
+                                      angles=np.array([params[a].value for a in ANGLE_NAMES]), method="base"),
+                  params, means, means, None, obs)
+    samp_res, rms_samples = _samples_rms(cal, pb, rec, iv, streamed, gravity) if iv.n else (np.empty(0), float("nan"))
+    if iv.n:
+        cal = replace(cal, fit={**cal_fit, "rms_residual_samples": rms_samples})
+    res = FitResult(params=params, initial=params, std=std, covariance=np.zeros((0, 0)), correlation=np.zeros((0, 0)),
+                    free_names=(), residuals=r, sigma=spread, chi2=chi2, dof=iv.n, status=cal_fit["status"],
+                    success=True, iterations=0, solve_time=0.0, model_name=model.name, model=model, gravity=gravity,
+                    mode="means", chi2_noise=chi2)
+    return CalibrationRun(config=config, recording=rec, intervals=iv, guess=pb.guess, observability=obs, result=res,
+                          calibration=cal, directions=directions, sample_residuals=samp_res, gravity_source="base")
 
 
 def calibrate_imu(config: RunConfig, recording: Recording | None = None,

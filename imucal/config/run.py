@@ -10,7 +10,7 @@ import os
 import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
 
 from imucal.constants import DEFAULT_ANGLE_TOL
@@ -22,6 +22,9 @@ from imucal.data.static import StaticSettings
 from imucal.constants import STANDARD_GRAVITY
 from imucal.files.schema import fill, rule
 from imucal.files.yamlio import check_structure, read_yaml
+
+if TYPE_CHECKING:  # the base calibration's type, for annotations (load_base imports it when run)
+    from imucal.calibration.frozen import Calibration
 
 FIT_MODES = ("means", "samples")
 WEIGHTS = ("auto", "noise", "uniform")
@@ -135,6 +138,12 @@ class FitSettings:
             raw["initial"] = {**init, **held}
         return raw
 
+    @property
+    def takes_base(self) -> bool:
+        """Every accelerometer parameter held at fit.base's and no effect: the accelerometer is taken from the
+        base calibration, not fitted (a hand-turned compass log's few still parts; imucal.pipeline)."""
+        return self.base is not None and set(BASE_NAMES) <= set(self.fix) and not self.effects
+
     def __post_init__(self) -> None:
         if self.noise is not None and (not isinstance(self.noise, str) or not self.noise):
             raise ImucalError(f"noise {short(self.noise)} must be a file name", field="fit.noise",
@@ -147,10 +156,11 @@ class FitSettings:
         for n in self.fix:
             if n not in BASE_NAMES:
                 raise ImucalError(f"cannot fix {short(n)}", field="fit.fix", fix=f"choose from {', '.join(BASE_NAMES)}")
-        if set(BASE_NAMES) <= set(self.fix) and not self.effects:  # no unknown left for the fit
+        if set(BASE_NAMES) <= set(self.fix) and not self.effects and self.base is None:  # no unknown left
             raise ImucalError(f"all {len(BASE_NAMES)} parameters are fixed, so nothing is left to fit",
                               field="fit.fix", fix="drop at least one from fit.fix (e.g. fix: [phi, psi, theta]), "
-                                                   "or fit an effect beside them (fit.effects)")
+                                                   "fit an effect beside them (fit.effects), or take the accelerometer "
+                                                   "from a calibration (fit.base)")
         for n, v in self.initial.items():
             if n not in BASE_NAMES and not (isinstance(n, str) and EFFECT_PARAMETER.match(n)):
                 raise ImucalError(f"unknown parameter {short(n)}", field="fit.initial",
@@ -282,16 +292,21 @@ def config_from_dict(d: Any, path: str | None = None) -> RunConfig:
     return cfg if cfg.fit.base is None else with_base(cfg, path)
 
 
-def with_base(cfg: RunConfig, path: str | None = None) -> RunConfig:
-    """fit.base read: the base calibration's accelerometer values join ``fit.initial`` (the run file's own
-    initial values and values held by ``fix: {name: value}`` win), so ``fix`` holds them there."""
+def base_path(cfg: RunConfig) -> Path:
+    """fit.base's file (relative to the run file's folder)."""
+    assert cfg.fit.base is not None
+    p = Path(cfg.fit.base)
+    return p if p.is_absolute() or cfg.base_dir is None else cfg.base_dir / p
+
+
+def load_base(cfg: RunConfig, path: str | None = None) -> Calibration:
+    """fit.base's calibration, checked against the run: its raw unit is the data's; a base the run takes
+    whole (``FitSettings.takes_base``) has no effect and its values are not overridden."""
     from imucal.calibration.frozen import load_calibration  # only a run file that names a base
 
     assert cfg.fit.base is not None
-    p = Path(cfg.fit.base)
-    p = p if p.is_absolute() or cfg.base_dir is None else cfg.base_dir / p
     try:
-        base = load_calibration(p)
+        base = load_calibration(base_path(cfg))
     except ImucalError as exc:
         raise ImucalError(f"fit.base {short(cfg.fit.base)}: {exc.message}", file=path, field="fit.base",
                           fix="give the calibration.yaml that imucal calibrate wrote for a multi-pose log") from None
@@ -299,7 +314,25 @@ def with_base(cfg: RunConfig, path: str | None = None) -> RunConfig:
         raise ImucalError(f"the base calibration's raw unit {short(base.raw_unit)} is not the data's "
                           f"{short(cfg.data.unit)}", file=path, field="fit.base",
                           fix="calibrate the base from a recording in the same unit, or set data.unit")
-    values = base.params.value_dict()
+    if cfg.fit.takes_base:
+        if base.effects:
+            raise ImucalError(f"the base calibration {short(cfg.fit.base)} has effects "
+                              f"({', '.join(short(e[0]) for e in base.effects)}), which a run cannot take whole",
+                              file=path, field="fit.base",
+                              fix="give a base without fit.effects, or leave one parameter out of fit.fix")
+        values = base.params.value_dict()
+        other = [n for n in BASE_NAMES if n in cfg.fit.initial and cfg.fit.initial[n] != values[n]]
+        if other:
+            raise ImucalError(f"{other[0]} = {cfg.fit.initial[other[0]]:g} is given, but the accelerometer is taken "
+                              f"from fit.base (its {other[0]} = {values[other[0]]:g})", file=path,
+                              field=f"fit.fix.{other[0]}", fix="give the held parameters as a list (fix: [s1, ...])")
+    return base
+
+
+def with_base(cfg: RunConfig, path: str | None = None) -> RunConfig:
+    """fit.base read: the base calibration's accelerometer values join ``fit.initial`` (the run file's own
+    initial values and values held by ``fix: {name: value}`` win), so ``fix`` holds them there."""
+    values = load_base(cfg, path).params.value_dict()
     held = {n: float(values[n]) for n in BASE_NAMES if n in values}
     return replace(cfg, fit=replace(cfg.fit, initial={**held, **cfg.fit.initial}))
 

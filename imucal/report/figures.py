@@ -36,8 +36,20 @@ def plain(text: str) -> str:
     return text.encode("utf-8", errors="backslashreplace").decode("utf-8").replace("$", r"\$")
 
 
+def no_intervals_figure(path: str | Path) -> None:
+    """The place of a per-interval figure for a log without a still interval (an accelerometer taken from
+    fit.base on a hand-turned log: imucal.pipeline.taken_from_base)."""
+    fig, axes = new_figure(WIDE, WIDE_H)
+    ax = axes[0, 0]
+    ax.text(0.5, 0.5, "no still interval in this log: |a| - g not checked", ha="center", va="center")
+    ax.set_axis_off()
+    save_png(fig, path)
+
+
 def residual_figure(run: CalibrationRun, path: str | Path) -> None:
     res, iv = run.result, run.intervals
+    if iv.n == 0:
+        return no_intervals_figure(path)
     r, s = interval_residuals(run)
     fig, axes = new_figure(WIDE, WIDE_H)
     ax = axes[0, 0]
@@ -72,6 +84,8 @@ def directions_figure(run: CalibrationRun, path: str | Path) -> None:
     """Gravity directions of the intervals, one disk per hemisphere: the distance from a disk's
     centre is the angle from the +z (left) or -z (right) sensor axis, in degrees. Every interval is
     numbered as in the report's tables; intervals in the same pose share a colour and a label."""
+    if run.intervals.n == 0:
+        return no_intervals_figure(path)
     d = run.directions
     labels = run.observability.labels
     fig, axes = new_figure(10, 5.6, DIRECTIONS_MARGINS, 1, 2)
@@ -198,6 +212,8 @@ BEFORE_AFTER_MARGINS = Margins(bottom=0.95)
 def before_after_figure(run: CalibrationRun, path: str | Path) -> None:
     """|a| - g per pose before and after the calibration, on a scale linear near zero and logarithmic
     beyond (the two differ by orders of magnitude)."""
+    if run.intervals.n == 0:
+        return no_intervals_figure(path)
     before, after = before_after(run)
     k = np.arange(before.size)
     fig, axes = new_figure(WIDE, WIDE_H, BEFORE_AFTER_MARGINS)

@@ -96,6 +96,8 @@ def _apply_html(run: CalibrationRun) -> str:
 
 def _residuals_html(run: CalibrationRun) -> str:
     iv = run.intervals
+    if iv.n == 0:  # an accelerometer taken from fit.base, on a log that never stops (imucal.pipeline)
+        return "<p>No still interval in this log: |a| − g was not checked.</p>"
     r, s = interval_residuals(run)
     before, _ = before_after(run)
     rows, cls = [], []
@@ -113,6 +115,23 @@ def _residuals_html(run: CalibrationRun) -> str:
                          [True, True, True, False, True, True, True, True], cls))
 
 
+def _taken_rows(run: CalibrationRun) -> list[tuple[str, str]]:
+    """An accelerometer taken from fit.base (imucal.pipeline.taken_from_base): no fit; this log's still
+    intervals, if any, a check."""
+    cal, iv, rec, taken = run.calibration, run.intervals, run.recording, run.calibration.fit["taken"]
+    check = (f"{iv.n} intervals ({run.observability.n_distinct} distinct orientations), reduced chi-square "
+             f"{num(cal.fit['redchi'], '.4g')}, RMS |a| − g {cal.fit['rms_residual'] * 1e3:.4g} mm/s²" if iv.n
+             else "none: this log has no still interval")
+    return [("model", esc(run.result.model_name)),
+            ("accelerometer", f"taken from {esc(taken['base'])} (SHA-256 <code>{esc(taken['sha256'])}</code>): "
+                              "its values and standard errors, not fitted to this log"),
+            ("check on this log's still intervals", check),
+            ("gravity", f"{cal.gravity:.6f} m/s² (the base's)"),
+            ("data", f"{esc(Path(rec.source).name)}: {rec.n} samples, {rec.duration:.1f} s, "
+                     f"{rec.sample_rate:.4g} Hz, raw unit {esc(cal.raw_unit)}"),
+            ("SHA-256", f"<code>{esc(rec.sha256)}</code>")]
+
+
 def _statistics_html(run: CalibrationRun) -> str:
     res, cal, iv, rec = run.result, run.calibration, run.intervals, run.recording
     rows = [("model", esc(res.model_name)),
@@ -127,7 +146,7 @@ def _statistics_html(run: CalibrationRun) -> str:
             ("gravity", f"{cal.gravity:.6f} m/s² ({esc(run.gravity_source)})"),
             ("data", f"{esc(Path(rec.source).name)}: {rec.n} samples, {rec.duration:.1f} s, "
                      f"{rec.sample_rate:.4g} Hz, raw unit {esc(cal.raw_unit)}"),
-            ("SHA-256", f"<code>{esc(rec.sha256)}</code>")]
+            ("SHA-256", f"<code>{esc(rec.sha256)}</code>")] if "taken" not in cal.fit else _taken_rows(run)
     if rec.time_note:
         rows.append(("time", esc(rec.time_note)))
     if time_base_words(rec.time_base):
@@ -156,7 +175,8 @@ CAPTIONS = {
 
 def _accelerometer_html(run: CalibrationRun, figures: Mapping[str, bytes]) -> str:
     parts = [_datasheet_html(datasheet(run.calibration)["accelerometer"]), DATASHEET_NOTE,
-             "<h3>Fitted parameters</h3>", _parameters_html(run), "<h3>|a| − g per pose, before and after</h3>"]
+             f"<h3>{'Parameters taken from ' + esc(run.calibration.fit['taken']['base']) if 'taken' in run.calibration.fit else 'Fitted parameters'}</h3>",
+             _parameters_html(run), "<h3>|a| − g per pose, before and after</h3>"]
     if "before_after.png" in figures:
         parts.append(figures_html({"before_after.png": figures["before_after.png"]}, CAPTIONS))
     parts += [f'<div id="residuals">{_residuals_html(run)}</div>', '<h3 id="apply">Apply map</h3>', _apply_html(run)]

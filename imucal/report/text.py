@@ -103,9 +103,32 @@ def time_base_words(tb: TimeBase | None) -> str:
     return "; ".join(out)
 
 
+def _taken_lines(run: CalibrationRun) -> list[str]:
+    """An accelerometer taken from fit.base (imucal.pipeline.taken_from_base): the base named, no fit; this
+    log's still intervals as a check, when it has some; warnings."""
+    cal, iv, taken = run.calibration, run.intervals, run.calibration.fit["taken"]
+    L = ["[[Taken from base]]",
+         f"    accelerometer      = taken from {taken['base']} (sha256 {taken['sha256']}): its values and standard "
+         "errors, not fitted to this log"]
+    if iv.n:
+        L.append(f"    check on           = {iv.n} still intervals of this log ({run.observability.n_distinct} "
+                 "distinct orientations)")
+        L.append(f"    chi-square         = {cal.fit['chi2']:.6g} on {iv.n} intervals (reduced {cal.fit['redchi']:.4g}; "
+                 "1 = |a| - g at the noise of the means and the base's standard errors)")
+        L.append(f"    RMS |a|-g, means   = {cal.fit['rms_residual']:.6g} m/s^2")
+        L.append(f"    RMS |a|-g, samples = {cal.fit['rms_residual_samples']:.6g} m/s^2")
+    else:
+        L.append("    check on           = none: this log has no still interval")
+    for wtext in cal.fit.get("warnings", []):
+        L.append(f"    WARNING            = {wtext}")
+    return L
+
+
 def _statistics_lines(run: CalibrationRun) -> list[str]:
     """Solver, chi-square, the stochastic excess, RMS, conditioning, warnings."""
     res, cal, iv = run.result, run.calibration, run.intervals
+    if "taken" in cal.fit:
+        return _taken_lines(run)
     L: list[str] = []
     L.append("[[Fit Statistics]]")
     L.append(f"    solver             = IPOPT: {res.status_words}")
@@ -308,9 +331,10 @@ def summary(run: CalibrationRun) -> dict:
                 "phi": nz(sd["phi"]), "psi": nz(sd["psi"]), "theta": nz(sd["theta"])},
         "effects": [{"name": n, "axes": ["xyz"[a] for a in ax],
                      "coefficients": {k: v[k].value for k in v if k.startswith(n)}} for n, ax in cal.effects],
-        "rms_residual": cal.fit["rms_residual"],
-        "rms_residual_samples": cal.fit["rms_residual_samples"],
-        "chi2": res.chi2, "dof": res.dof, "redchi": nz(res.redchi), "redchi_noise": nz(res.redchi_noise),
+        **({"taken": dict(cal.fit["taken"])} if "taken" in cal.fit else {}),  # the accelerometer not fitted
+        "rms_residual": nz(cal.fit.get("rms_residual", math.nan)),  # (none without a still interval: taken)
+        "rms_residual_samples": nz(cal.fit.get("rms_residual_samples", math.nan)),
+        "chi2": nz(res.chi2), "dof": res.dof, "redchi": nz(res.redchi), "redchi_noise": nz(res.redchi_noise),
         "bias_instability": res.bias_instability,
         "bias_random_walk": math.sqrt(res.random_walk),
         **({"bias_drift": res.bias_drift.to_json(cal.raw_unit)} if res.bias_drift is not None else {}),

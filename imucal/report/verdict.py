@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from imucal.pipeline import CalibrationRun, fit_warnings
+from imucal.pipeline import CalibrationRun, fit_warnings, taken_warnings
 from imucal.solve.misfit import POOR_FIT_P, POOR_FIT_REDCHI, excess_residuals
 from imucal.solve.stats import chi2_sf
 
@@ -94,8 +94,26 @@ def _bound_check(at_bound: dict[str, str]) -> Check:
                  "; ".join(f"{n} at its {b} bound" for n, b in at_bound.items()) or "all inside their bounds")
 
 
+def _taken_verdict(run: CalibrationRun) -> SensorVerdict:
+    """An accelerometer taken from fit.base (imucal.pipeline.taken_from_base): no fit to judge; this log's
+    still intervals, when it has some, check it."""
+    cal, iv, taken = run.calibration, run.intervals, run.calibration.fit["taken"]
+    warnings = tuple(taken_warnings(taken["base"], cal.fit["chi2"], iv.n, cal.fit["rms_residual"]) if iv.n else ())
+    agree = not warnings
+    checks = (
+        Check(f"taken from {taken['base']}", True, f"its values and standard errors (sha256 {taken['sha256'][:12]}...)"),
+        Check("this log's still intervals agree with it", agree,
+              f"{iv.n} intervals, reduced chi-square {cal.fit['redchi']:.3g}, RMS |a| − g "
+              f"{cal.fit['rms_residual'] * 1e3:.3g} mm/s²" if iv.n else "no still interval in this log: not checked"),
+    )
+    summary = f"taken from {taken['base']}, not fitted" + (f"; checked on {iv.n} still intervals" if iv.n else "")
+    return SensorVerdict("accelerometer", checks, warnings, summary, True)
+
+
 def accelerometer_verdict(run: CalibrationRun) -> SensorVerdict:
     res, cal, obs = run.result, run.calibration, run.observability
+    if "taken" in cal.fit:
+        return _taken_verdict(run)
     dropped = list(cal.data.get("dropped_intervals", []))
     held = (f"; the standard errors include a between-interval excess of {res.excess ** 0.5:.3g} m/s^2 rms "
             "(bias_instability)" if res.excess > 0 else "")
