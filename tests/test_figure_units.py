@@ -116,6 +116,7 @@ def test_every_figure_function_is_checked(counts_run, discoveries, drawn):
 
     for fn in figures.FIGURES.values():
         check(fn, counts_run)
+    check(figures.no_intervals_figure)  # a log without a still interval (an accelerometer taken from fit.base)
     for d in discoveries:
         for fn in discover_figures.FIGURES.values():
             check(fn, d)
