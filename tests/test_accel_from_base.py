@@ -126,3 +126,14 @@ def test_a_value_given_beside_a_taken_base_is_refused(tmp_path):
         config_from_dict({"data": {"path": "log.csv", "unit": "g"},
                           "fit": {"base": str(tmp_path / "base.yaml"), "fix": ALL,
                                   "initial": {"s1": 0.5}}})
+
+
+@pytest.mark.parametrize("extra", [{"mode": "samples"}, {"noise": "still.json"}])
+def test_a_fit_setting_beside_a_taken_base_is_refused(tmp_path, extra):
+    """Nothing is fitted when the accelerometer is taken whole: a weighting or a mode would be silently ignored."""
+    write_base(tmp_path / "base.yaml")
+    key = "fit." + next(iter(extra))
+    with pytest.raises(ImucalError, match="taken from fit.base") as e:
+        config_from_dict({"data": {"path": "log.csv", "unit": "g"},
+                          "fit": {"base": str(tmp_path / "base.yaml"), "fix": ALL, **extra}})
+    assert e.value.field == key and "\n" not in str(e.value)

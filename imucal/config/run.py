@@ -161,6 +161,10 @@ class FitSettings:
                               field="fit.fix", fix="drop at least one from fit.fix (e.g. fix: [phi, psi, theta]), "
                                                    "fit an effect beside them (fit.effects), or take the accelerometer "
                                                    "from a calibration (fit.base)")
+        if self.takes_base and (self.mode != "means" or self.noise is not None):  # nothing is fitted to weigh
+            key = "fit.mode" if self.mode != "means" else "fit.noise"
+            raise ImucalError(f"{key} has no effect: the accelerometer is taken from fit.base, not fitted",
+                              field=key, fix=f"drop {key}, or leave one parameter out of fit.fix to fit")
         for n, v in self.initial.items():
             if n not in BASE_NAMES and not (isinstance(n, str) and EFFECT_PARAMETER.match(n)):
                 raise ImucalError(f"unknown parameter {short(n)}", field="fit.initial",
