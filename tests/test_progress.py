@@ -54,23 +54,8 @@ def test_bar_appears_on_a_pseudo_terminal() -> None:
     code = ("from imucal.report.progress import progress\n"
             "with progress('hooked work', total=3, unit='fit', delay=0, leave=True) as step:\n"
             "    for _ in range(3):\n        step(note='0 failed')\n")
-    pid, fd = pty.fork()
-    if pid == 0:  # child: stdin, stdout and stderr are the pseudo-terminal, 100 columns wide
-        fcntl.ioctl(0, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))
-        os.environ["PYTHONPATH"] = str(ROOT)
-        os.execv(sys.executable, [sys.executable, "-c", code])
-    out = b""
-    while True:
-        try:
-            chunk = os.read(fd, 4096)
-        except OSError:  # the child closed the terminal
-            break
-        if not chunk:
-            break
-        out += chunk
-    _, status = os.waitpid(pid, 0)
-    text = out.decode(errors="replace")
-    assert os.WEXITSTATUS(status) == 0, text
+    status, text = _on_a_terminal(code)
+    assert status == 0, text
     assert "hooked work" in text and "3/3" in text and "0 failed" in text
 
 
