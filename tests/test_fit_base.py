@@ -48,3 +48,20 @@ def test_a_missing_or_foreign_base_is_one_line(si_run, run_cli, tmp_path, unchan
     r = run_cli(["calibrate", run, "--out", tmp_path / "o"])
     assert r.code == 2 and "raw unit" in r.err and "fit.base" in r.err, r.err
     assert not (tmp_path / "o").exists()
+
+
+def test_a_hostile_base_path_is_one_line(run_cli, tmp_path, unchanged):
+    """fit.base naming a FIFO, a directory, a C-comment-like name or a recording: one line, exit 2, nothing
+    written, and the FIFO never opened for reading (the run would hang)."""
+    import os
+
+    data = sweep(tmp_path / "sweep.csv", hours=0.2)
+    os.mkfifo(tmp_path / "fifo.yaml")
+    (tmp_path / "dir.yaml").mkdir()
+    run = tmp_path / "run.yaml"
+    for base, words in (("fifo.yaml", "FIFO"), ("dir.yaml", "directory"), ("'*/'", "not found"),
+                        (data.name, "not a calibration file")):
+        run.write_text(f"data: {{path: {data.name}, time_unit: s}}\nfit: {{base: {base}, fix: [phi]}}\n")
+        with unchanged():
+            r = run_cli(["calibrate", run, "--out", tmp_path / "o"])
+        assert r.code == 2 and r.err.count("\n") == 1 and "fit.base" in r.err and words in r.err, r.err
