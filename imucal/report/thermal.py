@@ -61,11 +61,12 @@ def gap_lines(tc: ThermalCalibration, alpha: float) -> list[str]:
 
 def gyro_lines(tc: ThermalCalibration) -> list[str]:
     """The gyroscope's bias(T) from the same rows (the calibration's gyroscope section), and its drift beside it."""
-    g = tc.gyro
-    if g is None:
-        return []
+    g, section = tc.gyro, tc.final.calibration.gyro
+    if g is None or section is None:
+        return [tc.gyro_note] if tc.gyro_note else []
+    held = section.fit.get("held", "scale, misalignment and g-sensitivity held")
     rms = lambda x: np.sqrt(np.mean(x ** 2, axis=0)) * 1e3  # noqa: E731  [mrad/s]
-    out = ["gyroscope bias(T) (in the calibration's gyroscope section; scale and misalignment held at nominal): "
+    out = [f"gyroscope bias(T) (in the calibration's gyroscope section; {held}): "
            "orders x, y, z = "
            + ", ".join(map(str, g.orders)) + "; rows about their poses "
            + ", ".join(f"{b:.3g} -> {a:.3g}" for b, a in zip(rms(g.before), rms(g.after))) + " mrad/s"]
@@ -124,6 +125,7 @@ def thermal_json(tc: ThermalCalibration) -> dict[str, Any]:
                            "std": [num(v) for v in lag.hysteresis_std], "p": lag.hysteresis_p,
                            "named": lag.hysteresis_named},
             "one_sided_axes": [AXIS_NAMES[i] for i in tc.one_sided],
+            "gyro_note": tc.gyro_note or None,
             "gyro": None if tc.gyro is None else {
                 "orders": list(tc.gyro.orders), "unit": "rad/s",
                 "coefficients": {n: tc.gyro.params[n].value for n in tc.gyro.params.free_names},

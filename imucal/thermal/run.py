@@ -7,7 +7,7 @@ the grammar's test (imucal.thermal.select); the lag and hysteresis of the temper
 tested (imucal.thermal.lag). The calibration kept is the base fit once more with the terms held
 at their values (``pipeline.calibrate_accelerometer(held=...)``), so the file, ``apply``, the generated C and the
 autopilot exports carry them, with the pose fit's standard errors. The gyroscope's bias(T), from the
-same rows (imucal.gyro.thermal), is attached as the calibration's gyroscope (``gyro_calibration``), so they
+same rows (imucal.thermal.gyro), is attached as the calibration's gyroscope (on fit.base's), so they
 carry it too.
 
 ``imucal discover`` takes this path when the recording is such a sweep (``sweep_of``).
@@ -23,19 +23,17 @@ import numpy as np
 from imucal.config.run import EffectSpec, RunConfig
 from imucal.data.load import use_stream
 from imucal.data.recording import Recording
-from imucal.calibration.sensor import SensorCalibration
-from imucal.constants import RATE_UNITS
 from imucal.data.static import Intervals
 from imucal.errors import ImucalError
-from imucal.gyro.thermal import GyroThermal, gyro_bias_temperature
+from imucal.gyro.thermal import GyroThermal
 from imucal.model.effects import AXIS_NAMES, EFFECTS, make_effect
-from imucal.model.gyroscope import BIAS_NAMES as GYRO_BIAS, gyro_model, gyro_parameters, term_parameters
 from imucal.model.parameters import ANGLE_NAMES, BASE_NAMES, Parameters
 from imucal.model.sensor import build_model
 from imucal.pipeline import CalibrationRun, calibrate_accelerometer, initial_guess, make_parameters, read_intervals
 from imucal.solve.stats import chi2_sf
 from imucal.thermal.determine import PoseSupport, one_sided
 from imucal.thermal.evidence import ThermalRows, thermal_rows
+from imucal.thermal.gyro import gyro_base, sweep_gyro
 from imucal.thermal.lag import LagTest, lag_and_hysteresis
 from imucal.thermal.select import Selection, ThermalProblem, select
 
@@ -81,8 +79,9 @@ class ThermalCalibration:
     one_sided: tuple[int, ...]  #: axes that meet gravity one way only: s_i and b_i at T_ref not told apart
     held: tuple[str, ...]  #: base parameters the run file held
     #: the gyroscope's bias(T) from the same rows (imucal.gyro.thermal) [rad/s], when the recording has one in
-    #: a rate unit; the calibration's gyroscope section carries it (``gyro_calibration``)
+    #: a rate unit or fit.base has a gyroscope; the calibration's gyroscope section carries it (imucal.thermal.gyro)
     gyro: GyroThermal | None = None
+    gyro_note: str = ""  #: why a recorded gyroscope got no section (counts without a base), else ""
 
     @property
     def effects(self) -> dict[str, tuple[int, ...]]:
@@ -163,36 +162,19 @@ def thermal_calibration(sweep: Sweep, progress: Callable[[], None] | None = None
         base, refusal = None, exc.message
     support = PoseSupport.of(rows, sel.fit.vectors, sel.fit.poses)
     held = tuple(n for n in BASE_NAMES if n in config.fit.fix)
-    gyro = None
-    if rows.gyro is not None and rec.gyro_unit in RATE_UNITS:  # counts: no nominal scale to read rad/s with
-        gyro = gyro_bias_temperature(replace(rows, gyro=rows.gyro * RATE_UNITS[rec.gyro_unit]), alpha)
-        cal = replace(final.calibration, attached=(gyro_calibration(gyro, rec.gyro_unit, fit_range(rows)),))
-        final = replace(final, calibration=cal)
+    acc = final.calibration.apply(rows.raw, {"temp": rows.temp, "time": rows.t})
+    gyro = sweep_gyro(rows, rec.gyro_unit, acc, gyro_base(config, rec.gyro_unit), fit_range(rows), alpha)
+    if gyro.section is not None:
+        final = replace(final, calibration=replace(final.calibration, attached=(gyro.section,)))
     return ThermalCalibration(rows=rows, selection=sel, support=support, lag=lag_and_hysteresis(prob, sel, rec, alpha),
                               final=final, base=base, base_refusal=refusal,
-                              one_sided=tuple(one_sided(final.directions)), held=held, gyro=gyro)
+                              one_sided=tuple(one_sided(final.directions)), held=held, gyro=gyro.fit,
+                              gyro_note=gyro.note)
 
 
 def fit_range(rows: ThermalRows) -> list[float]:
     """[degC] the rows' temperature range: the terms' (the autopilots' TMIN, TMAX)."""
     return [float(rows.temp.min()), float(rows.temp.max())]
-
-
-def gyro_calibration(g: GyroThermal, unit: str, temperature_range: list[float]) -> SensorCalibration:
-    """The gyroscope a sweep calibrates: its bias(T) terms (imucal.gyro.thermal, converted to ``unit``, a rate
-    unit) on the bias at the terms' zero, the scale at nominal and no misalignment or g-sensitivity, held (still
-    poses turn nothing: a rotation fit determines them)."""
-    k = 1.0 / RATE_UNITS[unit]  # [unit per rad/s] the nominal scale
-    effects = g.effects()
-    values = {n: (p.value if p.fixed else p.value * k) for n, p in g.params.items()}
-    base = gyro_parameters(unit, g.offset * k, [k] * 3, nominal=k)
-    params = base.with_fixed(base.names).extended(term_parameters(effects, unit, values, nominal=k))
-    std = {**{n: float(s * k) for n, s in zip(GYRO_BIAS, g.offset_std)}, **{n: float(s * k) for n, s in g.std.items()}}
-    fit = {"evidence": "still poses over a temperature sweep (imucal.gyro.thermal): bias(T) per axis; scale, "
-                       "misalignment and g-sensitivity held at nominal (no rotations)",
-           "orders": list(g.orders), "temperature_range": temperature_range,
-           "drift_per_day": (g.drift * k).tolist(), "drift_std_per_day": (g.drift_std * k).tolist()}
-    return SensorCalibration(gyro_model(effects), params, std, unit, fit)
 
 
 def found_label(effects: dict[str, tuple[int, ...]]) -> str:

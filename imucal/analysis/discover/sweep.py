@@ -56,6 +56,8 @@ def sweep_discovery(config: RunConfig, sweep: Sweep, settings: DiscoverSettings,
     if tc.base is None:
         notes.append(f"the base model without temperature terms was refused ({tc.base_refusal}): the base run "
                      "shown is the final one")
+    if tc.gyro_note:
+        notes.append(tc.gyro_note)
     a = settings.alpha_noise
     return Discovery(base=tc.base or tc.final, final=tc.final, steps=_steps(tc), effects=effects,
                      verdict=_verdict(tc, a), consistent_before=tc.p_noise(False) >= a,

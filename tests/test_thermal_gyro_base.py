@@ -1,0 +1,128 @@
+"""A sweep's gyroscope on fit.base's (issue 27): still poses give the bias over temperature, a multi-pose log
+with rotations gives the scale, misalignment and g-sensitivity; a gyroscope in counts without such a base gets
+no section, and the report says why (it was dropped silently before).
+
+The counts are written here by the gyroscope's forward model (imucal.model.gyroscope's docstring, written
+again in numpy): raw = s + bias(T) + B M omega + H a, with bias(T) the rad/s truth of test_thermal_gyro times
+each axis's scale (a raw-unit bias, as the description holds it), omega each pose's Earth rate plus noise.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from test_thermal import NOMINAL
+from test_thermal_gyro import EARTH, HOURS, gyro_sweep, truth
+from imucal.calibration.frozen import Calibration, load_calibration
+from imucal.calibration.sensor import SensorCalibration
+from imucal.model.gyroscope import GSENS_NAMES, MIS_NAMES, SCALE_NAMES, gyro_model, gyro_parameters
+from imucal.model.parameters import BASE_NAMES, base_parameters
+
+SCALE = np.array([940.0, 1010.0, 1075.0])  #: [counts per rad/s]
+MIS = np.array([0.012, -0.006, 0.009, 0.004, -0.007, 0.005])  #: M_g's off-diagonal entries
+H = np.array([[0.3, 0.02, 0.0], [0.0, -0.2, 0.01], [0.05, 0.0, 0.25]])  #: [counts per m/s^2]
+S0 = np.array([12.0, -7.0, 3.0])  #: [counts]
+S_ACC = np.array([0.05, -0.1, 0.2])  #: test_thermal.sweep's accelerometer shifts [m/s^2]
+HELD = ["b1", "b2", "b3", "phi", "psi", "theta"]
+
+
+def _M() -> np.ndarray:
+    M = np.eye(3)
+    for v, (i, j) in zip(MIS, ((0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1))):
+        M[i, j] = v
+    return M
+
+
+def counts_sweep(path: Path) -> tuple[Path, np.ndarray]:
+    """The sweep with gx, gy, gz in counts, and each sample's true rate [rad/s]."""
+    d = np.loadtxt(gyro_sweep(path.with_suffix(".rad.csv")), delimiter=",", skiprows=1)
+    acc, g, temp = d[:, 1:4], d[:, 4:7], d[:, 7]
+    rate = g - truth(temp)  # the Earth's rate of each pose, with the noise
+    raw = S0 + truth(temp) * SCALE + (rate @ _M().T) * SCALE + (acc - S_ACC) @ H.T
+    np.savetxt(path, np.column_stack([d[:, :4], raw, temp]), delimiter=",", header="t,ax,ay,az,gx,gy,gz,temp",
+               comments="", fmt="%.10g")
+    return path, rate
+
+
+def base_file(path: Path) -> Path:
+    """A multi-pose log's calibration as fit.base: the accelerometer at nominal, the gyroscope in counts."""
+    acc = base_parameters(S_ACC, [1.0, 1.0, 1.0], raw_unit="raw", gravity=9.80665)
+    gp = gyro_parameters("raw", S0 + 5.0, SCALE, MIS, H.ravel())
+    std = {n: 1e-3 for n in gp.names}
+    gyro = SensorCalibration(gyro_model(), gp, std, "raw", {"status": "Solve_Succeeded"})
+    Calibration(acc, {n: 1e-4 for n in BASE_NAMES}, 9.80665, "raw", attached=(gyro,)).save(path)
+    return path
+
+
+def _discover(run_cli, tmp_path: Path, fit: str) -> tuple:
+    data, rate = counts_sweep(tmp_path / "sweep.csv")
+    run = tmp_path / "run.yaml"
+    run.write_text(f"data: {{path: {data.name}, time_unit: s, gyro_unit: counts}}\nfit: {fit}\n")
+    r = run_cli(["discover", "--config", run, "--out", tmp_path / "cal"])
+    return r, data, rate
+
+
+def test_a_counts_gyroscope_without_a_base_gets_no_section_and_the_report_says_why(run_cli, tmp_path):
+    fix = "{fix: {" + ", ".join(f"{k}: {v!r}" for k, v in NOMINAL.items()) + "}}"
+    r, _, _ = _discover(run_cli, tmp_path, fix)
+    assert r.code == 0, r.err
+    cal = load_calibration(tmp_path / "cal" / "calibration.yaml")
+    assert cal.gyro is None
+    report = (tmp_path / "cal" / "report.txt").read_text()
+    assert "no gyroscope section was written" in report and "fit.base" in report
+
+
+def test_a_counts_gyroscope_takes_its_scale_misalignment_and_gsens_from_the_base(run_cli, tmp_path):
+    """The section holds the base's scale, M_g and H with their standard errors, the sweep's bias at T_ref and its
+    bias(T) in counts; ``apply`` on the counts gives each pose's Earth rate at every temperature."""
+    base = base_file(tmp_path / "base.yaml")
+    r, data, rate = _discover(run_cli, tmp_path, f"{{base: {base.name}, fix: [{', '.join(HELD)}]}}")
+    assert r.code == 0, r.err
+    cal = load_calibration(tmp_path / "cal" / "calibration.yaml")
+    g = cal.gyro
+    assert g is not None and g.raw_unit == "raw"
+    v = g.params.value_dict()
+    assert [v[n] for n in SCALE_NAMES] == SCALE.tolist() and [v[n] for n in MIS_NAMES] == MIS.tolist()
+    assert [v[n] for n in GSENS_NAMES] == H.ravel().tolist()
+    assert all(g.std[n] == 1e-3 for n in SCALE_NAMES)
+    assert g.fit["base"]["file"] == "base.yaml" and len(g.fit["base"]["sha256"]) == 64
+    assert "bias_temperature_x" in v and g.params["bias_temperature_x"].unit == "raw/degC"
+    d = np.loadtxt(data, delimiter=",", skiprows=1)
+    out = cal.apply_all({"accelerometer": d[:, 1:4], "gyroscope": d[:, 4:7]}, {"temp": d[:, 7]})
+    err = out["gyroscope"] - rate
+    # ``rate`` holds the noise, so what is left is the fit's: the Earth's rate averaged into the bias (at most
+    # 0.073 mrad/s) and the bias(T) misfit
+    assert np.abs(np.median(err, axis=0)).max() < 1e-4, np.median(err, axis=0)
+    hold = int(HOURS * 3600)
+    for k in range(3):  # no trend with temperature left within a pose
+        seg = slice(k * (hold + 120) + 600, k * (hold + 120) + hold)
+        for i in range(3):  # the truth: x linear (3 mrad/s over 10 degC), y quadratic
+            smooth = np.convolve(err[seg, i], np.ones(600) / 600, mode="valid")
+            assert np.ptp(smooth) < 1e-5, (k, i, np.ptp(smooth))
+    report = (tmp_path / "cal" / "report.txt").read_text()
+    assert "taken from fit.base base.yaml" in report
+
+
+def test_a_base_gyroscope_in_another_unit_is_one_line(run_cli, tmp_path, unchanged):
+    base = base_file(tmp_path / "base.yaml")
+    data, _ = counts_sweep(tmp_path / "sweep.csv")
+    run = tmp_path / "run.yaml"
+    run.write_text(f"data: {{path: {data.name}, time_unit: s, gyro_unit: deg/s}}\n"
+                   f"fit: {{base: {base.name}, fix: [{', '.join(HELD)}]}}\n")
+    with unchanged(tmp_path):
+        r = run_cli(["discover", "--config", run, "--out", tmp_path / "cal"])
+    assert r.code == 2 and r.err.count("\n") == 1 and "fit.base" in r.err and "deg/s" in r.err, r.err
+    assert not (tmp_path / "cal").exists()
+
+
+@pytest.mark.parametrize("axis", [0])
+def test_the_bias_over_temperature_is_the_truth_in_counts(run_cli, tmp_path, axis):
+    """x's linear term in counts per degC is the truth's 3e-4 rad/s per degC times the x scale (to 3 %)."""
+    base = base_file(tmp_path / "base.yaml")
+    r, _, _ = _discover(run_cli, tmp_path, f"{{base: {base.name}, fix: [{', '.join(HELD)}]}}")
+    assert r.code == 0, r.err
+    g = load_calibration(tmp_path / "cal" / "calibration.yaml").gyro
+    assert g is not None
+    assert g.params["bias_temperature_x"].value == pytest.approx(3e-4 * SCALE[axis], rel=0.03)
