@@ -415,8 +415,8 @@ def calibrate_accelerometer(config: RunConfig, recording: Recording | None = Non
     the file ``config.data`` names): read -> detect -> guess -> fit -> result -> calibration.
     ``held``: parameters of the model (effect coefficients and their references) held at these
     values, determined by other evidence (a temperature sweep's poses, imucal.thermal.run)."""
-    if config.fit.takes_base and not held:
-        return taken_from_base(config, recording)
+    if config.fit.taken_whole and not held:
+        return taken_whole(config, recording)
     rec, iv, streamed = read_intervals(config, recording)
     dropped = iv.meta.get("dropped", [])
     gravity, gsource = config.gravity.resolve()
@@ -480,35 +480,61 @@ def taken_warnings(base: str, chi2: float, n: int, rms: float) -> list[str]:
         return []
     return [f"this log's {n} still intervals disagree with the accelerometer taken from {base}: reduced chi-square "
             f"{misfit.redchi:.3g} against their noise and its standard errors (p < {POOR_FIT_P:g}), RMS |a|-g "
-            f"{rms:.3g} m/s^2; the sensor changed since, the base is another sensor's (or already corrects the "
-            "readings), or these intervals are not still"]
+            f"{rms:.3g} m/s^2; the sensor changed since, the values are another sensor's (or the readings were "
+            "already corrected), or these intervals are not still"]
 
 
-def taken_from_base(config: RunConfig, recording: Recording | None = None) -> CalibrationRun:
-    """The accelerometer taken from fit.base, not fitted (``FitSettings.takes_base``: a hand-turned compass
-    log's few still parts cannot determine it): the base's values and standard errors, its file named with its
-    sha256; this log's still intervals, if any, only check it (|a| - g per interval against the noise and the
-    base's standard errors: a warning when they disagree)."""
+@dataclass(frozen=True)
+class Taken:
+    """An accelerometer ``taken_whole`` takes: the nine values held, their standard errors, g and its source, what
+    the file records of their origin, and its name in words."""
+
+    params: Parameters
+    std: dict[str, float]
+    gravity: float
+    gravity_source: str
+    origin: dict[str, str]
+    name: str
+
+
+def _taken(config: RunConfig, unit: str) -> Taken:
+    """From fit.base: its values, errors and g, its file and sha256; from the run file's fit.fix values: those,
+    errors 0 (stated, not measured), the run's g."""
     import hashlib
 
     from imucal.config.run import base_path, load_base
 
+    if config.fit.base is None:
+        v = config.fit.initial
+        gravity, source = config.gravity.resolve()
+        params = base_parameters([v[f"s{i}"] for i in (1, 2, 3)], [v[f"b{i}"] for i in (1, 2, 3)],
+                                 [v[a] for a in ANGLE_NAMES], config.fit.angle_tolerance, unit, gravity)
+        return Taken(params.with_fixed(params.names), {n: 0.0 for n in params.names}, gravity, source,
+                     {"run_file": "fit.fix"}, "the run file's fit.fix values")
     base = load_base(config, config.source)
-    digest = hashlib.sha256(base_path(config).read_bytes()).hexdigest()
+    name = Path(config.fit.base).name
+    return Taken(base.params.with_fixed(base.params.names), {n: float(base.std[n]) for n in base.params.names},
+                 base.gravity, str(base.fit.get("gravity_source", "base")),
+                 {"base": name, "sha256": hashlib.sha256(base_path(config).read_bytes()).hexdigest()}, name)
+
+
+def taken_whole(config: RunConfig, recording: Recording | None = None) -> CalibrationRun:
+    """The accelerometer taken, not fitted (``FitSettings.taken_whole``): from fit.base (a hand-turned compass
+    log's few still parts cannot determine it: the base's values and standard errors, its file named with its
+    sha256) or from the run file's values (a log its device already corrected); this log's still intervals, if
+    any, only check it (|a| - g per interval against the noise and the standard errors: a warning when they
+    disagree)."""
     rec, iv, streamed = read_intervals(config, recording, least=0)
     model = build_model(())
-    params = base.params.with_fixed(base.params.names)
-    gravity = base.gravity
-    std = {n: float(base.std[n]) for n in params.names}
+    taken = _taken(config, rec.unit)
+    params, std, gravity = taken.params, taken.std, taken.gravity
     means = fit_data(model, iv, None, "means", rec.source)
     r, spread = _base_check(params, std, model, means, gravity) if iv.n else (np.empty(0), np.empty(0))
     chi2 = float(np.sum((r / spread) ** 2)) if iv.n else float("nan")
-    name = Path(config.fit.base).name
-    warnings = taken_warnings(name, chi2, iv.n, float(np.sqrt(np.mean(r**2))) if iv.n else float("nan"))
+    warnings = taken_warnings(taken.name, chi2, iv.n, float(np.sqrt(np.mean(r**2))) if iv.n else float("nan"))
     cal_fit: dict[str, Any] = {
-        "mode": "means", "taken": {"base": name, "sha256": digest},
-        "status": f"taken from {name}", "iterations": 0, "dof": iv.n,
-        "n_intervals": iv.n, "gravity_source": base.fit.get("gravity_source", "base"), "warnings": warnings,
+        "mode": "means", "taken": taken.origin, "status": f"taken from {taken.name}", "iterations": 0, "dof": iv.n,
+        "n_intervals": iv.n, "gravity_source": taken.gravity_source, "warnings": warnings,
     }
     if iv.n:
         cal_fit.update(rms_residual=float(np.sqrt(np.mean(r**2))), chi2=chi2, redchi=chi2 / iv.n,
@@ -534,7 +560,7 @@ def taken_from_base(config: RunConfig, recording: Recording | None = None) -> Ca
                     success=True, iterations=0, solve_time=0.0, model_name=model.name, model=model, gravity=gravity,
                     mode="means", chi2_noise=chi2)
     return CalibrationRun(config=config, recording=rec, intervals=iv, guess=pb.guess, observability=obs, result=res,
-                          calibration=cal, directions=directions, sample_residuals=samp_res, gravity_source="base")
+                          calibration=cal, directions=directions, sample_residuals=samp_res, gravity_source=taken.gravity_source)
 
 
 def calibrate_imu(config: RunConfig, recording: Recording | None = None,

@@ -1,9 +1,11 @@
 """fit.base with every accelerometer parameter held (issue 26 follow-up): the accelerometer is taken from the
 base calibration, not fitted, so a hand-turned compass log (rarely still) still calibrates its magnetometer;
-this log's still intervals, if any, only check the base."""
+this log's still intervals, if any, only check the base. Or every value given in fit.fix (no base): the
+accelerometer is taken as stated (a log its device already corrected), checked alike."""
 from __future__ import annotations
 
 import hashlib
+import html
 
 import numpy as np
 import pytest
@@ -111,10 +113,53 @@ def test_a_missing_or_wrong_unit_base_is_one_line_and_nothing_is_written(tmp_pat
     assert not (tmp_path / "out").exists()
 
 
-def test_all_nine_held_without_a_base_stays_refused():
+def test_all_nine_held_without_a_base_or_values_stays_refused():
     with pytest.raises(ImucalError, match="nothing is left to fit") as e:
         config_from_dict({"data": {"path": "log.csv"}, "fit": {"fix": ALL}})
-    assert "fit.base" in str(e.value) and "\n" not in str(e.value)
+    assert "fit.base" in str(e.value) and "give all nine values" in str(e.value) and "\n" not in str(e.value)
+    with pytest.raises(ImucalError, match="nothing is left to fit"):  # eight values are not nine
+        config_from_dict({"data": {"path": "log.csv"}, "fit": {"fix": ALL, "initial": {n: 1.0 for n in ALL[:8]}}})
+
+
+def as_logged(tmp_path, scale=(1.0, 1.0, 1.0)) -> object:
+    """A run file stating the accelerometer of a log in g that its device corrected: s 0, b = scale / g."""
+    b = {f"b{i + 1}": v / STANDARD_GRAVITY for i, v in enumerate(scale)}
+    fix = {"s1": 0.0, "s2": 0.0, "s3": 0.0, **b, "phi": np.pi / 2, "psi": np.pi / 2, "theta": np.pi / 2}
+    run = tmp_path / "run.yaml"
+    run.write_text(f"data: {{path: log.csv, unit: g, sample_rate: {RATE:g}}}\n"
+                   f"fit: {{fix: {{{', '.join(f'{k}: {v!r}' for k, v in fix.items())}}}}}\n"
+                   "mag: {field: 48, field_unit: uT}\ngravity: {value: 9.80665}\n")
+    return run
+
+
+def test_a_log_its_device_corrected_takes_the_stated_accelerometer(tmp_path, run_cli):
+    """fit.fix giving all nine values: taken as stated (errors 0), the magnetometer calibrated beside it; the still
+    intervals check it and name a statement that disagrees (a 3 % scale)."""
+    truth = truth_from_soft_iron(SOFT, s=HARD, field=48.0, noise=0.1, acc_noise=0.002)
+    sim = simulate_mag(truth, n_poses=30, hold=150, transition=40, seed=3)
+    np.savetxt(tmp_path / "log.csv", np.column_stack([sim.acc, sim.mag]), delimiter=",",
+               header="ax,ay,az,mx,my,mz", comments="", fmt="%.8g")  # acc in g, already corrected
+    r = run_cli(["calibrate", as_logged(tmp_path), "--out", tmp_path / "out"])
+    assert r.code == 0, r.err
+    cal = load_calibration(tmp_path / "out" / "calibration.yaml")
+    assert cal.fit["taken"] == {"run_file": "fit.fix"} and all(cal.std[n] == 0.0 for n in BASE_NAMES)
+    assert cal.params["b1"].value == pytest.approx(1 / STANDARD_GRAVITY) and cal.params["s2"].value == 0.0
+    assert cal.fit["redchi"] < 3 and not cal.fit["warnings"]
+    assert cal.sensor(MAGNETOMETER) is not None
+    text = (tmp_path / "out" / "report.txt").read_text()
+    assert "taken from the run file's fit.fix values" in text and "sha256" not in text.split("[[Taken")[1][:200]
+    assert html.escape("the run file's fit.fix values") in (tmp_path / "out" / "report.html").read_text()
+    r = run_cli(["calibrate", as_logged(tmp_path, scale=(1.03, 1.0, 1.0)), "--out", tmp_path / "off"])
+    assert r.code == 0, r.err
+    warn = load_calibration(tmp_path / "off" / "calibration.yaml").fit["warnings"]
+    assert any("disagree with the accelerometer taken from the run file's fit.fix values" in w for w in warn), warn
+
+
+def test_a_fit_setting_beside_stated_values_is_refused():
+    fix = {n: (1.5707963267948966 if n in ("phi", "psi", "theta") else 0.1) for n in ALL}
+    with pytest.raises(ImucalError, match="taken from fit.fix's values") as e:
+        config_from_dict({"data": {"path": "log.csv", "unit": "g"}, "fit": {"fix": fix, "mode": "samples"}})
+    assert e.value.field == "fit.mode"
 
 
 def test_a_value_given_beside_a_taken_base_is_refused(tmp_path):

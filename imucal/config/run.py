@@ -144,6 +144,19 @@ class FitSettings:
         base calibration, not fitted (a hand-turned compass log's few still parts; imucal.pipeline)."""
         return self.base is not None and set(BASE_NAMES) <= set(self.fix) and not self.effects
 
+    @property
+    def takes_given(self) -> bool:
+        """Every accelerometer parameter held at a value the run file gives (fit.fix as a mapping), no effect and
+        no base: the accelerometer is taken as stated, not fitted (a log its device already corrected: s 0, b 1,
+        right angles; imucal.pipeline)."""
+        return (self.base is None and set(BASE_NAMES) <= set(self.fix) and set(BASE_NAMES) <= set(self.initial)
+                and not self.effects)
+
+    @property
+    def taken_whole(self) -> bool:
+        """The accelerometer is taken (from fit.base or the run file's values), not fitted."""
+        return self.takes_base or self.takes_given
+
     def __post_init__(self) -> None:
         if self.noise is not None and (not isinstance(self.noise, str) or not self.noise):
             raise ImucalError(f"noise {short(self.noise)} must be a file name", field="fit.noise",
@@ -156,14 +169,16 @@ class FitSettings:
         for n in self.fix:
             if n not in BASE_NAMES:
                 raise ImucalError(f"cannot fix {short(n)}", field="fit.fix", fix=f"choose from {', '.join(BASE_NAMES)}")
-        if set(BASE_NAMES) <= set(self.fix) and not self.effects and self.base is None:  # no unknown left
+        if set(BASE_NAMES) <= set(self.fix) and not self.effects and not self.taken_whole:  # no unknown left
             raise ImucalError(f"all {len(BASE_NAMES)} parameters are fixed, so nothing is left to fit",
                               field="fit.fix", fix="drop at least one from fit.fix (e.g. fix: [phi, psi, theta]), "
-                                                   "fit an effect beside them (fit.effects), or take the accelerometer "
-                                                   "from a calibration (fit.base)")
-        if self.takes_base and (self.mode != "means" or self.noise is not None):  # nothing is fitted to weigh
+                                                   "fit an effect beside them (fit.effects), take the accelerometer "
+                                                   "from a calibration (fit.base), or give all nine values "
+                                                   "(fix: {s1: 0, ..., theta: 1.5707963267948966})")
+        if self.taken_whole and (self.mode != "means" or self.noise is not None):  # nothing is fitted to weigh
             key = "fit.mode" if self.mode != "means" else "fit.noise"
-            raise ImucalError(f"{key} has no effect: the accelerometer is taken from fit.base, not fitted",
+            where = "fit.base" if self.takes_base else "fit.fix's values"
+            raise ImucalError(f"{key} has no effect: the accelerometer is taken from {where}, not fitted",
                               field=key, fix=f"drop {key}, or leave one parameter out of fit.fix to fit")
         for n, v in self.initial.items():
             if n not in BASE_NAMES and not (isinstance(n, str) and EFFECT_PARAMETER.match(n)):

@@ -38,7 +38,7 @@ def plain(text: str) -> str:
 
 def no_intervals_figure(path: str | Path) -> None:
     """The place of a per-interval figure for a log without a still interval (an accelerometer taken from
-    fit.base on a hand-turned log: imucal.pipeline.taken_from_base)."""
+    fit.base on a hand-turned log: imucal.pipeline.taken_whole)."""
     fig, axes = new_figure(WIDE, WIDE_H)
     ax = axes[0, 0]
     ax.text(0.5, 0.5, "no still interval in this log: |a| - g not checked", ha="center", va="center")

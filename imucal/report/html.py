@@ -19,7 +19,7 @@ from imucal.report.figures import before_after
 from imucal.report.page import (CSP, STYLE, esc, figures_html, num, page_html, render_png,  # noqa: F401
                                 table_html)
 from imucal.report.text import interval_residuals, t_quantile_975, time_base_words
-from imucal.report.verdict import Check, SensorVerdict, Verdict, chi2_consistent, verdict  # noqa: F401
+from imucal.report.verdict import Check, SensorVerdict, Verdict, chi2_consistent, taken_words, verdict  # noqa: F401
 
 if TYPE_CHECKING:  # discovery pages only: `imucal calibrate` does not import the discovery modules
     from imucal.analysis.discover import Discovery
@@ -116,17 +116,17 @@ def _residuals_html(run: CalibrationRun) -> str:
 
 
 def _taken_rows(run: CalibrationRun) -> list[tuple[str, str]]:
-    """An accelerometer taken from fit.base (imucal.pipeline.taken_from_base): no fit; this log's still
-    intervals, if any, a check."""
-    cal, iv, rec, taken = run.calibration, run.intervals, run.recording, run.calibration.fit["taken"]
+    """An accelerometer taken from fit.base or the run file (imucal.pipeline.taken_whole): no fit; this log's
+    still intervals, if any, a check."""
+    cal, iv, rec = run.calibration, run.intervals, run.recording
+    name, what = taken_words(cal.fit["taken"])
     check = (f"{iv.n} intervals ({run.observability.n_distinct} distinct orientations), reduced chi-square "
              f"{num(cal.fit['redchi'], '.4g')}, RMS |a| − g {cal.fit['rms_residual'] * 1e3:.4g} mm/s²" if iv.n
              else "none: this log has no still interval")
     return [("model", esc(run.result.model_name)),
-            ("accelerometer", f"taken from {esc(taken['base'])} (SHA-256 <code>{esc(taken['sha256'])}</code>): "
-                              "its values and standard errors, not fitted to this log"),
+            ("accelerometer", f"taken from {esc(name)}: {esc(what)}, not fitted to this log"),
             ("check on this log's still intervals", check),
-            ("gravity", f"{cal.gravity:.6f} m/s² (the base's)"),
+            ("gravity", f"{cal.gravity:.6f} m/s² ({'the base' if 'base' in cal.fit['taken'] else 'the run'}'s)"),
             ("data", f"{esc(Path(rec.source).name)}: {rec.n} samples, {rec.duration:.1f} s, "
                      f"{rec.sample_rate:.4g} Hz, raw unit {esc(cal.raw_unit)}"),
             ("SHA-256", f"<code>{esc(rec.sha256)}</code>")]
@@ -175,7 +175,7 @@ CAPTIONS = {
 
 def _accelerometer_html(run: CalibrationRun, figures: Mapping[str, bytes]) -> str:
     parts = [_datasheet_html(datasheet(run.calibration)["accelerometer"]), DATASHEET_NOTE,
-             f"<h3>{'Parameters taken from ' + esc(run.calibration.fit['taken']['base']) if 'taken' in run.calibration.fit else 'Fitted parameters'}</h3>",
+             f"<h3>{'Parameters taken from ' + esc(taken_words(run.calibration.fit['taken'])[0]) if 'taken' in run.calibration.fit else 'Fitted parameters'}</h3>",
              _parameters_html(run), "<h3>|a| − g per pose, before and after</h3>"]
     if "before_after.png" in figures:
         parts.append(figures_html({"before_after.png": figures["before_after.png"]}, CAPTIONS))

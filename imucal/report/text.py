@@ -104,17 +104,19 @@ def time_base_words(tb: TimeBase | None) -> str:
 
 
 def _taken_lines(run: CalibrationRun) -> list[str]:
-    """An accelerometer taken from fit.base (imucal.pipeline.taken_from_base): the base named, no fit; this
-    log's still intervals as a check, when it has some; warnings."""
-    cal, iv, taken = run.calibration, run.intervals, run.calibration.fit["taken"]
-    L = ["[[Taken from base]]",
-         f"    accelerometer      = taken from {taken['base']} (sha256 {taken['sha256']}): its values and standard "
-         "errors, not fitted to this log"]
+    """An accelerometer taken from fit.base or the run file (imucal.pipeline.taken_whole): where from, no fit;
+    this log's still intervals as a check, when it has some; warnings."""
+    from imucal.report.verdict import taken_words
+
+    cal, iv = run.calibration, run.intervals
+    name, what = taken_words(cal.fit["taken"])
+    L = ["[[Taken, not fitted]]",
+         f"    accelerometer      = taken from {name}: {what}, not fitted to this log"]
     if iv.n:
         L.append(f"    check on           = {iv.n} still intervals of this log ({run.observability.n_distinct} "
                  "distinct orientations)")
         L.append(f"    chi-square         = {cal.fit['chi2']:.6g} on {iv.n} intervals (reduced {cal.fit['redchi']:.4g}; "
-                 "1 = |a| - g at the noise of the means and the base's standard errors)")
+                 "1 = |a| - g at the noise of the means and the taken standard errors)")
         L.append(f"    RMS |a|-g, means   = {cal.fit['rms_residual']:.6g} m/s^2")
         L.append(f"    RMS |a|-g, samples = {cal.fit['rms_residual_samples']:.6g} m/s^2")
     else:

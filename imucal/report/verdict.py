@@ -94,19 +94,28 @@ def _bound_check(at_bound: dict[str, str]) -> Check:
                  "; ".join(f"{n} at its {b} bound" for n, b in at_bound.items()) or "all inside their bounds")
 
 
+def taken_words(taken: dict) -> tuple[str, str]:
+    """Where a taken accelerometer (imucal.pipeline.taken_whole; the file's fit.taken) came from, in words: its
+    name, and what was taken with the file's digest, or that the run file stated the values."""
+    if "base" in taken:
+        return str(taken["base"]), f"its values and standard errors (sha256 {taken.get('sha256', '')})"
+    return "the run file's fit.fix values", "as stated (a log its device already corrected), standard errors 0"
+
+
 def _taken_verdict(run: CalibrationRun) -> SensorVerdict:
-    """An accelerometer taken from fit.base (imucal.pipeline.taken_from_base): no fit to judge; this log's
-    still intervals, when it has some, check it."""
-    cal, iv, taken = run.calibration, run.intervals, run.calibration.fit["taken"]
-    warnings = tuple(taken_warnings(taken["base"], cal.fit["chi2"], iv.n, cal.fit["rms_residual"]) if iv.n else ())
+    """An accelerometer taken from fit.base or the run file (imucal.pipeline.taken_whole): no fit to judge; this
+    log's still intervals, when it has some, check it."""
+    cal, iv = run.calibration, run.intervals
+    name, what = taken_words(cal.fit["taken"])
+    warnings = tuple(taken_warnings(name, cal.fit["chi2"], iv.n, cal.fit["rms_residual"]) if iv.n else ())
     agree = not warnings
     checks = (
-        Check(f"taken from {taken['base']}", True, f"its values and standard errors (sha256 {taken['sha256'][:12]}...)"),
+        Check(f"taken from {name}", True, what),
         Check("this log's still intervals agree with it", agree,
               f"{iv.n} intervals, reduced chi-square {cal.fit['redchi']:.3g}, RMS |a| − g "
               f"{cal.fit['rms_residual'] * 1e3:.3g} mm/s²" if iv.n else "no still interval in this log: not checked"),
     )
-    summary = f"taken from {taken['base']}, not fitted" + (f"; checked on {iv.n} still intervals" if iv.n else "")
+    summary = f"taken from {name}, not fitted" + (f"; checked on {iv.n} still intervals" if iv.n else "")
     return SensorVerdict("accelerometer", checks, warnings, summary, True)
 
 
