@@ -173,3 +173,32 @@ def test_mismatched_sensors_refused():
         calibrate_mag(sim.mag, sim.acc[:-5], source="log.csv")
     assert str(e.value) == ("log.csv: ax, ay, az: accelerometer (1445 rows) and magnetometer (1450 rows) differ "
                             "(fix: give both sensors on one time base)")
+
+
+def test_the_dip_poses_are_the_still_intervals_and_the_quiet_windows_between_them():
+    """dip_poses: windows overlapping a still interval are left out, the rest join in time order, flagged."""
+    from imucal.mag.calibrate import dip_poses
+    from imucal.mag.evidence import Poses
+
+    quiet = Poses(np.arange(0, 1000, 25), np.arange(25, 1025, 25), "windows of 25 samples")
+    still = Poses(np.arange(10, 1000, 160), np.arange(40, 1030, 160), "still intervals")  # 7 intervals
+    poses, is_still = dip_poses(quiet, still)
+    assert np.all(np.diff(poses.start) > 0) and is_still.sum() == still.n
+    assert np.array_equal(poses.start[is_still], still.start) and np.array_equal(poses.end[is_still], still.end)
+    w = poses.subset(~is_still)
+    assert not np.any((w.start[:, None] < still.end) & (w.end[:, None] > still.start))
+    assert w.n == quiet.n - 2 * still.n and "between them" in poses.source  # each interval meets two windows
+    few = still.subset(np.arange(still.n) < 5)  # fewer than MIN_STILL_POSES: the windows alone, as before
+    poses, is_still = dip_poses(quiet, few)
+    assert poses is quiet and not is_still.any()
+
+
+def test_a_log_with_few_still_holds_and_slow_turns_takes_its_dip_from_both():
+    """Eight short holds and slow turns between them: the windows between join the dip rows, the report and the
+    field's step test still go by the holds, and the alignment is recovered."""
+    truth = _truth()
+    sim = simulate_mag(truth, n_poses=8, hold=60, transition=400, seed=5)
+    cal = calibrate_mag(sim.mag, sim.acc, still=sim.holds, settings=MagSettings(field=truth.field))
+    assert cal.poses.n > 2 * sim.holds.n and "between them" in cal.poses.source
+    assert len(cal.report.poses) == sim.holds.n
+    assert np.all(np.abs(_z(cal, truth)) < 4.5)

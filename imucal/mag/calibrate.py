@@ -3,7 +3,8 @@
   1. noise of both sensors from the log (imucal.mag.evidence.sample_variance)
   2. initial guess: the accelerometer's linear ellipsoid fit (imucal.solve.initial) on the readings
   3. coverage: refuse directions that leave the hard and soft iron undetermined (imucal.mag.checks)
-  4. with an accelerometer: the lag, the poses (still intervals, else quiet windows), the mounting
+  4. with an accelerometer: the lag, the poses (still intervals and the quiet windows between them, or the
+     quiet windows alone when fewer than MIN_STILL_POSES are still), the mounting
      (imucal.mag.frame: the 24 signed permutations, refined in closed form)
   5. the fit of every row (imucal.mag.fit), with and without the rotation, and the F test between them
   6. the field's steps between poses, and the figures before and after (imucal.mag.result)
@@ -32,7 +33,8 @@ from imucal.solve.initial import ellipsoid_guess
 SOFT_IRON_CHOICES = ("auto", "symmetric", "full")
 #: Samples the initial ellipsoid fit looks at (evenly spaced): a linear fit, its cost linear in them.
 GUESS_ROWS = 20000
-#: Still intervals used for the dip when there are at least this many; else quiet windows of a moving log.
+#: Still intervals used for the dip (beside the quiet windows between them) when there are at least this many;
+#: else the quiet windows of a moving log alone.
 MIN_STILL_POSES = 6
 #: A pose whose accelerometer magnitude is off the poses' median by more than this fraction is moving
 #: (linear acceleration tilts the apparent gravity): not a DIP row.
@@ -94,19 +96,20 @@ class _DipSetup:
     rows: ev.MagRows
     search: AxesSearch
     params: Parameters  #: with the rotation and dip started from the closed form
+    steps: ev.Poses  #: the poses the report and the field's step test go by: the still ones when used, else all
 
 
 def _dip_setup(mag: np.ndarray, acc: np.ndarray, still: ev.Poses | None, params: Parameters, settings: MagSettings,
                var_m: np.ndarray, use: np.ndarray, source: str | None) -> _DipSetup:
-    """The lag, the poses (still intervals, else quiet windows), their DIP rows and the mounting."""
+    """The lag, the poses (``dip_poses``), their DIP rows and the mounting."""
     p0 = np.array(params.values(), float)
     lag = ev.Lag(float(settings.lag), 0.0, False) if settings.lag is not None else ev.estimate_lag(mag - p0[:3], acc)
     mag_d = ev.shift(mag, lag.samples)
-    poses = still if still is not None and still.n >= MIN_STILL_POSES else ev.quiet_windows(mag_d - p0[:3],
-                                                                                             settings.window)
-    poses = poses.subset(poses.inside(use))
+    poses, from_still = dip_poses(ev.quiet_windows(mag_d - p0[:3], settings.window), still)
+    keep = poses.inside(use)
     an = np.linalg.norm(poses.means(acc), axis=1)
-    poses = poses.subset(np.abs(an / np.median(an) - 1) <= MAX_ACC_DEVIATION)
+    keep &= np.abs(an / np.median(an[keep] if keep.any() else an) - 1) <= MAX_ACC_DEVIATION
+    poses, from_still = poses.subset(keep), from_still[keep]
     if poses.n < MIN_DIP_ROWS:
         raise ImucalError(f"only {poses.n} poses for the dip angle", file=source, field="ax, ay, az",
                           fix=f"hold the sensor still in at least {MIN_DIP_ROWS} orientations, or turn it slowly")
@@ -118,7 +121,23 @@ def _dip_setup(mag: np.ndarray, acc: np.ndarray, still: ev.Poses | None, params:
     start = dict(zip(ROTATION_NAMES, (float(np.clip(v, -ROTATION_BOUND, ROTATION_BOUND)) for v in r0)))
     if params["dip"].free:  # the poses' mean dip in the found frame
         start["dip"] = float(np.mean(dip_angles(rows.cov[:, 1:], h0 @ P.T)))
-    return _DipSetup(lag, poses, rows, search, params.with_values(start))
+    return _DipSetup(lag, poses, rows, search, params.with_values(start),
+                     poses.subset(from_still) if from_still.any() else poses)
+
+
+def dip_poses(quiet: ev.Poses, still: ev.Poses | None) -> tuple[ev.Poses, np.ndarray]:
+    """The dip's poses, and which of them are still intervals: the still intervals (when at least
+    MIN_STILL_POSES) and the quiet windows that overlap none of them, in time order. A hand-turned log is rarely
+    still: most of its dip evidence is in the windows between its few still parts (CK-Explorer's log: 19 still
+    intervals, some 300 quiet windows)."""
+    if still is None or still.n < MIN_STILL_POSES:
+        return quiet, np.zeros(quiet.n, bool)
+    hit = (quiet.start[:, None] < still.end[None, :]) & (quiet.end[:, None] > still.start[None, :])
+    apart = quiet.subset(~hit.any(axis=1))
+    start, end = np.concatenate([still.start, apart.start]), np.concatenate([still.end, apart.end])
+    order = np.argsort(start, kind="stable")
+    source = still.source if not apart.n else f"{still.source} and {apart.n} {quiet.source} between them"
+    return ev.Poses(start[order], end[order], source), np.arange(start.size)[order] < still.n
 
 
 def _fits(model: SensorModel, rows: ev.MagRows, params: Parameters, settings: MagSettings, dip: bool,
@@ -172,7 +191,7 @@ def calibrate_mag(mag: np.ndarray, acc: np.ndarray | None = None, *, still: ev.P
     model = build_mag_model(IDENTITY if setup is None else setup.search.best.axes, field_unit)
     params = params if setup is None else setup.params
     rows = ev.MagRows.stack(nrows, *([] if setup is None else [setup.rows]), *extra)
-    step_poses = setup.poses if setup is not None else (still if still is not None and still.n >= MIN_STILL_POSES
+    step_poses = setup.steps if setup is not None else (still if still is not None and still.n >= MIN_STILL_POSES
                                                         else ev.windows(len(mag), settings.window))
     fits = _fits(model, rows, params, settings, setup is not None, source)
     steps = field_steps(step_poses.means(_norm_pct(fits[0], mag)[:, None])[:, 0] / 100.0, step_poses)
