@@ -128,7 +128,8 @@ def make_parameters(guess: InitialGuess, config: RunConfig, gravity: float, mode
     for i in (1, 2, 3):
         if f"b{i}" in init and not init[f"b{i}"] > 0:
             raise ImucalError(f"b{i} = {init[f'b{i}']:g} must be positive", file=config.source,
-                              field=f"fit.initial.b{i}", fix="give the scale in raw units per m/s^2")
+                              field=f"{'fit.fix' if f'b{i}' in fs.fix else 'fit.initial'}.b{i}",
+                              fix="give the scale in raw units per m/s^2")
     angles0 = [init.get(a, np.pi / 2 if a in fs.fix else guess.angles[i]) for i, a in enumerate(ANGLE_NAMES)]
     s0 = [init.get(f"s{i+1}", guess.s[i]) for i in range(3)]
     b0 = [init.get(f"b{i+1}", guess.b[i]) for i in range(3)]
@@ -505,10 +506,9 @@ def _taken(config: RunConfig, unit: str) -> Taken:
     from imucal.config.run import base_path, load_base
 
     if config.fit.base is None:
-        v = config.fit.initial
         gravity, source = config.gravity.resolve()
-        params = base_parameters([v[f"s{i}"] for i in (1, 2, 3)], [v[f"b{i}"] for i in (1, 2, 3)],
-                                 [v[a] for a in ANGLE_NAMES], config.fit.angle_tolerance, unit, gravity)
+        unused = InitialGuess(s=np.zeros(3), b=np.ones(3), angles=np.full(3, RIGHT_ANGLE), method="given")
+        params = make_parameters(unused, config, gravity, build_model(()), unit)  # checks a scale > 0, the angles
         return Taken(params.with_fixed(params.names), {n: 0.0 for n in params.names}, gravity, source,
                      {"run_file": "fit.fix"}, "the run file's fit.fix values")
     base = load_base(config, config.source)

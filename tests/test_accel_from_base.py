@@ -182,3 +182,19 @@ def test_a_fit_setting_beside_a_taken_base_is_refused(tmp_path, extra):
         config_from_dict({"data": {"path": "log.csv", "unit": "g"},
                           "fit": {"base": str(tmp_path / "base.yaml"), "fix": ALL, **extra}})
     assert e.value.field == key and "\n" not in str(e.value)
+
+
+@pytest.mark.parametrize("bad, field, words", [({"b1": 0.0}, "fit.fix.b1", "must be positive"),
+                                               ({"b2": -0.1}, "fit.fix.b2", "must be positive"),
+                                               ({"phi": 1.0}, "fit.fix.phi", "outside its bounds")])
+def test_stated_values_a_fit_would_refuse_are_refused(tmp_path, run_cli, unchanged, bad, field, words):
+    """A stated scale of zero or below, or an angle outside 90 deg +- 2 %: one line, exit 2, nothing written."""
+    write_log(tmp_path / "log.csv", hold=150)
+    fix = {"s1": 0.0, "s2": 0.0, "s3": 0.0, "b1": 0.1, "b2": 0.1, "b3": 0.1, "phi": np.pi / 2, "psi": np.pi / 2,
+           "theta": np.pi / 2, **bad}
+    run = tmp_path / "run.yaml"
+    run.write_text(f"data: {{path: log.csv, unit: g, sample_rate: {RATE:g}}}\n"
+                   f"fit: {{fix: {{{', '.join(f'{k}: {v!r}' for k, v in fix.items())}}}}}\n")
+    with unchanged():
+        r = run_cli(["calibrate", run, "--out", tmp_path / "out"])
+    assert r.code == 2 and r.err.count("\n") == 1 and field in r.err and words in r.err, r.err
