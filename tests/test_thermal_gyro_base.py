@@ -126,3 +126,22 @@ def test_the_bias_over_temperature_is_the_truth_in_counts(run_cli, tmp_path, axi
     g = load_calibration(tmp_path / "cal" / "calibration.yaml").gyro
     assert g is not None
     assert g.params["bias_temperature_x"].value == pytest.approx(3e-4 * SCALE[axis], rel=0.03)
+
+
+@pytest.mark.parametrize("scale", [0.0, -940.0, 1e-300, float("nan")])
+def test_a_hostile_base_gyroscope_scale_is_one_line(run_cli, tmp_path, unchanged, scale, recwarn):
+    """A base whose gyroscope scale is zero, negative, tiny enough to overflow the map's check, or NaN: one line
+    naming fit.base, exit 2, no numpy warning, nothing written."""
+    import yaml
+
+    d = yaml.safe_load(base_file(tmp_path / "good.yaml").read_text())
+    d["gyroscope"]["parameters"]["scale_x"]["value"] = scale
+    (tmp_path / "base.yaml").write_text(yaml.safe_dump(d))
+    data, _ = counts_sweep(tmp_path / "sweep.csv")
+    run = tmp_path / "run.yaml"
+    run.write_text(f"data: {{path: {data.name}, time_unit: s, gyro_unit: counts}}\n"
+                   f"fit: {{base: base.yaml, fix: [{', '.join(HELD)}]}}\n")
+    with unchanged(tmp_path):
+        r = run_cli(["discover", "--config", run, "--out", tmp_path / "cal"])
+    assert r.code == 2 and r.err.count("\n") == 1 and "fit.base" in r.err and "Warning" not in r.err, r.err
+    assert not [w for w in recwarn if issubclass(w.category, RuntimeWarning)], [str(w.message) for w in recwarn]

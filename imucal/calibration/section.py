@@ -170,9 +170,11 @@ def check_sensor(s: SensorCalibration, path: str) -> None:
                               f"[{p.lower:.6g}, {p.upper:.6g}]", file=path, field=f"{s.kind}.parameters.{n}.value",
                               fix=REGEN)
     if s.at_reference().model.affine is not None:
-        A = s.at_reference().affine().A
-        scale = np.prod(np.linalg.norm(A, axis=1))
-        if not (np.all(np.isfinite(A)) and abs(np.linalg.det(A)) > MIN_RELATIVE_DET * scale):
+        with np.errstate(all="ignore"):  # a hostile scale (1e-300) overflows here: the test below names it
+            A = s.at_reference().affine().A
+            scale = np.prod(np.linalg.norm(A, axis=1))
+            singular = not (np.all(np.isfinite(A)) and abs(np.linalg.det(A)) > MIN_RELATIVE_DET * scale)
+        if singular:
             raise ImucalError(f"the {s.kind} parameters give a singular map (a direction lost)", file=path,
                               field=f"{s.kind}.parameters", fix=REGEN)
 
