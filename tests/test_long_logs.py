@@ -3,7 +3,11 @@ their square. Memory is bounded by counting allocations (tracemalloc: numpy repo
 it), never by timing; the speed lives in scripts/bench_memory.py."""
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 import tempfile
+import time
 import tracemalloc
 from pathlib import Path
 
@@ -24,6 +28,9 @@ from imucal.model.parameters import base_parameters
 from imucal.model.sensor import build_model
 from imucal.solve.fit import FitData, _sandwich, fit
 from imucal.solve.initial import ellipsoid_guess
+
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def _means(n: int, seed: int = 3) -> FitData:
@@ -115,10 +122,12 @@ def test_memory_is_flat_in_the_samples(tmp_path, small_blocks, monkeypatch):
     spilled, not kept (once 36 bytes a sample), so only a few numbers per interval grow. (The fixed
     buffers, made small here, and the head the layout is read from, 1 MB, are reached by both sizes.)"""
     import imucal.data.static as static_mod
+    from imucal.data import run_pool
     from imucal.data.stream import StreamedRecording
 
     monkeypatch.setattr(static_mod, "VAR_BLOCK", 997)
     monkeypatch.setattr(static_mod, "_SWEEP", 4096)
+    monkeypatch.setattr(run_pool, "BATCH_ROWS", 2000)  # the runs judged together
     StreamedRecording(DataSpec(path=str(_tiled(tmp_path, 1))))  # the modules it imports are no sample's
     peaks = []
     for k in (4, 40):
@@ -180,48 +189,97 @@ def test_whole_and_in_chunks_give_the_same_calibration_file(tmp_path, small_bloc
     assert got["never"] == got["always"]
 
 
-def test_the_runs_are_computed_on_threads_in_order_and_few_at_a_time():
-    """The runs' statistics come back in the order of the runs whatever thread finished first, at most
-    RUNS_IN_FLIGHT of them read ahead; an error in one is raised and nothing after it is started."""
-    import threading
-    import time as _time
+def _tenfold(item: tuple) -> int:
+    return item[0] * 10
 
-    import imucal.data.stream as stream_mod
 
-    alive, peak, lock = [0], [0], threading.Lock()
+def _fails_at_5(item: tuple) -> int:
+    if item[0] == 5:
+        raise ValueError("run 5")
+    return item[0]
 
-    def items():
-        for k in range(40):
-            with lock:
-                alive[0] += 1
-                peak[0] = max(peak[0], alive[0])
+
+def _dies_at_3(item: tuple) -> int:
+    if item[0] == 3:
+        os._exit(9)  # as a worker killed from outside
+    return item[0]
+
+
+@pytest.mark.parametrize("workers", [0, 2])
+def test_the_runs_are_judged_in_order_and_few_at_a_time(workers):
+    """The runs' results come back in the order of the runs, at most BATCHES_IN_FLIGHT per worker sent
+    ahead; an error in one is raised and little after it is read."""
+    from imucal.data import run_pool
+
+    taken, back = [0], []
+
+    def items(n):
+        for k in range(n):
+            taken[0] += 1
             yield (k,)
 
-    def fn(item):
-        _time.sleep(0.002 * (item[0] % 3))  # later items may finish first
-        return item[0] * 10
-
-    got = []
-    for item, r in stream_mod._ordered_map(fn, items()):
-        got.append((item[0], r))
-        with lock:
-            alive[0] -= 1
-    assert got == [(k, 10 * k) for k in range(40)]
-    assert peak[0] <= stream_mod.RUNS_IN_FLIGHT + 1
-
-    def bad(item):
-        if item[0] == 5:
-            raise ValueError("run 5")
-        return item[0]
-
-    consumed = []
-
-    def many():
-        for k in range(100):
-            consumed.append(k)
-            yield (k,)
-
+    held = 0
+    for item, r in run_pool.ordered_map(_tenfold, items(40), workers):
+        back.append((item[0], r))
+        held = max(held, taken[0] - len(back))
+    assert back == [(k, 10 * k) for k in range(40)]
+    assert held <= run_pool.BATCHES_IN_FLIGHT * workers + 1
+    taken[0] = 0
     with pytest.raises(ValueError, match="run 5"):
-        for _ in stream_mod._ordered_map(bad, many()):
+        for _ in run_pool.ordered_map(_fails_at_5, items(100), workers):
             pass
-    assert len(consumed) <= 5 + stream_mod.RUNS_IN_FLIGHT + 2
+    assert taken[0] <= 6 + run_pool.BATCHES_IN_FLIGHT * workers + 1
+
+
+def test_a_worker_that_dies_is_one_line():
+    """A worker killed (from outside, or out of memory) ends the run with one line naming the way out."""
+    from imucal.data import run_pool
+
+    with pytest.raises(ImucalError) as err:
+        for _ in run_pool.ordered_map(_dies_at_3, [(k,) for k in range(20)], 2):
+            pass
+    assert str(err.value).startswith("data.stream: a worker process judging the still intervals ended unexpectedly")
+    assert "--stream never" in str(err.value)
+
+
+def test_workers_end_with_the_process_that_started_them(tmp_path):
+    """A run killed by SIGKILL (no cleanup) leaves no worker behind: each watches its parent."""
+    psutil = pytest.importorskip("psutil")
+    code = ("import sys, time\nfrom imucal.data import run_pool\n"
+            "if __name__ == '__main__':\n"
+            "    for _ in run_pool.ordered_map(time.sleep, [30.0] * 4, 2):\n        pass\n")
+    script = tmp_path / "slow.py"
+    script.write_text(code)
+    proc = subprocess.Popen([sys.executable, str(script)], env={**os.environ, "PYTHONPATH": str(ROOT)})
+    try:
+        parent = psutil.Process(proc.pid)
+        deadline = time.monotonic() + 60
+        while len(workers := [c for c in parent.children() if "spawn_main" in " ".join(c.cmdline())]) < 2:
+            assert time.monotonic() < deadline, "the workers did not start"
+            time.sleep(0.1)
+    finally:
+        proc.kill()
+        proc.wait()
+    gone, alive = psutil.wait_procs(workers, timeout=30)
+    assert not alive, alive
+
+
+@pytest.mark.parametrize("mode", ["means", "samples"])
+def test_workers_give_the_same_calibration_file(tmp_path, small_blocks, monkeypatch, mode):
+    """Runs judged on worker processes give the calibration file of the runs judged in one process."""
+    from imucal.data import run_pool
+
+    if len(os.sched_getaffinity(0)) < 2:
+        pytest.skip("one core: no workers are started")
+    monkeypatch.setattr(run_pool, "POOL_RUNS", 1)
+    monkeypatch.setattr(run_pool, "BATCH_ROWS", 2000)  # several batches
+    monkeypatch.setattr(run_pool, "_allowed", [False])
+    path = _tiled(tmp_path, 2)
+    got = []
+    for allowed in (False, True):
+        run_pool.allow_workers(allowed)
+        assert run_pool.run_workers(50) == (2 if allowed else 0)
+        d = to_dict(calibrate_file(path, data={"stream": "always"}, fit={"mode": mode}).calibration)
+        d.pop("created")
+        got.append(d)
+    assert got[0] == got[1]

@@ -108,6 +108,10 @@ def _run(args: argparse.Namespace) -> int:
 def main(argv: list[str] | None = None) -> int:
     """Run one command. Exit statuses: imucal.errors.EXIT_* (README, "Exit status")."""
     as_program = argv is None  # the console script or python -m imucal, not a caller's code
+    if as_program:  # its main module is safe to import again: long logs may use worker processes
+        from imucal.data.run_pool import allow_workers
+
+        allow_workers()
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(argv)
     args = parser.parse_args(argv)

@@ -492,19 +492,38 @@ class _Line:
         white = _std_rows(core[1:] - core[:-1], ddof=1) / np.sqrt(2)
         floor = np.maximum(q / np.sqrt(12), 64 * np.finfo(float).eps * (np.abs(mu) + 1))
         drift = np.abs(beta) * np.sqrt(lever) > EDGE_SLOPE_Z * np.maximum(white, floor)
-        beta = np.where(drift, beta, 0.0)
-        res = x - mu - r[:, None] * beta
+        # without a drift the line is its mean (the slope's term, +-0, changes no value but a zero's sign,
+        # which nothing after reads: sums, squares and magnitudes)
+        res = x - mu - r[:, None] * np.where(drift, beta, 0.0) if drift.any() else x - mu
         return _Line(res, r, white, floor, np.where(drift, lever, np.inf), core.shape[0])
 
-    def sigma(self, row: np.ndarray, at: np.ndarray, size: np.ndarray) -> np.ndarray:
-        """Standard error of a mean over ``size`` rows centred at ``at``, for a row noise ``row``:
-        the mean's own and the line's (its level and slope, there)."""
-        return row * np.sqrt(1 / size[:, None] + 1 / self.nc + at[:, None] ** 2 / self.lever)
+    def sigma(self, row: np.ndarray, at: np.ndarray, size: np.ndarray | float) -> np.ndarray:
+        """Standard error of a mean over ``size`` rows (an array, or one count for all) centred at ``at``,
+        for a row noise ``row``: the mean's own and the line's (its level and slope, there)."""
+        own = 1 / size[:, None] + 1 / self.nc if isinstance(size, np.ndarray) else 1 / size + 1 / self.nc
+        return row * np.sqrt(own + at[:, None] ** 2 / self.lever)
 
 
 def _running(cs: np.ndarray, w: int) -> np.ndarray:
     """Means of every ``w`` consecutive rows, from the cumulative sums ``cs`` (with a leading 0)."""
     return (cs[w:] - cs[:-w]) / w
+
+
+def _row_max(x: np.ndarray) -> np.ndarray:
+    """``x.max(axis=1)`` of an (n, k) array, a column at a time (the same values, NaN too; numpy
+    reduces the few values of each row of a long array some 10 times slower)."""
+    out = x[:, 0].copy()
+    for j in range(1, x.shape[1]):
+        np.maximum(out, x[:, j], out=out)
+    return out
+
+
+def _row_all(x: np.ndarray) -> np.ndarray:
+    """``x.all(axis=1)`` of an (n, k) boolean array, a column at a time."""
+    out = x[:, 0].copy()
+    for j in range(1, x.shape[1]):
+        out &= x[:, j]
+    return out
 
 
 def _edge_cut(line: _Line, m: int, sides: str = "both") -> tuple[int, int] | None:
@@ -514,7 +533,8 @@ def _edge_cut(line: _Line, m: int, sides: str = "both") -> tuple[int, int] | Non
     res, r = line.res, line.r
     n = res.shape[0]
     c0, c1 = n // 4, n - n // 4
-    cs = np.zeros((n + 1, res.shape[1]))
+    cs = np.empty((n + 1, res.shape[1]))
+    cs[0] = 0.0
     np.cumsum(res, axis=0, out=cs[1:])
     scales, rows, w = [], [], m
     while w * EDGE_CORE_WINDOWS <= line.nc or not scales:  # one row's noise at each scale
@@ -522,23 +542,20 @@ def _edge_cut(line: _Line, m: int, sides: str = "both") -> tuple[int, int] | Non
                                np.maximum(line.white, line.floor) if not rows else rows[-1]))
         scales.append(w)
         w *= 2
-    ws, rows_w = np.array(scales), np.array(rows)
-
-    def z(size: np.ndarray, at: np.ndarray, mean: np.ndarray) -> np.ndarray:
-        row = rows_w[np.maximum(np.searchsorted(ws, size, side="right") - 1, 0)]
-        return (np.abs(mean) / line.sigma(row, at, size.astype(float))).max(axis=1)
-
-    i = np.arange(c1, n)  # rows i..n-1 ...
-    z_end = z(n - i, (r[i] + r[-1]) / 2, (cs[n] - cs[i]) / (n - i)[:, None])
-    j = np.arange(1, c0 + 1)  # ... and rows 0..j-1
-    z_start = z(j, (r[0] + r[j - 1]) / 2, cs[j] / j[:, None])
+    # the means of rows i..n-1 (i >= c1) and of rows 0..j-1 (j <= c0), and the z of each, in one go
+    i, j = np.arange(c1, n), np.arange(1, c0 + 1)
+    size = np.concatenate([n - i, j])
+    at = np.concatenate([(r[i] + r[-1]) / 2, (r[0] + r[j - 1]) / 2])
+    mean = np.concatenate([cs[n] - cs[i], cs[j]]) / size[:, None]
+    row = np.array(rows)[np.maximum(np.searchsorted(scales, size, side="right") - 1, 0)]
+    z = _row_max(np.abs(mean) / line.sigma(row, at, size.astype(float)))
+    z_end, z_start = z[:i.size], z[i.size:]
     top_end = z_end.max(initial=0.0) if sides != "start" else 0.0
     top_start = z_start.max(initial=0.0) if sides != "end" else 0.0
     if max(top_end, top_start) <= EDGE_Z:
         return None
     dev = _running(cs, m)  # dev[k]: mean of rows k..k+m-1 less the line
-    near = (np.abs(dev) <= EDGE_BACK * line.sigma(rows_w[0], r[:n - m + 1] + (m - 1) / 2,
-                                                  np.full(n - m + 1, float(m)))).all(axis=1)
+    near = _row_all(np.abs(dev) <= EDGE_BACK * line.sigma(rows[0], r[:n - m + 1] + (m - 1) / 2, float(m)))
     if top_end >= top_start:
         k = int(i[np.argmax(z_end)])  # walk back to the last window near the line
         back = np.flatnonzero(near[:max(k - m + 1, 0)])
@@ -583,6 +600,15 @@ def still_segment(start: int, seg: np.ndarray, t: np.ndarray, temp: np.ndarray |
     if hi - lo < 3 or t[hi - 1] - t[lo] < at_rate(settings, dt).min_duration:
         return None
     return segment(start + lo, seg[lo:hi], t[lo:hi], None if temp is None else temp[lo:hi], lows, highs, declared)
+
+
+def judge_runs(batch: list[tuple], args: tuple) -> list[Segment | None]:
+    """still_segment of each candidate run (first row, raw, t, temp) of a batch, None for one shorter
+    than the minimum duration (``args``: still_segment's lows, highs, declared, settings, m, q). A
+    function of its arguments alone: imucal.data.run_pool sends batches to worker processes."""
+    settings = args[3]
+    return [still_segment(start, raw, t, temp, *args) if t[-1] - t[0] >= settings.min_duration else None
+            for start, raw, t, temp in batch]
 
 
 def quantum(x: np.ndarray) -> float:

@@ -19,10 +19,9 @@ histograms of the threshold, and a few numbers per interval, whatever the length
 """
 from __future__ import annotations
 
-import collections
-import concurrent.futures
+import functools
 import os
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -31,12 +30,13 @@ import numpy as np
 from imucal.constants import TIME_UNITS
 from imucal.data.blocks import TextBlocks
 from imucal.data.lines import corrupt_value, no_rows, not_increasing
+from imucal.data.run_pool import batches, ordered_map, run_workers
 from imucal.data.recording import MAX_ABS_VALUE, RecordingSummary, StaticSamples, TimeBase
 from imucal.data.spec import DataSpec, as_spec, resolve_path
 from imucal.data.spill import RowSpill, temporary_file
 from imucal.data.static import (QUANTUM_ROWS, Intervals, MovingVariance, Segment, StaticSettings, VarianceStore,
                                 at_rate, auto_threshold, candidate_runs, column_extremes, edge_samples, intervals_from,
-                                quantum, still_segment, window_samples)
+                                judge_runs, quantum, window_samples)
 from imucal.data.timebase import (CLOCK_SPAN, GAP_STEPS, Decision, GapFinder, LagDiffs, StepStats, ValueCounts,
                                   clock_times, decide, gap_excess, rate_time_base, refine, time_base,
                                   time_unit_from_step)
@@ -298,17 +298,15 @@ class StreamedRecording:
         kept: dict[int, tuple] = {}
         m = edge_samples(scan.dt)
 
-        def still(piece: tuple) -> Segment | None:  # a run's edges cut to what is still
-            start, raw, t, temp = piece
-            return (still_segment(start, raw, t, temp, scan.lows, scan.highs, self.rails, st, m, scan.q)
-                    if t[-1] - t[0] >= st.min_duration else None)
-
-        for (start, raw, t, temp), g in _ordered_map(still, self._pieces(a, b)):
-            if g is not None:
-                segs.append(g)
-                if keep_samples:
-                    lo, hi = g.start - start, g.end - start
-                    kept[g.start] = (raw[lo:hi], t[lo:hi], None if temp is None else temp[lo:hi])
+        judge = functools.partial(judge_runs, args=(scan.lows, scan.highs, self.rails, st, m, scan.q))
+        runs = batches(self._pieces(a, b), lambda piece: piece[1].shape[0])
+        for batch, found in ordered_map(judge, runs, run_workers(a.size)):
+            for (start, raw, t, temp), g in zip(batch, found):
+                if g is not None:
+                    segs.append(g)
+                    if keep_samples:
+                        lo, hi = g.start - start, g.end - start
+                        kept[g.start] = (raw[lo:hi], t[lo:hi], None if temp is None else temp[lo:hi])
         iv = intervals_from(segs, thr, scan.q, st, scan.lows, scan.highs, self.rails, has_temp)
         if not keep_samples:
             return iv, None
@@ -357,32 +355,6 @@ class StreamedRecording:
             idx = np.concatenate([np.arange(max(a, row0), min(b, row1)) - row0
                                   for a, b in zip(iv.start[k0:k1], iv.end[k0:k1])])
             yield StaticSamples(raw[idx], t[idx], None if temp is None else temp[idx])
-
-
-#: Threads that compute the still runs' statistics (numpy releases the GIL inside its loops, so on a
-#: long log two threads keep a second core busy for part of the work) ...
-SEGMENT_THREADS = 2
-#: ... and the runs read ahead of the one being finished (memory: this many runs' samples at most).
-RUNS_IN_FLIGHT = 8
-
-
-def _ordered_map(fn: Callable[[tuple], object], items: Iterable[tuple]) -> Iterator[tuple[tuple, object]]:
-    """(item, fn(item)) for every item, in order, computed on SEGMENT_THREADS threads with at most
-    RUNS_IN_FLIGHT items held: the same results as in one thread (each item alone)."""
-    pending: collections.deque = collections.deque()
-    with concurrent.futures.ThreadPoolExecutor(max_workers=SEGMENT_THREADS, thread_name_prefix="imucal-runs") as pool:
-        try:
-            for item in items:
-                pending.append((item, pool.submit(fn, item)))
-                while len(pending) > RUNS_IN_FLIGHT:
-                    item0, fut = pending.popleft()
-                    yield item0, fut.result()
-            while pending:
-                item0, fut = pending.popleft()
-                yield item0, fut.result()
-        finally:
-            for _, fut in pending:  # an error or an interruption: nothing more is started
-                fut.cancel()
 
 
 def _guess_unit(spec: DataSpec, stamps: np.ndarray) -> str:
