@@ -271,3 +271,71 @@ def test_a_noise_file_in_the_recordings_unit_is_used(run_cli, two_units, tmp_pat
     root, recs, cals = two_units
     r = run_cli(_noise_run(tmp_path, recs[data], unit, _noise_json(tmp_path / "noise.json", density, unit)))
     assert r.code == 0, r.err
+
+
+def _edge_cut_reference(line, m: int, sides: str = "both"):
+    """imucal.data.static._edge_cut as it was written first (each edge's z apart, numpy's own row
+    reductions): the faster one must give the same cut on every run."""
+    from imucal.data.static import EDGE_BACK, EDGE_CORE_WINDOWS, EDGE_Z, _running, _std_rows
+
+    res, r = line.res, line.r
+    n = res.shape[0]
+    c0, c1 = n // 4, n - n // 4
+    cs = np.zeros((n + 1, res.shape[1]))
+    np.cumsum(res, axis=0, out=cs[1:])
+    scales, rows, w = [], [], m
+    while w * EDGE_CORE_WINDOWS <= line.nc or not scales:
+        rows.append(np.maximum(_std_rows(_running(cs[c0:c1 + 1], w)) * np.sqrt(w),
+                               np.maximum(line.white, line.floor) if not rows else rows[-1]))
+        scales.append(w)
+        w *= 2
+    ws, rows_w = np.array(scales), np.array(rows)
+
+    def z(size, at, mean):
+        row = rows_w[np.maximum(np.searchsorted(ws, size, side="right") - 1, 0)]
+        return (np.abs(mean) / line.sigma(row, at, size.astype(float))).max(axis=1)
+
+    i = np.arange(c1, n)
+    z_end = z(n - i, (r[i] + r[-1]) / 2, (cs[n] - cs[i]) / (n - i)[:, None])
+    j = np.arange(1, c0 + 1)
+    z_start = z(j, (r[0] + r[j - 1]) / 2, cs[j] / j[:, None])
+    top_end = z_end.max(initial=0.0) if sides != "start" else 0.0
+    top_start = z_start.max(initial=0.0) if sides != "end" else 0.0
+    if max(top_end, top_start) <= EDGE_Z:
+        return None
+    dev = _running(cs, m)
+    near = (np.abs(dev) <= EDGE_BACK * line.sigma(rows_w[0], r[:n - m + 1] + (m - 1) / 2,
+                                                  np.full(n - m + 1, float(m)))).all(axis=1)
+    if top_end >= top_start:
+        k = int(i[np.argmax(z_end)])
+        back = np.flatnonzero(near[:max(k - m + 1, 0)])
+        return 0, (int(back[-1]) + m if back.size else k)
+    k = int(j[np.argmax(z_start)])
+    ahead = np.flatnonzero(near[k:])
+    return (k + int(ahead[0]) if ahead.size else k), n
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_the_edge_cut_is_the_reference_one(seed):
+    """The edge test (issue 30: fewer numpy calls) cuts every run where its first version did: white
+    noise, counts, drifts and slow starts at either edge, at each side."""
+    from imucal.data.static import _edge_cut, _Line
+
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(40, 3000))
+    x = rng.normal(0, rng.uniform(0.5, 50), (n, 3)) + rng.uniform(-3e4, 3e4, 3)
+    if seed % 3 == 0:
+        x = np.round(x)  # counts
+    if seed % 4 == 1:
+        x += np.linspace(0, rng.uniform(0, 20), n)[:, None]  # a drift
+    if seed % 2 == 0:
+        onset = int(rng.integers(n // 2, n))
+        u = np.maximum(np.arange(n) - onset, 0) / max(n - onset, 1)
+        x[:, int(rng.integers(3))] += rng.uniform(0, 60) * u ** 2
+        if seed % 8 == 0:
+            x = x[::-1].copy()
+    q = 1.0 if seed % 3 == 0 else 0.0
+    m = int(rng.integers(3, max(4, n // 8)))
+    line = _Line.of(x, q)
+    for sides in ("both", "start", "end"):
+        assert _edge_cut(line, m, sides) == _edge_cut_reference(line, m, sides), (seed, sides)
