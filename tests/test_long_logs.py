@@ -244,7 +244,8 @@ def test_a_worker_that_dies_is_one_line():
 
 def test_workers_end_with_the_process_that_started_them(tmp_path):
     """A run killed by SIGKILL (no cleanup) leaves no worker behind: each watches its parent."""
-    psutil = pytest.importorskip("psutil")
+    import psutil
+
     code = ("import sys, time\nfrom imucal.data import run_pool\n"
             "if __name__ == '__main__':\n"
             "    for _ in run_pool.ordered_map(time.sleep, [30.0] * 4, 2):\n        pass\n")
