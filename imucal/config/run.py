@@ -5,6 +5,7 @@ dataclass and one line in RunConfig.
 """
 from __future__ import annotations
 
+import datetime as dt
 import math
 import os
 import re
@@ -16,6 +17,7 @@ from typing import TYPE_CHECKING, Any, Mapping
 from imucal.constants import DEFAULT_ANGLE_TOL
 from imucal.data.spec import DataSpec
 from imucal.errors import ImucalError, check_choice, short
+from imucal.mag.units import is_sensor_unit
 from imucal.model.gravity import normal_gravity
 from imucal.model.parameters import BASE_NAMES
 from imucal.data.static import StaticSettings
@@ -210,8 +212,6 @@ class GyroSettings:
 
 
 MAG_SOFT_IRON = ("auto", "symmetric", "full")
-#: A unit's name as a magnetometer's model name can carry it (imucal.mag.model.LABEL_PATTERN)
-MAG_UNIT = re.compile(r"[A-Za-z0-9_/^.()*-]{1,32}\Z")
 
 
 @dataclass(frozen=True)
@@ -242,10 +242,23 @@ class MagConfig:
         msg="field {value} is not a field magnitude", gt=0,
         fix="the local field's magnitude, e.g. 48.2 with field_unit: uT"))
 
+    @classmethod
+    def schema_input(cls, raw: Any) -> Any:
+        """A date as YAML reads it unquoted (date: 2024-05-17 is a date, not text) taken as its ISO text."""
+        if isinstance(raw, Mapping) and isinstance(raw.get("date"), dt.date):
+            return {**raw, "date": raw["date"].isoformat()}
+        return raw
+
     def __post_init__(self) -> None:
         check_choice(self.soft_iron, MAG_SOFT_IRON, "mag.soft_iron", "soft iron choice")
+        if self.date is not None:
+            try:
+                dt.date.fromisoformat(self.date)
+            except (TypeError, ValueError):
+                raise ImucalError(f"date {short(self.date)} is not a date", field="mag.date",
+                                  fix="write it as YYYY-MM-DD, e.g. 2024-05-17") from None
         for name, unit in (("unit", self.unit), ("field_unit", self.field_unit)):
-            if unit is not None and not (isinstance(unit, str) and MAG_UNIT.match(unit)):
+            if unit is not None and not is_sensor_unit(unit):
                 raise ImucalError(f"{name} {short(unit)} is not a unit name", field=f"mag.{name}",
                                   fix="e.g. uT, gauss, mG, nT, or raw for counts")
         if self.field is not None and not (_is_real(self.field) and self.field > 0):

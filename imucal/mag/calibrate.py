@@ -18,7 +18,7 @@ import numpy as np
 
 from imucal.errors import ImucalError
 from imucal.mag import evidence as ev
-from imucal.mag.checks import PoseOffset, coverage_error, field_steps, require_coverage
+from imucal.mag.checks import PoseOffset, coverage_error, field_steps, require_coverage, require_span
 from imucal.mag.fit import MagFitResult, SoftIronTest, fit_rows, soft_iron_test
 from imucal.mag.frame import AxesSearch, dip_angles, euler_angles, search_axes
 from imucal.mag.model import (DIP, IDENTITY, NORM, ROTATION_BOUND, ROTATION_NAMES, build_mag_model,
@@ -179,6 +179,7 @@ def calibrate_mag(mag: np.ndarray, acc: np.ndarray | None = None, *, still: ev.P
     mag = np.asarray(mag, float)
     acc = None if acc is None else np.asarray(acc, float)
     ev.check_lengths(mag, acc, source)
+    require_span(mag, source)
     use = np.ones(len(mag), bool) if use is None else np.asarray(use, bool)
     earth = settings.place.field() if settings.place is not None else None
     params, field_unit = _start(mag[use], settings, earth, raw_unit, source)

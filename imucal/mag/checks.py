@@ -24,6 +24,9 @@ from imucal.solve import observability
 
 #: Rows (evenly spaced samples) the coverage check looks at: its cost is linear in them.
 COVERAGE_ROWS = 2000
+#: [raw] An axis whose readings span less holds no field the fit can resolve (its absolute tolerances and the
+#: observability thresholds lose it below about 1e-15; a log in tesla spans some 1e-4).
+MIN_SPAN = 1e-12
 #: A direction is covered when a recorded field direction lies within this angle of it [deg].
 COVERED_DEG = 30.0
 #: CUSUM test of a step in the field: significance.
@@ -43,14 +46,28 @@ def _direction_words(d: np.ndarray) -> str:
 CANDIDATES = tuple(np.array(v, float) for v in itertools.product((-1, 0, 1), repeat=3) if any(v))
 
 
+def require_span(mag: np.ndarray, source: str | None = None) -> None:
+    """Refuse readings that hardly change on an axis (a constant column, or values near the smallest floats):
+    below MIN_SPAN the fit's absolute tolerances cannot resolve a field turning with the sensor."""
+    span = np.ptp(mag, axis=0) if len(mag) else np.zeros(3)
+    if not (span >= MIN_SPAN).all():
+        i = int(np.argmin(span))
+        raise ImucalError(f"m{'xyz'[i]} spans only {span[i]:.3g} over the log: not a field turning with the sensor",
+                          file=source, field="mx, my, mz",
+                          fix="check that mx, my, mz hold the magnetometer, and turn the sensor through many "
+                              "orientations")
+
+
 def missing_directions(directions: np.ndarray) -> list[str]:
     """The cube directions no recorded field direction comes within COVERED_DEG of: the faces (the axes both
     ways) when any is missing, else the edges, else the corners (what to add first)."""
-    u = directions / np.linalg.norm(directions, axis=1, keepdims=True)
+    norm = np.linalg.norm(directions, axis=1, keepdims=True)
+    seen = np.isfinite(norm[:, 0]) & (norm[:, 0] > 0)  # a reading at the centre has no direction
+    u = directions[seen] / norm[seen]
     cos_min = math.cos(math.radians(COVERED_DEG))
     for order in (1, 2, 3):  # faces, edges, corners
         out = [_direction_words(c) for c in CANDIDATES
-               if np.count_nonzero(c) == order and np.max(u @ (c / np.linalg.norm(c))) < cos_min]
+               if np.count_nonzero(c) == order and np.max(u @ (c / np.linalg.norm(c)), initial=-1.0) < cos_min]
         if out:
             return out
     return []
@@ -75,7 +92,7 @@ def require_coverage(model: SensorModel, rows: MagRows, params: Parameters, sour
     weighted = J / sigma[:, None] * math.sqrt(len(norm) / len(pick))  # the fit sees every sample
     s0 = np.array([params[f"s{i}"].value for i in (1, 2, 3)])
     directions = sub.raw - s0
-    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    directions /= np.maximum(np.linalg.norm(directions, axis=1, keepdims=True), np.finfo(float).tiny)
     angle_tol = params["phi"].upper / (math.pi / 2) - 1.0
     obs = observability.analyse(directions, J, free, weighted, observability.thresholds(params, free, angle_tol))
     if obs.undetermined or obs.n_distinct < len(free):

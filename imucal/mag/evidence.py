@@ -104,7 +104,11 @@ def sample_variance(x: np.ndarray) -> np.ndarray:
         return np.zeros(x.shape[1])
     d2 = np.diff(x, 2, axis=0)
     mad = np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0)
-    return (MAD_TO_STD * mad) ** 2 / SECOND_DIFFERENCE_GAIN
+    var = (MAD_TO_STD * mad) ** 2 / SECOND_DIFFERENCE_GAIN
+    for i in np.flatnonzero(var == 0):  # noise below one step of a coarse quantiser: at least its q^2 / 12
+        steps = np.diff(np.unique(x[:, i]))
+        var[i] = float(steps.min()) ** 2 / 12 if steps.size else 0.0
+    return var
 
 
 def norm_rows(raw: np.ndarray, var: np.ndarray) -> MagRows:
@@ -216,6 +220,10 @@ def shift(x: np.ndarray, lag: float) -> np.ndarray:
 def check_lengths(mag: np.ndarray, acc: np.ndarray | None, source: str | None) -> None:
     if mag.ndim != 2 or mag.shape[1] != 3:
         raise ImucalError(f"magnetometer readings must be N x 3, got {mag.shape}", file=source, field="mx, my, mz")
+    for name, x in (("mx, my, mz", mag), ("ax, ay, az", acc)):
+        if x is not None and not np.isfinite(x).all():
+            raise ImucalError(f"row {int(np.flatnonzero(~np.isfinite(x).all(axis=1))[0])} holds NaN or Inf", file=source,
+                              field=name, fix="remove or repair the non-finite rows before calibrating")
     if acc is not None and acc.shape != mag.shape:
         raise ImucalError(f"accelerometer ({acc.shape[0]} rows) and magnetometer ({mag.shape[0]} rows) differ",
                           file=source, field="ax, ay, az", fix="give both sensors on one time base")

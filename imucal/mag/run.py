@@ -15,7 +15,6 @@ import numpy as np
 
 from imucal.calibration.sensor import SensorCalibration
 from imucal.config.run import MagConfig
-from imucal.errors import ImucalError
 from imucal.mag.calibrate import MagSettings, calibrate_mag
 from imucal.mag.evidence import Poses
 from imucal.mag.field_model import Place
@@ -26,12 +25,7 @@ def settings_of(cfg: MagConfig) -> MagSettings:
     """The fit's settings from the run file's ``mag:`` section (the place's date parsed here)."""
     place = None
     if cfg.latitude is not None and cfg.longitude is not None and cfg.date is not None:
-        try:
-            date = dt.date.fromisoformat(str(cfg.date))
-        except ValueError:
-            raise ImucalError(f"date {cfg.date!r} is not a date", field="mag.date",
-                              fix="write it as YYYY-MM-DD, e.g. 2024-05-17") from None
-        place = Place(float(cfg.latitude), float(cfg.longitude), date, float(cfg.height))
+        place = Place(float(cfg.latitude), float(cfg.longitude), dt.date.fromisoformat(cfg.date), float(cfg.height))
     lag = None if cfg.lag is None else float(cfg.lag)
     return MagSettings(field=cfg.field, field_unit=cfg.field_unit, dip_deg=cfg.dip_deg, soft_iron=cfg.soft_iron,
                        window=int(cfg.window), lag=lag, place=place)

@@ -7,7 +7,9 @@ when both are field units it is converted, otherwise the calibrated field is in 
 from __future__ import annotations
 
 import math
+import re
 
+from imucal.calibration.fields import SCALE_UNIT, is_unit
 from imucal.errors import ImucalError
 
 #: Field units and their factor to microtesla (SI: 1 gauss = 1e-4 T = 100 uT).
@@ -17,6 +19,18 @@ FIELD_UNITS = {"uT": 1.0, "nT": 1e-3, "mT": 1e3, "T": 1e6, "gauss": 100.0, "G": 
 #: outside this range by more than this factor is refused as a unit mix-up.
 EARTH_FIELD_UT = (22.0, 67.0)
 EARTH_FIELD_SLACK = 3.0
+
+
+#: A magnetometer's unit as its model's name carries it (imucal.mag.model.LABEL_PATTERN, less "_" and "*": no units).
+SENSOR_UNIT = re.compile(r"[A-Za-z0-9/^.()-]{1,32}\Z")
+
+
+def is_sensor_unit(unit: object) -> bool:
+    """A unit a magnetometer's readings (or its field) may be in: one its model's name carries, a raw unit the
+    calibration file's reader takes (its scales' unit a unit too: imucal.calibration.fields), and the scales'
+    unit when the field is fitted in it (unit/unit) a unit too; so calibrate writes no file apply refuses."""
+    return (isinstance(unit, str) and SENSOR_UNIT.match(unit) is not None and is_unit(unit)
+            and is_unit(SCALE_UNIT.format(raw=unit)) and is_unit(f"{unit}/{unit}"))
 
 
 def is_field_unit(unit: str) -> bool:

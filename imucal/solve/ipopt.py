@@ -11,8 +11,10 @@ required acceptable iterates, 83 in 9 with 3; the parameters differ by 5e-9 stan
 from __future__ import annotations
 from imucal.errors import raise_if_signalled
 
-#: IPOPT options shared by the means, samples and effects fits.
-OPTIONS = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes",
+#: IPOPT options shared by the means, samples and effects fits. A trial point whose objective is not finite
+#: (a step too far for the model) is IPOPT's to cut back, its outcome the solve's status: CasADi's own print
+#: of it (show_eval_warnings) would reach stderr as warning text.
+OPTIONS = {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes", "show_eval_warnings": False,
            "ipopt.tol": 1e-8, "ipopt.acceptable_tol": 1e-6, "ipopt.acceptable_iter": 3,
            "ipopt.max_iter": 300}
 
