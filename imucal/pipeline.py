@@ -14,7 +14,7 @@ from imucal.calibration.frozen import Calibration, now_utc
 from imucal.config.run import RunConfig
 
 from imucal.data.load import load_recording, use_stream
-from imucal.data.recording import Recording, RecordingSummary, StaticSamples
+from imucal.data.recording import MAX_ABS_VALUE, Recording, RecordingSummary, StaticSamples
 from imucal.errors import ImucalError
 from imucal.solve.fit import SCATTER_NOTABLE_Z, FitData, FitResult, fit, jacobian_rows
 from imucal.solve.initial import InitialGuess, ellipsoid_guess
@@ -114,6 +114,11 @@ def initial_guess(intervals: Intervals, gravity: float, angles_free: bool, sourc
     return guess, dirs, n_distinct
 
 
+#: [raw per m/s^2] A scale b the run file may state: one that maps readings within the recordings' +-MAX_ABS_VALUE
+#: (imucal.data.recording) to accelerations and back without over- or underflow (b**2 enters every weight).
+SCALE_RANGE = (1.0 / MAX_ABS_VALUE, MAX_ABS_VALUE)
+
+
 def make_parameters(guess: InitialGuess, config: RunConfig, gravity: float, model: SensorModel,
                     raw_unit: str) -> Parameters:
     fs = config.fit
@@ -125,11 +130,17 @@ def make_parameters(guess: InitialGuess, config: RunConfig, gravity: float, mode
             raise ImucalError(f"{a} = {init[a]:g} rad is outside its bounds [{lo:.6g}, {hi:.6g}] rad",
                               file=config.source, field=f"{where}.{a}",
                               fix="give the angle in radians near pi/2 = 1.5708 (or widen fit.angle_tolerance)")
+    lo_b, hi_b = SCALE_RANGE
     for i in (1, 2, 3):
-        if f"b{i}" in init and not init[f"b{i}"] > 0:
-            raise ImucalError(f"b{i} = {init[f'b{i}']:g} must be positive", file=config.source,
+        if f"b{i}" in init and not lo_b <= init[f"b{i}"] <= hi_b:
+            raise ImucalError(f"b{i} = {init[f'b{i}']:g} must be positive"
+                              + ("" if init[f"b{i}"] <= 0 else f", within {lo_b:g} to {hi_b:g}"), file=config.source,
                               field=f"{'fit.fix' if f'b{i}' in fs.fix else 'fit.initial'}.b{i}",
                               fix="give the scale in raw units per m/s^2")
+        if f"s{i}" in init and not abs(init[f"s{i}"]) <= MAX_ABS_VALUE:
+            raise ImucalError(f"s{i} = {init[f's{i}']:g} is beyond the readings' +-{MAX_ABS_VALUE:g}",
+                              file=config.source, field=f"{'fit.fix' if f's{i}' in fs.fix else 'fit.initial'}.s{i}",
+                              fix="give the shift in raw units")
     angles0 = [init.get(a, np.pi / 2 if a in fs.fix else guess.angles[i]) for i, a in enumerate(ANGLE_NAMES)]
     s0 = [init.get(f"s{i+1}", guess.s[i]) for i in range(3)]
     b0 = [init.get(f"b{i+1}", guess.b[i]) for i in range(3)]

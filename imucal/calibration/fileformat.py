@@ -118,10 +118,14 @@ class EffectEntry:
 @dataclass(frozen=True)
 class UnitsSection:
     input: str = field(default="raw", metadata=rule(msg="{value} is not text", fix=REGEN))
-    output: str = SI_ACCEL_UNIT
-    angles: str = "rad"
-    time: str = "s"
-    temperature: str = "degC"
+    #: what the maps read and give, as this imucal writes them: a file stating another unit is refused, not
+    #: applied in these (a temperature in degF read as degC)
+    output: Literal["m/s^2"] = field(default=SI_ACCEL_UNIT, metadata=rule(
+        msg=f"output unit {{value}} is not {SI_ACCEL_UNIT}", fix=REGEN))
+    angles: Literal["rad"] = field(default="rad", metadata=rule(msg="angle unit {value} is not rad", fix=REGEN))
+    time: Literal["s"] = field(default="s", metadata=rule(msg=f"time unit {{value}} is not {TIME.unit}", fix=REGEN))
+    temperature: Literal["degC"] = field(default="degC", metadata=rule(
+        msg=f"temperature unit {{value}} is not {TEMPERATURE.unit}", fix=REGEN))
     gravity: Literal["m/s^2"] = field(default=SI_ACCEL_UNIT, metadata=rule(
         msg=f"gravity unit {{value}} is not {SI_ACCEL_UNIT}", fix=f"give gravity in {SI_ACCEL_UNIT}"))
 

@@ -29,6 +29,7 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
+from imucal.calibration.fileformat import REGEN
 from imucal.calibration.frozen import Calibration
 from imucal.calibration.sensor import SensorCalibration
 from imucal.errors import ImucalError
@@ -90,7 +91,20 @@ def _affine_at(cal: Calibration, temp: float, probe: float) -> tuple[np.ndarray,
     raw = np.vstack([np.zeros(3), probe * np.eye(3)])
     a = cal.apply(raw, {"temp": np.full(4, temp)})
     A = (a[1:] - a[0]).T / probe
-    return A, -np.linalg.solve(A, a[0])
+    return A, _shift(A, a[0], temp)
+
+
+#: A(T) more ill-conditioned than this is no calibration's (theirs are near 1): its terms swamp the map.
+MAX_CONDITION = 1e8
+
+
+def _shift(A: np.ndarray, y0: np.ndarray, temp: float) -> np.ndarray:
+    """s(T) = -A(T)^-1 y(0) of a map read at ``temp``; refused when A(T) lost a direction: temperature terms or
+    a T_ref so large that the map's rounding swamps it (an edited file)."""
+    if not (np.isfinite(A).all() and np.linalg.cond(A) <= MAX_CONDITION):
+        raise ImucalError(f"the temperature terms leave no invertible map at {temp:.4g} degC (a coefficient or "
+                          "T_ref far beyond a calibration's)", field="parameters", fix=REGEN)
+    return -np.linalg.solve(A, y0)
 
 
 #: Temperatures the exports accept [degC]: above absolute zero, below where any electronics survives.
@@ -155,7 +169,7 @@ def _sensor_affine_at(s: SensorCalibration, temp: float, probe: float) -> tuple[
     inputs = np.array([[temp if k == "temp" else 0.0 for k in s.model.inputs]] * 4)
     y = s.apply(raw, inputs)
     A = (y[1:] - y[0]).T / probe
-    return A, -np.linalg.solve(A, y[0])
+    return A, _shift(A, y[0], temp)
 
 
 def sensor_polynomial(s: SensorCalibration, size: float = 1.0) -> TempPolynomial | None:

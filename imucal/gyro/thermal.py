@@ -20,6 +20,8 @@ confounded (the real sweep: x drifts about -0.8 mrad/s per day).
 """
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -117,7 +119,10 @@ def _select(y: np.ndarray, P: np.ndarray, B: np.ndarray, alpha: float) -> tuple[
         new = _fit(y, np.hstack([P, B[:, :k]]), k)
         if new.dof < 1:
             break
-        lr = (cur.rss - new.rss) / (new.rss / new.dof)
+        if new.rss > 0:
+            lr = (cur.rss - new.rss) / (new.rss / new.dof)
+        else:  # an exact fit (a constant channel, or readings the order explains wholly): a drop is decisive
+            lr = math.inf if cur.rss > 0 else 0.0
         p = min(1.0, 3 * f_sf(max(lr, 0.0), 1, new.dof))  # Bonferroni over the three axes
         ps.append(p)
         if p >= alpha:
