@@ -64,3 +64,35 @@ def test_calibrate_then_apply_export_codegen_on_a_name_that_is_not_utf8(odd_name
     assert r.code == 0, r.err
     for f in (tmp_path / "fw").iterdir():
         utf8(f)
+
+
+@pytest.mark.filterwarnings("error")
+@pytest.mark.parametrize("name", ["a\rb.csv", "a\x01b.csv", "a\x7fb.csv"])
+def test_a_control_character_in_a_name_leaves_no_font_warning(name, run_cli, tmp_path):
+    """The figures' titles drew the name: matplotlib printed 'UserWarning: Glyph 13 (\\r) missing from font(s)'
+    on stderr (calibrate and discover alike). Figure text escapes what no font draws (report.figures.plain)."""
+    from imucal.report.figures import plain
+
+    assert plain("a\rb\x01$x\u202e.csv") == "a\\rb\\x01\\$x\\u202e.csv" and plain("é µ") == "é µ"
+    write_simulation(tmp_path / name, si_sensor(np.random.default_rng(1)), cube_directions(), 1)
+    r = run_cli(["calibrate", "--data", tmp_path / name, "--out", tmp_path / "cal"])
+    assert r.code == 0 and "Glyph" not in r.err, r.err
+
+
+def test_surrogate_escapes_in_a_run_file_are_one_character_or_one_line(run_cli, tmp_path):
+    """data.path: "log\\ud83d\\ude00.csv" (JSON's UTF-16 escapes of one emoji) ended as an internal error
+    (UnicodeEncodeError at os.stat): a pair is the character it encodes, a lone surrogate is refused; a file
+    name's undecodable byte (\\udcff, as imucal writes it) stays."""
+    from imucal.files.yamlio import parse_scalar
+
+    assert parse_scalar('"log\\ud83d\\ude00.csv"') == "log\U0001F600.csv"
+    assert parse_scalar('"log\\udcff.csv"') == "log\udcff.csv"
+    write_simulation(tmp_path / "log\U0001F600.csv", si_sensor(np.random.default_rng(1)), cube_directions(), 1)
+    run = tmp_path / "run.yaml"
+    run.write_text('data: {path: "log\\ud83d\\ude00.csv", unit: m/s^2}\n')
+    r = run_cli(["calibrate", run, "--out", tmp_path / "cal", "--no-figures"])
+    assert r.code == 0, r.err
+    run.write_text('data: {path: "log\\ud83d.csv", unit: m/s^2}\n')
+    r = run_cli(["calibrate", run, "--out", tmp_path / "cal2"])
+    assert r.code == 2 and r.err.count("\n") == 1 and "lone UTF-16 surrogate" in r.err, r.err
+    assert not (tmp_path / "cal2").exists()

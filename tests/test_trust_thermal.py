@@ -120,3 +120,17 @@ def test_a_file_stating_other_units_is_refused(tmp_path, key, value):
     with pytest.raises(ImucalError, match=" is not ") as e:
         load_calibration(p)
     assert e.value.field == f"units.{key}" and "\n" not in str(e.value)
+
+
+@pytest.mark.parametrize("temp, shown", [(-400.0, "-400"), (1e25, "1e+25")])
+def test_a_temperature_no_sensor_reads_is_one_line(sweep, tmp_path, run_cli, unchanged, temp, shown):
+    """A sweep with temperatures below absolute zero (or one sample at 1e25 degC) was calibrated, and the
+    file then refused by the exports ('not a temperature in degC')."""
+    data = sweep.copy()
+    data[100, 7] = temp
+    write(tmp_path / "sweep.csv", data)
+    run = run_file(tmp_path, NOMINAL)
+    with unchanged():
+        r = run_cli(["discover", "--config", run, "--out", tmp_path / "cal"])
+    assert r.code == 2 and r.err.count("\n") == 1, r.err
+    assert f"sweep.csv: data.columns.temp: sample 100 holds temperature {shown} degC" in r.err

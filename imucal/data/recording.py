@@ -7,7 +7,9 @@ from enum import Enum
 
 import numpy as np
 
-from imucal.model.channels import ACCELERATION, ANGULAR_RATE, MAGNETIC_FIELD, TEMPERATURE, TIME, Channel
+from imucal.errors import ImucalError
+from imucal.model.channels import (ACCELERATION, ANGULAR_RATE, MAGNETIC_FIELD, TEMPERATURE, TEMPERATURE_RANGE,
+                                     TIME, Channel)
 
 #: Plausible IMU sample rates [Hz]: anything outside is a wrong time unit or a wrong rate.
 MIN_RATE_HZ, MAX_RATE_HZ = 1.0, 1.0e5
@@ -77,6 +79,19 @@ class Recording:
     #: is then that of t's span)
     time_base: TimeBase | None = None
     mag: np.ndarray | None = None  #: (N, 3) magnetometer readings when mapped (mx, my, mz), in their own unit
+
+    def __post_init__(self) -> None:
+        """A temperature no sensor reads (below absolute zero, or above TEMPERATURE_RANGE) is refused: the fit
+        took it and wrote a calibration the exports refuse."""
+        if self.temp is None or not len(self.temp):
+            return
+        lo, hi = TEMPERATURE_RANGE
+        bad = ~((self.temp >= lo) & (self.temp <= hi))
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            raise ImucalError(f"sample {k} holds temperature {self.temp[k]:g} degC, not a sensor's temperature "
+                              f"({lo:g} to {hi:g} degC)", file=self.source, field="data.columns.temp",
+                              fix="give the temperature in degC (kelvin less 273.15), or repair the corrupt samples")
 
     @property
     def n(self) -> int:

@@ -33,6 +33,7 @@ from imucal.calibration.fileformat import REGEN
 from imucal.calibration.frozen import Calibration
 from imucal.calibration.sensor import SensorCalibration
 from imucal.errors import ImucalError
+from imucal.model.channels import TEMPERATURE_RANGE
 from imucal.model.effects import MIN_TEMPERATURE_SPREAD
 from imucal.model.parameters import BASE_NAMES, Parameters
 
@@ -107,8 +108,8 @@ def _shift(A: np.ndarray, y0: np.ndarray, temp: float) -> np.ndarray:
     return -np.linalg.solve(A, y0)
 
 
-#: Temperatures the exports accept [degC]: above absolute zero, below where any electronics survives.
-ABSOLUTE_ZERO, MAX_TEMPERATURE = -273.15, 1000.0
+#: Temperatures the exports accept [degC] (the peers' parameters are in degC).
+ABSOLUTE_ZERO, MAX_TEMPERATURE = TEMPERATURE_RANGE
 
 
 def _range(fit: object, tref: float) -> tuple[float, float, str]:

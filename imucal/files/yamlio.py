@@ -55,6 +55,12 @@ _FLOAT = re.compile(r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+][0-9]+)?
                     |\.(?:nan|NaN|NAN))$""", re.X)
 
 
+#: A UTF-16 surrogate pair, and a surrogate that is neither half of one nor an undecodable byte (\udc80-\udcff,
+#: Python's surrogateescape).
+_PAIR = re.compile("[\ud800-\udbff][\udc00-\udfff]")
+_LONE = re.compile("[\ud800-\udc7f\udd00-\udfff]")
+
+
 class _Loader(yaml.SafeLoader):
     """SafeLoader that counts aliases and nodes and refuses duplicate keys."""
 
@@ -86,6 +92,17 @@ class _Loader(yaml.SafeLoader):
                 raise _Refused(f"duplicate key {short(key)} at line {key_node.start_mark.line + 1}")
         return super().construct_mapping(node, deep=deep)
 
+    def construct_yaml_str(self, node):  # type: ignore[no-untyped-def]
+        """Text; a double-quoted UTF-16 surrogate pair (JSON's "\\ud83d\\ude00") is the one character it
+        encodes, \\udc80-\\udcff a file name's undecodable byte (as dump_yaml writes it), any other surrogate is
+        no character: refused (it reached os.stat as an internal error)."""
+        value = _PAIR.sub(lambda m: m.group().encode("utf-16", "surrogatepass").decode("utf-16"),
+                          super().construct_yaml_str(node))
+        if _LONE.search(value):
+            raise _Refused(f"text at line {node.start_mark.line + 1} holds a lone UTF-16 surrogate",
+                           "write the character itself, or its \\U00XXXXXX escape")
+        return value
+
     def construct_number(self, node):  # type: ignore[no-untyped-def]
         """An explicitly tagged !!int or !!float: refused in base 60 (``!!int 9:48``) or leading-zero octal."""
         value = self.construct_scalar(node)
@@ -101,6 +118,7 @@ _Loader.yaml_implicit_resolvers = {
     for ch, rs in yaml.SafeLoader.yaml_implicit_resolvers.items()}
 _Loader.add_implicit_resolver(_INT_TAG, _INT, list("-+0123456789"))
 _Loader.add_implicit_resolver(_FLOAT_TAG, _FLOAT, list("-+0123456789."))
+_Loader.add_constructor("tag:yaml.org,2002:str", _Loader.construct_yaml_str)
 _Loader.add_constructor(_INT_TAG, _Loader.construct_number)
 _Loader.add_constructor(_FLOAT_TAG, _Loader.construct_number)
 

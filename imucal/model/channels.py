@@ -37,6 +37,9 @@ ACCELERATION = Channel("acceleration", ("ax", "ay", "az"), "raw", "specific forc
 ANGULAR_RATE = Channel("angular_rate", ("gx", "gy", "gz"), "raw", "angular rate, the gyroscope's reading")
 MAGNETIC_FIELD = Channel("magnetic_field", ("mx", "my", "mz"), "raw", "magnetic field, the magnetometer's reading")
 TEMPERATURE = Channel("temperature", ("temp",), "degC", "sensor temperature")
+#: [degC] A sensor temperature: above absolute zero, below where any electronics survives (a reading outside is
+#: corrupt, or in another unit: K read as degC is 273 too warm, which this range cannot tell).
+TEMPERATURE_RANGE = (-273.15, 1000.0)
 TIME = Channel("time", ("t",), "s", "time from the first sample")
 
 #: covariate key (as effects declare it) -> the channel it is read from

@@ -30,10 +30,13 @@ WIDE, WIDE_H = 9.0, 4.2
 
 
 def plain(text: str) -> str:
-    """User text shown literally in a figure: dollar signs would start matplotlib's mathtext, and a
-    name that is not UTF-8 (a lone surrogate, b'log\xff.csv') is shown escaped, as every text output
-    writes it (imucal.files.output.TEXT_ERRORS)."""
-    return text.encode("utf-8", errors="backslashreplace").decode("utf-8").replace("$", r"\$")
+    """User text shown literally in a figure: dollar signs would start matplotlib's mathtext, a name that is
+    not UTF-8 (a lone surrogate, b'log\xff.csv') is shown escaped, as every text output writes it
+    (imucal.files.output.TEXT_ERRORS), and so is a character no font draws (a control character such as
+    the \\r in a file name: matplotlib warned 'Glyph 13 missing from font(s)' on stderr)."""
+    text = text.encode("utf-8", errors="backslashreplace").decode("utf-8")
+    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in text).replace(
+        "$", r"\$")
 
 
 def no_intervals_figure(path: str | Path) -> None:
