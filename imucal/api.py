@@ -27,7 +27,7 @@ import numpy as np
 
 from imucal.config.run import RunConfig, config_from_dict
 from imucal.constants import GYRO_UNIT_CHOICES
-from imucal.data.recording import Recording
+from imucal.data.recording import MAX_ABS_VALUE, Recording
 from imucal.data.spec import DataSpec
 from imucal.data.timebase import rate_time_base, stamped_times
 from imucal.errors import ImucalError, ImucalWarning, check_choice
@@ -141,9 +141,24 @@ def _frame_columns(frame: Any, t: Any, temp: Any, gyro: Any, mag: Any) -> tuple[
     return frame[list(FRAME_COLUMNS["acc"])].to_numpy(float), t, temp, gyro, mag
 
 
+def _numbers(values: Any, name: str) -> np.ndarray:
+    """``values`` as floats: text, complex numbers or flags refused in one line (numpy raised ValueError, or
+    warned ComplexWarning and dropped the imaginary part)."""
+    try:
+        arr = np.asarray(values)
+        if arr.dtype.kind in "iuf":
+            return arr.astype(float)
+        if arr.dtype.kind == "O":
+            return arr.astype(float)  # None is NaN, refused as such; text raises
+    except (TypeError, ValueError):
+        pass
+    raise ImucalError(f"{name} holds values that are not real numbers", field=name,
+                      fix="give an array of floats (or integers)")
+
+
 def _readings(values: Any, name: str, n: int | None = None) -> np.ndarray:
-    """An (N, 3) finite array of one sensor's readings (N >= 3, or ``n`` rows)."""
-    raw = np.asarray(values, float)
+    """An (N, 3) finite array of one sensor's readings (N >= 3, or ``n`` rows), within the readers' +-MAX_ABS_VALUE."""
+    raw = _numbers(values, name)
     if raw.ndim != 2 or raw.shape[1] != 3 or raw.shape[0] < 3:
         raise ImucalError(f"{name} must be an (N, 3) array with N >= 3, got shape {raw.shape}", field=name)
     if n is not None and raw.shape[0] != n:
@@ -151,6 +166,9 @@ def _readings(values: Any, name: str, n: int | None = None) -> np.ndarray:
                           fix="give one row per accelerometer sample (on its time base)")
     if not np.isfinite(raw).all():
         raise ImucalError(f"{name} holds NaN or Inf", field=name, fix="drop or repair those samples")
+    if not (np.abs(raw) <= MAX_ABS_VALUE).all():
+        raise ImucalError(f"{name} holds a value beyond +-{MAX_ABS_VALUE:g} (corrupt)", field=name,
+                          fix="drop or repair those samples")
     return raw
 
 
@@ -191,12 +209,12 @@ def recording_from_arrays(acc: ArrayLike, t: Sequence[float] | np.ndarray | None
         tu, note, tb = rate_time_base(fs)
         tt = np.arange(n) / float(fs)
     else:
-        stamps = np.asarray(t, float)
+        stamps = _numbers(t, "t")
         if stamps.shape != (n,) or not np.isfinite(stamps).all() or not (np.diff(stamps) > 0).all():
             raise ImucalError("t must be N finite, strictly increasing time stamps", field="t")
         # the readers' time base: unit, jitter, gaps, and fs (when given too) checked against t
         tt, tu, note, tb = stamped_times(stamps, time_unit, fs, "t", Path(name))
-    tc = None if temp is None else np.asarray(temp, float)
+    tc = None if temp is None else _numbers(temp, "temp")
     if tc is not None and tc.shape != (n,):
         raise ImucalError(f"temp must have {n} values, got shape {tc.shape}", field="temp")
     sha = hashlib.sha256(np.ascontiguousarray(raw).tobytes()).hexdigest()

@@ -116,3 +116,18 @@ def test_a_bad_date_names_the_run_file(tmp_path, run_cli):
     run.write_text("data: {path: log.csv}\nmag: {latitude: 45, longitude: 7, date: \"not a date\"}\n")
     r = run_cli(["calibrate", run, "--out", tmp_path / "out"])
     assert r.code == 2 and r.err.startswith(f"imucal: error: {run}: mag.date: "), r.err
+
+
+@pytest.mark.filterwarnings("error")
+@pytest.mark.parametrize("case, words", [("text", "not real numbers"), ("complex", "not real numbers"),
+                                         ("1e200", r"beyond \+-1e\+30")])
+def test_the_api_refuses_magnetometer_arrays_a_file_could_not_hold(log, case, words):
+    """imucal.calibrate(acc, mag=...) raised ValueError on text, warned ComplexWarning (dropping the imaginary
+    part) on complex readings and ended in OverflowError on readings of 1e200 (a file's beyond 1e30 are refused)."""
+    import imucal
+
+    mag = {"text": np.full(log[:, 3:].shape, "x"), "complex": log[:, 3:] + 1j,
+           "1e200": log[:, 3:] * 1e200}[case]
+    with pytest.raises(ImucalError, match=words) as e:
+        imucal.calibrate(log[:, :3] * 9.80665, mag=mag, fs=50.0, mag_field=48.0, mag_field_unit="uT")
+    assert e.value.field == "mag" and "\n" not in str(e.value)
