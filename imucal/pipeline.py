@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from imucal.calibration.frozen import Calibration, now_utc
-from imucal.config.run import RunConfig
+from imucal.config.run import MagConfig, RunConfig
 
 from imucal.data.load import load_recording, use_stream
 from imucal.data.recording import MAX_ABS_VALUE, Recording, RecordingSummary, StaticSamples
@@ -584,6 +584,12 @@ def calibrate_imu(config: RunConfig, recording: Recording | None = None,
         run = _with_gyro(run, config, gyro_file)
     if getattr(run.recording, "mag", None) is not None:  # a file read in chunks never has one
         run = _with_mag(run, config)
+    elif config.mag != MagConfig():  # mag: (or --mag-*) given for a log without mx, my, mz: said, not dropped
+        from imucal.report.mag import no_magnetometer_warning
+
+        cal = run.calibration
+        warned = [*cal.fit.get("warnings", []), no_magnetometer_warning(run.recording.source)]
+        run = replace(run, calibration=replace(cal, fit={**cal.fit, "warnings": warned}))
     return run
 
 

@@ -131,3 +131,31 @@ def test_the_api_refuses_magnetometer_arrays_a_file_could_not_hold(log, case, wo
     with pytest.raises(ImucalError, match=words) as e:
         imucal.calibrate(log[:, :3] * 9.80665, mag=mag, fs=50.0, mag_field=48.0, mag_field_unit="uT")
     assert e.value.field == "mag" and "\n" not in str(e.value)
+
+
+def test_mag_settings_for_a_log_without_a_magnetometer_are_said_not_dropped(log, tmp_path, run_cli):
+    """--mag-field (or a mag: section) beside a log without mx, my, mz calibrated the accelerometer alone
+    without a word: the user asked for a magnetometer and got none."""
+    np.savetxt(tmp_path / "acc.csv", log[:, :3], delimiter=",", header="ax,ay,az", comments="", fmt="%.8g")
+    r = run_cli(["calibrate", "--data", tmp_path / "acc.csv", "--unit", "g", "--sample-rate", "50", "--mag-field",
+                 "48uT", "--no-figures", "--out", tmp_path / "out"])
+    assert r.code == 0, r.err
+    said = f"magnetometer: mag settings given, but {tmp_path / 'acc.csv'} has no mx, my, mz"
+    assert said in r.err and said in (tmp_path / "out" / "report.txt").read_text()
+    r = run_cli(["calibrate", "--data", tmp_path / "acc.csv", "--unit", "g", "--sample-rate", "50", "--no-figures",
+                 "--out", tmp_path / "plain"])
+    assert r.code == 0 and "magnetometer" not in r.err, r.err
+
+
+def test_a_magnetometer_mapped_in_a_netcdf_file_is_one_line(log, tmp_path, run_cli, unchanged):
+    """data.columns.mx in a netCDF file was ignored: the accelerometer calibrated alone, the mapping unsaid."""
+    import h5py
+
+    with h5py.File(tmp_path / "log.nc", "w") as f:
+        v = f.create_dataset("acc", data=log[:, :3])
+        v.attrs["units"], v.attrs["sampling_rate"] = "g", np.array([50.0])
+        f.create_dataset("mag", data=log[:, 3:]).attrs["units"] = "uT"
+    with unchanged():
+        r = run_cli(["calibrate", "--data", tmp_path / "log.nc", "--columns", "mx=mag", "--out", tmp_path / "out"])
+    assert r.code == 2 and r.err.count("\n") == 1, r.err
+    assert r.err.startswith(f"imucal: error: {tmp_path / 'log.nc'}: data.columns.mx: a magnetometer is not read")

@@ -296,6 +296,10 @@ class _Reader:
 
 
 def _check_spec(spec: DataSpec, path: Path) -> None:
+    mag = [r for r in ("mx", "my", "mz") if r in spec.columns]
+    if mag:  # not read from netCDF: a mapping silently dropped would leave the magnetometer uncalibrated unsaid
+        raise ImucalError("a magnetometer is not read from a netCDF file", file=str(path), field=f"data.columns.{mag[0]}",
+                          fix="export the recording as CSV with mx, my, mz columns")
     given = [n for n in _TEXT_ONLY if getattr(spec, n)]
     given += [n for n, v, d in (("format", spec.format, "auto"), ("time_unit", spec.time_unit, "auto"),
                                 ("gyro_unit", spec.gyro_unit, "auto")) if v != d]

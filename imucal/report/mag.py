@@ -29,6 +29,12 @@ def mag_warnings(cal: MagCalibration) -> list[str]:
     return out
 
 
+def no_magnetometer_warning(source: str) -> str:
+    """The magnetometer's settings given (mag:, --mag-*) for a recording without one."""
+    return (f"magnetometer: mag settings given, but {source} has no mx, my, mz: no magnetometer calibrated "
+            "(map its columns: data.columns, --columns mx=...,my=...,mz=...)")
+
+
 def mag_lines(cal: MagCalibration) -> list[str]:
     """The magnetometer's lines of the text report."""
     r, p = cal.report, cal.params
