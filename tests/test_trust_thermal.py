@@ -134,3 +134,21 @@ def test_a_temperature_no_sensor_reads_is_one_line(sweep, tmp_path, run_cli, unc
         r = run_cli(["discover", "--config", run, "--out", tmp_path / "cal"])
     assert r.code == 2 and r.err.count("\n") == 1, r.err
     assert f"sweep.csv: data.columns.temp: sample 100 holds temperature {shown} degC" in r.err
+
+
+def test_apply_says_when_it_extrapolates_the_temperature_terms(tmp_path, run_cli):
+    """Data at 80..129 degC through terms fitted over 15..45 degC were corrected without a word (the cubic
+    extrapolated; the autopilots hold the end value): a warning names how many samples and the ranges."""
+    p = tmp_path / "cal.yaml"
+    calibration(BIAS, BIAS_COEFFS).save(p)
+    rows = "".join(f"{i},0.1,0.2,9.8,{t:g}\n" for i, t in enumerate(list(range(80, 130)) + [14.0, 47.0]))
+    (tmp_path / "hot.csv").write_text("t,ax,ay,az,temp\n" + rows)
+    r = run_cli(["apply", p, "--data", tmp_path / "hot.csv", "--time-unit", "s", "--unit", "m/s^2", "--out",
+                 tmp_path / "out.csv", "--no-gravity-check"])
+    assert r.code == 0, r.err
+    assert ("imucal: warning: 50 of 52 samples are at temperatures well outside the 15..45 degC the calibration's "
+            "temperature terms were fitted over (the data span 14..129 degC)") in r.err, r.err
+    (tmp_path / "mild.csv").write_text("t,ax,ay,az,temp\n" + "".join(f"{i},0.1,0.2,9.8,{14 + i}\n" for i in range(34)))
+    r = run_cli(["apply", p, "--data", tmp_path / "mild.csv", "--time-unit", "s", "--unit", "m/s^2", "--out",
+                 tmp_path / "out2.csv", "--no-gravity-check"])
+    assert r.code == 0 and "temperatures" not in r.err, r.err  # within a tenth of the range beyond its ends

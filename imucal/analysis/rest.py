@@ -63,3 +63,33 @@ def rest_check(calibrated: np.ndarray, raw: np.ndarray, intervals: Intervals, gr
     r = [float(np.linalg.norm(raw[s:e].mean(axis=0))) for s, e in spans]
     return RestCheck(at_rest=median(a), gravity=float(gravity), intervals=len(spans), raw_at_rest=median(r),
                      integer=quantum(raw) == 1.0, cal_unit=cal_unit)
+
+
+#: Samples beyond the fitted temperature range by more than this fraction of it are named: the range is the rows'
+#: mean temperatures, single samples stray a little beyond it (a tenth of a degree on a 20 degC sweep).
+SPAN_MARGIN = 0.1
+
+
+@dataclass(frozen=True)
+class TemperatureSpan:
+    """The data's temperatures against the range a calibration's temperature terms were fitted over (its
+    sensors' ``fit.temperature_range``, the narrowest): outside it the terms are extrapolated, where the
+    autopilots hold the end value (imucal.export.tempcal)."""
+
+    tmin: float  #: [degC] the fitted range
+    tmax: float
+    outside: int  #: samples outside it by more than SPAN_MARGIN of it
+    low: float  #: [degC] the data's lowest and highest temperature
+    high: float
+
+
+def temperature_span(fits: list[object], temp: np.ndarray | None) -> TemperatureSpan | None:
+    """The span check of ``temp`` against the fitted ranges in ``fits`` (the sensors' fit sections); None
+    without temperatures or a range."""
+    ranges = [f["temperature_range"] for f in fits if isinstance(f, dict) and f.get("temperature_range")]
+    if temp is None or not len(temp) or not ranges:
+        return None
+    tmin, tmax = max(float(r[0]) for r in ranges), min(float(r[1]) for r in ranges)
+    margin = SPAN_MARGIN * max(tmax - tmin, 0.0)
+    outside = int(np.count_nonzero((temp < tmin - margin) | (temp > tmax + margin)))
+    return TemperatureSpan(tmin, tmax, outside, float(np.min(temp)), float(np.max(temp)))

@@ -53,13 +53,19 @@ def _rest_words(chk) -> str:
     return f"{text}: the data ({seen}) do not fit a calibration that takes {unit(chk.cal_unit)}"
 
 
+def _span_words(span, n: int) -> str:
+    return (f"{span.outside} of {n} samples are at temperatures well outside the {span.tmin:.4g}..{span.tmax:.4g} degC "
+            f"the calibration's temperature terms were fitted over (the data span {span.low:.4g}..{span.high:.4g} degC): "
+            "there they are extrapolated (the autopilots hold the end value)")
+
+
 def run(args: argparse.Namespace) -> int:
     import io
     import sys
 
     import numpy as np
 
-    from imucal.analysis.rest import rest_check
+    from imucal.analysis.rest import rest_check, temperature_span
     from imucal.calibration.frozen import load_calibration
     from imucal.data.static import detect_static
     from imucal.errors import ImucalError
@@ -93,6 +99,10 @@ def run(args: argparse.Namespace) -> int:
                               fix=f"apply the calibration made for data in this unit, or give data in its unit "
                                   f"({cal.raw_unit}); --no-gravity-check writes the output anyway")
         sys.stderr.write(f"imucal: warning: {_rest_words(chk)}\n")
+    span = temperature_span([cal.fit, *(s.fit for s in cal.attached if raws.get(s.kind) is not None)],
+                            rec.temp if "temp" in keys else None)
+    if span is not None and span.outside:
+        sys.stderr.write(f"imucal: warning: {_span_words(span, rec.n)}\n")
     out = cal.apply_all(raws, covs, acc=a)  # every sensor, one frame
     done = [s for s in cal.all_sensors if s.kind in out]
     cols, body = [c for s in done for c in s.model.output.columns], [out[s.kind] for s in done]
