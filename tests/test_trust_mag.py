@@ -159,3 +159,17 @@ def test_a_magnetometer_mapped_in_a_netcdf_file_is_one_line(log, tmp_path, run_c
         r = run_cli(["calibrate", "--data", tmp_path / "log.nc", "--columns", "mx=mag", "--out", tmp_path / "out"])
     assert r.code == 2 and r.err.count("\n") == 1, r.err
     assert r.err.startswith(f"imucal: error: {tmp_path / 'log.nc'}: data.columns.mx: a magnetometer is not read")
+
+
+def test_the_ardupilot_export_says_when_its_arming_check_refuses_the_offsets(tmp_path, run_cli):
+    """A hard iron of 250 uT (2500 mG) was exported as COMPASS_OFS without a word: ArduPilot's arming check
+    refuses offsets longer than COMPASS_OFFS_MAX (default 1800 mG)."""
+    truth = truth_from_soft_iron(SOFT, s=(250.0, 0.0, 0.0), field=48.0, noise=0.1, acc_noise=0.002)
+    sim = simulate_mag(truth, n_poses=30, hold=150, transition=40, seed=3)
+    write(tmp_path / "log.csv", np.column_stack([sim.acc, sim.mag]))
+    r = calibrate(run_cli, tmp_path, "--mag-unit", "uT")
+    assert r.code == 0, r.err
+    r = run_cli(["export", tmp_path / "out" / "calibration.yaml", "--format", "ardupilot", "--out", tmp_path / "x.param"])
+    assert r.code == 0, r.err
+    assert "COMPASS_OFFS_MAX's default 1800 mG: ArduPilot refuses to arm" in r.out + r.err
+    assert "set COMPASS_OFFS_MAX to at least 25" in r.out + r.err

@@ -122,6 +122,23 @@ def magnetometer(cal: Calibration) -> SensorCalibration | None:
 NEGLIGIBLE_ROTATION_DEG = 0.01
 
 
+#: [mG] ArduPilot's COMPASS_OFFS_MAX (AP_Compass.cpp: default AP_COMPASS_OFFSETS_MAX_DEFAULT, @Range 500 3000):
+#: its arming check ("Compass offsets too high", AP_Arming.cpp) refuses offsets longer than it.
+ARDUPILOT_OFFS_MAX, ARDUPILOT_OFFS_MAX_LIMIT = 1800.0, 3000.0
+
+
+def _offsets_note(ofs: np.ndarray) -> tuple[str, ...]:
+    """ArduPilot's arming check on |COMPASS_OFS| [mG], said when this calibration's offsets fail it."""
+    n = float(np.linalg.norm(ofs))
+    if n <= ARDUPILOT_OFFS_MAX:
+        return ()
+    fix = (f"set COMPASS_OFFS_MAX to at least {math.ceil(n)}" if n <= ARDUPILOT_OFFS_MAX_LIMIT else
+           f"beyond the {ARDUPILOT_OFFS_MAX_LIMIT:g} mG COMPASS_OFFS_MAX allows: mount the magnetometer away from the "
+           "iron that offsets it")
+    return (f"|COMPASS_OFS| = {n:.4g} mG exceeds COMPASS_OFFS_MAX's default {ARDUPILOT_OFFS_MAX:g} mG: ArduPilot "
+            f"refuses to arm ('Compass offsets too high'); {fix}",)
+
+
 def _note(f: MagFactors, fmt: str) -> tuple[str, ...]:
     if f.dropped_deg < NEGLIGIBLE_ROTATION_DEG:
         return ()
@@ -144,7 +161,7 @@ def ardupilot(cal: Calibration) -> tuple[list[str], list[tuple[str, float | int]
                                            *zip(ARDUPILOT_DIA, map(float, np.diag(M))),
                                            *zip(ARDUPILOT_ODI, (float(M[i, j]) for i, j in OFF_DIAGONAL)),
                                            (ARDUPILOT_ORIENT, f.rotation)]
-    return head, vals, _note(f, "ArduPilot")
+    return head, vals, _note(f, "ArduPilot") + _offsets_note(ofs)
 
 
 def px4(cal: Calibration) -> tuple[list[str], list[tuple[str, float | int]], tuple[str, ...]]:
