@@ -173,3 +173,16 @@ def test_the_ardupilot_export_says_when_its_arming_check_refuses_the_offsets(tmp
     assert r.code == 0, r.err
     assert "COMPASS_OFFS_MAX's default 1800 mG: ArduPilot refuses to arm" in r.out + r.err
     assert "set COMPASS_OFFS_MAX to at least 25" in r.out + r.err
+
+
+@pytest.mark.parametrize("unit, looks", [("gauss", "uT"), ("nT", "uT"), ("mT", "uT")])
+def test_readings_in_another_field_unit_than_stated_are_named(log, tmp_path, run_cli, unit, looks):
+    """Readings of about 48 (uT) stated as gauss calibrated to scales of 99 gauss per gauss without a word, and
+    the exports then wrote offsets 100 times too large."""
+    write(tmp_path / "log.csv", log)
+    r = calibrate(run_cli, tmp_path, "--mag-unit", unit)
+    assert r.code == 0, r.err
+    assert f"the readings are not in {unit} (they look like {looks}: give mag.unit {looks}" in r.err, r.err
+    r = calibrate(run_cli, tmp_path, "--mag-unit", "uT")
+    assert r.code == 0 and "the readings are not in" not in r.err, r.err
+

@@ -33,6 +33,23 @@ def is_sensor_unit(unit: object) -> bool:
             and is_unit(SCALE_UNIT.format(raw=unit)) and is_unit(f"{unit}/{unit}"))
 
 
+#: Readings in a field unit have scales near 1 there (soft iron: a few per cent, tens on a poor board): scales
+#: beyond this factor of it mean the readings are in another unit than the one stated (a factor 10 or 100).
+UNIT_SCALE_FACTOR = 2.0
+
+
+def stated_unit_mismatch(raw_unit: str, field_unit: str, scale: float) -> str | None:
+    """The field unit readings stated in ``raw_unit`` look like, from their scales' geometric mean ``scale``
+    [raw_unit per field_unit]: None when it is near 1 field_unit in raw_unit (or either is no field unit), else
+    the field unit whose conversion it is within UNIT_SCALE_FACTOR, or "" for none (counts)."""
+    if raw_unit not in FIELD_UNITS or field_unit not in FIELD_UNITS or not scale > 0:
+        return None
+    if abs(math.log(scale / convert(1.0, field_unit, raw_unit))) <= math.log(UNIT_SCALE_FACTOR):
+        return None
+    near = min(FIELD_UNITS, key=lambda u: abs(math.log(scale / convert(1.0, field_unit, u))))
+    return near if abs(math.log(scale / convert(1.0, field_unit, near))) <= math.log(UNIT_SCALE_FACTOR) else ""
+
+
 def is_field_unit(unit: str) -> bool:
     return unit in FIELD_UNITS
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 from imucal.mag.result import MagCalibration
+from imucal.mag.units import convert, stated_unit_mismatch
 
 
 def mag_warnings(cal: MagCalibration) -> list[str]:
@@ -23,6 +24,13 @@ def mag_warnings(cal: MagCalibration) -> list[str]:
     if cal.left_handed:
         out.append("magnetometer: the fitted dip has the opposite sign of the field model's: one of its axes is "
                    "probably inverted (a left-handed frame); check the axis signs")
+    b = math.prod(cal.params[f"b{i}"].value for i in (1, 2, 3)) ** (1 / 3)
+    looks = stated_unit_mismatch(cal.raw_unit, cal.field_unit, b)
+    if looks is not None:
+        hint = f"they look like {looks}: give mag.unit {looks}" if looks else "counts? give mag.unit raw"
+        out.append(f"magnetometer: its scales are {b:.3g} {cal.raw_unit} per {cal.field_unit}, where readings in "
+                   f"{cal.raw_unit} have about {convert(1.0, cal.field_unit, cal.raw_unit):.3g}: the readings are not "
+                   f"in {cal.raw_unit} ({hint}, or check mag.field)")
     if not cal.field_given:
         out.append(f"magnetometer: the field's magnitude was fitted (its overall scale held): the calibrated "
                    f"field is in the sensor's unit {cal.field_unit}; give mag.field (--mag-field) for a field unit")
