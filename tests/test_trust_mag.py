@@ -186,3 +186,13 @@ def test_readings_in_another_field_unit_than_stated_are_named(log, tmp_path, run
     r = calibrate(run_cli, tmp_path, "--mag-unit", "uT")
     assert r.code == 0 and "the readings are not in" not in r.err, r.err
 
+
+@pytest.mark.parametrize("fmt", ["imutk", "madlab", "matrix", "kalibr"])
+def test_a_format_without_a_magnetometer_says_it_drops_it(log, tmp_path, run_cli, fmt):
+    """imu_tk, mad-lab, matrix and Kalibr files hold no magnetometer: it was dropped without a word, where the
+    gyroscope's dropped terms are stated."""
+    write(tmp_path / "log.csv", log)
+    assert calibrate(run_cli, tmp_path).code == 0
+    r = run_cli(["export", tmp_path / "out" / "calibration.yaml", "--format", fmt, "--out", tmp_path / f"x.{fmt}"])
+    assert r.code == 0, r.err
+    assert "magnetometer not exported: this format holds none" in r.out + r.err

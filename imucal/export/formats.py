@@ -36,6 +36,7 @@ from imucal.calibration.frozen import Calibration
 from imucal.constants import SI_ACCEL_UNIT, SI_RATE_UNIT
 from imucal.export.escape import hash_comment
 from imucal.export.gyro import MADLAB_GYR_UNIT, forward, gsens_sentence, imutk_factors, madlab_factors
+from imucal.model.sensor import MAGNETOMETER
 
 
 @dataclass(frozen=True)
@@ -74,9 +75,14 @@ def affine(cal: Calibration) -> tuple[np.ndarray, np.ndarray]:
 
 
 def dropped_terms(cal: Calibration) -> tuple[str, ...]:
-    """What an affine format loses of the other sensors' terms (the gyroscope's bias(T)): one sentence each."""
+    """What an affine format loses of the other sensors (the magnetometer) and their terms (the gyroscope's bias(T)):
+    one sentence each."""
     out = []
     for s in cal.attached:
+        if s.kind == MAGNETOMETER:  # no affine peer format holds one
+            out.append("magnetometer not exported: this format holds none (the ArduPilot and PX4 exports and "
+                       "`imucal codegen` keep it)")
+            continue
         ref = s.reference_inputs()
         if ref:
             names = ", ".join(f"{e.name} ({''.join('xyz'[a] for a in e.axes)})" for e in s.model.effects)
