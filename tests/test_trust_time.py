@@ -460,6 +460,36 @@ def test_time_in_minutes_is_named(tmp_path, run_cli, unchanged, how):
     assert res.code == 0, res.err
 
 
+@pytest.mark.parametrize("how", STREAM_HOW)
+@pytest.mark.parametrize("lost", [False, True])
+def test_a_one_hertz_log_in_seconds_is_named_and_its_lost_samples_do_not_refuse_it(tmp_path, run_cli, unchanged,
+                                                                                   how, lost):
+    """A temperature logger's 1 Hz stamps in seconds: a step of 1 is inferred as milliseconds (1 kHz, the more usual
+    rate), where no pose is still; before: "no static intervals found". Now the seconds are named (at least
+    HINT_MIN_POSES_LESS_USUAL poses read in s). With every 10th sample lost, --time-unit s was refused ("0.9014 Hz,
+    not an IMU sample rate ... looks like ms": the clock's span median counts the lost samples); the good stamps'
+    own step is 1 s, so it calibrates."""
+    r = simulated(tmp_path)
+    keep = (np.arange(r.sim.t.size) % 10 != 9) if lost else np.ones(r.sim.t.size, bool)
+    src = with_stamps(r.path, tmp_path / "all.csv", np.round(r.sim.t * 100.0))
+    d = np.loadtxt(src, delimiter=",", skiprows=1)[keep]
+    src = tmp_path / "hz.csv"
+    np.savetxt(src, d, delimiter=",", fmt=["%.0f", "%.0f", "%.0f", "%.0f"], header="t,ax,ay,az", comments="")
+    with unchanged():
+        res = run_cli(["calibrate", "--data", src, "--stream", how, "--out", tmp_path / "o"])
+    assert res.code == 2
+    one_line_error(res.err, "hz.csv: data.time_unit: the time column read in ms gives 1000 Hz and 0 still pose(s); "
+                            "read in s it gives 1 Hz and 26 distinct still poses: the time unit looks like seconds "
+                            "(fix: give --time-unit s (data.time_unit: s))")
+    res = run_cli(["calibrate", "--data", src, "--stream", how, "--time-unit", "s", "--out", tmp_path / "o",
+                   "--no-figures", "--quiet"])
+    assert res.code == 0, res.err
+    assert yaml.safe_load((tmp_path / "o" / "calibration.yaml").read_text())["fit"]["n_intervals"] == 26
+    report = (tmp_path / "o" / "report.txt").read_text()
+    assert "s, 1 Hz, unit raw)" in report  # the sample rate, not the clock's 0.9 Hz with the lost samples in it
+    assert ("gap(s) in the time stamps (samples missing" in report) == lost  # the lost samples are named
+
+
 def test_a_single_pose_on_a_wrong_time_scale_is_not_called_minutes(tmp_path, run_cli):
     """One pose tapped every 10 s (a noise log): read in minutes it splits into runs between the
     taps, but all point one way, so minutes are not named."""

@@ -179,7 +179,10 @@ class Decision:
     unit: str
     note: str
     jittered: bool
-    step: float  #: the sample step in the stamps' unit: the clock's (StepStats.clock_step; refine)
+    #: the sample step in the stamps' unit: a jittered clock's (StepStats.clock_step), good stamps' median step (lost
+    #: samples lengthen the clock's span median: a logger dropping every 10th sample read as 0.9 of its rate, the
+    #: losses not named as gaps); refine fits either end to end
+    step: float
     gap_ref: float  #: steps longer than GAP_STEPS x this are gap candidates
     short_fraction: float
     rate_given: float | None
@@ -226,9 +229,9 @@ def decide(st: StepStats, time_unit: str, rate_given: float | None, column: str,
     jittered = frac > JITTER_FRACTION
     shown, what = _shown(jittered, st.median_step, clock)
     unit, note = _unit_and_note(shown, what, st.first, time_unit, rate_given, path, column)
-    if st.n > 1:
-        check_rate(clock, unit, path)
-    dec = Decision(unit=unit, note=note, jittered=jittered, step=clock, gap_ref=clock if jittered else st.median_step,
+    if st.n > 1:  # good stamps' own step: lost samples (a logger's dropouts) lengthen the clock's span median
+        check_rate(clock if jittered else st.median_step, unit, path)
+    dec = Decision(unit=unit, note=note, jittered=jittered, step=clock if jittered else st.median_step, gap_ref=clock if jittered else st.median_step,
                    short_fraction=frac, rate_given=rate_given, time_unit=time_unit, column=column)
     if rate_given is not None and st.n > 1 and abs(dec.rate / rate_given - 1.0) > RATE_TOLERANCE:
         raise ImucalError(f"sample rate {rate_given:g} Hz given, but the time column {column} steps at "

@@ -14,7 +14,7 @@ import numpy as np
 from imucal.constants import TIME_UNITS
 from imucal.data.recording import MAX_RATE_HZ, MIN_RATE_HZ, Recording, RecordingSummary, TimeSource
 from imucal.data.static import detect_static
-from imucal.data.timebase import decades_from_typical
+from imucal.data.timebase import JITTER_FRACTION, decades_from_typical
 from imucal.errors import ImucalError
 from imucal.solve.observability import distinct_directions
 
@@ -24,6 +24,10 @@ if TYPE_CHECKING:
 #: Distinct orientations the stamps read in another unit must show before that unit is named as
 #: the likely one: a single pose read on a wrong time scale may split into runs, all one way.
 HINT_MIN_POSES = 3
+#: ... and read in a unit that gives a less usual rate than the one inferred (1 Hz in seconds where a step
+#: of 1 was inferred as 1 kHz in milliseconds: a temperature logger's): as many as a calibration needs, since
+#: a slowly moving log read on a slower time scale may look still in short runs.
+HINT_MIN_POSES_LESS_USUAL = 6
 #: Words for a unit in a message.
 _UNIT_WORDS = {"min": "minutes", "s": "seconds", "ms": "milliseconds", "us": "microseconds", "ns": "nanoseconds"}
 
@@ -33,26 +37,31 @@ def unit_hint(config: RunConfig, rec: Recording | RecordingSummary, found: int,
     """The refusal to give when a run finds fewer than two still poses (``found``) on a stamped
     recording but HINT_MIN_POSES or more distinct ones with its stamps read in another unit that
     gives a more usual rate (closer to TYPICAL_RATE_HZ: minutes, which are never inferred, or
-    another): the time unit looks like that one. None otherwise (a log that only moves, read 60
-    times slower, may look still; at a rate further from an IMU's usual one it is not tried).
+    another), or, when the unit was inferred, HINT_MIN_POSES_LESS_USUAL with the stamps read in a unit that
+    gives a less usual one (a 1 Hz logger's seconds read as milliseconds): the time unit looks like that one.
+    None otherwise (a log that only moves, read 60 times slower, may look still).
     Only on that failure: each unit tried costs one more detection (a re-read for a file read in
     chunks)."""
     tb = rec.time_base
     if tb is None or tb.source is TimeSource.RATE or not math.isfinite(tb.rate):
         return None
     best: tuple[int, str, float] | None = None
+    # good stamps' own rate: lost samples (a logger's dropouts) slow the clock's (imucal.data.timebase.check_rate)
+    own = tb.rate if tb.short_fraction > JITTER_FRACTION or not tb.median_step > 0 else 1.0 / tb.median_step
     for unit, f in TIME_UNITS.items():
-        rate = tb.rate * TIME_UNITS[rec.time_unit] / f
-        if unit == rec.time_unit or not MIN_RATE_HZ <= rate <= MAX_RATE_HZ or (
-                decades_from_typical(rate) >= decades_from_typical(tb.rate)):
-            continue  # only a unit that gives a more usual rate (the inference's rule) is tried
+        rate = own * TIME_UNITS[rec.time_unit] / f
+        usual = decades_from_typical(rate) < decades_from_typical(own)
+        if unit == rec.time_unit or not MIN_RATE_HZ <= rate <= MAX_RATE_HZ or not (
+                usual or config.data.time_unit == "auto"):
+            continue  # a unit that gives a more usual rate (the inference's rule), or any, when it was inferred
         poses = _poses_in(config, rec, unit, f / TIME_UNITS[rec.time_unit], rails)
-        if poses >= max(HINT_MIN_POSES, found + 1) and (best is None or poses > best[0]):
+        least = HINT_MIN_POSES if usual else HINT_MIN_POSES_LESS_USUAL
+        if poses >= max(least, found + 1) and (best is None or poses > best[0]):
             best = (poses, unit, rate)
     if best is None:
         return None
     poses, unit, rate = best
-    return ImucalError(f"the time column read in {rec.time_unit} gives {tb.rate:.4g} Hz and {found} still pose(s); "
+    return ImucalError(f"the time column read in {rec.time_unit} gives {own:.4g} Hz and {found} still pose(s); "
                        f"read in {unit} it gives {rate:.4g} Hz and {poses} distinct still poses: the time unit looks "
                        f"like {_UNIT_WORDS[unit]}", file=rec.source, field="data.time_unit",
                        fix=f"give --time-unit {unit} (data.time_unit: {unit})"
