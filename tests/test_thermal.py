@@ -270,3 +270,21 @@ def test_the_gyroscope_bias_over_temperature_orders_values_and_drift():
     want = truth[[0, 79]] - np.array([0.0, 0.0, 0.0])
     np.testing.assert_allclose(curve, want, atol=5e-6)
     assert np.sqrt(np.mean(g.after ** 2)) < 3e-6 < np.sqrt(np.mean(g.before ** 2))
+
+
+@pytest.mark.parametrize("case", ["flat", "none"])
+def test_a_few_pose_log_that_is_no_sweep_says_why(tmp_path, run_cli, unchanged, case):
+    """Three poses whose temperature never changes (or is not read): discovery's refusal says what a sweep needs
+    (before: only "record more static orientations", with nothing about the temperature)."""
+    d = np.loadtxt(sweep(tmp_path / "s.csv", hours=1.0), delimiter=",", skiprows=1)
+    d[:, 4] = 20.0
+    cols = d if case == "flat" else d[:, :4]
+    np.savetxt(tmp_path / "log.csv", cols, delimiter=",", header="t,ax,ay,az,temp"[: 10 if case == "none" else None],
+               comments="", fmt="%.8g")
+    run = tmp_path / "run.yaml"
+    run.write_text("data: {path: log.csv, time_unit: s}\nfit: {fix: {"
+                   + ", ".join(f"{k}: {v!r}" for k, v in NOMINAL.items()) + "}}\n")
+    with unchanged():
+        r = run_cli(["discover", "--config", run, "--out", tmp_path / "o"])
+    assert r.code == 2 and r.err.count("\n") == 1 and "too few to test effects" in r.err, r.err
+    assert ("spans 2 degC, and this log's span at most 0 degC" if case == "flat" else "data.columns.temp") in r.err

@@ -7,6 +7,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Callable
 
+import numpy as np
+
 from imucal.analysis import stochastic as stoch
 from imucal.analysis.discover import axes as ax_
 from imucal.analysis.discover import backward as bw
@@ -25,6 +27,7 @@ from imucal.errors import ImucalError
 from imucal.model.effects import EFFECTS, MIN_DOF, given_names, make_effect
 from imucal.model.parameters import BASE_NAMES
 from imucal.pipeline import CalibrationRun, calibrate_accelerometer
+from imucal.thermal.evidence import SWEEP_SPAN
 from imucal.thermal.run import Sweep, sweep_of
 from imucal.thermal.select import TEMPERATURE_TERMS
 from imucal.solve.fit import FitResult
@@ -166,7 +169,21 @@ def _check_room(base: CalibrationRun) -> None:
     if iv.n - (n_free0 + 1) < MIN_DOF:
         raise ImucalError(f"{iv.n} static intervals are too few to test effects: the base model has {n_free0} free "
                           f"parameters, one effect coefficient more needs at least {n_free0 + 1 + MIN_DOF} intervals",
-                          file=src, field="intervals", fix="record more static orientations (e.g. 18 to 30 holds of 3 s)")
+                          file=src, field="intervals", fix="record more static orientations (e.g. 18 to 30 holds of 3 s)"
+                                                           + _sweep_words(base))
+
+
+def _sweep_words(base: CalibrationRun) -> str:
+    """Why a log of few poses was not taken as a temperature sweep (imucal.thermal.evidence.SWEEP_SPAN), for the
+    refusal's fix: no temperature read, or none of its still poses spans the temperature change a sweep needs."""
+    rec, iv = base.recording, base.intervals
+    temp = getattr(rec, "temp", None)
+    if temp is None:
+        return ("; a temperature sweep's few poses need its temperature (data.columns.temp in degC, or a netCDF "
+                "variable with units degC)")
+    span = max((float(np.ptp(temp[a:b])) for a, b in zip(iv.start, iv.end) if b > a), default=0.0)
+    return (f"; a temperature sweep needs a still pose that spans {SWEEP_SPAN:g} degC, and this log's span at "
+            f"most {span:.3g} degC")
 
 
 def _tested_config(config: RunConfig, notes: list[str]) -> RunConfig:
