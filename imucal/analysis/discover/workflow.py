@@ -170,7 +170,7 @@ def _check_room(base: CalibrationRun) -> None:
         raise ImucalError(f"{iv.n} static intervals are too few to test effects: the base model has {n_free0} free "
                           f"parameters, one effect coefficient more needs at least {n_free0 + 1 + MIN_DOF} intervals",
                           file=src, field="intervals", fix="record more static orientations (e.g. 18 to 30 holds of 3 s)"
-                                                           + _sweep_words(base))
+                          + (_sweep_words(base) if n_free0 < len(BASE_NAMES) else ""))  # a run file held some: a sweep?
 
 
 def _sweep_words(base: CalibrationRun) -> str:
