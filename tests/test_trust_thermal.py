@@ -152,3 +152,17 @@ def test_apply_says_when_it_extrapolates_the_temperature_terms(tmp_path, run_cli
     r = run_cli(["apply", p, "--data", tmp_path / "mild.csv", "--time-unit", "s", "--unit", "m/s^2", "--out",
                  tmp_path / "out2.csv", "--no-gravity-check"])
     assert r.code == 0 and "temperatures" not in r.err, r.err  # within a tenth of the range beyond its ends
+
+
+@pytest.mark.parametrize("how", ["never", "always"])
+def test_a_temperature_no_sensor_reads_is_refused_by_both_readers(sweep, tmp_path, run_cli, unchanged, how):
+    """The file read in chunks (above 64 MB, or --stream always) builds no Recording: its parse refuses the same
+    sample in the same words (it calibrated before)."""
+    data = sweep[:, [0, 1, 2, 3, 7]].copy()  # no gyroscope: reading in chunks keeps none
+    data[100, 4] = -400.0
+    np.savetxt(tmp_path / "sweep.csv", data, delimiter=",", header="t,ax,ay,az,temp", comments="", fmt="%.10g")
+    with unchanged():
+        r = run_cli(["calibrate", "--data", tmp_path / "sweep.csv", "--time-unit", "s", "--stream", how,
+                     "--fix-angles", "--out", tmp_path / "cal"])
+    assert r.code == 2 and r.err.count("\n") == 1, r.err
+    assert "sweep.csv: data.columns.temp: sample 100 holds temperature -400 degC" in r.err, r.err

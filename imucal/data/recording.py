@@ -83,15 +83,8 @@ class Recording:
     def __post_init__(self) -> None:
         """A temperature no sensor reads (below absolute zero, or above TEMPERATURE_RANGE) is refused: the fit
         took it and wrote a calibration the exports refuse."""
-        if self.temp is None or not len(self.temp):
-            return
-        lo, hi = TEMPERATURE_RANGE
-        bad = ~((self.temp >= lo) & (self.temp <= hi))
-        if bad.any():
-            k = int(np.flatnonzero(bad)[0])
-            raise ImucalError(f"sample {k} holds temperature {self.temp[k]:g} degC, not a sensor's temperature "
-                              f"({lo:g} to {hi:g} degC)", file=self.source, field="data.columns.temp",
-                              fix="give the temperature in degC (kelvin less 273.15), or repair the corrupt samples")
+        if self.temp is not None and (err := temperature_error(self.temp, self.source)) is not None:
+            raise err
 
     @property
     def n(self) -> int:
@@ -164,3 +157,17 @@ class RecordingSummary:
     @property
     def duration(self) -> float:
         return float(self.t_last)
+
+
+def temperature_error(temp: np.ndarray, source: str, first: int = 0) -> ImucalError | None:
+    """The refusal of a temperature no sensor reads (below absolute zero, or above TEMPERATURE_RANGE: the fit took
+    it and wrote a calibration the exports refuse), naming its sample (``first``: the index of ``temp[0]``);
+    None when every one is a sensor's."""
+    lo, hi = TEMPERATURE_RANGE
+    bad = ~((temp >= lo) & (temp <= hi))
+    if not bad.any():
+        return None
+    k = int(np.flatnonzero(bad)[0])
+    return ImucalError(f"sample {first + k} holds temperature {temp[k]:g} degC, not a sensor's temperature "
+                       f"({lo:g} to {hi:g} degC)", file=source, field="data.columns.temp",
+                       fix="give the temperature in degC (kelvin less 273.15), or repair the corrupt samples")

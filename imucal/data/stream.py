@@ -31,7 +31,7 @@ from imucal.constants import TIME_UNITS
 from imucal.data.blocks import TextBlocks
 from imucal.data.lines import corrupt_value, no_rows, not_increasing
 from imucal.data.run_pool import batches, ordered_map, run_workers
-from imucal.data.recording import MAX_ABS_VALUE, RecordingSummary, StaticSamples, TimeBase
+from imucal.data.recording import MAX_ABS_VALUE, RecordingSummary, StaticSamples, TimeBase, temperature_error
 from imucal.data.spec import DataSpec, as_spec, resolve_path
 from imucal.data.spill import RowSpill, temporary_file
 from imucal.data.static import (QUANTUM_ROWS, Intervals, MovingVariance, Segment, StaticSettings, VarianceStore,
@@ -195,6 +195,8 @@ class StreamedRecording:
         if p.big is None and (arr.max() > MAX_ABS_VALUE or arr.min() < -MAX_ABS_VALUE):  # no copy of the block
             bad = (np.abs(arr) > MAX_ABS_VALUE).any(axis=1)
             p.big = corrupt_value(self.file.line_of(block, first, int(np.flatnonzero(bad)[0])), self.path)
+        if p.big is None and "temp" in self._it:  # as the whole file's Recording refuses it
+            p.big = temperature_error(arr[:, self._it["temp"]], str(self.path), p.n)
         if "t" not in self._it:
             return
         stamps = arr[:, self._it["t"]]
