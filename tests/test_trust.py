@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -502,17 +503,22 @@ def test_a_signal_after_the_set_is_complete_or_ignored_keeps_the_new_set(tmp_pat
 
 
 def test_sigterm_removes_staged_outputs(work):
-    """SIGTERM while the figures are staged: exit 130, nothing published, no staging left."""
-    p = _imucal(["calibrate", "--data", "rec.csv", "--out", "sig"], work)
-    deadline = time.time() + 60
-    while time.time() < deadline and p.poll() is None:
-        if (work / "sig").exists() and list((work / "sig").glob(".imucal-*")):
-            p.send_signal(signal.SIGTERM)
+    """SIGTERM while the figures are staged: exit 130, nothing published, no staging left. The staging lasts a
+    fraction of a second on a quiet machine: up to five tries to catch it."""
+    for _ in range(5):
+        shutil.rmtree(work / "sig", ignore_errors=True)
+        p = _imucal(["calibrate", "--data", "rec.csv", "--out", "sig"], work)
+        deadline = time.time() + 60
+        while time.time() < deadline and p.poll() is None:
+            if (work / "sig").exists() and list((work / "sig").glob(".imucal-*")):
+                p.send_signal(signal.SIGTERM)
+                break
+            time.sleep(0.001)
+        _, err = p.communicate(timeout=60)
+        if p.returncode != 0:
             break
-        time.sleep(0.002)
-    _, err = p.communicate(timeout=60)
     if p.returncode == 0:
-        pytest.skip("the run finished before it could be interrupted")
+        pytest.skip("five runs finished before they could be interrupted")
     assert p.returncode == 130, err
     assert "terminated by SIGTERM; nothing was written" in err and "Traceback" not in err
     assert not (work / "sig").exists() or not any((work / "sig").iterdir())
