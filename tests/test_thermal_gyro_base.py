@@ -56,12 +56,25 @@ def base_file(path: Path) -> Path:
     return path
 
 
-def _discover(run_cli, tmp_path: Path, fit: str) -> tuple:
+def _run_file(tmp_path: Path, fit: str, gyro_unit: str = "counts") -> tuple[Path, Path, np.ndarray]:
+    """The counts sweep and a run file for it: (run file, data, true rate)."""
     data, rate = counts_sweep(tmp_path / "sweep.csv")
     run = tmp_path / "run.yaml"
-    run.write_text(f"data: {{path: {data.name}, time_unit: s, gyro_unit: counts}}\nfit: {fit}\n")
-    r = run_cli(["discover", "--config", run, "--out", tmp_path / "cal"])
-    return r, data, rate
+    run.write_text(f"data: {{path: {data.name}, time_unit: s, gyro_unit: {gyro_unit}}}\nfit: {fit}\n")
+    return run, data, rate
+
+
+def _discover(run_cli, tmp_path: Path, fit: str) -> tuple:
+    run, data, rate = _run_file(tmp_path, fit)
+    return run_cli(["discover", "--config", run, "--out", tmp_path / "cal"]), data, rate
+
+
+def _refused_one_line(run_cli, tmp_path: Path, unchanged, fit: str, gyro_unit: str, *words: str) -> None:
+    run, _, _ = _run_file(tmp_path, fit, gyro_unit)
+    with unchanged(tmp_path):
+        r = run_cli(["discover", "--config", run, "--out", tmp_path / "cal"])
+    assert r.code == 2 and r.err.count("\n") == 1 and all(w in r.err for w in words), r.err
+    assert "Warning" not in r.err and not (tmp_path / "cal").exists()
 
 
 def test_a_counts_gyroscope_without_a_base_gets_no_section_and_the_report_says_why(run_cli, tmp_path):
@@ -107,14 +120,8 @@ def test_a_counts_gyroscope_takes_its_scale_misalignment_and_gsens_from_the_base
 
 def test_a_base_gyroscope_in_another_unit_is_one_line(run_cli, tmp_path, unchanged):
     base = base_file(tmp_path / "base.yaml")
-    data, _ = counts_sweep(tmp_path / "sweep.csv")
-    run = tmp_path / "run.yaml"
-    run.write_text(f"data: {{path: {data.name}, time_unit: s, gyro_unit: deg/s}}\n"
-                   f"fit: {{base: {base.name}, fix: [{', '.join(HELD)}]}}\n")
-    with unchanged(tmp_path):
-        r = run_cli(["discover", "--config", run, "--out", tmp_path / "cal"])
-    assert r.code == 2 and r.err.count("\n") == 1 and "fit.base" in r.err and "deg/s" in r.err, r.err
-    assert not (tmp_path / "cal").exists()
+    _refused_one_line(run_cli, tmp_path, unchanged, f"{{base: {base.name}, fix: [{', '.join(HELD)}]}}", "deg/s",
+                      "fit.base", "deg/s")
 
 
 @pytest.mark.parametrize("axis", [0])
@@ -137,11 +144,6 @@ def test_a_hostile_base_gyroscope_scale_is_one_line(run_cli, tmp_path, unchanged
     d = yaml.safe_load(base_file(tmp_path / "good.yaml").read_text())
     d["gyroscope"]["parameters"]["scale_x"]["value"] = scale
     (tmp_path / "base.yaml").write_text(yaml.safe_dump(d))
-    data, _ = counts_sweep(tmp_path / "sweep.csv")
-    run = tmp_path / "run.yaml"
-    run.write_text(f"data: {{path: {data.name}, time_unit: s, gyro_unit: counts}}\n"
-                   f"fit: {{base: base.yaml, fix: [{', '.join(HELD)}]}}\n")
-    with unchanged(tmp_path):
-        r = run_cli(["discover", "--config", run, "--out", tmp_path / "cal"])
-    assert r.code == 2 and r.err.count("\n") == 1 and "fit.base" in r.err and "Warning" not in r.err, r.err
+    _refused_one_line(run_cli, tmp_path, unchanged, f"{{base: base.yaml, fix: [{', '.join(HELD)}]}}", "counts",
+                      "fit.base")
     assert not [w for w in recwarn if issubclass(w.category, RuntimeWarning)], [str(w.message) for w in recwarn]

@@ -32,6 +32,14 @@ def one_line_error(err: str, *parts: str) -> str:
     return lines[0]
 
 
+def refused(run_cli, unchanged, args: list, *parts: str) -> str:
+    """``imucal ARGS`` changes nothing, exits 2 and says one line holding ``parts``."""
+    with unchanged():
+        res = run_cli(args)
+    assert res.code == 2
+    return one_line_error(res.err, *parts)
+
+
 def simulated(tmp_path: Path, name: str = "sim.csv", seed: int = 7, **kw):
     """A 100 Hz counts recording of 26 cube poses (t, ax, ay, az)."""
     sensor = mems_counts_sensor(np.random.default_rng(seed))
@@ -432,12 +440,9 @@ def test_a_step_that_cannot_tell_two_units_apart_is_refused(tmp_path, run_cli, u
     """A step of 0.2: 5 kHz in ms or 5 Hz in s, equally far from an IMU's usual rates."""
     src = tmp_path / "r.csv"
     src.write_text("t,ax,ay,az\n" + "".join(f"{0.2 * k:.1f},1,2,{16384 + k % 3}\n" for k in range(400)))
-    with unchanged():
-        res = run_cli(["calibrate", "--data", src, "--stream", how, "--out", tmp_path / "o"])
-    assert res.code == 2
-    one_line_error(res.err, "r.csv: data.time_unit: the time stamps step by 0.2: 5000 Hz in ms or 5 Hz in s, which "
-                            "the step alone cannot tell apart (fix: give --time-unit ms or --time-unit s "
-                            "(data.time_unit))")
+    refused(run_cli, unchanged, ["calibrate", "--data", src, "--stream", how, "--out", tmp_path / "o"],
+            "r.csv: data.time_unit: the time stamps step by 0.2: 5000 Hz in ms or 5 Hz in s, which "
+            "the step alone cannot tell apart (fix: give --time-unit ms or --time-unit s (data.time_unit))")
     assert load_recording(DataSpec(path=str(src), time_unit="s")).sample_rate == pytest.approx(5.0)
 
 
@@ -475,12 +480,10 @@ def test_a_one_hertz_log_in_seconds_is_named_and_its_lost_samples_do_not_refuse_
     d = np.loadtxt(src, delimiter=",", skiprows=1)[keep]
     src = tmp_path / "hz.csv"
     np.savetxt(src, d, delimiter=",", fmt=["%.0f", "%.0f", "%.0f", "%.0f"], header="t,ax,ay,az", comments="")
-    with unchanged():
-        res = run_cli(["calibrate", "--data", src, "--stream", how, "--out", tmp_path / "o"])
-    assert res.code == 2
-    one_line_error(res.err, "hz.csv: data.time_unit: the time column read in ms gives 1000 Hz and 0 still pose(s); "
-                            "read in s it gives 1 Hz and 26 distinct still poses: the time unit looks like seconds "
-                            "(fix: give --time-unit s (data.time_unit: s))")
+    refused(run_cli, unchanged, ["calibrate", "--data", src, "--stream", how, "--out", tmp_path / "o"],
+            "hz.csv: data.time_unit: the time column read in ms gives 1000 Hz and 0 still pose(s); "
+            "read in s it gives 1 Hz and 26 distinct still poses: the time unit looks like seconds "
+            "(fix: give --time-unit s (data.time_unit: s))")
     res = run_cli(["calibrate", "--data", src, "--stream", how, "--time-unit", "s", "--out", tmp_path / "o",
                    "--no-figures", "--quiet"])
     assert res.code == 0, res.err
