@@ -196,3 +196,17 @@ def test_a_format_without_a_magnetometer_says_it_drops_it(log, tmp_path, run_cli
     r = run_cli(["export", tmp_path / "out" / "calibration.yaml", "--format", fmt, "--out", tmp_path / f"x.{fmt}"])
     assert r.code == 0, r.err
     assert "magnetometer not exported: this format holds none" in r.out + r.err
+
+
+def test_a_soft_iron_beyond_the_models_bound_is_named(log, tmp_path, run_cli):
+    """An off-diagonal soft iron of 0.6 (a magnet or steel next to the sensor) takes an angle to its bound of
+    90 deg +- 22.5 deg; before, the warning said only that the solver stopped. A board's soft iron is not named."""
+    strong = truth_from_soft_iron(np.array([[1.0, 0.6, 0.0], [0.6, 1.0, 0.0], [0.0, 0.0, 1.0]]), s=(10.0, -5.0, 3.0),
+                                  field=48.0, noise=0.1, acc_noise=0.002)
+    sim = simulate_mag(strong, n_poses=30, hold=150, transition=40, seed=3)
+    write(tmp_path / "log.csv", np.column_stack([sim.acc, sim.mag]))
+    r = calibrate(run_cli, tmp_path)
+    assert "the soft iron's angle(s) phi reached their bound (90 deg +- 22.5 deg)" in r.err, r.err
+    write(tmp_path / "log.csv", log)
+    r = calibrate(run_cli, tmp_path)
+    assert r.code == 0 and "reached their bound" not in r.err, r.err

@@ -22,7 +22,7 @@ from imucal.mag.fit import MagFitResult, SoftIronTest
 from imucal.mag.field_model import EarthField
 from imucal.mag.frame import AxesSearch, rotation_angle
 from imucal.mag.model import permutation, vectorized
-from imucal.model.parameters import Parameters
+from imucal.model.parameters import Parameter, Parameters
 
 
 #: The field model's inclination above which its sign is trusted for the handedness check [deg] (near the
@@ -77,6 +77,16 @@ class MagCalibration:
     field_given: bool  #: F given by the user (else fitted, the scales' size held)
     excluded: tuple[PoseOffset, ...] = ()  #: poses whose field stood out, left out of the fit
     earth: EarthField | None = None  #: the field model's values at the user's place and date
+
+    @property
+    def soft_iron_at_bound(self) -> tuple[str, ...]:
+        """The soft iron's angles (phi, psi, theta) on their bound (90 deg +- MAG_ANGLE_TOL), or within 1 % of
+        its half-width (a fit stopped on its way there): a field distorted more than a board's soft iron, which
+        the fit cannot follow."""
+        def near(p: Parameter) -> bool:
+            tol = 0.01 * (p.upper - p.lower) / 2
+            return min(p.value - p.lower, p.upper - p.value) <= tol
+        return tuple(n for n in ("phi", "psi", "theta") if near(self.params[n]))
 
     @property
     def left_handed(self) -> bool | None:

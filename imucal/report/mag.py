@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+from imucal.mag.model import MAG_ANGLE_TOL
 from imucal.mag.result import MagCalibration
 from imucal.mag.units import convert, stated_unit_mismatch
 
@@ -13,6 +14,10 @@ def mag_warnings(cal: MagCalibration) -> list[str]:
     out = []
     if not cal.fit.success:
         out.append(f"magnetometer: the solver stopped with {cal.fit.status}: check the fit before using it")
+    if cal.soft_iron_at_bound:
+        out.append(f"magnetometer: the soft iron's angle(s) {', '.join(cal.soft_iron_at_bound)} reached their bound "
+                   f"(90 deg +- {90 * MAG_ANGLE_TOL:g} deg): the field is distorted more than a board's soft iron "
+                   "(a magnet or a steel part close to the sensor?); move the sensor away from it and record again")
     steps = cal.steps
     if steps is not None and steps.step_after is not None:
         out.append(f"magnetometer: the field's magnitude steps by {100 * steps.step:+.2g} % after pose "
