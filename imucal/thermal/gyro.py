@@ -27,7 +27,6 @@ from imucal.errors import ImucalError, short
 from imucal.gyro.thermal import ALPHA, GyroThermal, gyro_bias_temperature
 from imucal.model.gyroscope import BIAS_NAMES, GSENS_NAMES, MIS_NAMES, SCALE_NAMES, gyro_model, gyro_parameters, \
     term_parameters, values
-from imucal.model.parameters import Parameters
 from imucal.thermal.evidence import ThermalRows
 
 
@@ -103,7 +102,7 @@ def gyro_calibration(g: GyroThermal, unit: str, k: np.ndarray, temperature_range
         origin: dict[str, Any] = {}
     else:
         bv = base.sensor.params.value_dict()
-        params = replace_bias(base.sensor.params, bias)
+        params = base.sensor.params.with_values(dict(zip(BIAS_NAMES, map(float, bias))))  # the sweep's bias at T_ref
         held = {n: float(base.sensor.std.get(n, np.nan)) for n in (*SCALE_NAMES, *MIS_NAMES, *GSENS_NAMES)}
         evidence = f"scale, misalignment and g-sensitivity taken from fit.base {base.name}"
         origin = {"base": {"file": base.name, "sha256": base.sha256, "scale": [bv[n] for n in SCALE_NAMES]}}
@@ -114,9 +113,3 @@ def gyro_calibration(g: GyroThermal, unit: str, k: np.ndarray, temperature_range
            "orders": list(g.orders), "temperature_range": temperature_range,
            "drift_per_day": (g.drift * k).tolist(), "drift_std_per_day": (g.drift_std * k).tolist(), **origin}
     return SensorCalibration(gyro_model(effects), params, std, unit, fit)
-
-
-def replace_bias(params: Parameters, bias: np.ndarray) -> Parameters:
-    """``params`` with the bias at ``bias`` (the sweep's, at the terms' zero)."""
-    new = dict(zip(BIAS_NAMES, map(float, bias)))
-    return Parameters(replace(p, value=new[n]) if n in new else p for n, p in params.items())
