@@ -601,7 +601,7 @@ def markdown(r: dict, args) -> str:
     ap, ap1 = r.get("apply"), r.get("apply_1thread")
     if ap and "error" not in ap:
         names = {"imucal": "`Calibration.apply(raw)`", "numpy": "`raw @ A.T + c` (plain numpy)",
-                 "numpy_t": "`out = (A @ raw.T).T; out += c` (what Calibration.apply does)"}
+                 "numpy_t": "`out = (A @ raw.T).T; out += c` (the affine map as one product: Calibration.apply evaluates the numpy generated from the model's CasADi apply, in blocks, which holds any effect)"}
         L += ["## Apply throughput", "",
               f"{ap['n']:,} samples (N x 3 float64 in memory), median of repeats; numpy's BLAS with its default "
               "threads, and with `OPENBLAS_NUM_THREADS=1`. On a shared 2-core machine a multithreaded BLAS call "
