@@ -115,7 +115,7 @@ def test_a_counts_gyroscope_takes_its_scale_misalignment_and_gsens_from_the_base
             smooth = np.convolve(err[seg, i], np.ones(600) / 600, mode="valid")
             assert np.ptp(smooth) < 1e-5, (k, i, np.ptp(smooth))
     report = (tmp_path / "cal" / "report.txt").read_text()
-    assert "taken from fit.base base.yaml" in report
+    assert "taken from fit.base 'base.yaml'" in report
 
 
 def test_a_base_gyroscope_in_another_unit_is_one_line(run_cli, tmp_path, unchanged):
@@ -147,3 +147,15 @@ def test_a_hostile_base_gyroscope_scale_is_one_line(run_cli, tmp_path, unchanged
     _refused_one_line(run_cli, tmp_path, unchanged, f"{{base: base.yaml, fix: [{', '.join(HELD)}]}}", "counts",
                       "fit.base")
     assert not [w for w in recwarn if issubclass(w.category, RuntimeWarning)], [str(w.message) for w in recwarn]
+
+
+def test_a_base_named_with_a_newline_stays_one_line_in_the_report(run_cli, tmp_path):
+    """The base's file name reaches the report's text through the gyroscope section: quoted (imucal.errors.short),
+    so a newline in it cannot start a line of its own; the YAML keeps it exactly."""
+    name = 'b*\nx".yaml'
+    base = base_file(tmp_path / name)
+    r, _, _ = _discover(run_cli, tmp_path, "{base: " + '"b*\\nx\\".yaml"' + f", fix: [{', '.join(HELD)}]}}")
+    assert r.code == 0, r.err
+    lines = (tmp_path / "cal" / "report.txt").read_text().splitlines()
+    assert any("taken from fit.base 'b*\\nx\".yaml'" in ln for ln in lines), [ln for ln in lines if "fit.base" in ln]
+    assert load_calibration(tmp_path / "cal" / "calibration.yaml").gyro.fit["base"]["file"] == base.name

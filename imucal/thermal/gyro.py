@@ -104,7 +104,7 @@ def gyro_calibration(g: GyroThermal, unit: str, k: np.ndarray, temperature_range
         bv = base.sensor.params.value_dict()
         params = base.sensor.params.with_values(dict(zip(BIAS_NAMES, map(float, bias))))  # the sweep's bias at T_ref
         held = {n: float(base.sensor.std.get(n, np.nan)) for n in (*SCALE_NAMES, *MIS_NAMES, *GSENS_NAMES)}
-        evidence = f"scale, misalignment and g-sensitivity taken from fit.base {base.name}"
+        evidence = f"scale, misalignment and g-sensitivity taken from fit.base {short(base.name)}"  # one line
         origin = {"base": {"file": base.name, "sha256": base.sha256, "scale": [bv[n] for n in SCALE_NAMES]}}
     params = params.with_fixed(params.names).extended(term_parameters(effects, unit, terms, nominal=float(np.mean(k))))
     std = {**{n: float(s) for n, s in zip(BIAS_NAMES, g.offset_std * k)}, **held,
