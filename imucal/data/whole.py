@@ -2,7 +2,8 @@
 
 The file is refused as a whole before it is parsed (imucal.data.lines: NUL bytes, an over-long
 line, not UTF-8); the common recording (ASCII, every line after the header a row) is parsed by
-numpy's C reader from the bytes, anything else line by line, which names the line at fault.
+numpy's C reader from the bytes (fixed-width numbers, as MATLAB writes them, by imucal.data.fixed_width:
+the same doubles), anything else line by line, which names the line at fault.
 The time base is imucal.data.timebase's, as for every reader.
 """
 from __future__ import annotations
@@ -15,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from imucal.data import fixed_width
 from imucal.data.layout import MAX_SCAN_LINES, Layout, layout
 from imucal.data.lines import (BINARY_PROBE, binary_file, corrupt_value, decode, line_too_long, lineno, long_line,
                                no_rows, not_increasing, parse_block, plain_text)
@@ -70,13 +72,20 @@ def _fast_table(blob: bytes, spec: DataSpec, path: Path) -> tuple[Layout, np.nda
     first = spec.skip_rows + lay.body  # 0-based line of the first row
     if (lay.body + MAX_SCAN_LINES >= len(head) and end < len(blob)) or n_lines <= first:
         return None  # the layout may depend on lines past the head; or no row at all
-    try:
-        with warnings.catch_warnings():  # "input contained no data": blank lines only, read below
-            warnings.simplefilter("ignore")
-            arr = np.loadtxt(io.BytesIO(blob), delimiter=lay.delimiter, usecols=lay.usecols, ndmin=2,
-                             dtype=float, comments="#", skiprows=first)
-    except (ValueError, IndexError):
-        return None
+    arr = None
+    if lay.delimiter is None:  # fixed-width numbers (MATLAB's save -ascii): read as digits in columns
+        start = 0
+        for _ in range(first):
+            start = blob.find(b"\n", start) + 1
+        arr = fixed_width.table(blob, start, lay.usecols)
+    if arr is None:
+        try:
+            with warnings.catch_warnings():  # "input contained no data": blank lines only, read below
+                warnings.simplefilter("ignore")
+                arr = np.loadtxt(io.BytesIO(blob), delimiter=lay.delimiter, usecols=lay.usecols, ndmin=2,
+                                 dtype=float, comments="#", skiprows=first)
+        except (ValueError, IndexError):
+            return None
     if arr.shape[0] != n_lines - first or not np.isfinite(arr).all():
         return None  # a blank or comment line, or a bad value: the line by line reader decides
     return lay, arr
