@@ -43,15 +43,21 @@ def test_data_line_count_agrees_with_the_line_by_line_test(lines: list[str]) -> 
     assert data_line_count(lines, "\n".join(lines)) == _slow_count(lines)
 
 
-def test_calibrate_imports_only_what_it_uses(tmp_path: Path) -> None:
-    """A plain run (a short file read whole, no figures) loads none of the modules it does not use."""
+def _run_modules(tmp_path: Path, *args: str) -> list[str]:
+    """The modules ``imucal calibrate ARGS --out tmp_path --no-figures --quiet`` loaded, in a fresh process."""
     code = ("import json, sys\nfrom imucal.cli.main import main\n"
-            f"rc = main(['calibrate', '--data', {str(XSENS)!r}, '--gravity', '9.81744', '--out', {str(tmp_path)!r}, "
+            f"rc = main(['calibrate', *{list(args)!r}, '--out', {str(tmp_path)!r}, "
             "'--no-figures', '--quiet'])\nprint(json.dumps([rc, sorted(sys.modules)]))")
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path,
                        env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=120)
     rc, mods = json.loads(p.stdout.strip().splitlines()[-1])
     assert rc == 0, p.stderr
+    return mods
+
+
+def test_calibrate_imports_only_what_it_uses(tmp_path: Path) -> None:
+    """A plain run (a short file read whole, no figures) loads none of the modules it does not use."""
+    mods = _run_modules(tmp_path, "--data", str(XSENS), "--gravity", "9.81744")
     unused = {"numpy.ma", "imucal.gyro.fit", "imucal.gyro.run", "imucal.gyro.result", "imucal.calibration.gyro",
               "imucal.analysis.noise_model", "imucal.analysis.discover", "matplotlib", "pandas", "pyarrow", "tqdm",
               # the chunked reader and its spill (a long file), the time-unit hint (too few poses found)
@@ -60,6 +66,16 @@ def test_calibrate_imports_only_what_it_uses(tmp_path: Path) -> None:
               "traceback"}  # printed only by --debug on an internal error
     assert unused.isdisjoint(mods), unused & set(mods)
     assert (tmp_path / "calibration.yaml").exists()
+
+
+def test_a_gyroscope_run_imports_only_what_it_uses(tmp_path: Path) -> None:
+    """With imu_tk's second file: the gyroscope's modules, but no numpy.ma (np.median's NaN check), no
+    figures, no chunked reading."""
+    mods = _run_modules(tmp_path, "--data", str(XSENS), "--gyro-data", str(XSENS.with_name("xsens_gyro.mat")),
+                        "--gravity", "9.81744")
+    assert "imucal.gyro.fit" in mods
+    unused = {"numpy.ma", "matplotlib", "pandas", "imucal.data.stream", "imucal.analysis.discover", "traceback"}
+    assert unused.isdisjoint(mods), unused & set(mods)
 
 
 def test_help_and_an_unknown_command_still_list_every_command(capsys) -> None:

@@ -28,6 +28,7 @@ from imucal.model.gyroscope import (BIAS_NAMES, GSENS_NAMES, MIN_ANGLE_DEG, MIS_
                                     gyro_parameters)
 from imucal.model.parameters import Parameters
 from imucal.solve.fit import FitResult, fit_evidence
+from imucal.solve.stats import median
 from imucal.solve.vectorize import apply_values
 
 #: raw units with a known nominal scale [unit per rad/s]
@@ -177,7 +178,7 @@ def _segment_sigma(data: GyroData, seg: Segments, scale0: np.ndarray) -> np.ndar
     """Noise of one residual component [rad]: static directions plus the gyro's angle random walk."""
     rate_sd = float(np.sqrt(np.mean((data.static_rate_noise() / scale0) ** 2)))  # [rad/s] per sample
     dur = data.t[seg.last] - data.t[seg.first]
-    dt = np.median(np.diff(data.t))
+    dt = median(np.diff(data.t))
     return np.sqrt(seg.sigma_u**2 + rate_sd**2 * dt * dur)
 
 

@@ -21,6 +21,7 @@ import numpy as np
 
 from imucal.gyro.gsens import ALPHA, StaticFit, fit_static
 from imucal.gyro.segments import GyroData
+from imucal.solve.stats import median
 
 #: [s] how far inside the poses the segments start and end when the rule says so
 LEAD_IN_S = 0.5
@@ -53,7 +54,7 @@ def edge_motion(data: GyroData, st: StaticFit, lead_in: float = LEAD_IN_S) -> Ed
     mean over N samples removed: n (1 + n/N) for an edge of n samples, n (1 - n/N) for an inner
     window (so a still pose gives a ratio near 1 however long it is).
     """
-    dt = float(np.median(np.diff(data.t)))
+    dt = median(np.diff(data.t))
     n = max(int(round(lead_in / dt)), 1)
     rate = data.gyro - st.bias - data.acc @ st.H.T
     edges, inner = [], []

@@ -7,10 +7,12 @@ out of the segments and names it (``GapMotion``), so that no fit or score integr
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
 
 from imucal.errors import ImucalError
+from imucal.solve.stats import median
 
 
 @dataclass(frozen=True)
@@ -47,7 +49,12 @@ class GyroData:
         return int(self.start.size)
 
     def static_means(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Per static interval: gyro mean, its standard error, acceleration mean and its standard error."""
+        """Per static interval: gyro mean, its standard error, acceleration mean and its standard error
+        (read-only arrays, computed once: the stillness test, the static fit and the segments ask)."""
+        return self._static_means
+
+    @cached_property
+    def _static_means(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         g, gs, a, as_ = [], [], [], []
         for i0, i1 in zip(self.start, self.end):
             n = i1 - i0
@@ -55,7 +62,10 @@ class GyroData:
             gs.append(self.gyro[i0:i1].std(0, ddof=1) / np.sqrt(n))
             a.append(self.acc[i0:i1].mean(0))
             as_.append(self.acc[i0:i1].std(0, ddof=1) / np.sqrt(n))
-        return np.array(g), np.array(gs), np.array(a), np.array(as_)
+        out = np.array(g), np.array(gs), np.array(a), np.array(as_)
+        for x in out:
+            x.flags.writeable = False
+        return out
 
     def without(self, keep: np.ndarray) -> "GyroData":
         """The same samples with only the static intervals ``keep`` (bool per interval) as still poses."""
@@ -120,7 +130,7 @@ def motion_segments(data: GyroData, lead_in: float = 0.0) -> Segments:
     sig = np.sqrt(np.mean(a_se**2, axis=1)) / norm  # one component of a direction's error [rad]
     k = np.zeros(data.start.size, int)
     if lead_in > 0:
-        k = np.minimum(int(round(lead_in / float(np.median(np.diff(data.t))))), (data.end - data.start) // 4)
+        k = np.minimum(int(round(lead_in / median(np.diff(data.t)))), (data.end - data.start) // 4)
     first = data.end[:-1] - 1 - k[:-1]
     last = data.start[1:] + k[1:]
     if np.any(last <= first):
