@@ -1,7 +1,7 @@
 """One calibration run: load, detect static intervals, guess, check observability, fit."""
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 import math
 from dataclasses import asdict, dataclass, replace
@@ -28,8 +28,6 @@ from imucal.solve.misfit import POOR_FIT_P, excess_residuals  # one rule for eve
 from imucal.report.misfit import excess_words
 from imucal.model.effects_registry import effects_from_specs
 from imucal.model.effects import EFFECTS, check_given, fit_to_data, given_names, prepare_parameters
-from imucal.thermal.determine import interval_advice
-from imucal.thermal.evidence import thermal_rows
 
 if TYPE_CHECKING:  # imported only when used: the gyroscope's modules, the noise-model reader (fit.noise),
     from imucal.analysis.noise_model import NoiseModel  # the chunked reader (a file above STREAM_BYTES)
@@ -343,8 +341,15 @@ def _problem(config: RunConfig, rec: Recording | RecordingSummary, iv: Intervals
         mdata = fit_data(model, iv, None, "means", rec.source, noise) if data.mode != "means" else data
         obs = observability(model, params, mdata, dirs, gravity, config.fit.angle_tolerance)
         require_observable(obs, params.free_names, rec.source,
-                           lambda names: interval_advice(names, dirs, iv.temp))  # what pose, what temperature
+                           lambda names: _interval_advice(names, dirs, iv.temp))  # what pose, what temperature
     return _Problem(model, guess, params, data, mdata, samples, obs)
+
+
+def _interval_advice(names: Sequence[str], dirs: np.ndarray, temp: np.ndarray | None) -> str | None:
+    """imucal.thermal.determine.interval_advice, imported when a refusal asks for it (measured start-up)."""
+    from imucal.thermal.determine import interval_advice
+
+    return interval_advice(names, dirs, temp)
 
 
 def observability(model: SensorModel, params: Parameters, means: FitData, directions: np.ndarray, gravity: float,
@@ -367,6 +372,8 @@ def _refuse_absurd(res: FitResult, params: Parameters, source: str, config: RunC
         rms = float(np.sqrt(np.mean(res.residuals**2)))
         fix = ((f"free the held parameters ({', '.join(held)}); " if held else "")
                + "check that the log holds still poses of one sensor and the data columns")
+        from imucal.thermal.evidence import thermal_rows  # measured start-up: only a refused fit
+
         if not any(e.name.endswith(("temperature", "temperature2", "temperature3")) for e in config.fit.effects) \
                 and isinstance(rec, Recording) and (rows := thermal_rows(rec, iv)) is not None and rows.is_sweep:
             fix = (f"its still poses change with temperature (a sweep, {rows.temp.min():.1f}..{rows.temp.max():.1f} "

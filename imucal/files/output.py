@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import contextlib
 import errno
-import json
 import os
 import re
 import shutil
@@ -189,6 +188,8 @@ def write_text_atomic(path: str | os.PathLike, text: str) -> None:
 
 def json_text(obj: Any) -> str:
     """The JSON of every JSON output (indented, NaN kept as JavaScript's NaN)."""
+    import json  # measured start-up: only a run that writes JSON (--json)
+
     return json.dumps(obj, indent=2, sort_keys=False, allow_nan=True) + "\n"
 
 
