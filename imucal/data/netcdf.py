@@ -55,13 +55,18 @@ RATE_UNITS = {**{u: ("rad/s", 1.0, 0.0) for u in ("rad/s", "rad s-1", "rad.s-1",
               **{u: ("deg/s", 1.0, 0.0) for u in ("deg/s", "deg s-1", "degree/s", "degrees/s", "dps",
                                                   "degree/second", "degrees per second")}}
 TEMPERATURE_UNITS = {**{u: ("degC", 1.0, 0.0) for u in ("c", "degc", "deg c", "deg_c", "celsius", "degree_celsius",
-                                                        "degrees_celsius", "degrees celsius", "°c")},
-                     **{u: ("degC", 1.0, -273.15) for u in ("k", "kelvin", "degk", "degrees_kelvin")},
-                     **{u: ("degC", 5.0 / 9.0, -32.0 * 5.0 / 9.0) for u in ("f", "degf", "fahrenheit",
-                                                                            "degrees_fahrenheit")}}
+                                                        "degrees_celsius", "degrees celsius", "°c", "degree_c",
+                                                        "degrees_c", "degree c", "degrees c", "deg. c", "℃")},
+                     **{u: ("degC", 1.0, -273.15) for u in ("k", "kelvin", "degk", "degrees_kelvin", "degree_kelvin",
+                                                            "degree_k", "degrees_k")},
+                     **{u: ("degC", 5.0 / 9.0, -32.0 * 5.0 / 9.0) for u in ("f", "degf", "fahrenheit", "degree_f",
+                                                                            "degrees_fahrenheit", "degree_fahrenheit",
+                                                                            "degrees_f", "°f")}}
 #: The units of each kind, in words (messages).
 KNOWN_UNITS = {"acceleration": "m/s^2 (m/s2, m s-2) or g", "angular rate": "rad/s, mrad/s or deg/s",
                "temperature": "degC (C, celsius), K or degF"}
+#: Attributes that describe a variable in words (CF's standard_name and long_name, and common others).
+_DESCRIBING = ("standard_name", "long_name", "description", "full_name")
 #: CF time units ("UNIT since DATE") -> factor to seconds.
 TIME_SINCE = {"seconds": 1.0, "second": 1.0, "secs": 1.0, "sec": 1.0, "s": 1.0,
               "milliseconds": 1e-3, "millisecond": 1e-3, "msec": 1e-3, "ms": 1e-3,
@@ -234,9 +239,22 @@ class _Reader:
         raise self.fail(f"variable {short(name)} has shape {v.shape}: {role} needs (N, 3), one row of three "
                         "axes per sample", f"data.columns.{role}", "map ax, ay and az to three 1-D variables instead")
 
+    def lookalike(self, kind: str, role: str) -> None:
+        """Refuse a 1-D variable named or described as ``kind`` whose units are not of that kind (or absent): left
+        unread, a temperature sweep would silently get no temperature."""
+        for name, var in self.vars.items():
+            words = " ".join([name, *(_text(var.attrs[a]) for a in _DESCRIBING if a in var.attrs)]).lower()
+            if var.ndim == 1 and kind[:4] in words and _kind(_units(var)) is None:
+                units = _units(var)
+                said = "has no units attribute" if units is None else f"has units {short(units)}"
+                raise self.fail(f"variable {short(name)} looks like the {kind} ({role}) but {said}, and imucal reads "
+                                f"{kind} only in {KNOWN_UNITS[kind]}: it would be left unread",
+                                f"{name}.units", f"set its units to read it (ncatted -a units,{name},o,c,degC FILE)")
+
     def scalar(self, role: str, kind: str, table: dict) -> _Channel | None:
         name = self.spec.columns.get(role) or self.by_kind(kind, role)
         if name is None:
+            self.lookalike(kind, role)
             return None
         if not isinstance(name, str):
             raise self.fail("a netCDF variable is mapped by its name, not by a column index", f"data.columns.{role}",
@@ -375,7 +393,11 @@ def _recording(rd: _Reader, spec: DataSpec, path: Path, sha: str) -> Recording:
         keep &= np.isfinite(stamps)
     idx = np.flatnonzero(keep)  # rows with a fill value are dropped: a gap in the stamps
     if idx.size == 0:
-        raise rd.fail("has no rows with every channel read present (all fill values)", "data",
+        if n == 0:
+            raise rd.fail(f"variable {short(acc.name)} holds no samples", "data.columns.ax", "record samples")
+        empty = [ch.name for ch in (acc, gyro, temp) if ch is not None and not np.isfinite(ch.values).any()]
+        raise rd.fail("has no rows with every channel read present (all fill values"
+                      + (f": {short(empty[0])} holds no value)" if empty else ")"), "data",
                       "record samples, or map variables that hold them")
     raw = acc.values[idx]
     g = None if gyro is None else gyro.values[idx]

@@ -8,8 +8,8 @@ from enum import Enum
 import numpy as np
 
 from imucal.errors import ImucalError
-from imucal.model.channels import (ACCELERATION, ANGULAR_RATE, MAGNETIC_FIELD, TEMPERATURE, TEMPERATURE_RANGE,
-                                     TIME, Channel)
+from imucal.model.channels import (ACCELERATION, ANGULAR_RATE, MAGNETIC_FIELD, MAX_OPERATING_TEMPERATURE, TEMPERATURE,
+                                   TEMPERATURE_RANGE, TIME, Channel)
 
 #: Plausible IMU sample rates [Hz]: anything outside is a wrong time unit or a wrong rate.
 MIN_RATE_HZ, MAX_RATE_HZ = 1.0, 1.0e5
@@ -166,7 +166,13 @@ def temperature_error(temp: np.ndarray, source: str, first: int = 0) -> ImucalEr
     lo, hi = TEMPERATURE_RANGE
     bad = ~((temp >= lo) & (temp <= hi))
     if not bad.any():
-        return None
+        mid = float(np.median(temp)) if temp.size else 0.0
+        if mid <= MAX_OPERATING_TEMPERATURE:
+            return None
+        return ImucalError(f"the temperature's median is {mid:.5g} degC, above any MEMS sensor's operating range "
+                           f"(at most {MAX_OPERATING_TEMPERATURE:g} degC): kelvin ({mid:.5g} K is {mid - 273.15:.3g} "
+                           "degC)?", file=source, field="data.columns.temp",
+                           fix="give the temperature in degC (kelvin less 273.15)")
     k = int(np.flatnonzero(bad)[0])
     return ImucalError(f"sample {first + k} holds temperature {temp[k]:g} degC, not a sensor's temperature "
                        f"({lo:g} to {hi:g} degC)", file=source, field="data.columns.temp",

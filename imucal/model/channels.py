@@ -40,6 +40,10 @@ TEMPERATURE = Channel("temperature", ("temp",), "degC", "sensor temperature")
 #: [degC] A sensor temperature: above absolute zero, below where any electronics survives (a reading outside is
 #: corrupt, or in another unit: K read as degC is 273 too warm, which this range cannot tell).
 TEMPERATURE_RANGE = (-273.15, 1000.0)
+#: [degC] Above any MEMS sensor's operating range: AEC-Q100 grade 0, the widest automotive grade, ends at 150 degC
+#: ambient (50 degC of margin for a die's self-heating). A recording whose median temperature lies above it is in
+#: kelvin (25 degC is 298.15 K, -40 degC 233 K) or corrupt; degF (41..77 for 5..25 degC) cannot be told from degC.
+MAX_OPERATING_TEMPERATURE = 200.0
 TIME = Channel("time", ("t",), "s", "time from the first sample")
 
 #: covariate key (as effects declare it) -> the channel it is read from

@@ -1,0 +1,95 @@
+"""Units no file or option may state wrongly unsaid (trust34): a netCDF temperature whose units imucal does not
+know, a temperature in kelvin read as degC, a field magnitude in the readings' own unit far from their field, a
+calibration file whose parameter unit labels are not the model's, and what the PX4 export says of the
+magnetometer's offsets. Each is one line naming the file, the field and the fix, or a note that cites its source."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from imucal.calibration.frozen import load_calibration
+from imucal.data.load import DataSpec, load_recording
+from imucal.errors import ImucalError
+from test_calibration_sensors import V2
+from test_netcdf import write_nc
+from test_trust_mag import SOFT, calibrate, log, write  # noqa: F401  (log: the module's fixture)
+
+
+def one_line(r, start: str) -> str:
+    assert r.code == 2 and r.err.count("\n") == 1 and "Traceback" not in r.err, (r.out, r.err)
+    assert r.err.startswith("imucal: error: " + start), r.err
+    return r.err
+
+
+# --- 1. a netCDF temperature whose units are not known ---------------------------------------------------------
+
+@pytest.mark.parametrize("units, said", [("rankine", "has units 'rankine'"), (None, "has no units attribute")])
+def test_a_netcdf_temperature_in_unknown_units_is_named_not_dropped(tmp_path, run_cli, unchanged, units, said):
+    """A variable board_temp in units imucal does not know (or none) was not taken as the temperature, and a sweep
+    then had none, without a word."""
+    n = 40
+    path = write_nc(tmp_path / "t.nc", np.tile([0.0, 0.0, 9.8], (n, 1)), np.arange(n, dtype=float),
+                    temp=np.full(n, 20.0), temp_units=units, names={"temp": "board_temp"})
+    with unchanged(tmp_path):
+        r = run_cli(["calibrate", "--data", path, "--out", tmp_path / "out", "--no-figures"])
+    err = one_line(r, f"{path}: board_temp.units: variable 'board_temp' looks like the temperature (temp) but {said}")
+    assert "it would be left unread" in err and "fix: set its units to read it (ncatted -a units,board_temp,o,c," in err
+
+
+def test_a_netcdf_variable_described_as_temperature_is_named_too(tmp_path):
+    import h5py
+
+    n = 20
+    path = write_nc(tmp_path / "t.nc", np.tile([0.0, 0.0, 9.8], (n, 1)), np.arange(n, dtype=float))
+    with h5py.File(path, "a") as f:
+        f.create_dataset("ch7", data=np.full(n, 20.0)).attrs["long_name"] = "IMU Temperature"
+    with pytest.raises(ImucalError, match="variable 'ch7' looks like the temperature") as e:
+        load_recording(str(path))
+    assert e.value.field == "ch7.units"
+
+
+@pytest.mark.parametrize("units", ["degrees C", "degree_C", "degrees_K", "degree_Fahrenheit"])
+def test_common_temperature_spellings_are_read(tmp_path, units):
+    n = 20
+    rec = load_recording(str(write_nc(tmp_path / "t.nc", np.tile([0.0, 0.0, 9.8], (n, 1)), np.arange(n, dtype=float),
+                                      temp=np.full(n, 290.0 if "K" in units else 21.5), temp_units=units)))
+    want = {"degrees C": 21.5, "degree_C": 21.5, "degrees_K": 290.0 - 273.15, "degree_Fahrenheit": (21.5 - 32) * 5 / 9}
+    np.testing.assert_allclose(rec.temp, want[units])
+
+
+def test_a_netcdf_channel_of_fill_values_only_is_named(tmp_path):
+    n = 20
+    path = write_nc(tmp_path / "f.nc", np.tile([0.0, 0.0, 9.8], (n, 1)), np.arange(n, dtype=float),
+                    temp=np.full(n, np.nan))
+    with pytest.raises(ImucalError, match=r"all fill values: 'temperature' holds no value\)"):
+        load_recording(str(path))
+    path = write_nc(tmp_path / "e.nc", np.zeros((0, 3)), np.zeros(0))
+    with pytest.raises(ImucalError, match="variable 'acceleration' holds no samples"):
+        load_recording(str(path))
+
+
+
+# --- a temperature in kelvin labelled degC ---------------------------------------------------------------------
+
+@pytest.mark.parametrize("stream", ["never", "always"])
+def test_a_temperature_in_kelvin_is_refused_not_read_as_300_degc(tmp_path, stream):
+    """A temp column of 293..300 (kelvin) was read as 293..300 degC: below the 1000 degC corrupt-value bound, so a
+    sweep was fitted at temperatures no sensor works at, and its terms exported as such."""
+    t = np.arange(200) / 50.0
+    data = np.column_stack([t, np.zeros(200), np.zeros(200), np.full(200, 9.8), np.linspace(293.15, 300.0, 200)])
+    path = tmp_path / "k.csv"
+    np.savetxt(path, data, delimiter=",", header="t,ax,ay,az,temp", comments="", fmt="%.6g")
+    with pytest.raises(ImucalError) as e:
+        load_recording(DataSpec(path=str(path), stream=stream))
+    assert e.value.field == "data.columns.temp" and str(e.value).startswith(str(path))
+    assert "above any MEMS sensor's operating range (at most 200 degC): kelvin (" in str(e.value)
+    assert "fix: give the temperature in degC (kelvin less 273.15)" in str(e.value)
+
+
+def test_a_hot_sensor_in_degc_is_read():
+    from imucal.data.recording import temperature_error
+
+    assert temperature_error(np.linspace(-40.0, 150.0, 50), "x.csv") is None
