@@ -93,3 +93,34 @@ def test_a_hot_sensor_in_degc_is_read():
     from imucal.data.recording import temperature_error
 
     assert temperature_error(np.linspace(-40.0, 150.0, 50), "x.csv") is None
+
+
+# --- 2. a field magnitude in the readings' own unit far from their field ----------------------------------------
+
+@pytest.mark.filterwarnings("error")
+@pytest.mark.parametrize("field", ["1e-300", "1e-6", "1e9", "1e308"])
+def test_a_field_in_the_readings_unit_far_from_their_field_is_one_line(log, tmp_path, run_cli, unchanged, field):
+    """--mag-field 1e-300 (no unit: the readings' own) ended as an internal error (LinAlgError), 1e308 as an
+    OverflowError, and 1e9 or 1e-6 calibrated to scales of 1e-7 or 1e7 without a word."""
+    write(tmp_path / "log.csv", log)
+    with unchanged():
+        r = run_cli(["calibrate", "--data", tmp_path / "log.csv", "--unit", "g", "--sample-rate", "50",
+                     "--mag-field", field, "--no-figures", "--out", tmp_path / "out"])
+    err = one_line(r, f"{tmp_path / 'log.csv'}: mag.field: field magnitude {float(field):g} raw is ")
+    assert "times the readings' field (about 4" in err and "fix: give the field with its unit" in err
+
+
+def test_a_field_in_the_readings_unit_near_their_field_calibrates(log, tmp_path, run_cli):
+    write(tmp_path / "log.csv", log)
+    r = run_cli(["calibrate", "--data", tmp_path / "log.csv", "--unit", "g", "--sample-rate", "50",
+                 "--mag-field", "40", "--no-figures", "--quiet", "--out", tmp_path / "out"])
+    assert r.code == 0, r.err
+
+
+@pytest.mark.parametrize("field", [0.0, -48.0, float("nan"), float("inf")])
+def test_the_api_refuses_a_field_that_is_no_magnitude(log, field):
+    from imucal.mag.calibrate import MagSettings, calibrate_mag
+
+    with pytest.raises(ImucalError, match="must be a positive number") as e:
+        calibrate_mag(log[:, 3:], settings=MagSettings(field=field))
+    assert e.value.field == "mag.field"

@@ -25,7 +25,7 @@ from imucal.mag.model import (DIP, IDENTITY, NORM, ROTATION_BOUND, ROTATION_NAME
                               mag_parameters, vectorized)
 from imucal.mag.result import MagCalibration, MagReport, PoseFigures, Scatter
 from imucal.mag.field_model import EarthField, Place
-from imucal.mag.units import field_magnitude
+from imucal.mag.units import field_magnitude, field_ratio_error, is_field_unit
 from imucal.model.parameters import BASE_NAMES, Parameters
 from imucal.model.sensor import SensorModel
 from imucal.solve.initial import ellipsoid_guess
@@ -160,6 +160,10 @@ def _start(mag: np.ndarray, settings: MagSettings, earth: EarthField | None, raw
                    (earth.intensity_uT, "uT") if earth is not None else (None, None))
     given = value is not None
     F, field_unit = field_magnitude(value, unit, raw_unit, source) if given else (None, raw_unit)
+    if given and not is_field_unit(field_unit):  # F in the readings' own unit: near their field's size
+        err = field_ratio_error(F, field_unit, _guess(mag, None, 1.0, source)[3], source)
+        if err is not None:
+            raise err
     s0, b0, ang0, F0 = _guess(mag, F, settings.size, source)
     dip0 = 0.0 if settings.dip_deg is None else math.radians(settings.dip_deg)
     params = mag_parameters(s0, b0, ang0, F0, dip0=dip0, raw_unit=raw_unit, field_unit=field_unit)

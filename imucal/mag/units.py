@@ -21,6 +21,24 @@ EARTH_FIELD_UT = (22.0, 67.0)
 EARTH_FIELD_SLACK = 3.0
 
 
+#: A field magnitude given in the readings' own unit (counts) more than this factor off the readings' field (the
+#: ellipsoid's mean radius) is refused: a sensor's scale error is a few per cent (tens on a poor board), so such
+#: a value is in another unit (uT typed for counts) or a typing error, and would scale the calibrated field by it.
+MAX_FIELD_RATIO = 10.0
+
+
+def field_ratio_error(value: float, unit: str, readings: float, source: str | None = None) -> ImucalError | None:
+    """The refusal of a field magnitude ``value`` in the readings' own ``unit`` (no field unit) that is more than
+    MAX_FIELD_RATIO off the readings' field ``readings`` [unit]; None when within it."""
+    ratio = value / readings if readings > 0 else math.inf
+    if 1.0 / MAX_FIELD_RATIO <= ratio <= MAX_FIELD_RATIO:
+        return None
+    return ImucalError(f"field magnitude {value:g} {unit} is {ratio:.3g} times the readings' field (about "
+                       f"{readings:.4g} {unit}): not the field in the readings' unit", file=source, field="mag.field",
+                       fix="give the field with its unit and the readings' unit (e.g. --mag-field 48.2uT --mag-unit "
+                           f"uT), or in the readings' own unit (about {readings:.4g})")
+
+
 #: A magnetometer's unit as its model's name carries it (imucal.mag.model.LABEL_PATTERN, less "_" and "*": no units).
 SENSOR_UNIT = re.compile(r"[A-Za-z0-9/^.()-]{1,32}\Z")
 
