@@ -124,3 +124,59 @@ def test_the_api_refuses_a_field_that_is_no_magnitude(log, field):
     with pytest.raises(ImucalError, match="must be a positive number") as e:
         calibrate_mag(log[:, 3:], settings=MagSettings(field=field))
     assert e.value.field == "mag.field"
+
+
+# --- 3. a calibration file's parameter unit labels --------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def mag_file(log, tmp_path_factory):
+    from imucal.cli.main import main
+
+    root = tmp_path_factory.mktemp("magcal")
+    write(root / "log.csv", log)
+    assert main(["calibrate", "--data", str(root / "log.csv"), "--unit", "g", "--sample-rate", "50", "--mag-field",
+                 "48uT", "--mag-unit", "uT", "--no-figures", "--quiet", "--out", str(root / "out")]) == 0
+    return yaml.safe_load((root / "out" / "calibration.yaml").read_text())
+
+
+def _edited(d: dict, where: list[str], unit: str, path: Path) -> Path:
+    entry = d
+    for k in where:
+        entry = entry[k]
+    entry["unit"] = unit
+    path.write_text(yaml.safe_dump(d, sort_keys=False))
+    return path
+
+
+@pytest.mark.parametrize("where, unit, field, want", [
+    (["parameters", "s1"], "m/s^2", "parameters.s1.unit", "'g'"),
+    (["parameters", "b2"], "raw/(m/s^2)", "parameters.b2.unit", "'g/(m/s^2)'"),
+    (["magnetometer", "parameters", "s1"], "mG", "magnetometer.parameters.s1.unit", "'uT'"),
+    (["magnetometer", "parameters", "F"], "nT", "magnetometer.parameters.F.unit", "'uT'"),
+    (["magnetometer", "parameters", "b3"], "uT/mG", "magnetometer.parameters.b3.unit", "'uT/uT'"),
+])
+def test_a_parameter_unit_label_the_model_does_not_give_is_refused(mag_file, tmp_path, run_cli, unchanged, where,
+                                                                   unit, field, want):
+    """A file edited to state a bias in another unit was taken as is: the number applied as if in the model's."""
+    import copy
+
+    path = _edited(copy.deepcopy(mag_file), where, unit, tmp_path / "cal.yaml")
+    with unchanged(tmp_path):
+        r = run_cli(["export", path, "--format", "ardupilot", "--out", tmp_path / "x.param"])
+    err = one_line(r, f"{path}: {field}: {where[-1]} is labelled {unit!r}, but the model with input unit ")
+    assert f"has it in {want} (the number is not converted)" in err and "fix: write unit: " in err
+
+
+def test_a_gyroscope_bias_labelled_in_another_unit_is_refused(tmp_path):
+    d = load_calibration(V2).to_dict()
+    path = _edited(d, ["gyroscope", "parameters", "bias_x"], "deg/s", tmp_path / "g.yaml")
+    with pytest.raises(ImucalError) as e:
+        load_calibration(path)
+    assert e.value.field == "gyroscope.parameters.bias_x.unit"
+    assert "bias_x is labelled 'deg/s', but the model with input unit 'raw' has it in 'raw'" in str(e.value)
+
+
+def test_the_unit_labels_calibrate_writes_read_back(mag_file, tmp_path):
+    path = tmp_path / "cal.yaml"
+    path.write_text(yaml.safe_dump(mag_file, sort_keys=False))
+    assert load_calibration(path).sensor("magnetometer") is not None

@@ -26,7 +26,8 @@ import numpy as np
 
 from imucal.calibration.fields import (ACCELEROMETER, DATE_PATTERN, GYROSCOPE, NAME_PATTERN, SHA256_PATTERN,
                                       VERSION_PATTERN, check_raw_unit, check_unit)
-from imucal.calibration.section import ParameterEntry, from_section, parameter_entries, read_parameters, to_section
+from imucal.calibration.section import (ParameterEntry, check_parameter_units, from_section, parameter_entries,
+                                       read_parameters, to_section)
 from imucal.calibration.sensor import SensorCalibration
 from imucal.model.registry import DESCRIPTIONS, KINDS
 from imucal.constants import SI_ACCEL_UNIT
@@ -36,7 +37,7 @@ from imucal.files.schema import fill, rule
 from imucal.files.yamlio import dump_yaml, read_yaml
 from imucal.model.geometry import gram_det_np
 from imucal.model.channels import TEMPERATURE, TIME
-from imucal.model.parameters import ANGLE_NAMES, BASE_NAMES, Parameter, Parameters, model_label
+from imucal.model.parameters import ANGLE_NAMES, BASE_NAMES, Parameter, Parameters, base_parameters, model_label
 
 #: imucal.calibration.frozen.Calibration, which builds, saves and loads itself through this module: named here,
 #: not imported, so the two modules import in one direction only (tests/test_imports.py)
@@ -211,6 +212,7 @@ def check_built(cal: Calibration, content: FileContent, path: str = "<calibratio
     fit numbers, and the model label and apply map the file derived (a hand edit is refused)."""
     check_text_fields(cal, path)
     _check_parameter_names(cal, path)
+    _check_parameter_units(cal, path)
     _check_bounds(cal, path)
     _check_fit_numbers(cal.fit, path)
     _check_model_name(content.model, cal, path)
@@ -237,6 +239,16 @@ def _check_parameter_names(cal: Calibration, path: str) -> None:
         extra = [n for n in names if n not in BASE_NAMES]
         raise ImucalError(f"parameter(s) {short(extra)} belong to no effect of this calibration", file=path,
                           field="parameters", fix=REGEN)
+
+
+def _check_parameter_units(cal: Calibration, path: str) -> None:
+    """The accelerometer's unit labels must be the model's for the file's input unit (base_parameters and each
+    effect's parameters, as calibrate writes them)."""
+    try:
+        want = cal.model.parameters(base_parameters((0.0,) * 3, (1.0,) * 3, raw_unit=cal.raw_unit))
+    except ImucalError as exc:
+        raise ImucalError(exc.message, file=path, field=exc.field or "effects", fix=exc.fix) from None
+    check_parameter_units(cal.params, {n: p.unit for n, p in want.items()}, cal.raw_unit, path, "parameters")
 
 
 def _attached(f: CalibrationFile, path: str) -> tuple[SensorCalibration, ...]:

@@ -19,6 +19,7 @@ against them on load, so a hand edit of a derived value is refused. The accelero
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
@@ -29,7 +30,7 @@ from imucal.calibration.sensor import SensorCalibration
 from imucal.errors import ImucalError, short
 from imucal.files.schema import fill, rule
 from imucal.model.parameters import Parameter, Parameters
-from imucal.model.registry import describe
+from imucal.model.registry import describe, parameter_units
 
 REGEN = "regenerate the file with `imucal calibrate`"
 #: Relative disagreement between a stored apply map and the parameters' that counts as an edit.
@@ -153,10 +154,29 @@ def from_section(kind: str, raw: Any, path: str) -> SensorCalibration:
         raise ImucalError(f"output unit {short(sec.units.output)} is not {model.output.unit!r}", file=path,
                           field=f"{kind}.units.output", fix=REGEN)
     check_raw_unit(sec.units.input, f"{kind}.units.input", path, "write e.g. rad/s, deg/s or counts")
+    check_parameter_units(params, parameter_units(kind, model, sec.units.input), sec.units.input, path,
+                          f"{kind}.parameters")
     s = SensorCalibration(model, params, std, sec.units.input, dict(sec.fit))
     check_sensor(s, path)
     _check_derived(s, sec.apply, path)
     return s
+
+
+def check_parameter_units(params: Parameters, want: Mapping[str, str], raw_unit: str, path: str, where: str) -> None:
+    """Every parameter's unit label must be the one the model gives it for readings in ``raw_unit`` (``want``):
+    a file edited to state a bias in another unit would be applied as if the number were in the model's."""
+    for n, p in params.items():
+        if n in want and p.unit != want[n] and not (_dimensionless(p.unit) and _dimensionless(want[n])):
+            raise ImucalError(f"{n} is labelled {short(p.unit)}, but the model with input unit {short(raw_unit)} "
+                              f"has it in {want[n]!r} (the number is not converted)", file=path,
+                              field=f"{where}.{n}.unit",
+                              fix=f"write unit: {want[n]} with the value in {want[n]}, or {REGEN}")
+
+
+def _dimensionless(unit: str) -> bool:
+    """1, or a unit per itself (m/s^2/(m/s^2), uT/uT): one unit written several ways."""
+    u = unit.replace(" ", "")
+    return u == "1" or re.fullmatch(r"(.+)/\(\1\)|(.+)/\2", u) is not None
 
 
 def check_sensor(s: SensorCalibration, path: str) -> None:

@@ -214,3 +214,10 @@ def mag_parameters(s0, b0, angles0=(RIGHT_ANGLE,) * 3, field_magnitude: float = 
                             undetermined=1.0,
                             description="angle between field and gravity's plane: asin(a . h / |a||h|)"))
     return Parameters(params)
+
+
+def parameter_units(model: SensorModel, raw_unit: str) -> dict[str, str]:
+    """Each parameter's unit for a magnetometer read in ``raw_unit`` whose field is in the model's output unit
+    (imucal.model.registry.parameter_units's hook): the units ``mag_parameters`` writes."""
+    params = mag_parameters((0.0,) * 3, (1.0,) * 3, raw_unit=raw_unit, field_unit=model.output.unit)
+    return {n: p.unit for n, p in params.items()}

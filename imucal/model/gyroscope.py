@@ -202,6 +202,13 @@ def gyro_parameters(unit: str, bias: Iterable[float], scale: Iterable[float], mi
     return Parameters(out)
 
 
+def parameter_units(model: SensorModel, raw_unit: str) -> dict[str, str]:
+    """Each parameter's unit for a gyroscope read in ``raw_unit`` (imucal.model.registry.parameter_units's hook):
+    the units ``gyro_parameters`` and ``term_parameters`` write."""
+    params = gyro_parameters(raw_unit, (0.0,) * 3, (1.0,) * 3).extended(term_parameters(model.effects, raw_unit, {}))
+    return {n: p.unit for n, p in params.items()}
+
+
 def values(params: Parameters) -> dict[str, np.ndarray]:
     """The parameters as the model's arrays: bias (3,), scale (3,), misalignment M_g (3, 3), H (3, 3)."""
     v = params.value_dict()

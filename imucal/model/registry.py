@@ -39,3 +39,10 @@ def describe(kind: str, label: str | None = None, where: str | None = None, file
         raise ImucalError(f"model {short(label)} is not this imucal's {kind} model {model.name!r}", file=file,
                           field=f"{where or kind}.model", fix="regenerate the file with this imucal, or upgrade imucal")
     return model
+
+
+def parameter_units(kind: str, model: SensorModel, raw_unit: str) -> dict[str, str]:
+    """Each parameter's unit as the ``kind`` module's own parameter builder writes it for readings in
+    ``raw_unit`` (its ``parameter_units(model, raw_unit)``): what a file's unit labels are checked against."""
+    module, _ = DESCRIPTIONS[kind]
+    return importlib.import_module(module).parameter_units(model, raw_unit)
