@@ -180,3 +180,28 @@ def test_the_unit_labels_calibrate_writes_read_back(mag_file, tmp_path):
     path = tmp_path / "cal.yaml"
     path.write_text(yaml.safe_dump(mag_file, sort_keys=False))
     assert load_calibration(path).sensor("magnetometer") is not None
+
+
+# --- 5. the PX4 export of a magnetometer ---------------------------------------------------------------------------
+
+def test_the_px4_export_says_what_px4_checks_of_the_magnetometer(mag_file, tmp_path, run_cli):
+    """The ArduPilot export names COMPASS_OFFS_MAX; the PX4 one said nothing of PX4's own rules: no limit on the
+    offsets (its metadata and pre-arm check cited), CAL_MAG0_ROT for an external magnetometer only."""
+    path = tmp_path / "cal.yaml"
+    path.write_text(yaml.safe_dump(mag_file, sort_keys=False))
+    r = run_cli(["export", path, "--format", "px4", "--out", tmp_path / "px4.params"])
+    assert r.code == 0, r.err
+    text = " ".join(line.lstrip("# ") for line in (tmp_path / "px4.params").read_text().splitlines())
+    assert "PX4 sets no limit on the offsets (no COMPASS_OFFS_MAX as ArduPilot has)" in text
+    assert "(magnetometerCheck.cpp) asks only a CAL_MAG0_ID equal to the device's id" in text
+    assert "PX4 forces an internal one's to -1 and rotates it by the board's SENS_BOARD_ROT" in text
+    assert "outside the range PX4's parameter metadata gives" not in r.out
+
+
+def test_a_px4_scale_outside_its_metadata_range_is_said():
+    from imucal.export.mag_autopilot import _px4_scale_note
+
+    assert _px4_scale_note(np.diag([1.0, 0.9, 1.1])) == ()
+    note = _px4_scale_note(np.diag([3.5, 1.0, 0.05]))[0]
+    assert note.startswith("CAL_MAG0_XSCALE = 3.5, CAL_MAG0_ZSCALE = 0.05 outside the range PX4's parameter metadata "
+                           "gives the scales (0.1 to 3, src/modules/sensors/module.yaml)")

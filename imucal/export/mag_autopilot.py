@@ -139,6 +139,24 @@ def _offsets_note(ofs: np.ndarray) -> tuple[str, ...]:
             f"refuses to arm ('Compass offsets too high'); {fix}",)
 
 
+#: PX4's parameter metadata range of CAL_MAGn_{X,Y,Z}SCALE (src/modules/sensors/module.yaml: min 0.1, max 3.0). The
+#: offsets have none there, and sensor_calibration/Magnetometer.cpp reads them as set; the pre-arm check
+#: (commander/HealthAndArmingChecks/checks/magnetometerCheck.cpp) asks a CAL_MAGn_ID equal to the device's id, not a
+#: bound on them: no limit on the offsets is stated here.
+PX4_SCALE_RANGE = (0.1, 3.0)
+
+
+def _px4_scale_note(S: np.ndarray) -> tuple[str, ...]:
+    """The diagonal of PX4's S outside the range its parameter metadata gives CAL_MAGn_*SCALE, said."""
+    lo, hi = PX4_SCALE_RANGE
+    out = [f"{n} = {v:.4g}" for n, v in zip(PX4_SCALE, np.diag(S)) if not lo <= v <= hi]
+    if not out:
+        return ()
+    return (f"{', '.join(out)} outside the range PX4's parameter metadata gives the scales ({lo:g} to {hi:g}, "
+            "src/modules/sensors/module.yaml): a ground station may not take it; a soft iron that large means iron "
+            "close to the magnetometer: mount it away from it",)
+
+
 def _note(f: MagFactors, fmt: str) -> tuple[str, ...]:
     if f.dropped_deg < NEGLIGIBLE_ROTATION_DEG:
         return ()
@@ -172,12 +190,16 @@ def px4(cal: Calibration) -> tuple[list[str], list[tuple[str, float | int]], tup
     f = factors(m, "PX4")
     head = ["Magnetometer (Magnetometer.hpp Correct()): h = CAL_MAG0_ROT * (S (raw - CAL_MAG0_*OFF)), S symmetric:",
             f"CAL_MAG0_*SCALE on its diagonal, CAL_MAG0_*ODIAG off it; offsets in gauss; CAL_MAG0_ROT = {f.rotation} "
-            f"({ROTATIONS[f.rotation]}) is imucal's mounting {m.model.name}."]
+            f"({ROTATIONS[f.rotation]}) is imucal's mounting {m.model.name},",
+            "for an external magnetometer: PX4 forces an internal one's to -1 and rotates it by the board's SENS_BOARD_ROT",
+            "(sensor_calibration/Magnetometer.cpp). PX4 sets no limit on the offsets (no COMPASS_OFFS_MAX as ArduPilot",
+            "has): its parameter metadata (module.yaml) gives CAL_MAGn_*OFF no range, and its pre-arm magnetometer check",
+            "(magnetometerCheck.cpp) asks only a CAL_MAG0_ID equal to the device's id."]
     vals: list[tuple[str, float | int]] = [*zip(PX4_OFF, map(float, f.s / GAUSS_UT)),
                                            *zip(PX4_SCALE, map(float, np.diag(f.S))),
                                            *zip(PX4_ODIAG, (float(f.S[i, j]) for i, j in OFF_DIAGONAL)),
                                            (PX4_ROT, f.rotation)]
-    return head, vals, _note(f, "PX4") + ("set CAL_MAG0_ID to your magnetometer's device id",)
+    return head, vals, _note(f, "PX4") + _px4_scale_note(f.S) + ("set CAL_MAG0_ID to your magnetometer's device id",)
 
 
 def all_permutations_named() -> bool:
