@@ -633,4 +633,4 @@ def _with_mag(run: CalibrationRun, config: RunConfig) -> CalibrationRun:
     covs = covariate_values(cal.covariates, temp=rec.temp, time=rec.t, source=rec.source)
     acc = cal.apply(rec.raw, covs)
     res = mag_of_run(rec.mag, acc, run.intervals.start, run.intervals.end, config.mag, source=rec.source)
-    return _attach(run, calibrated(res), mag_warnings(res), mag=res)
+    return _attach(run, calibrated(res, rec.sample_rate), mag_warnings(res), mag=res)

@@ -205,3 +205,71 @@ def test_a_px4_scale_outside_its_metadata_range_is_said():
     note = _px4_scale_note(np.diag([3.5, 1.0, 0.05]))[0]
     assert note.startswith("CAL_MAG0_XSCALE = 3.5, CAL_MAG0_ZSCALE = 0.05 outside the range PX4's parameter metadata "
                            "gives the scales (0.1 to 3, src/modules/sensors/module.yaml)")
+
+
+# --- 4. the magnetometer's lag in apply ----------------------------------------------------------------------------
+
+def test_apply_moves_the_magnetometer_by_its_lag_and_says_so(tmp_path, run_cli):
+    """The lag was estimated and taken out of the fit, but apply paired mag[k] with acc[k] (the report did not say
+    it): the calibrated field of a log on the move lagged its attitude by 3 samples."""
+    from imucal.mag.simulate import simulate_mag, truth_from_soft_iron
+
+    truth = truth_from_soft_iron(SOFT, s=(10.0, -5.0, 3.0), field=48.0, noise=0.1, acc_noise=0.002, lag=3.0)
+    sim = simulate_mag(truth, n_poses=30, hold=150, transition=40, seed=3)
+    data = np.column_stack([np.arange(len(sim.acc)) / 50.0, sim.acc, sim.mag])
+    np.savetxt(tmp_path / "log.csv", data, delimiter=",", header="t,ax,ay,az,mx,my,mz", comments="", fmt="%.8g")
+    r = run_cli(["calibrate", "--data", tmp_path / "log.csv", "--unit", "g", "--mag-field", "48uT", "--mag-unit", "uT",
+                 "--no-figures", "--quiet", "--out", tmp_path / "cal"])
+    assert r.code == 0, r.err
+    report = (tmp_path / "cal" / "report.txt").read_text()
+    assert "lag: mx, my, mz lag the accelerometer by 3" in report
+    assert "`imucal apply` moves them earlier by the nearest whole number of samples" in report
+    assert "the generated C and the exports do not: pair mag[k] with acc[k - lag] in firmware" in report
+    fit = yaml.safe_load((tmp_path / "cal" / "calibration.yaml").read_text())["magnetometer"]["fit"]
+    assert fit["lag_s"] == pytest.approx(fit["lag_samples"] / 50.0)
+    r = run_cli(["apply", tmp_path / "cal" / "calibration.yaml", "--data", tmp_path / "log.csv", "--unit", "g",
+                 "--out", tmp_path / "out.csv"])
+    assert r.code == 0, r.err
+    assert ("mx, my, mz moved 3 samples earlier (the magnetometer's lag behind the accelerometer): the last 3 rows' "
+            "mx, my, mz are nan") in r.out
+    out = np.loadtxt(tmp_path / "out.csv", delimiter=",", skiprows=1)
+    assert np.isnan(out[-3:, 4:]).all() and np.isfinite(out[:-3]).all()
+    cal = load_calibration(tmp_path / "cal" / "calibration.yaml")
+    want = cal.apply_all({"accelerometer": sim.acc[:-3], "magnetometer": sim.mag[3:]})["magnetometer"]
+    np.testing.assert_allclose(out[:-3, 4:], want, rtol=1e-7, atol=1e-6)
+    # a log at twice the rate: the same lag in seconds is twice the samples
+    data[:, 0] /= 2.0
+    np.savetxt(tmp_path / "fast.csv", data, delimiter=",", header="t,ax,ay,az,mx,my,mz", comments="", fmt="%.8g")
+    r = run_cli(["apply", tmp_path / "cal" / "calibration.yaml", "--data", tmp_path / "fast.csv", "--unit", "g",
+                 "--out", tmp_path / "fast_out.csv", "--no-gravity-check"])
+    assert r.code == 0 and "mx, my, mz moved 6 samples earlier" in r.out, r.err
+
+
+def test_the_lag_in_whole_samples():
+    from imucal.mag.run import lag_samples, shift_lag
+
+    assert lag_samples({"lag_samples": 3.2, "lag_s": 0.064}, 100.0) == 6
+    assert lag_samples({"lag_samples": 3.2}, 100.0) == 3  # a file without lag_s: its samples
+    assert lag_samples({}, 50.0) == 0 and lag_samples({"lag_samples": float("nan")}, 50.0) == 0
+    m = np.arange(12.0).reshape(4, 3)
+    np.testing.assert_array_equal(shift_lag(m, 1)[:3], m[1:])
+    np.testing.assert_array_equal(shift_lag(m, -1)[1:], m[:3])
+    assert np.isnan(shift_lag(m, 1)[3]).all() and np.isnan(shift_lag(m, -1)[0]).all() and np.isnan(shift_lag(m, 9)).all()
+
+
+def test_apply_refuses_a_magnetometer_in_another_unit(log, tmp_path, run_cli, unchanged):
+    """A log in nT applied to a calibration of readings in uT wrote a field of 48000 'uT' without a word (the
+    accelerometer's |a| at rest is checked, the magnetometer's |h| was not)."""
+    write(tmp_path / "log.csv", log)
+    assert calibrate(run_cli, tmp_path, "--mag-unit", "uT").code == 0
+    data = log.copy()
+    data[:, 3:] *= 1000.0
+    write(tmp_path / "nT.csv", data)
+    with unchanged():
+        r = run_cli(["apply", tmp_path / "out" / "calibration.yaml", "--data", tmp_path / "nT.csv", "--unit", "g",
+                     "--sample-rate", "50", "--out", tmp_path / "a.csv"])
+    err = one_line(r, f"{tmp_path / 'nT.csv'}: data.columns.mx: |h| after calibration is ")
+    assert "where the calibration's field is 48 uT: mx, my, mz are not in its input unit uT" in err
+    r = run_cli(["apply", tmp_path / "out" / "calibration.yaml", "--data", tmp_path / "nT.csv", "--unit", "g",
+                 "--sample-rate", "50", "--out", tmp_path / "a.csv", "--no-gravity-check"])
+    assert r.code == 0 and "imucal: warning: |h| after calibration is " in r.err, r.err

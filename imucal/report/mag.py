@@ -61,5 +61,10 @@ def mag_lines(cal: MagCalibration) -> list[str]:
         out.append(f"dip scatter: {r.dip_deg.before:.3g} deg before, {r.dip_deg.after:.3g} deg after "
                    f"(alignment {math.degrees(cal.misalignment):.3g} deg, soft iron "
                    f"{'full 3x3' if cal.full_soft_iron else 'symmetric'})")
+    if cal.lag is not None:
+        how = f"estimated, correlation {cal.lag.correlation:.2f}" if cal.lag.estimated else "given"
+        out.append(f"lag: mx, my, mz lag the accelerometer by {cal.lag.samples:.3g} samples ({how}; taken out of the "
+                   "fit); `imucal apply` moves them earlier by the nearest whole number of samples at the data's "
+                   "rate, the generated C and the exports do not: pair mag[k] with acc[k - lag] in firmware")
     out.append(f"solver: {cal.fit.status}")
     return out

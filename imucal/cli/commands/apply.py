@@ -20,8 +20,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, help="output CSV")
     p.add_argument("--no-gravity-check", action="store_true",
                    help="write the output even when |a| at rest after calibration misses the calibration's "
-                        "gravity by more than 10 %% (default: refused, as data in another unit than the "
-                        "calibration's do; a warning instead with this flag)")
+                        "gravity by more than 10 %% or |h| its field by a factor 2 (default: refused, as data in "
+                        "another unit than the calibration's do; a warning instead with this flag)")
     p.set_defaults(run=run)
 
 
@@ -83,6 +83,11 @@ def run(args: argparse.Namespace) -> int:
     rec = load_recording(cfg.data, cfg.base_dir)
     raw_g = None if cal.gyro is None else gyro_on_accel_samples(rec, None if gyro_file is None else str(gyro_file))
     raws = {ACCELEROMETER: rec.raw, GYROSCOPE: raw_g, MAGNETOMETER: rec.mag}
+    lag = 0
+    if cal.sensor(MAGNETOMETER) is not None and rec.mag is not None:
+        from imucal.mag.run import aligned  # only a calibration with a magnetometer
+
+        raws[MAGNETOMETER], lag = aligned(cal.sensor(MAGNETOMETER), rec.mag, rec.sample_rate)
     # the covariates of every sensor the data hold (the gyroscope's bias(T) reads temp even when the
     # accelerometer's map does not)
     keys = tuple(dict.fromkeys([*cal.covariates, *(k for s in cal.attached if raws.get(s.kind) is not None
@@ -104,6 +109,13 @@ def run(args: argparse.Namespace) -> int:
     if span is not None and span.outside:
         sys.stderr.write(f"imucal: warning: {_span_words(span, rec.n)}\n")
     out = cal.apply_all(raws, covs, acc=a)  # every sensor, one frame
+    if MAGNETOMETER in out:  # |h| must be the calibration's field, as |a| at rest its gravity
+        from imucal.mag.run import field_error
+
+        if (err := field_error(cal.sensor(MAGNETOMETER), out[MAGNETOMETER], rec.source)) is not None:
+            if not args.no_gravity_check:
+                raise err
+            sys.stderr.write(f"imucal: warning: {err.message}\n")
     done = [s for s in cal.all_sensors if s.kind in out]
     cols, body = [c for s in done for c in s.model.output.columns], [out[s.kind] for s in done]
     ts, tfmt = _time_column(rec)
@@ -119,6 +131,9 @@ def run(args: argparse.Namespace) -> int:
     lack = [s for s in cal.attached if s.kind not in out]
     note = "".join(f"; the calibration has a {s.kind} but the data have none ({', '.join(s.model.channel.columns)}"
                    f"{' or --gyro-data' if s.kind == GYROSCOPE else ''}): left out" for s in lack)
+    if lag:
+        note += (f"; mx, my, mz moved {lag} samples {'earlier' if lag > 0 else 'later'} (the magnetometer's lag "
+                 f"behind the accelerometer): the {'last' if lag > 0 else 'first'} {abs(lag)} rows' mx, my, mz are nan")
     rest = "; no still span: |a| at rest not checked" if chk is None else f"; {_rest_words(chk)}"
     print(f"wrote {rec.n} calibrated samples {what} to {args.out}; t is {how}{note}{rest}")
     return 0
