@@ -24,6 +24,7 @@ from imucal.solve.observability import Observability, analyse, distinct_directio
 from imucal.constants import RIGHT_ANGLE
 from imucal.model.parameters import ANGLE_NAMES, BASE_NAMES, Parameters, base_parameters
 from imucal.data.static import Intervals, detect_static
+from imucal.analysis.rest import stated_unit_error
 from imucal.solve.misfit import POOR_FIT_P, excess_residuals  # one rule for every sensor's fit
 from imucal.report.misfit import excess_words
 from imucal.model.effects_registry import effects_from_specs
@@ -281,6 +282,8 @@ def read_intervals(config: RunConfig, recording: Recording | None = None, least:
         rec = recording if recording is not None else load_recording(config.data, config.base_dir)
         iv = detect_static(rec.t, rec.raw, config.static, rec.temp, source=rec.source, rails=declared)
     dropped = iv.meta.get("dropped", [])
+    if (err := stated_unit_error(rec.unit, iv.mean, rec.source)) is not None:
+        raise err  # readings in m/s^2 stated as g: the exports would convert them again
     if iv.n >= least:
         return rec, iv, streamed
     if iv.n < 2:

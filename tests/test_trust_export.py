@@ -290,12 +290,17 @@ def test_temperature_terms_are_converted_too(unit):
 
 def test_counts_calibration_is_refused_by_the_autopilots_naming_the_unit(run_cli, tmp_path, unchanged):
     """The audit: INS_ACCOFFS_X,33123.85 with exit 0. A counts calibration labelled 'raw' (the
-    default), 'counts' or, wrongly, 'm/s^2' is refused; the formats that hold any unit still export."""
+    default) or 'counts' is refused; the formats that hold any unit still export. Labelled, wrongly, 'm/s^2', its
+    readings at rest (16540) are refused by calibrate already (imucal.analysis.rest.stated_unit_error)."""
     rec = write_simulation(tmp_path / "c.csv", mems_counts_sensor(np.random.default_rng(4)), cube_directions(),
                            seed=5)
+    with unchanged():
+        r = run_cli(["calibrate", "--data", rec.path, "--unit", "m/s^2", "--out", tmp_path / "si", "--no-figures"])
+    assert r.code == 2
+    one_line_error(r.err, f"{rec.path}: data.unit: the readings at rest are ", "where readings in m/s^2 are 9.80665: "
+                   "they are not in m/s^2", "(fix: give data.unit raw for counts)")
     for label, words in (("raw", "the input unit is not stated ('raw'), and read as m/s^2 it gives offsets"),
-                         ("counts", "input unit 'counts' is not an acceleration unit"),
-                         ("m/s^2", "the input unit 'm/s^2' gives offsets")):
+                         ("counts", "input unit 'counts' is not an acceleration unit")):
         out = tmp_path / label.replace("/", "_")
         r = run_cli(["calibrate", "--data", rec.path, "--unit", label, "--out", out, "--no-figures"])
         assert r.code == 0, r.err

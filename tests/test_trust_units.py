@@ -273,3 +273,34 @@ def test_apply_refuses_a_magnetometer_in_another_unit(log, tmp_path, run_cli, un
     r = run_cli(["apply", tmp_path / "out" / "calibration.yaml", "--data", tmp_path / "nT.csv", "--unit", "g",
                  "--sample-rate", "50", "--out", tmp_path / "a.csv", "--no-gravity-check"])
     assert r.code == 0 and "imucal: warning: |h| after calibration is " in r.err, r.err
+
+
+# --- the hunt: units and clocks the data contradict ----------------------------------------------------------------
+
+def test_accelerometer_readings_in_another_unit_than_stated_are_refused(log, tmp_path, run_cli, unchanged):
+    """A 9-axis log in m/s^2 stated as g calibrated without a word (scales of 9.8 g per m/s^2): the calibration
+    then carried 'g' into the exports, which convert g to m/s^2 again (PX4's offsets 9.8 times too large)."""
+    data = log.copy()
+    data[:, :3] *= 9.80665
+    write(tmp_path / "log.csv", data)
+    with unchanged():
+        r = calibrate(run_cli, tmp_path)
+    err = one_line(r, f"{tmp_path / 'log.csv'}: data.unit: the readings at rest are 9.807 g (median |mean| of ")
+    assert "where readings in g are 1: they are not in g (fix: they look like m/s^2: give data.unit m/s^2" in err
+
+
+def test_a_netcdf_acceleration_in_g_labelled_m_per_s2_is_refused(log, tmp_path, run_cli, unchanged):
+    path = write_nc(tmp_path / "s.nc", log[:, :3], np.arange(len(log)) / 50.0)  # in g, its units m/s2
+    with unchanged(tmp_path):
+        r = run_cli(["calibrate", "--data", path, "--out", tmp_path / "out", "--no-figures"])
+    err = one_line(r, f"{path}: data.unit: the readings at rest are ")
+    assert "where readings in m/s^2 are 9.80665: they are not in m/s^2 (fix: they look like g" in err
+    assert "a netCDF file: its variable's units attribute" in err
+
+
+def test_the_stated_unit_check_leaves_counts_and_a_poor_sensor_alone():
+    from imucal.analysis.rest import stated_unit_error
+
+    assert stated_unit_error("raw", np.full((5, 3), 1e4)) is None
+    assert stated_unit_error("g", np.array([[0.0, 0.0, 1.3], [0.0, 0.85, 0.0]])) is None  # 30 % off: no unit mix-up
+    assert "they look like mg" in stated_unit_error("g", np.array([[0.0, 0.0, 1000.0]])).fix

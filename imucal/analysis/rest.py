@@ -13,6 +13,7 @@ import numpy as np
 
 from imucal.constants import STANDARD_GRAVITY
 from imucal.data.static import Intervals, quantum
+from imucal.errors import ImucalError
 from imucal.solve.stats import median
 
 #: Largest relative difference between |a| at rest after calibration and the calibration's gravity
@@ -50,6 +51,31 @@ class RestCheck:
             if abs(self.raw_at_rest / g - 1.0) <= REST_TOLERANCE:
                 return unit
         return "raw counts" if self.integer else None
+
+
+#: A recording stated in a unit of acceleration whose |reading| at rest is more than this factor off that unit's
+#: gravity is in another unit: a sensor's scale and offset errors move it by per cent (10 % on a poor one), a unit
+#: mistake by 9.81 or 1000.
+STATED_UNIT_FACTOR = 2.0
+
+
+def stated_unit_error(unit: str, means: np.ndarray, source: str | None = None) -> ImucalError | None:
+    """The refusal of readings stated in ``unit`` (one of REST_UNITS: m/s^2, g, mg) whose |reading| at rest (the
+    median |mean| of still intervals ``means``) is not that unit's gravity within STATED_UNIT_FACTOR: the fit would
+    be fine in the readings' unit, but the calibration would carry the wrong one into apply and the exports (PX4's
+    and ArduPilot's convert g to m/s^2); None when it fits or the unit is not one of them (raw counts)."""
+    g = dict(REST_UNITS).get(unit)
+    if g is None or len(means) == 0:
+        return None
+    at_rest = median([float(np.linalg.norm(m)) for m in np.asarray(means, float)])
+    if 1.0 / STATED_UNIT_FACTOR <= at_rest / g <= STATED_UNIT_FACTOR:
+        return None
+    looks = next((u for u, gu in REST_UNITS if abs(at_rest / gu - 1.0) <= REST_TOLERANCE), None)
+    hint = (f"they look like {looks}: give data.unit {looks} (--unit {looks}; a netCDF file: its variable's units "
+            "attribute)" if looks else "give data.unit raw for counts")
+    return ImucalError(f"the readings at rest are {at_rest:.4g} {unit} (median |mean| of {len(means)} still intervals), "
+                       f"where readings in {unit} are {g:g}: they are not in {unit}", file=source, field="data.unit",
+                       fix=hint)
 
 
 def rest_check(calibrated: np.ndarray, raw: np.ndarray, intervals: Intervals, gravity: float,
