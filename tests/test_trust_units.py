@@ -304,3 +304,24 @@ def test_the_stated_unit_check_leaves_counts_and_a_poor_sensor_alone():
     assert stated_unit_error("raw", np.full((5, 3), 1e4)) is None
     assert stated_unit_error("g", np.array([[0.0, 0.0, 1.3], [0.0, 0.85, 0.0]])) is None  # 30 % off: no unit mix-up
     assert "they look like mg" in stated_unit_error("g", np.array([[0.0, 0.0, 1000.0]])).fix
+
+
+def test_a_second_gyroscope_file_stamped_apart_is_not_paired_by_index(tmp_path):
+    """imu_tk's two files with as many samples were paired sample by sample whatever their stamps said: a gyroscope
+    file 0.5 s late calibrated (and was applied) without a word."""
+    from imucal.gyro.run import gyro_on_accel_samples
+
+    t = np.arange(2000) / 100.0
+    np.savetxt(tmp_path / "acc.txt", np.column_stack([t, np.tile([0.0, 0.0, 16384.0], (2000, 1))]), fmt="%.10g")
+    rec = load_recording(str(tmp_path / "acc.txt"))
+    for dt, ok in ((0.004, True), (0.5, False)):  # within half a sample: the clock's rounding
+        np.savetxt(tmp_path / "gyro.txt", np.column_stack([t + dt, np.ones((2000, 3))]), fmt="%.10g")
+        if ok:
+            assert gyro_on_accel_samples(rec, str(tmp_path / "gyro.txt")).shape == (2000, 3)
+            continue
+        with pytest.raises(ImucalError) as e:
+            gyro_on_accel_samples(rec, str(tmp_path / "gyro.txt"))
+        assert e.value.field == "t" and e.value.file == str(tmp_path / "gyro.txt")
+        assert "as many samples as the accelerometer, but sample " in str(e.value)
+        assert "is stamped 0.5 s apart from the accelerometer's (50 samples): not the same samples on one clock" in str(
+            e.value)

@@ -14,6 +14,11 @@ from imucal.solve.fit import FitResult
 from imucal.gyro.segments import GyroData, gyro_data_from_run
 
 
+#: A second file with as many samples is taken sample by sample when each stamp lies within this fraction of a
+#: sample period of the accelerometer's (the clock's rounding), not when they name other instants.
+SAME_SAMPLE_FRACTION = 0.5
+
+
 def gyro_channel(rec: Recording, gyro_file: str | None = None
                  ) -> tuple[np.ndarray, np.ndarray, str, float | None, np.ndarray | None] | None:
     """(time stamps [s], raw rates (N, 3), source, accelerometer start in the gyro's clock, the
@@ -32,6 +37,15 @@ def gyro_channel(rec: Recording, gyro_file: str | None = None
                           field="--gyro-data", fix="record t in both files (imu_tk: t x y z)")
     t_g = g.t_source * TIME_UNITS[g.time_unit]
     acc_t0 = float(rec.t_source[0]) * TIME_UNITS[rec.time_unit]
+    if g.n == rec.n:  # taken sample by sample: the stamps must say they are the same samples
+        off = np.abs(t_g - rec.t_source * TIME_UNITS[rec.time_unit])
+        if not off.max() <= SAME_SAMPLE_FRACTION / rec.sample_rate:
+            k = int(np.argmax(off))
+            raise ImucalError(f"as many samples as the accelerometer, but sample {k} is stamped {off[k]:.6g} s apart "
+                              f"from the accelerometer's ({off[k] * rec.sample_rate:.3g} samples): not the same "
+                              "samples on one clock", file=g.source, field="t",
+                              fix="give the gyroscope's stamps on the accelerometer's clock (the same t for the same "
+                                  "sample), in one unit")
     return t_g, g.raw, g.source, acc_t0, None if g.time_base is None else g.time_base.gap_index
 
 
