@@ -21,7 +21,7 @@ def _calibration(gravity=9.81, rms=0.004):
     from imucal.calibration import frozen as cal_mod
     from imucal.model.parameters import base_parameters
 
-    params = base_parameters(S, B, ANGLES)
+    params = base_parameters(S, B, ANGLES, raw_unit="m/s^2")
     return cal_mod.Calibration(params=params, std={n: 1e-3 for n in params}, gravity=gravity,
                                raw_unit="m/s^2", fit={"rms_residual": rms})
 

@@ -201,7 +201,7 @@ def _calibration_file(path, angles, std=1e-3):
     from imucal.calibration import frozen as cal_mod
     from imucal.model.parameters import base_parameters
 
-    params = base_parameters([0.1, -0.2, 0.3], [1.01, 0.99, 1.02], angles)
+    params = base_parameters([0.1, -0.2, 0.3], [1.01, 0.99, 1.02], angles, raw_unit="m/s^2")
     cal = cal_mod.Calibration(params=params, std={n: std for n in params}, gravity=9.81,
                               raw_unit="m/s^2", fit={"rms_residual": 0.004})
     cal.save(path)
