@@ -164,9 +164,10 @@ def from_section(kind: str, raw: Any, path: str) -> SensorCalibration:
 
 def check_parameter_units(params: Parameters, want: Mapping[str, str], raw_unit: str, path: str, where: str) -> None:
     """Every parameter's unit label must be the one the model gives it for readings in ``raw_unit`` (``want``):
-    a file edited to state a bias in another unit would be applied as if the number were in the model's."""
+    a file edited to state a bias in another unit would be applied as if the number were in the model's. An empty
+    label (files before the grammar wrote none for the base) states nothing and is read in the model's unit."""
     for n, p in params.items():
-        if n in want and p.unit != want[n] and not (_dimensionless(p.unit) and _dimensionless(want[n])):
+        if n in want and p.unit and p.unit != want[n] and not (_dimensionless(p.unit) and _dimensionless(want[n])):
             raise ImucalError(f"{n} is labelled {short(p.unit)}, but the model with input unit {short(raw_unit)} "
                               f"has it in {want[n]!r} (the number is not converted)", file=path,
                               field=f"{where}.{n}.unit",
