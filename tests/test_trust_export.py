@@ -157,6 +157,16 @@ PIECES = ["\n", "\r", "\r\n", "\v", "\f", "\x1c", "\x85", "\u2028", "\u2029", "\
 HOSTILE = st.lists(st.sampled_from(PIECES) | st.text(max_size=4), min_size=1, max_size=8).map("".join)
 
 
+@pytest.mark.parametrize("value", ["=...", "\\...", "/imu...", "...", "a\n...", "x..."])
+def test_yaml_flow_keeps_a_value_that_ends_in_three_dots(value):
+    """yaml_flow cut PyYAML's document end marker with removesuffix("..."), which also cut the value's own: a
+    Kalibr rostopic "/imu..." was written as "/imu", and "=..." as "=", which YAML refuses (hypothesis found it)."""
+    from imucal.export.escape import yaml_flow
+
+    text = yaml_flow(value)
+    assert "\n" not in text and yaml.safe_load(f"rostopic: {text}") == {"rostopic": value}
+
+
 @functools.lru_cache(maxsize=None)
 def clean_export(thermal: bool, fmt: str, name: str) -> str:
     return export(calibration(thermal=thermal), fmt, ExportOptions(filename=name, noise=NOISE)).text

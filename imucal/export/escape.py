@@ -68,7 +68,9 @@ def ardupilot_comment(text: Any) -> list[str]:
 
 def yaml_flow(value: Any) -> str:
     """``value`` as YAML flow text on one line that PyYAML reads back to the same value."""
-    text = dump_yaml(value, default_flow_style=True, width=_YAML_WIDTH).strip().removesuffix("...").strip()
+    text = dump_yaml(value, default_flow_style=True, width=_YAML_WIDTH).strip()
+    if text.endswith("\n..."):  # the document end marker PyYAML adds after a plain scalar, on a line of its own
+        text = text[:-4].strip()  # (never the value's own "...": "/imu..." stayed "/imu")
     if "\n" in text:  # a single-quoted scalar spans lines at its line breaks: double quotes escape them
         text = dump_yaml(value, default_flow_style=True, width=_YAML_WIDTH, default_style='"').strip()
     return text
