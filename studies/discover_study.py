@@ -20,6 +20,9 @@ at the 1e-3 level discovery uses. No method can name a term more often than its 
                                                      # angles in temperature, single and in pairs, and the
                                                      # cross-axis term on two axes nearly cancelling
                                                      # (studies/results/discover_new_terms_study.md)
+    python studies/discover_study.py --new-terms --visible --coefficient
+                                                     # the same, SNR = the weakest coefficient in standard errors
+                                                     # (studies/results/discover_new_terms_coefficient_study.md)
     python studies/discover_study.py --visible       # SNR = sqrt(lambda) (studies/results/discover_visible_study.md)
     python studies/discover_study.py --visible --revisit --snr 10 20 --cases 16
                                                      # every pose held twice (studies/results/discover_revisit_visible_study.md)
@@ -227,11 +230,11 @@ def run_case(args: tuple) -> dict:
     from imucal.analysis.simulate import draw_effect_case
 
     if effect == "pair":
-        return run_pair(seed, snr, noise_mg, pool)
-    with tempfile.TemporaryDirectory() as d:
+        return run_pair(seed, snr, noise_mg, pool, visible)
+    with tempfile.TemporaryDirectory() as d:  # (the cancelling cross-axis cells keep their size SNR)
         phys = (visible_snr(seed, effect, snr, noise_mg, os.path.join(d, "ref.csv"), revisit,
                             weakest=str(visible).startswith("coefficient"), tau_known=visible == "coefficient-tau-known")
-            if visible and effect else snr)
+            if visible and effect and effect != CROSS_TWO else snr)
     if not math.isfinite(phys):  # the base model absorbs this draw entirely: no size makes it visible
         return {"seed": seed, "effect": effect, "snr": snr, "noise_mg": noise_mg, "outcome": "invisible",
                 "found": [], "truth": effect, "ambiguous": False, "size_mg": math.nan, "sigma_mean_mg": math.nan,
@@ -287,7 +290,7 @@ _REFERENCE_SNR = 10.0
 
 
 def visible_snr(seed: int, effect: str, snr: float, noise_mg: float, path: str, revisit: bool = False,
-                weakest: bool = False, tau_known: bool = False) -> float:
+                weakest: bool = False, tau_known: bool = False, axes: tuple[int, ...] | None = None) -> float:
     """The physical SNR (size / sigma_mean) at which this seed's effect has sqrt(lambda) = ``snr``
     (with ``weakest``: its weakest coefficient is ``snr`` standard errors; ``tau_known``: see visible_chi2).
 
@@ -296,8 +299,8 @@ def visible_snr(seed: int, effect: str, snr: float, noise_mg: float, path: str, 
     with the square of the size: one reference lambda fixes the size. Infinite when lambda is 0."""
     from imucal.analysis.simulate import draw_effect_case
 
-    lam0 = visible_chi2(draw_effect_case(seed, effect=effect, snr=_REFERENCE_SNR, noise_mg=noise_mg, revisit=revisit),
-                        path, rel=False, weakest=weakest, tau_known=tau_known)[0]
+    lam0 = visible_chi2(draw_effect_case(seed, effect=effect, axes=axes, snr=_REFERENCE_SNR, noise_mg=noise_mg,
+                                         revisit=revisit), path, rel=False, weakest=weakest, tau_known=tau_known)[0]
     return _REFERENCE_SNR * snr / math.sqrt(lam0) if lam0 > 1e-9 else math.inf
 
 
@@ -342,13 +345,22 @@ def stochastic_called(res) -> bool:
     return res.verdict.outcome in (Outcome.STOCHASTIC, Outcome.TERMS_AND_STOCHASTIC)
 
 
-def run_pair(seed: int, snr: float, noise_mg: float, pool: tuple[str, ...]) -> dict:
-    """Two different effects, one axis each, same SNR: are both named, and nothing else?"""
+def run_pair(seed: int, snr: float, noise_mg: float, pool: tuple[str, ...], visible: bool | str = False) -> dict:
+    """Two different effects, one axis each, same SNR: are both named, and nothing else? With ``visible``,
+    each effect is scaled to that SNR on its own, as ``visible_snr`` scales a single one (the draws of a
+    case do not depend on its size, so the pair is the same pair at another size)."""
     from imucal.config.run import config_from_dict
     from imucal.analysis.discover import discover
-    from imucal.analysis.simulate import draw_pair_case, pair_config
+    from imucal.analysis.simulate import draw_effect_case, draw_pair_case, pair_config
 
-    c1, c2 = draw_pair_case(seed, snr=snr, noise_mg=noise_mg, candidates=pool)
+    c1, c2 = draw_pair_case(seed, snr=_REFERENCE_SNR if visible else snr, noise_mg=noise_mg, candidates=pool)
+    if visible:
+        with tempfile.TemporaryDirectory() as d:
+            c1, c2 = (draw_effect_case(seed, effect=c.effect, axes=c.axes, noise_mg=noise_mg,
+                                       snr=visible_snr(seed, c.effect, snr, noise_mg, os.path.join(d, "ref.csv"),
+                                                       weakest=str(visible).startswith("coefficient"),
+                                                       tau_known=visible == "coefficient-tau-known", axes=c.axes))
+                      for c in (c1, c2))
     with tempfile.TemporaryDirectory() as d:
         path = os.path.join(d, "case.csv")
         with open(path, "w") as f:
@@ -386,7 +398,9 @@ def main(argv: list[str] | None = None) -> int:
                     "classic study's sizes (noise 0.1 0.3 1, SNR 10-60, 20 cases, 40 clean, pairs at SNR 20 and 40)")
     ap.add_argument("--new-terms", action="store_true", help="issue 28's terms (NEW_TERMS) at SNR 5-40, 16 cases a cell, "
                     "their pairs with the classic five at SNR 10, 20 and 40, the cancelling two-axis cross-axis term "
-                    "(CROSS_TWO_SNR) and 200 clean cases; writes studies/results/discover_new_terms_study.md")
+                    "(CROSS_TWO_SNR) and 200 clean cases; writes studies/results/discover_new_terms_study.md; with --visible "
+                    "--coefficient: each term and each member of a pair scaled to its weakest coefficient's SNR 10, 20 "
+                    "and 40, writes studies/results/discover_new_terms_coefficient_study.md")
     ap.add_argument("--effects", nargs="+", choices=list(EFFECTS), help="terms to hide (default: the grammar)")
     ap.add_argument("--visible", action="store_true", help="SNR = sqrt(lambda), what the data can see of the "
                     "effect (its coefficient in standard errors beside the base model), instead of size / sigma_mean; "
@@ -415,7 +429,8 @@ def main(argv: list[str] | None = None) -> int:
     if a.revisit:
         size.update(pairs=0, pair_snr=[])
     if a.new_terms:
-        size.update(noise=[0.3], snr=[5, 10, 20, 40], cases=16, clean=200, pairs=20, pair_snr=[10, 20, 40])
+        size.update(noise=[0.3], snr=[10, 20, 40] if a.visible else [5, 10, 20, 40], cases=16, clean=200, pairs=20,
+                    pair_snr=[10, 20, 40])
     if a.quick:
         size.update(noise=[0.3], snr=[10, 40], cases=2, clean=4, pairs=2, pair_snr=[40])
     for k, v in size.items():
@@ -423,6 +438,7 @@ def main(argv: list[str] | None = None) -> int:
             setattr(a, k, v)
     if a.out is None:
         a.out = str(ROOT / "studies" / "results" / ("discover_study.md" if a.classic else
+                                     "discover_new_terms_coefficient_study.md" if a.new_terms and a.coefficient else
                                      "discover_new_terms_study.md" if a.new_terms else
                                      ("discover_revisit_" if a.revisit else "discover_") +
                                      ("coefficient_tau_known_study.md" if a.visible and a.tau_known else
@@ -681,6 +697,8 @@ def report(rows: list[dict], a: argparse.Namespace, wall: float) -> str:
          + ("(the random draws do not depend on the size); *size SNR* = size / sigma_mean, the physical "
             "definition of studies/results/discover_grammar_study.md, is reported beside it. "
             if a.visible else "*SNR* = size / sigma_mean. ")
+         + ("In a pair each term is scaled on its own, as a single one (beside the base model, not beside the "
+            "other term); the cancelling cross-axis cells keep their size SNR. " if a.visible and a.new_terms else "")
          + "*Correct* = exactly the hidden effect on exactly its axes, nothing else. *lambda* = the chi-square the "
          "noise-free effect adds to the base fit (what the data can see of it), *oracle* = P(chi2_1(lambda) > 10.83).",
          ""]
