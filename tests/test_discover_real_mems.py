@@ -153,3 +153,20 @@ def test_the_c_header_says_how_to_compute_the_temperature_rate(tmp_path, run_cli
     assert code == 0, err
     assert (f"temp_rate [degC/s] (dT/dt: the least-squares slope of temp against time over the "
             f"{TEMPERATURE_RATE_WINDOW:g} s centred on the sample") in header.replace(" * ", " ")
+
+
+def test_a_quadratic_and_an_asymmetric_scale_the_poses_cannot_tell_apart_say_what_would(tmp_path):
+    """A quadratic scale nonlinearity whose weakest coefficient is ~10 standard errors (the weakest-coefficient
+    study's seed 50330): on these poses an asymmetric scale fits it as well (|m| = m^2 / g on axis-aligned
+    poses), the result is flagged ambiguous and the report names the poses that would separate them."""
+    case = draw_effect_case(50330, effect="scale_nonlinearity", snr=14.5, noise_mg=0.3)
+    d = _discover(case.config.run(), case.config.sensor.unit, tmp_path / "c.csv")
+    (e,) = d.effects
+    assert {e.name} | {a.split("[")[0] for a in e.ambiguous_with} >= {"scale_nonlinearity", "scale_asymmetry"}
+    rival = "scale_nonlinearity" if e.name == "scale_asymmetry" else "scale_asymmetry"
+    line = f"to tell {e.name} from {rival}: on poses with an axis along or across gravity |m| = m^2 / g"
+    assert line in discovery_report(d)
+    # a term without a confusable relative gets no such line
+    lone = dataclasses.replace(e, name="bias_drift", ambiguous_with=("bias_warmup[x]",))
+    from imucal.report.discover_text import separation_lines
+    assert separation_lines(lone) == []

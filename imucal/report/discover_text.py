@@ -9,6 +9,7 @@ import math
 
 from imucal.analysis.discover import Discovery, Outcome, Shortfall, Verdict, Withheld
 from imucal.analysis.discover.problem import label
+from imucal.analysis.discover.result import FoundEffect
 from imucal.analysis.discover.verdict import StochasticPart
 from imucal.analysis.stochastic import Preferred
 from imucal.constants import STANDARD_GRAVITY
@@ -130,11 +131,28 @@ def _gap_lines(d: Discovery) -> list[str]:
             f"    model      = {b.model_name}  ->  {f.model_name}"]
 
 
+#: What tells two terms apart that the data could not: the record a user can make to separate them.
+_SEPARATED_BY = {
+    frozenset({"scale_nonlinearity", "scale_asymmetry"}):
+        "on poses with an axis along or across gravity |m| = m^2 / g, so only poses with the axis between "
+        "level and vertical (an edge at 45 deg, a corner at 35 deg) tell an asymmetric scale from a quadratic "
+        "one: record more of them",
+}
+
+
+def separation_lines(e: FoundEffect) -> list[str]:
+    """For a term ambiguous with a relative the data cannot tell it from, what would (``_SEPARATED_BY``)."""
+    rivals = {a.split("[")[0] for a in e.ambiguous_with}
+    return [f"        to tell {e.name} from {r}: {_SEPARATED_BY[frozenset({e.name, r})]}"
+            for r in sorted(rivals) if frozenset({e.name, r}) in _SEPARATED_BY]
+
+
 def _effect_lines(d: Discovery) -> list[str]:
     L = ["[[Effects found]]" + ("" if d.effects else "  none")]
     for e in d.effects:
         amb = f"  (ambiguous with {', '.join(e.ambiguous_with)})" if e.ambiguous_with else ""
         L.append(f"    {e.label}: LR = {e.lr:.4g}, p (adjusted) = {e.p_value:.3g}{amb}")
+        L += separation_lines(e)
         if e.unresolved_axes:
             L.append(f"        not ruled out on {', '.join(EFFECTS[e.name].axis_names[a] for a in e.unresolved_axes)}: "
                      "these poses barely see the term there (see the notes)")
