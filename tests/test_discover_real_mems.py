@@ -170,3 +170,25 @@ def test_a_quadratic_and_an_asymmetric_scale_the_poses_cannot_tell_apart_say_wha
     lone = dataclasses.replace(e, name="bias_drift", ambiguous_with=("bias_warmup[x]",))
     from imucal.report.discover_text import separation_lines
     assert separation_lines(lone) == []
+
+
+def test_a_gyroscope_and_a_magnetometer_beside_the_accelerometer_are_said_to_be_left_out(tmp_path):
+    """discover searches the accelerometer: a log that also has gx, gy, gz and mx, my, mz is told that those are
+    neither searched nor in the calibration it writes (they were dropped without a word)."""
+    import pandas as pd
+
+    case = draw_effect_case(9404, effect=None)
+    df = pd.read_csv(__import__("io").StringIO(case.config.run().to_csv_text()))
+    rng = np.random.default_rng(1)
+    plain = tmp_path / "acc.csv"
+    df.to_csv(plain, index=False)
+    for c in ("gx", "gy", "gz", "mx", "my", "mz"):
+        df[c] = rng.normal(0.0, 1.0, len(df))
+    both = tmp_path / "nine.csv"
+    df.to_csv(both, index=False)
+    unit = case.config.sensor.unit
+    left = [n for n in discover(config_from_dict({"data": {"path": str(both), "unit": unit, "gyro_unit": "rad/s"}})).notes if "not searched" in n]
+    assert left and left[0].startswith("the gyroscope (gx, gy, gz) and the magnetometer (mx, my, mz) not searched")
+    assert "fit.effects" in left[0]
+    assert not [n for n in discover(config_from_dict({"data": {"path": str(plain), "unit": unit}})).notes
+                if "not searched" in n]

@@ -247,6 +247,15 @@ def _kept(asked: RunConfig, config: RunConfig, st: State, p_after: float, settin
         return None
 
 
+def _sensors_left(recording) -> list[str]:
+    """The note that the gyroscope's and magnetometer's columns a recording has are not in discover's result."""
+    left = [f"the {n} ({c})" for n, c, a in (("gyroscope", "gx, gy, gz", "gyro"), ("magnetometer", "mx, my, mz", "mag"))
+            if getattr(recording, a, None) is not None]
+    return [f"{' and '.join(left)} not searched and not in the calibration written: discover looks at the "
+            "accelerometer; give the effects it names to `imucal calibrate` (fit.effects in the run file) for a "
+            "calibration of every sensor"] if left else []
+
+
 def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings(),
              progress: Callable[[], None] | None = None) -> Discovery:
     """Fit the base model, test its residual against the noise, add effects while they are needed.
@@ -258,6 +267,7 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings(),
     if base is None:
         return sweep_discovery(asked, sweep, settings, progress)
     prob = Problem(config, base, progress)
+    notes += _sensors_left(base.recording)
     names = testable(list(settings.candidates), base.intervals, base.recording.source, notes)
     _check_room(base)
     p_before = p_noise(base.result)
