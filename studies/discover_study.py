@@ -614,7 +614,7 @@ def new_terms_block(rows: list[dict], a: argparse.Namespace) -> list[str]:
         in_pairs = [lab in r["found"] for r, lab in mine]
         met = bool(ok) and np.mean(ok) >= RELIABLE and (not in_pairs or np.mean(in_pairs) >= RELIABLE)
         L.append(f"| {t} | " + " | ".join(f"{sum(r['outcome'] == 'correct' for r in cs[s])}/{len(cs[s])}" for s in a.snr)
-                 + f" | {np.mean(ok):.0%} | " + (f"{sum(in_pairs)}/{len(in_pairs)}" if in_pairs else "-")
+                 + f" | {np.mean(ok):.1%} | " + (f"{sum(in_pairs)}/{len(in_pairs)}" if in_pairs else "-")
                  + f" | {'met' if met else 'NOT met'} |")
     cross = [r for r in rows if r["effect"] == CROSS_TWO]
     L += ["", "The cross-axis term on two axes, q_j = -1.1 q_i (SNR of each coefficient's size; "
