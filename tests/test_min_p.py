@@ -54,21 +54,3 @@ def test_the_null_is_reproducible():
     J, base, cands = _design()
     fam = [([c], 1, False) for c in cands]
     assert np.array_equal(min_p_null([J], base, fam).min_p, min_p_null([J], base, fam).min_p)
-
-
-def test_a_search_is_priced_at_the_tail_it_adds():
-    """One screen: chi-square(k)'s quantile at the level; m orthogonal screens of one column: the
-    quantile of their maximum, chi-square(1) at 1 - (1 - level)^(1/m), by Sidak."""
-    from imucal.analysis.min_p import search_price
-    from scipy.stats import chi2
-
-    level, m = 0.01, 20
-    J, base, cands = _design(m=m)
-    # one candidate column moved screen by screen: screen i holds candidate column i at index 3
-    screens = [np.column_stack([J[:, :3], J[:, c]]) for c in cands]
-    q_one, q_searched = search_price(screens, base, [([3], False), ([3], True)], level, draws=40000)
-    assert q_one == pytest.approx(chi2.isf(level, 1), rel=0.06)
-    assert q_searched == pytest.approx(chi2.isf(1 - (1 - level) ** (1 / m), 1), rel=0.06)
-    # the mean-based price it replaces (Ye's generalised degrees of freedom, E[max] = 4.9 here) charged
-    # these 20 screens 4.9 coefficients; their tail is worth 1.8 coefficients at chi-square(1)'s quantile
-    assert q_searched / q_one == pytest.approx(1.82, rel=0.08)

@@ -20,7 +20,7 @@ from imucal.analysis.discover.candidates import extra
 from imucal.analysis.discover.problem import Effects, Problem, canonical
 from imucal.analysis.discover.result import Candidate
 from imucal.analysis.discover.settings import TAU_GRID
-from imucal.analysis.min_p import MinPNull, min_p_null, search_price
+from imucal.analysis.min_p import MinPNull, min_p_null, search_gain
 from imucal.model.effects import make_effect
 from imucal.solve.fit import FitResult, jacobian_rows
 from imucal.solve.stats import chi2_sf
@@ -103,17 +103,17 @@ def screen_candidate(screens: list[Screen], rw: np.ndarray, base_cols: list[int]
     return best
 
 
-def _priced(screened: list[Candidate], Js: list[np.ndarray], base_cols: list[int], family: list,
-            penalty: float) -> list[Candidate]:
-    """Each candidate searched over several screens priced so that pure noise beats it as rarely as it
-    beats one coefficient at ``penalty`` (``search_price``), and at no fewer parameters than ``k``."""
+def _priced(screened: list[Candidate], Js: list[np.ndarray], base_cols: list[int], family: list) -> list[Candidate]:
+    """Each candidate searched over several screens priced at what its search gains on noise beyond its
+    columns (``search_gain``), at least one parameter per shape or given value (as ``k`` counts them)."""
     searched = [i for i, (_, _, ids) in enumerate(family) if len(ids) > 1]
     if not searched:
         return screened
-    quantile = search_price(Js, base_cols, [(family[i][0], family[i][2]) for i in searched], chi2_sf(penalty, 1))
+    gain = search_gain(Js, base_cols, [(family[i][0], family[i][2]) for i in searched])
     out = list(screened)
-    for q, i in zip(quantile, searched):
-        out[i] = dataclasses.replace(out[i], priced=max(float(out[i].k), q / penalty))
+    for g, i in zip(gain, searched):
+        c = out[i]
+        out[i] = dataclasses.replace(c, priced=len(c.new_axes) + max(float(c.extra), g - len(c.new_axes)))
     return out
 
 
@@ -132,8 +132,7 @@ class Scan:
     values: list[dict[str, float]]  #: the shape values of each screen
 
 
-def scan(prob: Problem, current: FitResult, effects: Effects, names: Sequence[str], cands: list,
-         penalty: float) -> Scan:
+def scan(prob: Problem, current: FitResult, effects: Effects, names: Sequence[str], cands: list) -> Scan:
     """Gauss-Newton chi-square of each candidate from the current fit, and the joint null of
     their statistics (``imucal.analysis.min_p``): the round's multiple-testing correction."""
     screens, rw, col, cur_free = screen(prob, current, effects, names)
@@ -147,6 +146,6 @@ def scan(prob: Problem, current: FitResult, effects: Effects, names: Sequence[st
         family.append(([col[x] for x in make_effect(n, new).coefficient_names], c.k, ids[-1]))
     Js = [s.J for s in screens]
     null = min_p_null(Js, base_cols, family)
-    screened = _priced(screened, Js, base_cols, family, penalty)
+    screened = _priced(screened, Js, base_cols, family)
     p_best = min((chi2_sf(max(0.0, current.chi2 - c.chi2_screen), c.k) for c in screened), default=1.0)
     return Scan(screened, null, null.adjust(p_best), Js, rw, col, base_cols, ids, [s.values for s in screens])

@@ -67,7 +67,7 @@ def _next_round(prob: Problem, st: State, names: list[str], settings: DiscoverSe
                          "free parameters")
             st.shortfall = Shortfall.TOO_FEW_INTERVALS
         return None
-    sc = scan(prob, st.current, st.effects, names, cands, settings.penalty)
+    sc = scan(prob, st.current, st.effects, names, cands)
     if consistent and sc.p >= settings.alpha_scan:
         return None  # the omnibus test passes and no single candidate stands out from the noise
     level = settings.alpha_effect if not consistent else settings.alpha_scan
