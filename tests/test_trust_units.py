@@ -237,6 +237,14 @@ def test_apply_moves_the_magnetometer_by_its_lag_and_says_so(tmp_path, run_cli):
     cal = load_calibration(tmp_path / "cal" / "calibration.yaml")
     want = cal.apply_all({"accelerometer": sim.acc[:-3], "magnetometer": sim.mag[3:]})["magnetometer"]
     np.testing.assert_allclose(out[:-3, 4:], want, rtol=1e-7, atol=1e-6)
+    # the generated C does not shift: its header says so, with the lag, where it was silent
+    r = run_cli(["codegen", tmp_path / "cal" / "calibration.yaml", "--out", tmp_path / "c"])
+    assert r.code == 0, r.err
+    header = " ".join((tmp_path / "c" / "imucal.h").read_text().split()).replace(" * ", " ")
+    assert (f"Time: raw_m lags the accelerometer's readings by {fit['lag_s']:.4g} s ({fit['lag_samples']:.3g} samples "
+            "at the recording's rate); this function does not shift it: pass raw_m read that much later (raw_m[k + lag] "
+            "with the accelerometer's sample k), as `imucal apply` does.") in header
+    assert header.count("Time:") == 1  # the accelerometer's block has no lag
     # a log at twice the rate: the same lag in seconds is twice the samples
     data[:, 0] /= 2.0
     np.savetxt(tmp_path / "fast.csv", data, delimiter=",", header="t,ax,ay,az,mx,my,mz", comments="", fmt="%.8g")

@@ -152,6 +152,7 @@ def doc(c: Context, s: SensorCalibration, k: Kernel) -> list[str]:
                f"B = 0: {p}_{n['fn']} does not read {', '.join(_unread(s, k))}") if k_in else []),
         f" * Units: {n['raw']} in [{unit}] (the recording's unit); {n['out']} in [{s.model.output.unit}], in the",
         " * same frame f as acc (the accelerometer's orthonormal frame above).",
+        *_lag_lines(s, n["raw"]),
         " *",
         " * Expected error",
         *wrap(f"fit: {t(_fit_text(s.fit), 300)}"),
@@ -163,6 +164,19 @@ def doc(c: Context, s: SensorCalibration, k: Kernel) -> list[str]:
         f" * Cost of {p}_{n['fn']}: {k.ops}; no branch, no heap, no",
         " * mutable static state.",
     ]
+
+
+def _lag_lines(s: SensorCalibration, raw: str) -> list[str]:
+    """A sensor whose readings lag the accelerometer's (a magnetometer's fit ``lag_s``/``lag_samples``): the
+    function does not shift them, the caller must (``imucal apply`` does)."""
+    sec, samples = s.fit.get("lag_s"), s.fit.get("lag_samples")
+    if not any(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v != 0
+               for v in (sec, samples)):
+        return []
+    return textwrap.wrap(f"Time: {raw} lags the accelerometer's readings by {_fmt(sec, '.4g')} s ({_fmt(samples, '.3g')} "
+                         f"samples at the recording's rate); this function does not shift it: pass {raw} read that "
+                         f"much later ({raw}[k + lag] with the accelerometer's sample k), as `imucal apply` does.", 94,
+                         initial_indent=" * ", subsequent_indent=" *   ")
 
 
 def _unread(s: SensorCalibration, k: Kernel) -> list[str]:
