@@ -333,3 +333,17 @@ def test_a_second_gyroscope_file_stamped_apart_is_not_paired_by_index(tmp_path):
         assert "as many samples as the accelerometer, but sample " in str(e.value)
         assert "is stamped 0.5 s apart from the accelerometer's (50 samples): not the same samples on one clock" in str(
             e.value)
+
+
+@pytest.mark.parametrize("fit", [{"lag_s": "*/ #include <evil.h> /*", "lag_samples": float("nan")},
+                                 {"lag_s": True, "lag_samples": "3\n#define X"}, {"lag_s": float("inf")}, {}])
+def test_a_hostile_or_missing_lag_writes_no_lag_line_into_the_c_header(fit):
+    """The header's lag line is written only from finite numbers: a string (a C comment's end, a newline), a bool,
+    nan or inf in the calibration file's fit section reaches the generated C as nothing."""
+    from types import SimpleNamespace
+
+    from imucal.export.codegen_sensor import _lag_lines
+
+    assert _lag_lines(SimpleNamespace(fit=fit), "raw_m") == []
+    text = " ".join(_lag_lines(SimpleNamespace(fit={"lag_s": 0.06, "lag_samples": "*/ x"}), "raw_m"))
+    assert "*/" not in text and "by 0.06 s (n/a samples" in text  # a number beside a hostile one: only the number
