@@ -105,27 +105,31 @@ def fixed_cost(tmp: Path, cfg, runs: int) -> dict:
     on its worker (hash, fit, files): the command's start, the manifest, the worker's start and the
     fleet report. ``runs`` batches, each into a new folder."""
     manifest = write_fleet(draw_fleet(cfg, 1, 0, 0), tmp / "one", [], settings={"output": {"figures": False}})
-    got, walls = [], []
+    got, walls, busy = [], [], []
     for i in range(runs + 1):
         out = tmp / f"fixed{i}"
-        wall, _, _ = batch(manifest, out, "--workers", "1")
+        wall, _, b = batch(manifest, out, "--workers", "1")
         unit = next(iter(table(out).values()))
         if i:  # the first warms the file cache
             got.append(wall - float(unit["seconds"]))
             walls.append(wall)
+            busy.append(b)
     return {"median": statistics.median(got), "min": min(got), "max": max(got), "wall": statistics.median(walls),
-            "runs": runs}
+            "runs": runs, "busy": statistics.median(busy)}
 
 
 def fixed_lines(fixed: dict, one: tuple) -> list[str]:
     label, wall, _, _, _, _, workers, unit_seconds = one
     return [f"Fixed cost of a batch (target under 0.5 s): a one-unit batch on one worker takes "
             f"{fixed['wall']:.2f} s, {fixed['median']:.2f} s of it (median of {fixed['runs']}; "
-            f"{fixed['min']:.2f} to {fixed['max']:.2f}) outside the unit's own work; in the {label} run below, "
+            f"{fixed['min']:.2f} to {fixed['max']:.2f}) outside the unit's own work, the whole machine's CPUs busy "
+            f"{fixed['busy']:.2f} of {os.cpu_count()} meanwhile (median; the batch's own included); "
+            f"in the {label} run below, "
             f"{wall - unit_seconds:.1f} s of its {wall:.1f} s were outside the units' work (each unit's wall time on "
             "its worker, summed). The batch's own process never loads the calibration path; its workers are "
-            "forked from a forkserver that has loaded it and fitted once (imucal.fleet.warm), started while the "
-            "manifest is read; the report's writers (pyarrow, matplotlib) load in a thread while the units run.",
+            "forked from a forkserver that has loaded it and fitted once (imucal.fleet.warm), started before the "
+            "batch loads its own modules; the report's writers (pyarrow, matplotlib) load in a thread while the "
+            "units run.",
             ""]
 
 

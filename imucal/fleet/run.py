@@ -32,6 +32,7 @@ from imucal.errors import (EXIT_INTERRUPTED, INTERRUPTING, ImucalError, interrup
 from imucal.files.inputs import max_data_bytes, open_regular, read_input_text
 from imucal.files.output import OutputSet, remove_stale_staging, write_json_atomic
 from imucal.fleet.manifest import Manifest, Unit
+from imucal.fleet.workers import worker_context
 from imucal.report.progress import progress
 
 DONE_FILE, SUMMARY_FILE = "done.json", "summary.json"
@@ -137,32 +138,6 @@ def _lost(unit: Unit, error: str) -> dict:
     return {"unit": unit.id, "status": INTERNAL, "error": error, "inputs": unit.inputs, "input_sha256": {},
             "settings_hash": unit.settings_hash, "seconds": 0.0, "cpu_seconds": 0.0, "summary": None,
             "skipped": False}
-
-
-#: Modules the forkserver loads before it forks any worker: the calibration path and its generated
-#: code (imucal.fleet.warm), loaded once per batch instead of once per worker, while the batch reads
-#: its manifest.
-WORKER_PRELOAD = ["imucal.fleet.warm"]
-
-
-def worker_context() -> multiprocessing.context.BaseContext:
-    """forkserver (workers start clean: no threads or signal handlers of the batch copied, and warm:
-    forked from a server that has loaded WORKER_PRELOAD), else spawn."""
-    if "forkserver" not in multiprocessing.get_all_start_methods():
-        return multiprocessing.get_context("spawn")
-    ctx = multiprocessing.get_context("forkserver")
-    ctx.set_forkserver_preload(WORKER_PRELOAD)
-    return ctx
-
-
-def start_workers_early() -> None:
-    """Start the forkserver now (it loads WORKER_PRELOAD while the batch reads its manifest); the
-    workers are forked from it later. Nothing to do without forkserver."""
-    if "forkserver" in multiprocessing.get_all_start_methods():
-        from multiprocessing import forkserver
-
-        worker_context()
-        forkserver.ensure_running()
 
 
 def default_workers() -> int:

@@ -1,5 +1,5 @@
 """What a batch's worker processes need, loaded once in the forkserver they are forked from
-(imucal.fleet.run.WORKER_PRELOAD): the calibration path's modules, and the base model's generated
+(imucal.fleet.workers.WORKER_PRELOAD): the calibration path's modules, and the base model's generated
 numpy code and IPOPT solver, built by one small fit. Each worker then starts warm instead of paying
 for its own imports and first fit (most of a small batch's fixed cost).
 """

@@ -33,10 +33,6 @@ def run(args: argparse.Namespace) -> int:
     from imucal.errors import EXIT_INTERRUPTED, ImucalError, interruption_line
     from imucal.files.inputs import same_file
     from imucal.files.output import check_outputs
-    from imucal.fleet.manifest import load_manifest
-    from imucal.fleet.report import (REPORT_CSV, REPORT_HTML, REPORT_PARQUET, REPORT_TEXT, fleet_table, load_writers,
-                                     summary_text, write_report)
-    from imucal.fleet.run import executor, progress_bar, run_units, start_workers_early
 
     if args.workers is not None:
         check_count(args.workers, "--workers", 1, 4096)
@@ -48,9 +44,17 @@ def run(args: argparse.Namespace) -> int:
     if os.path.isdir(args.manifest) and same_file(args.manifest, out):  # False, not OSError, for bad names
         raise ImucalError("is the folder of recordings", file=args.out, field="--out",
                           fix="write the results to another folder (its fleet.csv would become a unit)")
+    if args.scheduler is None:  # before the imports below: the workers' server loads meanwhile (docs/fleet.md)
+        from imucal.fleet.workers import start_workers_early
+
+        start_workers_early()
+    from imucal.fleet.manifest import load_manifest
+    from imucal.fleet.report import (REPORT_CSV, REPORT_HTML, REPORT_PARQUET, REPORT_TEXT, fleet_table, load_writers,
+                                     summary_text, write_report)
+    from imucal.fleet.run import executor, progress_bar, run_units
+
     check_outputs(inputs, [out / REPORT_CSV, out / REPORT_TEXT, out / REPORT_PARQUET, out / REPORT_HTML])
-    if args.scheduler is None:
-        start_workers_early()  # the workers' modules load while the manifest is read
+
     manifest = load_manifest(args.manifest, args.config)
     n = len(manifest.units)
     writers = load_writers(figures=not args.no_figures)  # beside the units (fixed cost: docs/fleet.md)
