@@ -23,14 +23,20 @@ def _run(code: str, cwd: Path) -> list:
     return json.loads(p.stdout.strip().splitlines()[-1])
 
 
+def _batch(tmp_path: Path, units: int, before: str, result: str) -> list:
+    """Runs `imucal batch` on ``units`` simulated units in a fresh interpreter after the lines ``before``;
+    returns [its exit code, the value of the expression ``result``]."""
+    cfg = load_simulation_config(str(ROOT / "configs" / "simulate_fleet.yaml"))
+    manifest = write_fleet(draw_fleet(cfg, units, 0, 0), tmp_path / "sim", [], settings={"output": {"figures": False}})
+    code = ("import json, sys\n" + before + "from imucal.cli.main import main\n"
+            f"rc = main(['batch', {str(manifest)!r}, '--out', {str(tmp_path / 'out')!r}, '--no-figures', "
+            f"'--workers', '1'])\nprint(json.dumps([rc, {result}]))")
+    return _run(code, tmp_path)
+
+
 def test_the_batch_process_never_loads_the_calibration_path(tmp_path):
     """The batch reads the manifest, hands out units and writes the report: no CasADi, no pipeline."""
-    cfg = load_simulation_config(str(ROOT / "configs" / "simulate_fleet.yaml"))
-    manifest = write_fleet(draw_fleet(cfg, 2, 0, 0), tmp_path / "sim", [], settings={"output": {"figures": False}})
-    code = ("import json, sys\nfrom imucal.cli.main import main\n"
-            f"rc = main(['batch', {str(manifest)!r}, '--out', {str(tmp_path / 'out')!r}, '--no-figures', "
-            "'--workers', '1'])\nprint(json.dumps([rc, sorted(sys.modules)]))")
-    rc, mods = _run(code, tmp_path)
+    rc, mods = _batch(tmp_path, 2, "", "sorted(sys.modules)")
     assert rc == 0 and (tmp_path / "out" / "fleet.csv").exists()
     assert {"casadi", "imucal.pipeline", "imucal.report.run_files", "imucal.solve.fit"}.isdisjoint(mods)
 
@@ -56,12 +62,7 @@ def test_workers_are_forked_warm(tmp_path):
 def test_the_workers_server_starts_before_the_batch_loads_numpy(tmp_path):
     """The forkserver (Python, numpy, CasADi and one fit: about 0.3 s) starts before the batch's own
     imports, so the two overlap on a machine with a free core (the fixed cost, docs/fleet.md)."""
-    cfg = load_simulation_config(str(ROOT / "configs" / "simulate_fleet.yaml"))
-    manifest = write_fleet(draw_fleet(cfg, 1, 0, 0), tmp_path / "sim", [], settings={"output": {"figures": False}})
-    code = ("import json, sys\nimport imucal.fleet.workers as w\nseen = []\nstart = w.start_workers_early\n"
-            "w.start_workers_early = lambda: (seen.append(sorted({'numpy', 'yaml'} & set(sys.modules))), start())\n"
-            "from imucal.cli.main import main\n"
-            f"rc = main(['batch', {str(manifest)!r}, '--out', {str(tmp_path / 'out')!r}, '--no-figures', "
-            "'--workers', '1'])\nprint(json.dumps([rc, seen]))")
-    rc, seen = _run(code, tmp_path)
+    rc, seen = _batch(tmp_path, 1, "import imucal.fleet.workers as w\nseen = []\nstart = w.start_workers_early\n"
+                      "w.start_workers_early = lambda: (seen.append(sorted({'numpy', 'yaml'} & set(sys.modules))), "
+                      "start())\n", "seen")
     assert rc == 0 and seen == [[]]
