@@ -35,10 +35,12 @@ def _batch(tmp_path: Path, units: int, before: str, result: str) -> list:
 
 
 def test_the_batch_process_never_loads_the_calibration_path(tmp_path):
-    """The batch reads the manifest, hands out units and writes the report: no CasADi, no pipeline."""
+    """The batch reads the manifest, hands out units and writes the report: no CasADi, no pipeline, and
+    no pandas (fleet.parquet is built without it: imucal.fleet.parquet)."""
     rc, mods = _batch(tmp_path, 2, "", "sorted(sys.modules)")
     assert rc == 0 and (tmp_path / "out" / "fleet.csv").exists()
-    assert {"casadi", "imucal.pipeline", "imucal.report.run_files", "imucal.solve.fit"}.isdisjoint(mods)
+    assert {"casadi", "imucal.pipeline", "imucal.report.run_files", "imucal.solve.fit", "pandas"}.isdisjoint(mods)
+    assert (tmp_path / "out" / "fleet.parquet").exists() or "pyarrow" not in mods
 
 
 def test_workers_are_forked_warm(tmp_path):

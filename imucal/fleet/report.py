@@ -20,6 +20,7 @@ import numpy as np
 
 from imucal.fleet.manifest import Tolerances
 from imucal.files.output import OutputSet
+from imucal.fleet.parquet import parquet_writer
 from imucal.fleet.run import ERROR, INTERNAL, NOT_CONVERGED, OK
 from imucal.model.parameters import ANGLE_NAMES, BASE_NAMES
 from imucal.report.page import esc, figures_html, num, page_html, table_html
@@ -164,14 +165,14 @@ def to_csv(table: FleetTable) -> str:
 
 
 def load_writers(figures: bool) -> threading.Thread:
-    """Load the report's writers in a thread, while the units run: pyarrow (fleet.parquet) and the
-    pandas it loads on its first table, matplotlib for the histograms. Most of a batch's fixed cost
-    is their loading (about a second), which then runs beside the units; join the thread before the
+    """Load the report's writers in a thread, while the units run: pyarrow's JSON reader and Parquet
+    writer (fleet.parquet, imucal.fleet.parquet: no pandas), matplotlib for the histograms. Their
+    loading is most of a batch's fixed cost; it runs beside the units; join the thread before the
     report is written."""
     def load() -> None:
         with contextlib.suppress(ImportError):
-            import pyarrow  # noqa: F401
-            import pandas  # noqa: F401 - pyarrow loads it to build a table
+            import pyarrow.json  # noqa: F401
+            import pyarrow.parquet  # noqa: F401
         if figures:
             import matplotlib.figure  # noqa: F401 - what imucal.report.canvas draws with
             import matplotlib.backends.backend_agg  # noqa: F401
@@ -179,21 +180,6 @@ def load_writers(figures: bool) -> threading.Thread:
     thread = threading.Thread(target=load, name="imucal-report-writers")
     thread.start()
     return thread
-
-
-def parquet_writer(table: FleetTable):
-    """A writer of fleet.parquet when pyarrow is importable, else None."""
-    try:
-        import pyarrow as pa
-        import pyarrow.parquet as pq
-    except ImportError:
-        return None
-    cols = _columns(table)
-
-    def write(path: Path) -> None:
-        pq.write_table(pa.Table.from_pylist([{c: r.get(c) for c in cols} for r in table.rows]), str(path))
-
-    return write
 
 
 def histogram(table: FleetTable, name: str, path: Path) -> None:
@@ -297,7 +283,7 @@ def write_report(table: FleetTable, out: Path, inputs: list[str], figures: bool 
         o.text(out / REPORT_CSV, to_csv(table))
         o.text(out / REPORT_TEXT, summary_text(table))
         o.text(out / REPORT_HTML, fleet_html(table, pngs))
-        pq = parquet_writer(table)
+        pq = parquet_writer(table.rows, _columns(table))
         if pq is not None:
             o.call(out / REPORT_PARQUET, pq)
             written.append(out / REPORT_PARQUET)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
+import imucal.fleet.run  # noqa: F401 - the workers' own module (their loop, imucal.fleet.run._worker)
 from imucal.constants import STANDARD_GRAVITY
 from imucal.model.parameters import base_parameters
 from imucal.model.sensor import build_model
