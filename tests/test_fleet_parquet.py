@@ -7,14 +7,12 @@ import math
 import struct
 
 import numpy as np
-import pytest
+import pyarrow as pa
+import pyarrow.parquet as pq
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-pa = pytest.importorskip("pyarrow")
-pq = pytest.importorskip("pyarrow.parquet")
-
-from imucal.fleet.parquet import arrow_table, json_schema  # noqa: E402
+from imucal.fleet.parquet import arrow_table, json_schema
 
 
 def _bytes(table) -> bytes:
