@@ -629,11 +629,13 @@ def _with_gyro(run: CalibrationRun, config: RunConfig, gyro_file: str | None) ->
 def _with_mag(run: CalibrationRun, config: RunConfig) -> CalibrationRun:
     """The magnetometer fitted on the same samples: its dip rows read the calibrated acceleration, its poses
     are the accelerometer's still intervals (imucal.mag.run)."""
-    from imucal.mag.run import calibrated, mag_of_run  # here: the magnetometer's modules, only with mx, my, mz
+    # here: the magnetometer's modules, only with mx, my, mz
+    from imucal.mag.run import calibrated, mag_of_run, stated_mag
     from imucal.report.mag import mag_warnings
 
     rec, cal = run.recording, run.calibration
     covs = covariate_values(cal.covariates, temp=rec.temp, time=rec.t, source=rec.source)
     acc = cal.apply(rec.raw, covs)
-    res = mag_of_run(rec.mag, acc, run.intervals.start, run.intervals.end, config.mag, source=rec.source)
+    res = mag_of_run(rec.mag, acc, run.intervals.start, run.intervals.end, stated_mag(config.mag, rec),
+                     source=rec.source)
     return _attach(run, calibrated(res, rec.sample_rate), mag_warnings(res), mag=res)

@@ -147,18 +147,22 @@ def test_mag_settings_for_a_log_without_a_magnetometer_are_said_not_dropped(log,
     assert r.code == 0 and "magnetometer" not in r.err, r.err
 
 
-def test_a_magnetometer_mapped_in_a_netcdf_file_is_one_line(log, tmp_path, run_cli, unchanged):
-    """data.columns.mx in a netCDF file was ignored: the accelerometer calibrated alone, the mapping unsaid."""
+def test_a_magnetometer_mapped_in_a_netcdf_file_is_calibrated(log, tmp_path, run_cli):
+    """data.columns.mx in a netCDF file was ignored (the accelerometer calibrated alone, the mapping unsaid),
+    then refused; now it is read in the unit its units attribute states (tests/test_netcdf_mag.py)."""
     import h5py
+
+    from imucal.calibration.frozen import load_calibration
 
     with h5py.File(tmp_path / "log.nc", "w") as f:
         v = f.create_dataset("acc", data=log[:, :3])
         v.attrs["units"], v.attrs["sampling_rate"] = "g", np.array([50.0])
         f.create_dataset("mag", data=log[:, 3:]).attrs["units"] = "uT"
-    with unchanged():
-        r = run_cli(["calibrate", "--data", tmp_path / "log.nc", "--columns", "mx=mag", "--out", tmp_path / "out"])
-    assert r.code == 2 and r.err.count("\n") == 1, r.err
-    assert r.err.startswith(f"imucal: error: {tmp_path / 'log.nc'}: data.columns.mx: a magnetometer is not read")
+    r = run_cli(["calibrate", "--data", tmp_path / "log.nc", "--columns", "mx=mag", "--mag-field", "48uT",
+                 "--no-figures", "--out", tmp_path / "out"])
+    assert r.code == 0, r.err
+    mag = load_calibration(tmp_path / "out" / "calibration.yaml").sensor("magnetometer")
+    assert mag is not None and mag.raw_unit == "uT"
 
 
 def test_the_ardupilot_export_says_when_its_arming_check_refuses_the_offsets(tmp_path, run_cli):

@@ -12,9 +12,10 @@ role is the one variable whose ``units`` attribute is of its kind (acceleration,
 temperature); the time is the first dimension's coordinate (CF: ``units = "seconds since ..."``),
 else the acceleration's ``sampling_rate`` attribute [Hz], else ``data.sample_rate``. Values are
 converted from the file's units (UNITS): acceleration stays in its unit (m/s^2 or g, recorded as
-data.unit), angular rate to rad/s or deg/s, temperature to degC. Rows with a fill value (NaN) in a
-channel read are dropped: the stamps then skip, and the time base keeps the gap (the spans are
-read as separate spans, imucal.data.timebase).
+data.unit), angular rate to rad/s or deg/s, temperature to degC, a magnetic field (read only when
+mapped: ``mx: VARIABLE``) kept in uT, nT, gauss or milligauss (tesla to uT) as the magnetometer's unit
+(mag.unit). Rows with a fill value (NaN) in a channel read are dropped: the stamps then skip, and
+the time base keeps the gap (the spans are read as separate spans, imucal.data.timebase).
 """
 from __future__ import annotations
 
@@ -62,9 +63,17 @@ TEMPERATURE_UNITS = {**{u: ("degC", 1.0, 0.0) for u in ("c", "degc", "deg c", "d
                      **{u: ("degC", 5.0 / 9.0, -32.0 * 5.0 / 9.0) for u in ("f", "degf", "fahrenheit", "degree_f",
                                                                             "degrees_fahrenheit", "degree_fahrenheit",
                                                                             "degrees_f", "°f")}}
+#: Magnetic field (a magnetometer mapped by data.columns mx: VARIABLE): kept in its unit (imucal.mag.units.FIELD_UNITS),
+#: tesla and millitesla in microtesla.
+FIELD_UNITS = {**{u: ("uT", 1.0, 0.0) for u in ("ut", "microtesla", "micro tesla", "µt", "μt", "micro_tesla")},
+               **{u: ("nT", 1.0, 0.0) for u in ("nt", "nanotesla", "nano tesla", "nano_tesla")},
+               **{u: ("uT", 1e3, 0.0) for u in ("mt", "millitesla")},
+               **{u: ("uT", 1e6, 0.0) for u in ("t", "tesla")},
+               **{u: ("gauss", 1.0, 0.0) for u in ("gauss", "gs")},  # not "g" nor "mg": an acceleration's
+               **{u: ("mG", 1.0, 0.0) for u in ("milligauss", "mgauss")}}
 #: The units of each kind, in words (messages).
 KNOWN_UNITS = {"acceleration": "m/s^2 (m/s2, m s-2) or g", "angular rate": "rad/s, mrad/s or deg/s",
-               "temperature": "degC (C, celsius), K or degF"}
+               "temperature": "degC (C, celsius), K or degF", "magnetic field": "uT, nT, mT, T, gauss or milligauss"}
 #: Attributes that describe a variable in words (CF's standard_name and long_name, and common others).
 _DESCRIBING = ("standard_name", "long_name", "description", "full_name")
 #: CF time units ("UNIT since DATE") -> factor to seconds.
@@ -314,10 +323,6 @@ class _Reader:
 
 
 def _check_spec(spec: DataSpec, path: Path) -> None:
-    mag = [r for r in ("mx", "my", "mz") if r in spec.columns]
-    if mag:  # not read from netCDF: a mapping silently dropped would leave the magnetometer uncalibrated unsaid
-        raise ImucalError("a magnetometer is not read from a netCDF file", file=str(path), field=f"data.columns.{mag[0]}",
-                          fix="export the recording as CSV with mx, my, mz columns")
     given = [n for n in _TEXT_ONLY if getattr(spec, n)]
     given += [n for n, v, d in (("format", spec.format, "auto"), ("time_unit", spec.time_unit, "auto"),
                                 ("gyro_unit", spec.gyro_unit, "auto")) if v != d]
@@ -379,14 +384,16 @@ def _recording(rd: _Reader, spec: DataSpec, path: Path, sha: str) -> Recording:
     n = acc.values.shape[0]
     gyro = rd.vector("g", "angular rate", RATE_UNITS, "raw")
     temp = rd.scalar("temp", "temperature", TEMPERATURE_UNITS)
-    for ch, role in ((gyro, "gx"), (temp, "temp")):
+    # a magnetometer only when mapped (data.columns mx: VARIABLE): a field variable is read, not guessed
+    mag = rd.vector("m", "magnetic field", FIELD_UNITS, "raw") if {"mx", "my", "mz"} & set(spec.columns) else None
+    for ch, role in ((gyro, "gx"), (temp, "temp"), (mag, "mx")):
         if ch is not None and ch.values.shape[0] != n:
             raise rd.fail(f"variable {short(ch.name)} has {ch.values.shape[0]} samples, the acceleration {n}",
                           f"data.columns.{role}", "map variables of one recording (one time dimension)")
     tname = rd.time_variable(acc.name)
     stamps, factor = rd.time(tname, n) if tname is not None else (None, 1.0)
     keep = np.isfinite(acc.values).all(axis=1)
-    for ch in (gyro, temp):
+    for ch in (gyro, temp, mag):
         if ch is not None:
             keep &= np.isfinite(ch.values).all(axis=1) if ch.values.ndim == 2 else np.isfinite(ch.values)
     if stamps is not None:
@@ -395,13 +402,14 @@ def _recording(rd: _Reader, spec: DataSpec, path: Path, sha: str) -> Recording:
     if idx.size == 0:
         if n == 0:
             raise rd.fail(f"variable {short(acc.name)} holds no samples", "data.columns.ax", "record samples")
-        empty = [ch.name for ch in (acc, gyro, temp) if ch is not None and not np.isfinite(ch.values).any()]
+        empty = [ch.name for ch in (acc, gyro, temp, mag) if ch is not None and not np.isfinite(ch.values).any()]
         raise rd.fail("has no rows with every channel read present (all fill values"
                       + (f": {short(empty[0])} holds no value)" if empty else ")"), "data",
                       "record samples, or map variables that hold them")
     raw = acc.values[idx]
     g = None if gyro is None else gyro.values[idx]
-    for ch, arr in ((acc, raw), (gyro, g)):
+    m = None if mag is None else mag.values[idx]
+    for ch, arr in ((acc, raw), (gyro, g), (mag, m)):
         if arr is not None and not (np.abs(arr) <= MAX_ABS_VALUE).all():
             k = int(idx[np.flatnonzero((np.abs(arr) > MAX_ABS_VALUE).any(axis=1))[0]])
             raise rd.fail(f"sample {k} of {short(ch.name)} holds a value beyond +-{MAX_ABS_VALUE:g} (corrupt)", "data",
@@ -430,4 +438,5 @@ def _recording(rd: _Reader, spec: DataSpec, path: Path, sha: str) -> Recording:
             note = f"no time variable: {rate:g} Hz, rows with fill values left out as gaps; " + note
     return Recording(t=t, raw=raw, temp=None if temp is None else temp.values[idx], unit=acc.unit,
                      source=str(path), sha256=sha, gyro=g, t_source=t_source, time_unit="s", time_note=note,
-                     time_column=tname, gyro_unit="raw" if gyro is None else gyro.unit, time_base=tb)
+                     time_column=tname, gyro_unit="raw" if gyro is None else gyro.unit, time_base=tb, mag=m,
+                     mag_unit="raw" if mag is None else mag.unit)

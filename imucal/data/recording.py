@@ -79,6 +79,8 @@ class Recording:
     #: is then that of t's span)
     time_base: TimeBase | None = None
     mag: np.ndarray | None = None  #: (N, 3) magnetometer readings when mapped (mx, my, mz), in their own unit
+    #: the magnetometer's unit when the file states it (a netCDF variable's units), else raw (the run file's mag.unit)
+    mag_unit: str = "raw"
 
     def __post_init__(self) -> None:
         """A temperature no sensor reads (below absolute zero, or above TEMPERATURE_RANGE) is refused: the fit
@@ -99,7 +101,7 @@ class Recording:
         if self.temp is not None:
             out.append(TEMPERATURE)
         if self.mag is not None:
-            out.append(MAGNETIC_FIELD)
+            out.append(MAGNETIC_FIELD.with_unit(self.mag_unit))
         return tuple(out)
 
     @property

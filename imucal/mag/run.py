@@ -7,6 +7,7 @@ intervals are its poses; ``calibrated`` turns the result into the one value ever
 """
 from __future__ import annotations
 
+import dataclasses
 import datetime as dt
 import math
 from typing import Any, Mapping
@@ -20,7 +21,7 @@ from imucal.mag.evidence import Poses
 from imucal.mag.field_model import Place
 from imucal.errors import ImucalError
 from imucal.mag.result import MagCalibration
-from imucal.mag.units import UNIT_SCALE_FACTOR
+from imucal.mag.units import UNIT_SCALE_FACTOR, convert, is_field_unit
 
 
 def settings_of(cfg: MagConfig) -> MagSettings:
@@ -31,6 +32,18 @@ def settings_of(cfg: MagConfig) -> MagSettings:
     lag = None if cfg.lag is None else float(cfg.lag)
     return MagSettings(field=cfg.field, field_unit=cfg.field_unit, dip_deg=cfg.dip_deg, soft_iron=cfg.soft_iron,
                        window=int(cfg.window), lag=lag, place=place)
+
+
+def stated_mag(cfg: MagConfig, rec: Any) -> MagConfig:
+    """The run file's ``mag:`` section with the readings' unit the file states (a netCDF variable's units:
+    ``rec.mag_unit``) when the section leaves it raw; refused when the two name different units."""
+    unit = getattr(rec, "mag_unit", "raw")
+    if unit == "raw" or cfg.unit == unit:
+        return cfg
+    if cfg.unit != "raw":
+        raise ImucalError(f"mag.unit {cfg.unit} disagrees with the file's {unit} for mx, my, mz", file=rec.source,
+                          field="mag.unit", fix="drop mag.unit (--mag-unit): the variable's units attribute gives it")
+    return dataclasses.replace(cfg, unit=unit)
 
 
 def mag_of_run(mag: np.ndarray, acc: np.ndarray, start: np.ndarray, end: np.ndarray, cfg: MagConfig,
@@ -91,9 +104,12 @@ def lag_samples(fit: Mapping[str, Any], rate: float) -> int:
     return int(round(samples)) if isinstance(samples, (int, float)) and math.isfinite(samples) else 0
 
 
-def aligned(sensor: SensorCalibration, mag: np.ndarray, rate: float) -> tuple[np.ndarray, int]:
-    """A log's mx, my, mz on the accelerometer's samples (``imucal apply``): moved earlier by the calibration's lag
-    in whole samples at ``rate`` [Hz] (``lag_samples``), and that count (0: unchanged)."""
+def aligned(sensor: SensorCalibration, mag: np.ndarray, rate: float, unit: str = "raw") -> tuple[np.ndarray, int]:
+    """A log's mx, my, mz on the accelerometer's samples (``imucal apply``): in the calibration's input unit when
+    both the log (``unit``, a netCDF variable's) and the calibration name field units, moved earlier by the
+    calibration's lag in whole samples at ``rate`` [Hz] (``lag_samples``), and that count (0: unchanged)."""
+    if is_field_unit(unit) and is_field_unit(sensor.raw_unit) and unit != sensor.raw_unit:
+        mag = np.asarray(mag, float) * convert(1.0, unit, sensor.raw_unit)
     samples = lag_samples(sensor.fit, rate)
     return (shift_lag(np.asarray(mag, float), samples) if samples else mag), samples
 

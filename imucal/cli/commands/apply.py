@@ -87,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
     if cal.sensor(MAGNETOMETER) is not None and rec.mag is not None:
         from imucal.mag.run import aligned  # only a calibration with a magnetometer
 
-        raws[MAGNETOMETER], lag = aligned(cal.sensor(MAGNETOMETER), rec.mag, rec.sample_rate)
+        raws[MAGNETOMETER], lag = aligned(cal.sensor(MAGNETOMETER), rec.mag, rec.sample_rate, rec.mag_unit)
     # the covariates of every sensor the data hold (the gyroscope's bias(T) reads temp even when the
     # accelerometer's map does not)
     keys = tuple(dict.fromkeys([*cal.covariates, *(k for s in cal.attached if raws.get(s.kind) is not None
