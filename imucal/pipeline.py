@@ -594,11 +594,12 @@ def calibrate_imu(config: RunConfig, recording: Recording | None = None,
         run = _with_gyro(run, config, gyro_file)
     if getattr(run.recording, "mag", None) is not None:  # a file read in chunks never has one
         run = _with_mag(run, config)
-    elif config.mag != MagConfig():  # mag: (or --mag-*) given for a log without mx, my, mz: said, not dropped
+    elif config.mag != MagConfig() or getattr(run.recording, "mag_unread", ""):  # said, not dropped
         from imucal.report.mag import no_magnetometer_warning
 
         cal = run.calibration
-        warned = [*cal.fit.get("warnings", []), no_magnetometer_warning(run.recording.source)]
+        warned = [*cal.fit.get("warnings", []),
+                  no_magnetometer_warning(run.recording.source, getattr(run.recording, "mag_unread", ""))]
         run = replace(run, calibration=replace(cal, fit={**cal.fit, "warnings": warned}))
     return run
 

@@ -115,3 +115,15 @@ def test_apply_takes_the_field_unit_the_file_states(log, tmp_path, run_cli):
     ya, yb = (np.genfromtxt(tmp_path / f, delimiter=",", names=True) for f in ("a.csv", "b.csv"))
     for c in ("mx", "my", "mz"):
         np.testing.assert_allclose(yb[c], ya[c], rtol=1e-9, atol=1e-9)
+
+
+def test_a_field_variable_not_mapped_is_said_not_dropped(log, tmp_path, run_cli):
+    """Without the mapping the accelerometer calibrates alone, and the run says which variable it left
+    unread and how to read it (it was silent)."""
+    _, nc, _ = log
+    r = run_cli(["calibrate", "--data", nc, "--out", tmp_path / "out", "--no-figures", "--quiet"])
+    assert r.code == 0, r.err
+    said = (f"magnetometer: {nc} holds magnetic_field (nT), not read: no magnetometer calibrated (map it to "
+            "calibrate it: --columns mx=magnetic_field")
+    assert said in r.err and said in (tmp_path / "out" / "report.txt").read_text()
+    assert load_calibration(tmp_path / "out" / "calibration.yaml").sensor("magnetometer") is None

@@ -274,6 +274,15 @@ class _Reader:
                             f"data.columns.{role}", "map a 1-D variable")
         return _Channel(v, unit, name)
 
+    def field_variable(self) -> str:
+        """An (N, 3) variable in a magnetic field unit, not mapped (a magnetometer is read only when mapped):
+        its name and units, for the run to say it left it unread; "" without one."""
+        for name, var in self.vars.items():
+            units = _units(var)
+            if units is not None and units.lower() in FIELD_UNITS and var.ndim == 2 and 3 in var.shape:
+                return f"{name} ({units})"
+        return ""
+
     def time_variable(self, acc_name: str) -> str | None:
         """The time: data.columns.t, else the coordinate of the acceleration's first dimension."""
         if "t" in self.spec.columns:
@@ -439,4 +448,5 @@ def _recording(rd: _Reader, spec: DataSpec, path: Path, sha: str) -> Recording:
     return Recording(t=t, raw=raw, temp=None if temp is None else temp.values[idx], unit=acc.unit,
                      source=str(path), sha256=sha, gyro=g, t_source=t_source, time_unit="s", time_note=note,
                      time_column=tname, gyro_unit="raw" if gyro is None else gyro.unit, time_base=tb, mag=m,
-                     mag_unit="raw" if mag is None else mag.unit)
+                     mag_unit="raw" if mag is None else mag.unit,
+                     mag_unread="" if mag is not None else rd.field_variable())

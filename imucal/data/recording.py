@@ -81,6 +81,8 @@ class Recording:
     mag: np.ndarray | None = None  #: (N, 3) magnetometer readings when mapped (mx, my, mz), in their own unit
     #: the magnetometer's unit when the file states it (a netCDF variable's units), else raw (the run file's mag.unit)
     mag_unit: str = "raw"
+    #: a magnetometer the file holds but was not asked to read (a netCDF field variable not mapped): "NAME (UNITS)"
+    mag_unread: str = ""
 
     def __post_init__(self) -> None:
         """A temperature no sensor reads (below absolute zero, or above TEMPERATURE_RANGE) is refused: the fit

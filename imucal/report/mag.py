@@ -42,8 +42,13 @@ def mag_warnings(cal: MagCalibration) -> list[str]:
     return out
 
 
-def no_magnetometer_warning(source: str) -> str:
-    """The magnetometer's settings given (mag:, --mag-*) for a recording without one."""
+def no_magnetometer_warning(source: str, unread: str = "") -> str:
+    """The magnetometer's settings given (mag:, --mag-*) for a recording without one, or a magnetometer the file
+    holds but was not asked to read (``unread``: a netCDF field variable, "NAME (UNITS)")."""
+    if unread:
+        name = unread.rsplit(" (", 1)[0]
+        return (f"magnetometer: {source} holds {unread}, not read: no magnetometer calibrated (map it to calibrate "
+                f"it: --columns mx={name}, or data.columns: {{mx: {name}}})")
     return (f"magnetometer: mag settings given, but {source} has no mx, my, mz: no magnetometer calibrated "
             "(map its columns: data.columns, --columns mx=...,my=...,mz=...)")
 
