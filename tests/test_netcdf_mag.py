@@ -127,3 +127,28 @@ def test_a_field_variable_not_mapped_is_said_not_dropped(log, tmp_path, run_cli)
             "calibrate it: --columns mx=magnetic_field")
     assert said in r.err and said in (tmp_path / "out" / "report.txt").read_text()
     assert load_calibration(tmp_path / "out" / "calibration.yaml").sensor("magnetometer") is None
+
+
+@pytest.mark.parametrize("name", ["b\nimucal: error: injected", "b\x00c", "x" * 300])
+def test_a_hostile_field_variable_name_stays_one_line(tmp_path, name):
+    """The unread variable's name reaches the warning (stderr, report.txt) as one printable line."""
+    nc = write_nc(tmp_path / "f.nc", np.tile([0.0, 0.0, 1.0], (10, 1)), np.arange(10.0), acc_units="g")
+    with h5py.File(nc, "a") as f:
+        f.create_dataset(name, data=np.full((10, 3), 0.5)).attrs["units"] = "uT"
+    rec = load_recording(str(nc))
+    assert rec.mag_unread and rec.mag_unread.isprintable() and len(rec.mag_unread) < 80
+
+
+@pytest.mark.parametrize("case", ["huge", "shape", "units", "length"])
+def test_a_hostile_mapped_field_variable_is_one_line(tmp_path, run_cli, unchanged, case):
+    n = 40
+    acc = np.tile([0.0, 0.0, 1.0], (n, 1))
+    nc = write_nc(tmp_path / "f.nc", acc, np.arange(float(n)), acc_units="g")
+    data = {"huge": np.full((n, 3), 1e300), "shape": np.full((n, 4), 0.5), "units": np.full((n, 3), 0.5),
+            "length": np.full((n - 3, 3), 0.5)}[case]
+    with h5py.File(nc, "a") as f:
+        f.create_dataset("b", data=data).attrs["units"] = "furlongs" if case == "units" else "uT"
+    with unchanged(tmp_path):
+        r = run_cli(["calibrate", "--data", nc, "--columns", "mx=b", "--out", tmp_path / "out"])
+    assert r.code == 2 and r.err.count("\n") == 1 and "fix: " in r.err, r.err
+    assert not (tmp_path / "out").exists()

@@ -31,7 +31,7 @@ import numpy as np
 
 from imucal.data.recording import MAX_ABS_VALUE, Recording
 from imucal.data.timebase import rate_time_base, stamped_times
-from imucal.errors import ImucalError, short
+from imucal.errors import ImucalError, key_text, short
 from imucal.files.inputs import max_data_bytes, open_regular
 
 if TYPE_CHECKING:
@@ -280,7 +280,7 @@ class _Reader:
         for name, var in self.vars.items():
             units = _units(var)
             if units is not None and units.lower() in FIELD_UNITS and var.ndim == 2 and 3 in var.shape:
-                return f"{name} ({units})"
+                return f"{key_text(name)} ({key_text(units)})"  # the file's text: one printable line
         return ""
 
     def time_variable(self, acc_name: str) -> str | None:
