@@ -33,6 +33,7 @@ from imucal.data.recording import MAX_ABS_VALUE, Recording
 from imucal.data.timebase import rate_time_base, stamped_times
 from imucal.errors import ImucalError, key_text, short
 from imucal.files.inputs import max_data_bytes, open_regular
+from imucal.mag.units import FIELD_UNITS as FIELD_UT  # each field unit in microtesla: the factors, once
 
 if TYPE_CHECKING:
     from imucal.data.spec import DataSpec
@@ -67,8 +68,8 @@ TEMPERATURE_UNITS = {**{u: ("degC", 1.0, 0.0) for u in ("c", "degc", "deg c", "d
 #: tesla and millitesla in microtesla.
 FIELD_UNITS = {**{u: ("uT", 1.0, 0.0) for u in ("ut", "microtesla", "micro tesla", "µt", "μt", "micro_tesla")},
                **{u: ("nT", 1.0, 0.0) for u in ("nt", "nanotesla", "nano tesla", "nano_tesla")},
-               **{u: ("uT", 1e3, 0.0) for u in ("mt", "millitesla")},
-               **{u: ("uT", 1e6, 0.0) for u in ("t", "tesla")},
+               **{u: ("uT", FIELD_UT["mT"], 0.0) for u in ("mt", "millitesla")},
+               **{u: ("uT", FIELD_UT["T"], 0.0) for u in ("t", "tesla")},
                **{u: ("gauss", 1.0, 0.0) for u in ("gauss", "gs")},  # not "g" nor "mg": an acceleration's
                **{u: ("mG", 1.0, 0.0) for u in ("milligauss", "mgauss")}}
 #: The units of each kind, in words (messages).
