@@ -59,6 +59,10 @@ class RestCheck:
 STATED_UNIT_FACTOR = 2.0
 
 
+#: |reading| at rest below this fraction of the stated unit's gravity, in no unit's gravity: gravity removed.
+NO_GRAVITY = 0.05
+
+
 def stated_unit_error(unit: str, means: np.ndarray, source: str | None = None) -> ImucalError | None:
     """The refusal of readings stated in ``unit`` (one of REST_UNITS: m/s^2, g, mg) whose |reading| at rest (the
     median |mean| of still intervals ``means``) is not that unit's gravity within STATED_UNIT_FACTOR: the fit would
@@ -71,8 +75,15 @@ def stated_unit_error(unit: str, means: np.ndarray, source: str | None = None) -
     if 1.0 / STATED_UNIT_FACTOR <= at_rest / g <= STATED_UNIT_FACTOR:
         return None
     looks = next((u for u, gu in REST_UNITS if abs(at_rest / gu - 1.0) <= REST_TOLERANCE), None)
-    hint = (f"they look like {looks}: give data.unit {looks} (--unit {looks}; a netCDF file: its variable's units "
-            "attribute)" if looks else "give data.unit raw for counts")
+    if looks:
+        hint = (f"they look like {looks}: give data.unit {looks} (--unit {looks}; a netCDF file: its variable's units "
+                "attribute)")
+    elif at_rest / g < NO_GRAVITY:
+        hint = ("still readings without gravity are an acceleration with gravity removed (a phone's or a filter's "
+                "linear acceleration), which cannot calibrate an accelerometer: record the sensor's own readings "
+                "(phyphox: Acceleration with g)")
+    else:
+        hint = "give data.unit raw for counts"
     return ImucalError(f"the readings at rest are {at_rest:.4g} {unit} (median |mean| of {len(means)} still intervals), "
                        f"where readings in {unit} are {g:g}: they are not in {unit}", file=source, field="data.unit",
                        fix=hint)

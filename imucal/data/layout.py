@@ -7,10 +7,11 @@ MAX_SCAN_LINES after the first non-comment line.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import BinaryIO
 
+from imucal.data.header_names import implied_unit, is_celsius, read_name, sensor_unit
 from imucal.data.lines import BINARY_PROBE, MAX_STREAM_BYTES, binary_file, check_text, is_number, not_utf8, split
 from imucal.data.spec import ROLES, DataSpec
 from imucal.data.timebase import time_column_name
@@ -40,7 +41,8 @@ _DEFAULT_NAMES = {"t": ("t", "time", "timestamp"), "ax": ("ax", "acc_x", "accx",
 
 def _known(name: str) -> bool:
     """A header name a role is read from without a mapping (a time column's by time_column_name)."""
-    return name.lower() in sum(_DEFAULT_NAMES.values(), ()) or time_column_name(name)[0]
+    return (name.lower() in sum(_DEFAULT_NAMES.values(), ()) or time_column_name(name)[0]
+            or read_name(name).role is not None)
 
 
 @dataclass(frozen=True)
@@ -53,6 +55,9 @@ class Layout:
     body: int  #: index (in the lines after skip_rows) of the first line after the header
     body_first: int  #: its 1-based line number in the file
     time_column: str  #: the time column's name in the file ("t" without a header)
+    #: the units the header's names state: data.unit (acceleration) and data.gyro_unit, in imucal's
+    #: spelling (imucal.data.header_names), for header_spec
+    units: dict = field(default_factory=dict)
 
     @property
     def usecols(self) -> list[int]:
@@ -88,14 +93,29 @@ def _no_header_layout(ncol: int, path: Path) -> dict[str, int]:
                       fix=f"map the columns, e.g. --columns {example} or data.columns in the YAML")
 
 
+def _uncommented(line: str) -> str:
+    """A header line without the comment sign EuRoC's and TUM's files put before it (#timestamp [ns],...)."""
+    return line.lstrip()[1:] if line.lstrip().startswith("#") else line
+
+
+def _comment_header(lines: list[str], k0: int) -> list[int]:
+    """The comment line just before the first data line when it has as many fields as that line (a
+    header written as a comment: EuRoC, Kalibr, TUM); none otherwise."""
+    c = next((i for i in range(k0 - 1, -1, -1) if lines[i].strip()), None)
+    if c is None or not lines[c].lstrip().startswith("#"):
+        return []
+    delim = sniff_delimiter(lines[k0])
+    return [c] if len(split(_uncommented(lines[c]), delim)) == len(split(lines[k0], delim)) else []
+
+
 def _find_header(lines: list[str], k0: int, spec: DataSpec, path: Path) -> int | None:
     """Index of the header line: the first text line with the mapped (or known default) names."""
     if spec.format not in ("auto", "csv"):
         return None
     wanted = [str(v) for r, v in spec.columns.items() if isinstance(v, str)]
     first_text: list[str] | None = None  # the first non-numeric line, for the message
-    for i in range(k0, min(len(lines), k0 + MAX_SCAN_LINES)):
-        toks = split(lines[i], spec.delimiter or sniff_delimiter(lines[i]))
+    for i in [*_comment_header(lines, k0), *range(k0, min(len(lines), k0 + MAX_SCAN_LINES))]:
+        toks = split(_uncommented(lines[i]), spec.delimiter or sniff_delimiter(lines[i]))
         if toks and not all(is_number(t) for t in toks):
             names = [t.strip().strip('"').strip("'") for t in toks]
             first_text = names if first_text is None else first_text
@@ -116,8 +136,13 @@ def _find_header(lines: list[str], k0: int, spec: DataSpec, path: Path) -> int |
 
 
 def _header_columns(names: list[str], spec: DataSpec, path: Path) -> dict[str, int]:
-    """Role -> column index from a header: the mapped names (or indices), else the default names."""
+    """Role -> column index from a header: the mapped names (or indices), else the default names, else
+    the role an exporter's name states (imucal.data.header_names: PX4, ArduPilot, EuRoC, ROS, ...)."""
     lower = [n.lower() for n in names]
+    read = [read_name(n) for n in names]
+    # ArduPilot's IMU message names its temperature T beside its time columns (TimeUS): a bare capital T
+    # beside another time column is not the time (imucal's own t, lower case, is)
+    capital_t = "T" in names and any(r.role == "t" and n != "T" for n, r in zip(names, read))
     cols: dict[str, int] = {}
     for role in ROLES:
         if role in spec.columns:
@@ -130,12 +155,24 @@ def _header_columns(names: list[str], spec: DataSpec, path: Path) -> dict[str, i
                 raise ImucalError(f"column {short(want)} (for {role}) not in header {short(names, 200)}",
                                   file=str(path), field=f"data.columns.{role}",
                                   fix="map the role to one of the header's names")
-        else:
-            name = next((c for c in _DEFAULT_NAMES[role] if c in lower), None)
-            if name is None and role == "t":  # timestamp_ms, time_s, stamp: the unit is read from the name
-                name = next((n for n in lower if time_column_name(n)[0]), None)
-            if name is not None:
-                cols[role] = _only_column(lower, name, role, path)
+            continue
+        lowered = [n for n, orig in zip(lower, names) if not (capital_t and orig == "T")]
+        name = next((c for c in _DEFAULT_NAMES[role] if c in lowered), None)
+        if name is None and role == "t":  # timestamp_ms, time_s, stamp: the unit is read from the name
+            name = next((n for n in lowered if time_column_name(n)[0]), None)
+        if name is not None:
+            cols[role] = _only_column(lower, name, role, path)
+    for role in ROLES:  # an exporter's names (acc_x [g], AccX, accelerometer_m_s2[0], w_RS_S_x [rad s^-1])
+        if role not in cols:
+            at = [i for i, r in enumerate(read) if r.role == role and i not in cols.values()]
+            if role == "temp" and not at and capital_t and "timeus" in lower:
+                at = [names.index("T")]  # ArduPilot's IMU message: TimeUS the time, T the temperature [degC]
+            if len(at) > 1:
+                raise ImucalError(f"columns {short(names[at[0]])} and {short(names[at[1]])} both name {role}",
+                                  file=str(path), field=f"data.columns.{role}",
+                                  fix=f"map {role} to one of them, e.g. --columns {role}={at[0]}")
+            if at:
+                cols[role] = at[0]
     return cols
 
 
@@ -179,14 +216,15 @@ def layout(lines: list[str], spec: DataSpec, path: Path) -> Layout:
     names: list[str] = []
     if header_idx is not None:
         delim = spec.delimiter or sniff_delimiter(lines[header_idx])
-        names = [t.strip().strip('"').strip("'") for t in split(lines[header_idx], delim)]
+        names = [t.strip().strip('"').strip("'") for t in split(_uncommented(lines[header_idx]), delim)]
         cols = _header_columns(names, spec, path)
         wide = [r for r, c in cols.items() if not 0 <= c < len(names)]
         if wide:
             raise ImucalError(f"column {cols[wide[0]]} of {wide[0]} is beyond the header's {len(names)} columns",
                               file=str(path), field=f"data.columns.{wide[0]}",
                               fix=f"give a 0-based index below {len(names)}, or the column's name")
-        body = header_idx + 1
+        body = max(header_idx + 1, k0)
+        _one_instance(names, lines[body:body + MAX_SCAN_LINES], delim, path)
     else:
         if not all(is_number(t) for t in split(lines[k0], spec.delimiter)):
             raise ImucalError(f"line {first_lineno + k0} is neither a header with known column names nor numbers",
@@ -204,7 +242,77 @@ def layout(lines: list[str], spec: DataSpec, path: Path) -> Layout:
     roles = [r for r in ROLES if r in cols]
     tname = names[cols["t"]] if header_idx is not None and "t" in roles else "t"
     return Layout(delimiter=delim, columns=cols, roles=roles, body=body, body_first=first_lineno + body,
-                  time_column=tname)
+                  time_column=tname, units=_stated_units(names, cols, path) if names else {})
+
+
+#: Column names that number the sensor a row comes from (ArduPilot's IMU message: I).
+INSTANCE_NAMES = ("i", "instance")
+
+
+def _one_instance(names: list[str], head: list[str], delim: str | None, path: Path) -> None:
+    """Refuse rows of several sensors interleaved in one file (an instance column that changes in the
+    head's rows): read as one sensor, they would be calibrated as one."""
+    for k, name in enumerate(names):
+        if name.lower() in INSTANCE_NAMES:
+            seen = {toks[k] for ln in head if ln.strip() and not ln.lstrip().startswith("#")
+                    and len(toks := split(ln, delim)) > k}
+            if len(seen) > 1:
+                shown = ", ".join(sorted(short(v, 20) for v in seen)[:4])
+                raise ImucalError(f"rows of {len(seen)} sensors are interleaved (column {short(name)} holds {shown})",
+                                  file=str(path), field="data.path",
+                                  fix=f"write one sensor's rows to a file (ArduPilot: mavlogdump.py --types IMU "
+                                      f"--condition 'IMU.I==0' --format csv) and calibrate each")
+
+
+#: The spec's field each sensor's stated unit fills, its value when not given, and the roles that state it.
+_UNIT_FIELDS = (("unit", "raw", ("ax", "ay", "az")), ("gyro_unit", "auto", ("gx", "gy", "gz")))
+
+
+def _stated_units(names: list[str], cols: dict[str, int], path: Path) -> dict[str, str]:
+    """The acceleration's and the rate's units the header's names state (the three axes agreeing); a
+    temperature stated in another unit than degC, or a unit not known, is refused naming the column."""
+    out: dict[str, str] = {}
+    if "temp" in cols:
+        u = read_name(names[cols["temp"]]).unit
+        if u is not None and not is_celsius(u):
+            raise ImucalError(f"the temperature column {short(names[cols['temp']])} states {short(u)}: imucal reads "
+                              "degrees Celsius", file=str(path), field="data.columns.temp",
+                              fix="convert the column to degC (and name it e.g. temp [degC])")
+    for spec_field, _, roles in _UNIT_FIELDS:
+        stated = {}
+        for r in roles:
+            if r in cols and (u := read_name(names[cols[r]]).unit or implied_unit(names[cols[r]], names)) is not None:
+                unit = sensor_unit(r, u)
+                if unit is None:
+                    raise ImucalError(f"column {short(names[cols[r]])} states a unit imucal does not know ({short(u)})",
+                                      file=str(path), field=f"data.{spec_field}",
+                                      fix="give the unit (--unit, --gyro-unit: e.g. m/s^2, g, counts; rad/s, deg/s) "
+                                          "and rename the column, or map the columns (--columns)")
+                stated[names[cols[r]]] = unit
+        if len(set(stated.values())) > 1:
+            (n1, u1), *rest = stated.items()
+            n2, u2 = next((n, u) for n, u in rest if u != u1)
+            raise ImucalError(f"columns {short(n1)} and {short(n2)} state different units ({u1}, {u2})",
+                              file=str(path), field=f"data.{spec_field}", fix="give every axis in one unit")
+        if stated:
+            out[spec_field] = next(iter(stated.values()))
+    return out
+
+
+def header_spec(spec: DataSpec, lay: Layout, path: Path) -> DataSpec:
+    """``spec`` with the units the header states where it gave none (data.unit raw, data.gyro_unit auto);
+    a unit given that disagrees with the header's is refused, naming both."""
+    given = {}
+    for spec_field, default, _ in _UNIT_FIELDS:
+        stated, now = lay.units.get(spec_field), getattr(spec, spec_field)
+        if stated is None or stated == now or (stated == "raw" and now in ("raw", "counts")):
+            continue
+        if now != default and not (now == "counts" and stated == "raw"):
+            raise ImucalError(f"data.{spec_field} {short(now)} given, but the header states {stated}",
+                              file=str(path), field=f"data.{spec_field}",
+                              fix=f"give {stated} (or leave the unit out), or correct the header")
+        given[spec_field] = stated
+    return replace(spec, **given) if given else spec
 
 
 def file_head(f: BinaryIO, spec: DataSpec, path: Path) -> tuple[Layout, int]:

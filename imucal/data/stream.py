@@ -29,6 +29,7 @@ import numpy as np
 
 from imucal.constants import TIME_UNITS
 from imucal.data.blocks import TextBlocks
+from imucal.data.layout import header_spec
 from imucal.data.lines import corrupt_value, no_rows, not_increasing
 from imucal.data.run_pool import batches, ordered_map, run_workers
 from imucal.data.recording import MAX_ABS_VALUE, RecordingSummary, StaticSamples, TimeBase, temperature_error
@@ -132,6 +133,7 @@ class StreamedRecording:
         self.settings, self.rails = settings, rails
         self.file = TextBlocks(self.spec, resolve_path(self.spec, base_dir))
         self.path: Path = self.file.path
+        self.spec = header_spec(self.spec, self.file.lay, self.path)  # the units the header's names state
         self._it = {r: i for i, r in enumerate(self.file.lay.roles)}
         self.spill = RowSpill(len(self._it))
         parsed, timing = self._parse()

@@ -206,7 +206,7 @@ TIME_NAME_UNITS = {"s": "s", "sec": "s", "secs": "s", "second": "s", "seconds": 
 
 def time_column_name(name: str) -> tuple[bool, str | None]:
     """Whether a column ``name`` names time (TIME_NAMES), and the unit it states (None: none stated)."""
-    n = name.strip().lower()
+    n = name.strip().strip("\"'").lower().lstrip("#%").strip()  # "#timestamp [ns]" (EuRoC), "%time" (rostopic)
     for base in TIME_NAMES:
         if n.startswith(base):
             rest = n[len(base):].strip(" _-.:()[]{}")

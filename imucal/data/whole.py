@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from imucal.data import fixed_width
-from imucal.data.layout import MAX_SCAN_LINES, Layout, layout
+from imucal.data.layout import MAX_SCAN_LINES, Layout, header_spec, layout
 from imucal.data.lines import (BINARY_PROBE, binary_file, corrupt_value, decode, line_too_long, lineno, long_line,
                                no_rows, not_increasing, parse_block, plain_text)
 from imucal.data.recording import MAX_ABS_VALUE, Recording
@@ -103,6 +103,7 @@ def read_text(spec: DataSpec, path: Path) -> Recording:
         body = lines[lay.body:]
         arr = parse_block(body, lay.body_first, lay.delimiter, lay.usecols, path)
     del blob
+    spec = header_spec(spec, lay, path)  # the units the header's names state
     body_first = lay.body_first
 
     def line_of(k: int) -> int:  # the file's line number of row k

@@ -1,0 +1,125 @@
+"""What a header's column names say: each column's role (t, ax .. mz, temp) and the unit it states.
+
+Exporters name their columns their own way; these are read without a mapping (--columns), their
+units taken from the names:
+- imucal and imu_tk: ``t ax ay az gx gy gz temp mx my mz`` (acc_x, gyro_x, mag_x, ...); a unit in
+  brackets or parentheses after any name: ``time (s)``, ``acc_x [m/s^2]``, ``temperature [degC]``;
+- PX4 (ulog2csv, sensor_combined): ``timestamp``, ``accelerometer_m_s2[0..2]``, ``gyro_rad[0..2]``;
+- ArduPilot (mavlogdump --types IMU): ``TimeUS``, ``AccX``, ``GyrX``, ``T`` (the IMU's temperature in
+  degC) and ``I`` (which IMU: several interleaved are refused, the fix names the instance filter);
+- EuRoC and Kalibr: ``#timestamp [ns]``, ``w_RS_S_x [rad s^-1]``, ``a_RS_S_x [m s^-2]``;
+- ROS (``rostopic echo -p`` of sensor_msgs/Imu): ``%time``, ``field.angular_velocity.x`` (rad/s),
+  ``field.linear_acceleration.x`` (m/s^2: REP 103's units);
+- phyphox: ``Time (s)``, ``Acceleration x (m/s^2)``, ``Gyroscope x (rad/s)``;
+- Xsens MT Manager: ``Acc_X``, ``Mag_X`` (``Gyr_X`` only mapped: below); Arduino MPU-6050 sketches:
+  ``AcX``, ``GyX`` (their ``Tmp`` is the sensor's raw count, not degC: not read as a temperature).
+A name is read as: an optional unit or axis index in brackets at its end, then words (split at
+space, ``_``, ``.``, ``-``), the last word (or the last letter of a word) the axis.
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+from imucal.data.timebase import TIME_NAME_UNITS, time_column_name
+
+#: Word stems of each sensor's axis columns (the words before the axis, joined by "_").
+ACC_STEMS = ("a", "ac", "acc", "accel", "accelerometer", "acceleration", "linear_acceleration",
+             "accelerometer_m_s2", "a_rs_s")
+GYRO_STEMS = ("g", "gy", "gyr", "gyro", "gyroscope", "angular_velocity", "gyro_rad", "w", "omega", "w_rs_s")
+#: Stems read only with the axis letter joined (ArduPilot's GyrX): mad-lab-fau's sessions name gyr_x
+#: columns that hold concatenated segments, not one motion a gyroscope could be calibrated on (mapped, read).
+JOINED_ONLY = ("gyr",)
+MAG_STEMS = ("m", "mag", "magnetometer", "magnetic_field")
+#: Stems that state their unit (PX4's field names; ROS's sensor_msgs/Imu fields, REP 103).
+STEM_UNITS = {"accelerometer_m_s2": "m/s^2", "linear_acceleration": "m/s^2", "gyro_rad": "rad/s",
+              "angular_velocity": "rad/s"}
+#: ArduPilot's IMU message (a header with TimeUS): AccX.. in m/s^2, GyrX.. in rad/s (its log documentation).
+ARDUPILOT_UNITS = {**{f"acc{a}": "m/s^2" for a in "xyz"}, **{f"gyr{a}": "rad/s" for a in "xyz"}}
+TEMP_STEMS = ("temp", "temperature", "t_c", "imu_temp", "temp_c")
+#: Unit spellings in names -> the unit imucal records (acceleration: data.unit; rate: data.gyro_unit).
+ACC_UNITS = {**{u: "m/s^2" for u in ("m/s^2", "m/s2", "m/s²", "m s^-2", "m s-2", "m.s-2", "m*s^-2", "ms^-2",
+                                      "m/s/s")},
+             **{u: "g" for u in ("g", "g0", "gn")}, "mg": "mg", "counts": "raw", "lsb": "raw", "raw": "raw"}
+RATE_UNITS = {**{u: "rad/s" for u in ("rad/s", "rad s^-1", "rad s-1", "rad.s-1", "rad/sec", "rads^-1")},
+              **{u: "deg/s" for u in ("deg/s", "°/s", "dps", "deg s^-1", "deg s-1", "deg/sec", "degree/s",
+                                      "degrees/s")},
+              "counts": "raw", "lsb": "raw", "raw": "raw"}
+TEMP_UNITS = ("degc", "deg c", "°c", "c", "celsius", "deg_c", "degree_celsius")
+
+_SUFFIX = re.compile(r"^(?P<base>.*?)\s*[\[(](?P<inner>[^\[\]()]*)[\])]\s*$")
+
+
+@dataclass(frozen=True)
+class Name:
+    """One header name, read: its role (None: none of ours) and the unit it states (None: none)."""
+
+    role: str | None
+    unit: str | None = None
+    words: tuple[str, ...] = ()  #: the name's words (lower case), without unit or axis
+
+
+def _axis_of(words: list[str], index: str | None) -> tuple[str | None, list[str]]:
+    """The axis (x, y, z) and the words before it: an index [0..2], a last word x/y/z, or a last
+    letter x/y/z after a known stem (AccX, gyrx, mx)."""
+    if index is not None:
+        return ("xyz"[int(index)] if int(index) < 3 else None), words
+    if len(words) > 1 and words[-1] in ("x", "y", "z"):
+        return (None if "_".join(words[:-1]) in JOINED_ONLY else words[-1]), words[:-1]
+    if words and len(words[-1]) > 1 and words[-1][-1] in "xyz":
+        head = [*words[:-1], words[-1][:-1]]
+        if "_".join(head) in ACC_STEMS + GYRO_STEMS + MAG_STEMS:
+            return words[-1][-1], head
+    return None, words
+
+
+def read_name(name: str) -> Name:
+    """The role and unit a column name states (see the module's list of exporters)."""
+    text = name.strip().strip("\"'").strip()
+    unit = index = None
+    m = _SUFFIX.match(text)
+    if m:
+        inner = m["inner"].strip()
+        index, unit = (inner, None) if inner.isdigit() else (None, inner or None)
+        text = m["base"]
+    text = text.lower().lstrip("#%").strip()
+    if text.startswith("field."):  # rostopic echo -p
+        text = text[len("field."):]
+    words = [w for w in re.split(r"[\s._\-]+", text) if w]
+    unit_l = None if unit is None else unit.lower()
+    is_time, time_unit = time_column_name(text)
+    if is_time and index is None and (unit_l is None or unit_l in TIME_NAME_UNITS):
+        return Name("t", time_unit if unit_l is None else TIME_NAME_UNITS[unit_l], tuple(words))
+    if "_".join(words) in TEMP_STEMS and index is None:
+        return Name("temp", unit, tuple(words))
+    axis, stem_words = _axis_of(words, index)
+    stem = "_".join(stem_words)
+    if axis is None:
+        return Name(None, unit, tuple(words))
+    for kind, stems in (("a", ACC_STEMS), ("g", GYRO_STEMS), ("m", MAG_STEMS)):
+        if stem in stems:
+            return Name(kind + axis, unit if unit is not None else STEM_UNITS.get(stem), tuple(stem_words))
+    return Name(None, unit, tuple(words))
+
+
+def sensor_unit(role: str, unit: str | None) -> str | None:
+    """The unit a name states for a role's sensor, in imucal's spelling (None: none stated, or none we
+    know: the caller names it)."""
+    if unit is None:
+        return None
+    u = unit.strip().lower()
+    table = ACC_UNITS if role[0] == "a" else RATE_UNITS if role[0] == "g" else {}
+    return table.get(u) or table.get(u.replace(" ", ""))
+
+
+def is_celsius(unit: str) -> bool:
+    """Whether a temperature column's stated unit is degrees Celsius."""
+    return unit.strip().lower() in TEMP_UNITS
+
+
+def implied_unit(name: str, names: list[str]) -> str | None:
+    """The unit a column's exporter implies without stating it: ArduPilot's IMU message (TimeUS in the
+    header) logs AccX in m/s^2 and GyrX in rad/s."""
+    if "timeus" in (n.strip().lower() for n in names):
+        return ARDUPILOT_UNITS.get(name.strip().lower())
+    return None

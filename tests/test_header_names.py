@@ -1,0 +1,218 @@
+"""Exporters' headers read without a mapping (imucal.data.header_names): the role and unit of each
+column from its name, the units into the recording, and one line for what a header cannot mean.
+
+The numbers under each header are the same samples (a simulated six-pose recording); every reader
+must give the same arrays, in the unit the header states.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from imucal.data.header_names import read_name
+from imucal.data.load import load_recording
+from imucal.data.spec import DataSpec
+from imucal.data.stream import StreamedRecording
+from imucal.errors import ImucalError
+
+
+@pytest.mark.parametrize("name, role, unit", [
+    ("t", "t", None), ("Time (s)", "t", "s"), ("#timestamp [ns]", "t", "ns"), ("%time", "t", None),
+    ("TimeUS", "t", "us"), ("timestamp", "t", None),
+    ("ax", "ax", None), ("gz", "gz", None), ("wx", "gx", None),
+    ("acc_x [g]", "ax", "g"), ("Acceleration y (m/s^2)", "ay", "m/s^2"), ("AccZ", "az", None),
+    ("AcX", "ax", None), ("accelerometer_m_s2[2]", "az", "m/s^2"), ("a_RS_S_x [m s^-2]", "ax", "m s^-2"),
+    ("field.linear_acceleration.y", "ay", "m/s^2"), ("Acc_X", "ax", None),
+    ("GyrX", "gx", None), ("gyro_rad[1]", "gy", "rad/s"), ("w_RS_S_z [rad s^-1]", "gz", "rad s^-1"),
+    ("field.angular_velocity.x", "gx", "rad/s"), ("Gyroscope x (rad/s)", "gx", "rad/s"), ("GyZ", "gz", None),
+    ("Gyr_X", None, None),  # mad-lab-fau's gyr_x: read only when mapped (tests/test_trust_data.py)
+    ("Mag_X", "mx", None), ("Magnetic field y (µT)", "my", "µT"),
+    ("temperature [degC]", "temp", "degC"), ("Tmp", None, None), ("FreeAcc_X", None, None),
+    ("temperature", "temp", None), ("accelerometer_m_s2[3]", None, None), ("seq", None, None),
+])
+def test_a_name_states_its_role_and_unit(name, role, unit):
+    got = read_name(name)
+    assert (got.role, got.unit) == (role, unit)
+
+
+def _samples(n: int = 600) -> dict[str, np.ndarray]:
+    """Six still poses of 1 s at 100 Hz, in m/s^2 and rad/s, and a temperature [degC]."""
+    rng = np.random.default_rng(3)
+    dirs = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float)
+    acc = np.repeat(dirs * 9.81, n // 6, axis=0) + rng.normal(0, 0.01, (n, 3))
+    return {"t": np.arange(n) / 100.0, "acc": acc, "gyro": rng.normal(0, 0.001, (n, 3)),
+            "temp": 20 + np.arange(n) / n}
+
+
+#: (file, header, one row from t, acc, gyro, temp, the units the recording must carry, the time unit)
+def _px4(t, a, g, T):
+    return f"{int(round(t * 1e6))},{g[0]!r},{g[1]!r},{g[2]!r},4000,0,{a[0]!r},{a[1]!r},{a[2]!r},4000"
+
+
+def _ardupilot(t, a, g, T):
+    return f"{1.7e9 + t:.6f},{int(round(t * 1e6))},0,{g[0]!r},{g[1]!r},{g[2]!r},{a[0]!r},{a[1]!r},{a[2]!r},0,0,{T!r}"
+
+
+def _euroc(t, a, g, T):
+    return f"{int(round(1.4e18 + t * 1e9))},{g[0]!r},{g[1]!r},{g[2]!r},{a[0]!r},{a[1]!r},{a[2]!r}"
+
+
+def _ros(t, a, g, T):
+    ns = int(round(1.6e18 + t * 1e9))
+    return f"{ns},7,{ns},imu_link,0,0,0,1,{g[0]!r},{g[1]!r},{g[2]!r},{a[0]!r},{a[1]!r},{a[2]!r}"
+
+
+def _phyphox(t, a, g, T):
+    return f"{t!r},{a[0] / 9.80665!r},{a[1] / 9.80665!r},{a[2] / 9.80665!r},{g[0] * 180 / np.pi!r}," \
+           f"{g[1] * 180 / np.pi!r},{g[2] * 180 / np.pi!r},{T!r}"
+
+
+EXPORTERS = {
+    "px4": ("timestamp,gyro_rad[0],gyro_rad[1],gyro_rad[2],gyro_integral_dt,accelerometer_timestamp_relative,"
+            "accelerometer_m_s2[0],accelerometer_m_s2[1],accelerometer_m_s2[2],accelerometer_integral_dt",
+            _px4, ("m/s^2", "rad/s", "us"), False),
+    "ardupilot": ("timestamp,TimeUS,I,GyrX,GyrY,GyrZ,AccX,AccY,AccZ,EG,EA,T", _ardupilot, ("m/s^2", "rad/s", "s"),
+                  True),
+    "euroc": ("#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],a_RS_S_x [m s^-2],"
+              "a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]", _euroc, ("m/s^2", "rad/s", "ns"), False),
+    "ros": ("%time,field.header.seq,field.header.stamp,field.header.frame_id,field.orientation.x,"
+            "field.orientation.y,field.orientation.z,field.orientation.w,field.angular_velocity.x,"
+            "field.angular_velocity.y,field.angular_velocity.z,field.linear_acceleration.x,"
+            "field.linear_acceleration.y,field.linear_acceleration.z", _ros, ("m/s^2", "rad/s", "ns"), False),
+    "units in brackets": ('"Time (s)","Acceleration x (g)","Acceleration y (g)","Acceleration z (g)",'
+                          '"Gyroscope x (deg/s)","Gyroscope y (deg/s)","Gyroscope z (deg/s)","temperature [degC]"',
+                          _phyphox, ("g", "deg/s", "s"), True),
+}
+
+
+def _write(path: Path, header: str, row, s: dict) -> Path:
+    rows = [row(t, a, g, T) for t, a, g, T in zip(s["t"].tolist(), s["acc"].tolist(), s["gyro"].tolist(),
+                                                  s["temp"].tolist())]
+    path.write_text(header + "\n" + "\n".join(rows) + "\n")
+    return path
+
+
+@pytest.mark.parametrize("stream", ["never", "always"])
+@pytest.mark.parametrize("exporter", list(EXPORTERS))
+def test_an_exporters_file_is_read_in_the_units_its_header_states(tmp_path, exporter, stream):
+    header, row, (unit, gyro_unit, time_unit), has_temp = EXPORTERS[exporter]
+    s = _samples()
+    p = _write(tmp_path / f"{exporter}.csv", header, row, s)
+    spec = DataSpec(path=str(p), stream=stream)
+    if stream == "always":  # the chunked reader: the same units, no samples kept
+        rec = StreamedRecording(spec).recording
+        assert rec.unit == unit and rec.n == s["t"].size
+        return
+    rec = load_recording(spec)
+    assert (rec.unit, rec.gyro_unit, rec.time_unit) == (unit, gyro_unit, time_unit)
+    acc = s["acc"] / (9.80665 if unit == "g" else 1.0)
+    gyro = s["gyro"] * (180 / np.pi if gyro_unit == "deg/s" else 1.0)
+    np.testing.assert_allclose(rec.raw, acc, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(rec.gyro, gyro, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(rec.t, s["t"], atol=2e-6)  # epoch seconds in ArduPilot's timestamp: 1e-6 s digits
+    if has_temp:
+        np.testing.assert_allclose(rec.temp, s["temp"], rtol=1e-12)
+    else:
+        assert rec.temp is None
+
+
+def test_ardupilots_t_is_its_temperature_not_the_time(tmp_path):
+    """ArduPilot's IMU message holds TimeUS and T, the IMU's temperature: T used to be read as the time
+    (the bare name t), which a warming IMU's rising temperature would pass for."""
+    s = _samples()
+    s["temp"] = 30 + np.arange(s["t"].size) * 0.01  # rising: strictly increasing, as stamps are
+    p = _write(tmp_path / "ap.csv", EXPORTERS["ardupilot"][0], _ardupilot, s)
+    rec = load_recording(DataSpec(path=str(p)))
+    assert rec.time_column == "timestamp"
+    np.testing.assert_allclose(rec.temp, s["temp"])
+
+
+def test_a_header_as_a_comment_with_the_datas_columns_is_the_header(tmp_path):
+    """EuRoC writes its header as a comment; a comment with another number of fields is a comment."""
+    s = _samples()
+    p = tmp_path / "c.csv"
+    body = "\n".join(_euroc(*r) for r in zip(s["t"].tolist(), s["acc"].tolist(), s["gyro"].tolist(),
+                                              s["temp"].tolist()))
+    p.write_text("# recorded by a rig, 7 columns follow\n" + EXPORTERS["euroc"][0] + "\n" + body + "\n")
+    assert load_recording(DataSpec(path=str(p))).unit == "m/s^2"
+    p.write_text("# t gx gy gz\n" + body + "\n")  # four names, seven columns: no header
+    with pytest.raises(ImucalError, match="has 7 columns and no header"):
+        load_recording(DataSpec(path=str(p)))
+
+
+@pytest.mark.parametrize("header, given, words", [
+    ("t,acc_x [g],acc_y [g],acc_z [g]", {"unit": "m/s^2"},
+     "c.csv: data.unit: data.unit 'm/s^2' given, but the header states g (fix: give g (or leave the unit out)"),
+    ("t,acc_x [g],acc_y [m/s^2],acc_z [g]", {},
+     "c.csv: data.unit: columns 'acc_x [g]' and 'acc_y [m/s^2]' state different units (g, m/s^2)"),
+    ("t,acc_x [furlong],acc_y,acc_z", {},
+     "c.csv: data.unit: column 'acc_x [furlong]' states a unit imucal does not know ('furlong')"),
+    ("t,ax,ay,az,temp [°F]", {},
+     "c.csv: data.columns.temp: the temperature column 'temp [°F]' states '°F': imucal reads degrees Celsius"),
+    ("t,acc_x [g],acc_y [g],acc_z [g],Acceleration x (g)", {},
+     "c.csv: data.columns.ax: columns 'acc_x [g]' and 'Acceleration x (g)' both name ax (fix: map ax to one of "
+     "them, e.g. --columns ax=1)"),
+    ("t,acc_x [g],acc_y [g],acc_z [g],gyro_x [deg/s],gyro_y [deg/s],gyro_z [deg/s]", {"gyro_unit": "rad/s"},
+     "c.csv: data.gyro_unit: data.gyro_unit 'rad/s' given, but the header states deg/s"),
+])
+def test_a_header_that_cannot_mean_one_thing_is_one_line(tmp_path, header, given, words):
+    p = tmp_path / "c.csv"
+    p.write_text(header + "\n" + "\n".join(",".join(["%d" % k] + ["1"] * (header.count(",")))
+                                           for k in range(10)) + "\n")
+    with pytest.raises(ImucalError) as ei:
+        load_recording(DataSpec(path=str(p), **given))
+    assert "\n" not in str(ei.value) and words in str(ei.value), str(ei.value)
+
+
+def test_interleaved_sensors_are_refused_naming_the_instance_column(tmp_path):
+    p = tmp_path / "ap.csv"
+    rows = [f"{k // 3 * 0.01:.2f},{k // 3 * 10000 + k % 3},{k % 3},0,0,9.81" for k in range(60)]
+    p.write_text("timestamp,TimeUS,I,AccX,AccY,AccZ\n" + "\n".join(rows) + "\n")
+    with pytest.raises(ImucalError) as ei:
+        load_recording(DataSpec(path=str(p)))
+    assert str(ei.value).endswith("/ap.csv: data.path: rows of 3 sensors are interleaved (column 'I' holds "
+                                    "'0', '1', '2') (fix: write one sensor's rows to a file (ArduPilot: "
+                                    "mavlogdump.py --types IMU --condition 'IMU.I==0' --format csv) and calibrate each)"), str(ei.value)
+
+
+def test_a_calibration_from_an_exporters_header_equals_the_mapped_one(run_cli, tmp_path, si_recording):
+    """The same samples under phyphox's names (units in parentheses) and under imucal's own with the unit
+    given: the same calibration, parameter for parameter."""
+    d = np.loadtxt(si_recording.path, delimiter=",", skiprows=1)
+    own = tmp_path / "own.csv"
+    np.savetxt(own, d[:, :4], delimiter=",", header="t,ax,ay,az", comments="", fmt="%.10g")
+    ph = tmp_path / "phyphox.csv"
+    np.savetxt(ph, d[:, :4], delimiter=",", comments="", fmt="%.10g",
+               header='"Time (s)","Acceleration x (m/s^2)","Acceleration y (m/s^2)","Acceleration z (m/s^2)"')
+    out = {}
+    for name, p, extra in (("own", own, ["--unit", "m/s^2"]), ("phyphox", ph, [])):
+        js = tmp_path / f"{name}.json"
+        r = run_cli(["calibrate", p, *extra, "--out", tmp_path / name, "--no-figures", "--quiet", "--json", js])
+        assert r.code == 0, r.err
+        out[name] = json.loads(js.read_text())
+    assert out["own"]["params"] == out["phyphox"]["params"] and out["own"]["std"] == out["phyphox"]["std"]
+    assert out["own"]["raw_unit"] == out["phyphox"]["raw_unit"] == "m/s^2"
+
+
+def test_a_linear_acceleration_without_gravity_is_named_as_such(run_cli, tmp_path):
+    """phyphox's "Linear Acceleration" (gravity removed by the phone): still readings near 0 m/s^2 are not
+    counts, and the fix says what to record instead."""
+    rng = np.random.default_rng(1)
+    t = np.arange(6000) / 100.0
+    a = rng.normal(0, 0.02, (6000, 3))
+    for k in range(0, 6000, 1000):  # six moves between still spans
+        a[k:k + 100] += rng.normal(0, 2, (100, 3))
+    p = tmp_path / "lin.csv"
+    np.savetxt(p, np.column_stack([t, a]), delimiter=",", comments="", fmt="%.6g",
+               header='"Time (s)","Linear Acceleration x (m/s^2)","Linear Acceleration y (m/s^2)",'
+                      '"Linear Acceleration z (m/s^2)"')
+    r = run_cli(["calibrate", p, "--out", tmp_path / "o", "--no-figures", "--quiet"])
+    lines = r.err.strip().splitlines()
+    assert r.code == 2 and len(lines) == 1 and not (tmp_path / "o").exists(), r.err
+    assert "lin.csv: data.unit: the readings at rest are" in lines[0] and lines[0].endswith(
+        "(fix: still readings without gravity are an acceleration with gravity removed (a phone's or a filter's "
+        "linear acceleration), which cannot calibrate an accelerometer: record the sensor's own readings "
+        "(phyphox: Acceleration with g))"), lines[0]
