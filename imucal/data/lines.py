@@ -169,11 +169,24 @@ def check_lines(lines: list[str], first_lineno: int, delimiter: str | None, usec
         for c in usecols:
             if not is_number(toks[c]):
                 raise ImucalError(f"line {first_lineno + i} column {c + 1}: {toks[c][:20]!r} is not a number",
-                                  file=str(path), field="data",
-                                  fix="remove non-numeric rows or map the right columns")
+                                  file=str(path), field="data", fix=not_a_number_fix(toks[c], delimiter))
             if not math.isfinite(float(toks[c])):
                 raise ImucalError(f"line {first_lineno + i} holds NaN or Inf", file=str(path),
                                   field="data", fix="remove or repair the non-finite rows before calibrating")
+
+
+_DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+([eE][+-]?\d+)?$")
+
+
+def not_a_number_fix(tok: str, delimiter: str | None) -> str:
+    """What to do about a field that is not a number: an empty cell (sensors logged apart), a decimal comma
+    (a spreadsheet's European locale), or another text."""
+    if not tok.strip():
+        return ("an empty cell: a logger that writes each sensor's rows apart (at its own rate) leaves the other "
+                "sensors' cells empty; write each sensor to its own file, or fill the rows, before calibrating")
+    if delimiter != "," and _DECIMAL_COMMA.match(tok.strip()):
+        return "the numbers have a decimal comma: write them with a decimal point (a spreadsheet in an English locale)"
+    return "remove non-numeric rows or map the right columns"
 
 
 def lineno(lines: list[str], k: int, first: int) -> int:
