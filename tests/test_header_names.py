@@ -216,3 +216,23 @@ def test_a_linear_acceleration_without_gravity_is_named_as_such(run_cli, tmp_pat
         "(fix: still readings without gravity are an acceleration with gravity removed (a phone's or a filter's "
         "linear acceleration), which cannot calibrate an accelerometer: record the sensor's own readings "
         "(phyphox: Acceleration with g))"), lines[0]
+
+
+@pytest.mark.parametrize("stream", ["never", "always"])
+def test_a_line_of_units_under_the_names_is_read_as_their_units(tmp_path, stream):
+    """Some loggers write the units on the line after the names: read as the units, not refused as a row."""
+    s = _samples()
+    p = tmp_path / "u.csv"
+    rows = "\n".join(f"{t!r},{a[0] / 9.80665!r},{a[1] / 9.80665!r},{a[2] / 9.80665!r},{T!r}"
+                     for t, a, T in zip(s["t"].tolist(), s["acc"].tolist(), s["temp"].tolist()))
+    p.write_text("t,ax,ay,az,temp\ns,g,g,g,degC\n" + rows + "\n")
+    if stream == "always":
+        rec = StreamedRecording(DataSpec(path=str(p), stream=stream)).recording
+        assert (rec.unit, rec.n) == ("g", s["t"].size)
+        return
+    rec = load_recording(DataSpec(path=str(p)))
+    assert rec.unit == "g" and rec.raw.shape == (s["t"].size, 3)
+    np.testing.assert_allclose(rec.raw * 9.80665, s["acc"], rtol=1e-12)
+    p.write_text("t,ax,ay,az,temp\ns,g,g,g,degF\n" + rows + "\n")
+    with pytest.raises(ImucalError, match="the temperature column 'temp \\[degF\\]' states 'degF'"):
+        load_recording(DataSpec(path=str(p)))

@@ -123,3 +123,9 @@ def implied_unit(name: str, names: list[str]) -> str | None:
     if "timeus" in (n.strip().lower() for n in names):
         return ARDUPILOT_UNITS.get(name.strip().lower())
     return None
+
+
+def is_unit_name(text: str) -> bool:
+    """Whether ``text`` is a unit of time, acceleration, angular rate or temperature that a name may state."""
+    u = text.strip().lower()
+    return u in TIME_NAME_UNITS or u in ACC_UNITS or u in RATE_UNITS or u in TEMP_UNITS or u.replace(" ", "") in ACC_UNITS

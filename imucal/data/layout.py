@@ -11,7 +11,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import BinaryIO
 
-from imucal.data.header_names import implied_unit, is_celsius, read_name, sensor_unit
+from imucal.data.header_names import implied_unit, is_celsius, is_unit_name, read_name, sensor_unit
 from imucal.data.lines import BINARY_PROBE, MAX_STREAM_BYTES, binary_file, check_text, is_number, not_utf8, split
 from imucal.data.spec import ROLES, DataSpec
 from imucal.data.timebase import time_column_name
@@ -224,6 +224,10 @@ def layout(lines: list[str], spec: DataSpec, path: Path) -> Layout:
                               file=str(path), field=f"data.columns.{wide[0]}",
                               fix=f"give a 0-based index below {len(names)}, or the column's name")
         body = max(header_idx + 1, k0)
+        units_row = _units_row(lines[body] if body < len(lines) else "", delim, len(names))
+        if units_row is not None:  # a line of units under the names (s, m/s^2, deg/s, degC): read as theirs
+            names = [f"{n} [{u}]" if u and read_name(n).unit is None else n for n, u in zip(names, units_row)]
+            body += 1
         _one_instance(names, lines[body:body + MAX_SCAN_LINES], delim, path)
     else:
         if not all(is_number(t) for t in split(lines[k0], spec.delimiter)):
@@ -243,6 +247,15 @@ def layout(lines: list[str], spec: DataSpec, path: Path) -> Layout:
     tname = names[cols["t"]] if header_idx is not None and "t" in roles else "t"
     return Layout(delimiter=delim, columns=cols, roles=roles, body=body, body_first=first_lineno + body,
                   time_column=tname, units=_stated_units(names, cols, path) if names else {})
+
+
+def _units_row(line: str, delim: str | None, n: int) -> list[str] | None:
+    """The units of a line under the header that holds one per column (some empty) and no number, at least
+    one a unit imucal knows; None for any other line."""
+    toks = [t.strip().strip("\"'").strip("[]()").strip() for t in split(line, delim)]
+    if len(toks) != n or any(is_number(t) for t in toks if t) or any(len(t) > 16 for t in toks):
+        return None
+    return toks if any(t and is_unit_name(t) for t in toks) else None
 
 
 #: Column names that number the sensor a row comes from (ArduPilot's IMU message: I).
