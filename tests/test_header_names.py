@@ -11,6 +11,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from imucal.data.header_names import read_name
 from imucal.data.load import load_recording
@@ -236,3 +238,25 @@ def test_a_line_of_units_under_the_names_is_read_as_their_units(tmp_path, stream
     p.write_text("t,ax,ay,az,temp\ns,g,g,g,degF\n" + rows + "\n")
     with pytest.raises(ImucalError, match="the temperature column 'temp \\[degF\\]' states 'degF'"):
         load_recording(DataSpec(path=str(p)))
+
+
+_PIECES = ["t", "T", "time", "TimeUS", "#timestamp", "%time", "acc", "Acc", "a", "gyro", "gyr", "w", "mag", "temp",
+           "field.", "linear_acceleration", "_", ".", " ", "x", "y", "z", "X", "[0]", "[2]", "[9]", " [g]", " (m/s^2)",
+           " [rad s^-1]", " (deg/s)", " [degC]", " [°F]", " (s)", " [ns]", " [furlong]", "(", "]", "I", "Tmp", "µ", "\""]
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(names=st.lists(st.lists(st.sampled_from(_PIECES) | st.text(max_size=4), min_size=1, max_size=4).map("".join),
+                      min_size=3, max_size=9),
+       units_row=st.booleans())
+def test_any_header_is_read_or_refused_in_one_line(tmp_path, names, units_row):
+    """Whatever the names, the reader gives a recording or one ImucalError line: never another exception."""
+    names = [n.replace(",", ";").replace("\n", " ").replace("\r", " ") for n in names]
+    rows = [",".join(f"{(k * 0.01 if j == 0 else 1.0 + j):g}" for j in range(len(names))) for k in range(30)]
+    extra = [",".join(["s", "g", "deg/s", "degC"][j % 4] for j in range(len(names)))] if units_row else []
+    p = tmp_path / "h.csv"
+    p.write_text("\n".join([",".join(names), *extra, *rows]) + "\n", encoding="utf-8", errors="surrogatepass")
+    try:
+        load_recording(DataSpec(path=str(p), sample_rate=100.0))
+    except ImucalError as exc:
+        assert "\n" not in str(exc)
