@@ -260,3 +260,28 @@ def test_any_header_is_read_or_refused_in_one_line(tmp_path, names, units_row):
         load_recording(DataSpec(path=str(p), sample_rate=100.0))
     except ImucalError as exc:
         assert "\n" not in str(exc)
+
+
+def test_a_rate_stated_above_the_header_times_a_file_without_a_time_column(tmp_path):
+    """tomisuarez's MPU-6050 log starts with "Fs,100" and has no time column: read at 100 Hz as with the rate
+    given; a rate given that disagrees is refused, naming both."""
+    from conftest import real_file
+
+    p = real_file("mpu6050-tomisuarez", "example_data_calibration.csv")
+    stated = load_recording(DataSpec(path=str(p)))
+    given = load_recording(DataSpec(path=str(p), sample_rate=100.0))
+    assert stated.time_note == "no time column: 100 Hz stated above the header"
+    assert given.time_note == "no time column: 100 Hz given"
+    for a, b in ((stated.t, given.t), (stated.raw, given.raw), (stated.gyro, given.gyro)):
+        np.testing.assert_array_equal(a, b)
+    with pytest.raises(ImucalError) as ei:
+        load_recording(DataSpec(path=str(p), sample_rate=200.0))
+    assert str(ei.value).endswith("example_data_calibration.csv: data.sample_rate: sample rate 200 Hz given, but "
+                                  "the file states 100 Hz above its header: two sources of time disagree (fix: give "
+                                  "100 (or leave the rate out), or correct the file's line)"), str(ei.value)
+    q = tmp_path / "meta.csv"  # other spellings, and a key that is not a rate
+    q.write_text("sampling rate: 50 Hz\nsensor,MPU-6050\nax,ay,az\n" + "0,0,1\n" * 10)
+    assert load_recording(DataSpec(path=str(q))).time_note == "no time column: 50 Hz stated above the header"
+    q.write_text("samples,50\nax,ay,az\n" + "0,0,1\n" * 10)
+    with pytest.raises(ImucalError, match="no time column and no sample rate"):
+        load_recording(DataSpec(path=str(q)))

@@ -7,6 +7,7 @@ MAX_SCAN_LINES after the first non-comment line.
 from __future__ import annotations
 
 import os
+import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import BinaryIO
@@ -14,7 +15,7 @@ from typing import BinaryIO
 from imucal.data.header_names import implied_unit, is_celsius, is_unit_name, read_name, sensor_unit
 from imucal.data.lines import BINARY_PROBE, MAX_STREAM_BYTES, binary_file, check_text, is_number, not_utf8, split
 from imucal.data.spec import ROLES, DataSpec
-from imucal.data.timebase import time_column_name
+from imucal.data.timebase import RATE_TOLERANCE, time_column_name
 from imucal.errors import ImucalError, short
 from imucal.files.inputs import open_regular
 
@@ -58,6 +59,8 @@ class Layout:
     #: the units the header's names state: data.unit (acceleration) and data.gyro_unit, in imucal's
     #: spelling (imucal.data.header_names), for header_spec
     units: dict = field(default_factory=dict)
+    #: [Hz] a sample rate a metadata line above the header states ("Fs,100"), for header_spec
+    sample_rate: float | None = None
 
     @property
     def usecols(self) -> list[int]:
@@ -188,12 +191,12 @@ def _only_column(names: list[str], name: str, role: str, path: Path) -> int:
     return at[0]
 
 
-def _check_roles(cols: dict[str, int], spec: DataSpec, path: Path) -> None:
+def _check_roles(cols: dict[str, int], spec: DataSpec, path: Path, meta_rate: float | None = None) -> None:
     for role in ("ax", "ay", "az"):
         if role not in cols:
             raise ImucalError(f"missing column for {role}", file=str(path), field=f"data.columns.{role}",
                               fix=f"add a column named {role} or map it in data.columns")
-    if "t" not in cols and spec.sample_rate is None:
+    if "t" not in cols and spec.sample_rate is None and meta_rate is None:
         raise ImucalError("no time column and no sample rate", file=str(path), field="data.sample_rate",
                           fix="add a t column or set data.sample_rate in Hz")
     for axes, what in ((("gx", "gy", "gz"), "gyroscope"), (("mx", "my", "mz"), "magnetometer")):
@@ -242,11 +245,32 @@ def layout(lines: list[str], spec: DataSpec, path: Path) -> Layout:
         if not cols:
             cols = _no_header_layout(len(split(lines[k0], delim)), path)
         body = k0
-    _check_roles(cols, spec, path)
+    meta_rate = _metadata_rate(lines[k0:header_idx], delim) if header_idx is not None else None
+    _check_roles(cols, spec, path, meta_rate)
     roles = [r for r in ROLES if r in cols]
     tname = names[cols["t"]] if header_idx is not None and "t" in roles else "t"
     return Layout(delimiter=delim, columns=cols, roles=roles, body=body, body_first=first_lineno + body,
-                  time_column=tname, units=_stated_units(names, cols, path) if names else {})
+                  time_column=tname, units=_stated_units(names, cols, path) if names else {},
+                  sample_rate=meta_rate)
+
+
+#: Keys of a metadata line above the header that states the sample rate [Hz] ("Fs,100": the MPU-6050
+#: logger of tomisuarez's calibration; "sample_rate: 200 Hz").
+RATE_KEYS = ("fs", "sample rate", "sample_rate", "sampling rate", "sampling_rate", "sampling frequency",
+             "sample frequency", "rate", "frequency", "odr", "data rate")
+
+
+def _metadata_rate(meta: list[str], delim: str | None) -> float | None:
+    """The sample rate [Hz] one metadata line states as key and value (a "Hz" after it allowed); None when
+    no line does, or two disagree."""
+    found = set()
+    for ln in meta:
+        parts = [p.strip().strip("\"'") for p in re.split(r"[,;:=\t]", ln.strip().lstrip("#"), maxsplit=1)]
+        if len(parts) == 2 and parts[0].lower().removesuffix(" [hz]").removesuffix(" (hz)") in RATE_KEYS:
+            value = parts[1].removesuffix("Hz").removesuffix("hz").strip().rstrip(",;")
+            if is_number(value) and 0 < float(value) < float("inf"):
+                found.add(float(value))
+    return found.pop() if len(found) == 1 else None
 
 
 def _units_row(line: str, delim: str | None, n: int) -> list[str] | None:
@@ -316,6 +340,13 @@ def header_spec(spec: DataSpec, lay: Layout, path: Path) -> DataSpec:
     """``spec`` with the units the header states where it gave none (data.unit raw, data.gyro_unit auto);
     a unit given that disagrees with the header's is refused, naming both."""
     given = {}
+    if lay.sample_rate is not None and spec.sample_rate is None and "t" not in lay.roles:
+        given["sample_rate"] = lay.sample_rate  # "Fs,100" above the header of a file without a time column
+    elif lay.sample_rate is not None and spec.sample_rate is not None and (
+            abs(spec.sample_rate / lay.sample_rate - 1.0) > RATE_TOLERANCE):
+        raise ImucalError(f"sample rate {spec.sample_rate:g} Hz given, but the file states {lay.sample_rate:g} Hz "
+                          "above its header: two sources of time disagree", file=str(path), field="data.sample_rate",
+                          fix=f"give {lay.sample_rate:g} (or leave the rate out), or correct the file's line")
     for spec_field, default, _ in _UNIT_FIELDS:
         stated, now = lay.units.get(spec_field), getattr(spec, spec_field)
         if stated is None or stated == now or (stated == "raw" and now in ("raw", "counts")):

@@ -133,7 +133,8 @@ class StreamedRecording:
         self.settings, self.rails = settings, rails
         self.file = TextBlocks(self.spec, resolve_path(self.spec, base_dir))
         self.path: Path = self.file.path
-        self.spec = header_spec(self.spec, self.file.lay, self.path)  # the units the header's names state
+        self._rate_source = "given" if self.spec.sample_rate is not None else "stated above the header"
+        self.spec = header_spec(self.spec, self.file.lay, self.path)  # units the header states, a rate above it
         self._it = {r: i for i, r in enumerate(self.file.lay.roles)}
         self.spill = RowSpill(len(self._it))
         parsed, timing = self._parse()
@@ -256,7 +257,7 @@ class StreamedRecording:
             unit, note = dec.unit, dec.note
             tb = time_base(dec, stats, gi, gs, lambda k: self._row_line(p.blocks, k))
         else:
-            unit, note, tb = rate_time_base(spec.sample_rate)
+            unit, note, tb = rate_time_base(spec.sample_rate, self._rate_source)
         if n < 3:  # as detect_static
             raise ImucalError(f"only {n} samples", file=str(self.path), field="data",
                               fix="record several seconds in each orientation")

@@ -473,6 +473,7 @@ def stamped_times(stamps: np.ndarray, time_unit: str, rate_given: float | None, 
     return t, dec.unit, dec.note, time_base(dec, st, gi, gs, line_of)
 
 
-def rate_time_base(rate: float) -> tuple[str, str, TimeBase]:
-    """Unit, note and time base of a recording without a time column, at the given rate [Hz]."""
-    return "s", f"no time column: {float(rate):g} Hz given", TimeBase(source=TimeSource.RATE, rate=float(rate))
+def rate_time_base(rate: float, source: str = "given") -> tuple[str, str, TimeBase]:
+    """Unit, note and time base of a recording without a time column, at the rate [Hz] ``source`` names
+    (given; or stated by the file: a metadata line above the header)."""
+    return "s", f"no time column: {float(rate):g} Hz {source}", TimeBase(source=TimeSource.RATE, rate=float(rate))

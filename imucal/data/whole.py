@@ -103,7 +103,8 @@ def read_text(spec: DataSpec, path: Path) -> Recording:
         body = lines[lay.body:]
         arr = parse_block(body, lay.body_first, lay.delimiter, lay.usecols, path)
     del blob
-    spec = header_spec(spec, lay, path)  # the units the header's names state
+    rate_source = "given" if spec.sample_rate is not None else "stated above the header"
+    spec = header_spec(spec, lay, path)  # the units the header's names state, a rate its metadata lines state
     body_first = lay.body_first
 
     def line_of(k: int) -> int:  # the file's line number of row k
@@ -120,7 +121,7 @@ def read_text(spec: DataSpec, path: Path) -> Recording:
         if not (d > 0).all():
             raise not_increasing(line_of(int(np.flatnonzero(~(d > 0))[0]) + 1), path)
     if stamps is None:
-        unit, note, tb = rate_time_base(spec.sample_rate)
+        unit, note, tb = rate_time_base(spec.sample_rate, rate_source)
         t = np.arange(n) / float(spec.sample_rate)
     elif n:  # a given sample rate beside the stamps is checked against them (imucal.data.timebase)
         t, unit, note, tb = stamped_times(stamps, spec.time_unit, spec.sample_rate, lay.time_column, path, line_of)
