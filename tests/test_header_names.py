@@ -31,7 +31,7 @@ from imucal.errors import ImucalError
     ("GyrX", "gx", None), ("gyro_rad[1]", "gy", "rad/s"), ("w_RS_S_z [rad s^-1]", "gz", "rad s^-1"),
     ("field.angular_velocity.x", "gx", "rad/s"), ("Gyroscope x (rad/s)", "gx", "rad/s"), ("GyZ", "gz", None),
     ("Gyr_X", None, None),  # mad-lab-fau's gyr_x: read only when mapped (tests/test_trust_data.py)
-    ("Mag_X", "mx", None), ("Magnetic field y (µT)", "my", "µT"),
+    ("Mag_X", "mx", None), ("Magnetic field y (µT)", "my", "µT"), ("field.magnetic_field.z", "mz", None),
     ("temperature [degC]", "temp", "degC"), ("Tmp", None, None), ("FreeAcc_X", None, None),
     ("temperature", "temp", None), ("accelerometer_m_s2[3]", None, None), ("seq", None, None),
 ])
@@ -151,7 +151,11 @@ def test_a_header_as_a_comment_with_the_datas_columns_is_the_header(tmp_path):
     ("t,acc_x [g],acc_y [m/s^2],acc_z [g]", {},
      "c.csv: data.unit: columns 'acc_x [g]' and 'acc_y [m/s^2]' state different units (g, m/s^2)"),
     ("t,acc_x [furlong],acc_y,acc_z", {},
-     "c.csv: data.unit: column 'acc_x [furlong]' states a unit imucal does not know ('furlong')"),
+     "c.csv: data.columns.ax: column 'acc_x [furlong]' states 'furlong', where a text file's ax, ay, az are read "
+     "in m/s^2, g, mg or counts (fix: write the column in one of those units and name it so, e.g. ax [m/s^2])"),
+    ("t,ax,ay,az,mag_x [mT],mag_y [mT],mag_z [mT]", {},
+     "c.csv: data.columns.mx: column 'mag_x [mT]' states 'mT', where a text file's mx, my, mz are read in uT, nT, "
+     "gauss, milligauss or counts"),
     ("t,ax,ay,az,temp [°F]", {},
      "c.csv: data.columns.temp: the temperature column 'temp [°F]' states '°F': imucal reads degrees Celsius"),
     ("t,acc_x [g],acc_y [g],acc_z [g],Acceleration x (g)", {},
@@ -285,3 +289,13 @@ def test_a_rate_stated_above_the_header_times_a_file_without_a_time_column(tmp_p
     q.write_text("samples,50\nax,ay,az\n" + "0,0,1\n" * 10)
     with pytest.raises(ImucalError, match="no time column and no sample rate"):
         load_recording(DataSpec(path=str(q)))
+
+
+def test_a_magnetometers_stated_unit_reaches_the_recording(tmp_path):
+    """phyphox's "Magnetic field x (µT)": the recording's mag_unit, which a run's mag.unit is checked against
+    (as a netCDF variable's units attribute)."""
+    p = tmp_path / "m.csv"
+    p.write_text("t,ax,ay,az,Magnetic field x (µT),Magnetic field y (µT),Magnetic field z (µT)\n"
+                 + "\n".join(f"{k * 0.01:.2f},0,0,9.81,20,1,-40" for k in range(20)) + "\n")
+    rec = load_recording(DataSpec(path=str(p)))
+    assert rec.mag_unit == "uT" and rec.mag.shape == (20, 3)

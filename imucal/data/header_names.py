@@ -22,6 +22,7 @@ import re
 from dataclasses import dataclass
 
 from imucal.data.timebase import TIME_NAME_UNITS, time_column_name
+from imucal.data.unit_names import ACCELERATION_UNITS, FIELD_UNITS, RATE_UNITS, TEMPERATURE_UNITS
 
 #: Word stems of each sensor's axis columns (the words before the axis, joined by "_").
 ACC_STEMS = ("a", "ac", "acc", "accel", "accelerometer", "acceleration", "linear_acceleration",
@@ -37,15 +38,13 @@ STEM_UNITS = {"accelerometer_m_s2": "m/s^2", "linear_acceleration": "m/s^2", "gy
 #: ArduPilot's IMU message (a header with TimeUS): AccX.. in m/s^2, GyrX.. in rad/s (its log documentation).
 ARDUPILOT_UNITS = {**{f"acc{a}": "m/s^2" for a in "xyz"}, **{f"gyr{a}": "rad/s" for a in "xyz"}}
 TEMP_STEMS = ("temp", "temperature", "t_c", "imu_temp", "temp_c")
-#: Unit spellings in names -> the unit imucal records (acceleration: data.unit; rate: data.gyro_unit).
-ACC_UNITS = {**{u: "m/s^2" for u in ("m/s^2", "m/s2", "m/s²", "m s^-2", "m s-2", "m.s-2", "m*s^-2", "ms^-2",
-                                      "m/s/s")},
-             **{u: "g" for u in ("g", "g0", "gn")}, "mg": "mg", "counts": "raw", "lsb": "raw", "raw": "raw"}
-RATE_UNITS = {**{u: "rad/s" for u in ("rad/s", "rad s^-1", "rad s-1", "rad.s-1", "rad/sec", "rads^-1")},
-              **{u: "deg/s" for u in ("deg/s", "°/s", "dps", "deg s^-1", "deg s-1", "deg/sec", "degree/s",
-                                      "degrees/s")},
-              "counts": "raw", "lsb": "raw", "raw": "raw"}
-TEMP_UNITS = ("degc", "deg c", "°c", "c", "celsius", "deg_c", "degree_celsius")
+#: Raw readings (counts), a unit any sensor's column may state.
+RAW_UNITS = ("counts", "count", "lsb", "raw", "adc")
+#: Per sensor, the unit spellings a text header may state (imucal.data.unit_names, plus milli-g): only those
+#: read as they are (factor 1, no offset); a text file's numbers are not converted.
+SENSOR_UNITS = {"a": {**ACCELERATION_UNITS, "mg": ("mg", 1.0, 0.0)}, "g": RATE_UNITS, "m": FIELD_UNITS}
+#: What a text header may state, in words (messages).
+TEXT_UNITS = {"a": "m/s^2, g, mg or counts", "g": "rad/s, deg/s or counts", "m": "uT, nT, gauss, milligauss or counts"}
 
 _SUFFIX = re.compile(r"^(?P<base>.*?)\s*[\[(](?P<inner>[^\[\]()]*)[\])]\s*$")
 
@@ -103,18 +102,20 @@ def read_name(name: str) -> Name:
 
 
 def sensor_unit(role: str, unit: str | None) -> str | None:
-    """The unit a name states for a role's sensor, in imucal's spelling (None: none stated, or none we
-    know: the caller names it)."""
+    """The unit a name states for a role's sensor, in imucal's spelling ("raw" for counts); None when none is
+    stated, or it is one a text file is not read in (the caller names it)."""
     if unit is None:
         return None
     u = unit.strip().lower()
-    table = ACC_UNITS if role[0] == "a" else RATE_UNITS if role[0] == "g" else {}
-    return table.get(u) or table.get(u.replace(" ", ""))
+    if u in RAW_UNITS:
+        return "raw"
+    ours = SENSOR_UNITS[role[0]].get(u)
+    return ours[0] if ours is not None and ours[1:] == (1.0, 0.0) else None
 
 
 def is_celsius(unit: str) -> bool:
-    """Whether a temperature column's stated unit is degrees Celsius."""
-    return unit.strip().lower() in TEMP_UNITS
+    """Whether a temperature column's stated unit is degrees Celsius (read as it is)."""
+    return TEMPERATURE_UNITS.get(unit.strip().lower()) == ("degC", 1.0, 0.0)
 
 
 def implied_unit(name: str, names: list[str]) -> str | None:
@@ -126,6 +127,6 @@ def implied_unit(name: str, names: list[str]) -> str | None:
 
 
 def is_unit_name(text: str) -> bool:
-    """Whether ``text`` is a unit of time, acceleration, angular rate or temperature that a name may state."""
+    """Whether ``text`` is a unit of time, acceleration, angular rate, temperature or field a name may state."""
     u = text.strip().lower()
-    return u in TIME_NAME_UNITS or u in ACC_UNITS or u in RATE_UNITS or u in TEMP_UNITS or u.replace(" ", "") in ACC_UNITS
+    return u in TIME_NAME_UNITS or u in RAW_UNITS or u in TEMPERATURE_UNITS or any(u in t for t in SENSOR_UNITS.values())

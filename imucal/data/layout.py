@@ -12,7 +12,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import BinaryIO
 
-from imucal.data.header_names import implied_unit, is_celsius, is_unit_name, read_name, sensor_unit
+from imucal.data.header_names import TEXT_UNITS, implied_unit, is_celsius, is_unit_name, read_name, sensor_unit
 from imucal.data.lines import BINARY_PROBE, MAX_STREAM_BYTES, binary_file, check_text, is_number, not_utf8, split
 from imucal.data.spec import ROLES, DataSpec
 from imucal.data.timebase import RATE_TOLERANCE, time_column_name
@@ -301,8 +301,11 @@ def _one_instance(names: list[str], head: list[str], delim: str | None, path: Pa
                                       f"--condition 'IMU.I==0' --format csv) and calibrate each")
 
 
-#: The spec's field each sensor's stated unit fills, its value when not given, and the roles that state it.
+#: The spec's field each sensor's stated unit fills, its value when not given, and the roles that state it
+#: (the magnetometer's: the Recording's mag_unit, which the run's mag.unit is checked against).
 _UNIT_FIELDS = (("unit", "raw", ("ax", "ay", "az")), ("gyro_unit", "auto", ("gx", "gy", "gz")))
+_MAG_FIELD = ("mag_unit", "raw", ("mx", "my", "mz"))  # named data.columns.mx in messages: the spec has no field
+_EXAMPLE = {"a": "m/s^2", "g": "rad/s", "m": "uT"}
 
 
 def _stated_units(names: list[str], cols: dict[str, int], path: Path) -> dict[str, str]:
@@ -315,22 +318,23 @@ def _stated_units(names: list[str], cols: dict[str, int], path: Path) -> dict[st
             raise ImucalError(f"the temperature column {short(names[cols['temp']])} states {short(u)}: imucal reads "
                               "degrees Celsius", file=str(path), field="data.columns.temp",
                               fix="convert the column to degC (and name it e.g. temp [degC])")
-    for spec_field, _, roles in _UNIT_FIELDS:
+    for spec_field, _, roles in (*_UNIT_FIELDS, _MAG_FIELD):
         stated = {}
         for r in roles:
             if r in cols and (u := read_name(names[cols[r]]).unit or implied_unit(names[cols[r]], names)) is not None:
                 unit = sensor_unit(r, u)
                 if unit is None:
-                    raise ImucalError(f"column {short(names[cols[r]])} states a unit imucal does not know ({short(u)})",
-                                      file=str(path), field=f"data.{spec_field}",
-                                      fix="give the unit (--unit, --gyro-unit: e.g. m/s^2, g, counts; rad/s, deg/s) "
-                                          "and rename the column, or map the columns (--columns)")
+                    raise ImucalError(f"column {short(names[cols[r]])} states {short(u)}, where a text file's "
+                                      f"{r[0]}x, {r[0]}y, {r[0]}z are read in {TEXT_UNITS[r[0]]}", file=str(path),
+                                      field=f"data.columns.{r}", fix="write the column in one of those units and "
+                                                                     "name it so, e.g. " + f"{r} [{_EXAMPLE[r[0]]}]")
                 stated[names[cols[r]]] = unit
         if len(set(stated.values())) > 1:
             (n1, u1), *rest = stated.items()
             n2, u2 = next((n, u) for n, u in rest if u != u1)
             raise ImucalError(f"columns {short(n1)} and {short(n2)} state different units ({u1}, {u2})",
-                              file=str(path), field=f"data.{spec_field}", fix="give every axis in one unit")
+                              file=str(path), field="data.columns.mx" if spec_field == "mag_unit" else f"data.{spec_field}",
+                              fix="give every axis in one unit")
         if stated:
             out[spec_field] = next(iter(stated.values()))
     return out
