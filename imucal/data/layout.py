@@ -368,7 +368,7 @@ def file_head(f: BinaryIO, spec: DataSpec, path: Path) -> tuple[Layout, int]:
     skip = spec.skip_rows
     head = f.read(BINARY_PROBE)
     if b"\x00" in head:
-        raise binary_file(path)
+        raise binary_file(path, head=head)
     size = 1 << 20
     while True:
         head += f.read(size - len(head))

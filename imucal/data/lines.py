@@ -47,9 +47,27 @@ def line_too_long(path: Path, line: int) -> ImucalError:
                        fix="check that the file is a text recording (one row per line) and not cut or corrupt")
 
 
-def binary_file(path: Path, line: int | None = None) -> ImucalError:
-    """NUL bytes: at the head of the file, or (``line``) after text (a sparse or corrupt file)."""
+#: Binary files recordings come in, by their first bytes: what the file is, and how to get text imucal reads.
+BINARY_FORMATS = (
+    (b"ULog\x01\x12\x35", "a PX4 ULog", "write its IMU as CSV with pyulog (ulog2csv LOG.ulg -m sensor_combined) "
+                                       "and calibrate that CSV (its names are read with their units)"),
+    (b"\xa3\x95", "an ArduPilot DataFlash log", "write its IMU as CSV with pymavlink (mavlogdump.py --types IMU "
+                                              "--condition 'IMU.I==0' --format csv LOG.bin > imu.csv)"),
+    (b"MATLAB 5.0 MAT-file", "a binary MATLAB MAT-file", "save the samples as text in MATLAB (writematrix(X, "
+                                                         "'log.csv') with a header row, or save -ascii)"),
+    (b"PK\x03\x04", "a zip archive (a spreadsheet's .xlsx, or a compressed log)",
+     "save the sheet as CSV, or unzip the recording"),
+    (b"\x1f\x8b", "a gzip-compressed file", "decompress it (gunzip) and calibrate the text"),
+)
+
+
+def binary_file(path: Path, line: int | None = None, head: bytes = b"") -> ImucalError:
+    """NUL bytes: at the head of the file (``head``: its first bytes, which may name its format), or
+    (``line``) after text (a sparse or corrupt file)."""
     where = "" if line is None or line <= 1 else f" from line {line} on (a sparse or corrupt file)"
+    known = next(((what, fix) for magic, what, fix in BINARY_FORMATS if head.startswith(magic)), None)
+    if known is not None and not where:
+        return ImucalError(f"is {known[0]}, not a text recording", file=str(path), field="data.path", fix=known[1])
     return ImucalError(f"is a binary file (NUL bytes){where}, not a text recording", file=str(path),
                        field="data.path", fix="export the recording as CSV or whitespace-separated text")
 

@@ -35,8 +35,8 @@ def _read_bytes(path: Path) -> tuple[bytes, str]:
     hole = first_hole(fd, size)  # a sparse file's NUL tail is never read
     try:
         with os.fdopen(fd, "rb") as f:
-            if b"\x00" in f.read(BINARY_PROBE):  # a binary file is refused before it is read whole
-                raise binary_file(path)
+            if b"\x00" in (probe := f.read(BINARY_PROBE)):  # a binary file is refused before it is read whole
+                raise binary_file(path, head=probe)
             f.seek(0)
             blob = f.read(hole)
     except OSError as exc:
