@@ -11,8 +11,9 @@ from imucal.errors import ImucalError
 
 @pytest.mark.parametrize("stream", ["never", "always"])
 @pytest.mark.parametrize("name, head, words", [
-    ("log.ulg", b"ULog\x01\x12\x35\x01\x00\x00", "is a PX4 ULog, not a text recording (fix: write its IMU as CSV "
-     "with pyulog (ulog2csv LOG.ulg -m sensor_combined) and calibrate that CSV"),
+    ("log.ulg", b"ULog\x01\x12\x35\x01\x00\x00", "is a PX4 ULog, not a text recording (fix: write its "
+     "accelerometer as CSV with pyulog (ulog2csv LOG.ulg -m sensor_accel: before PX4's calibration, with the "
+     "temperature) and calibrate that CSV)"),
     ("00000042.BIN", b"\xa3\x95\x80\x80\x59\x00", "is an ArduPilot DataFlash log, not a text recording (fix: write its "
      "IMU as CSV with pymavlink (mavlogdump.py --types IMU --condition 'IMU.I==0' --format csv LOG.bin > imu.csv))"),
     ("run.mat", b"MATLAB 5.0 MAT-file, Platform: GLNXA64" + b" " * 90 + b"\x00\x01IM",

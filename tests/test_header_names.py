@@ -299,3 +299,18 @@ def test_a_magnetometers_stated_unit_reaches_the_recording(tmp_path):
                  + "\n".join(f"{k * 0.01:.2f},0,0,9.81,20,1,-40" for k in range(20)) + "\n")
     rec = load_recording(DataSpec(path=str(p)))
     assert rec.mag_unit == "uT" and rec.mag.shape == (20, 3)
+
+
+def test_px4s_sensor_accel_csv_is_read_with_its_temperature(tmp_path):
+    """ulog2csv -m sensor_accel (what the ULog refusal tells a user to write): x, y, z before PX4's calibration
+    and the temperature, stamped in microseconds."""
+    s = _samples()
+    p = tmp_path / "log_sensor_accel_0.csv"
+    rows = "\n".join(f"{int(round(t * 1e6))},{int(round(t * 1e6)) - 150},2490378,{a[0]!r},{a[1]!r},{a[2]!r},{T!r},0,0,0,0,4"
+                     for t, a, T in zip(s["t"].tolist(), s["acc"].tolist(), s["temp"].tolist()))
+    p.write_text("timestamp,timestamp_sample,device_id,x,y,z,temperature,error_count,clip_counter[0],"
+                 "clip_counter[1],clip_counter[2],samples\n" + rows + "\n")
+    rec = load_recording(DataSpec(path=str(p)))
+    assert (rec.time_column, rec.time_unit, rec.gyro) == ("timestamp", "us", None)
+    np.testing.assert_allclose(rec.raw, s["acc"], rtol=1e-12)
+    np.testing.assert_allclose(rec.temp, s["temp"], rtol=1e-12)

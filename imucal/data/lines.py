@@ -49,8 +49,9 @@ def line_too_long(path: Path, line: int) -> ImucalError:
 
 #: Binary files recordings come in, by their first bytes: what the file is, and how to get text imucal reads.
 BINARY_FORMATS = (
-    (b"ULog\x01\x12\x35", "a PX4 ULog", "write its IMU as CSV with pyulog (ulog2csv LOG.ulg -m sensor_combined) "
-                                       "and calibrate that CSV (its names are read with their units)"),
+    (b"ULog\x01\x12\x35", "a PX4 ULog", "write its accelerometer as CSV with pyulog (ulog2csv LOG.ulg -m "
+                                       "sensor_accel: before PX4's calibration, with the temperature) and calibrate "
+                                       "that CSV"),
     (b"\xa3\x95", "an ArduPilot DataFlash log", "write its IMU as CSV with pymavlink (mavlogdump.py --types IMU "
                                               "--condition 'IMU.I==0' --format csv LOG.bin > imu.csv)"),
     (b"MATLAB 5.0 MAT-file", "a binary MATLAB MAT-file", "save the samples as text in MATLAB (writematrix(X, "
