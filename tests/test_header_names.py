@@ -314,3 +314,31 @@ def test_px4s_sensor_accel_csv_is_read_with_its_temperature(tmp_path):
     assert (rec.time_column, rec.time_unit, rec.gyro) == ("timestamp", "us", None)
     np.testing.assert_allclose(rec.raw, s["acc"], rtol=1e-12)
     np.testing.assert_allclose(rec.temp, s["temp"], rtol=1e-12)
+
+
+def test_a_gyroscope_file_with_named_columns_is_read_as_its_gyroscope(run_cli, tmp_path):
+    """imu_tk's second file (t x y z) written with a header that names its gyroscope (t, gx, gy, gz): the same
+    gyroscope calibration, not "missing column for ax"; a header's rate unit that the run contradicts: one line."""
+    import yaml
+
+    from conftest import real_file
+
+    acc, gyro = real_file("xsens-mti-imutk", "xsens_acc.mat"), real_file("xsens-mti-imutk", "xsens_gyro.mat")
+    named = tmp_path / "gyro_named.csv"
+    np.savetxt(named, np.loadtxt(gyro), delimiter=",", header="t,gx,gy,gz", comments="", fmt="%.10g")
+    cals = {}
+    for name, g in (("mat", gyro), ("named", named)):
+        r = run_cli(["calibrate", acc, "--gyro-data", g, "--gravity", "9.81744", "--out", tmp_path / name,
+                     "--no-figures", "--quiet"])
+        assert r.code == 0, r.err
+        cals[name] = yaml.safe_load((tmp_path / name / "calibration.yaml").read_text())["gyroscope"]["parameters"]
+    assert cals["mat"] == cals["named"]
+    stated = tmp_path / "gyro_dps.csv"
+    np.savetxt(stated, np.loadtxt(gyro), delimiter=",", header="t,gyro_x [deg/s],gyro_y [deg/s],gyro_z [deg/s]",
+               comments="", fmt="%.10g")
+    r = run_cli(["calibrate", acc, "--gyro-data", stated, "--gyro-unit", "rad/s", "--gravity", "9.81744",
+                 "--out", tmp_path / "o", "--no-figures", "--quiet"])
+    lines = r.err.strip().splitlines()
+    assert r.code == 2 and len(lines) == 1 and lines[0].endswith(
+        "gyro_dps.csv: data.gyro_unit: data.gyro_unit rad/s given, but the gyroscope file's header states deg/s "
+        "(fix: give deg/s (or leave it out))"), r.err

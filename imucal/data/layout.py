@@ -322,12 +322,14 @@ def _stated_units(names: list[str], cols: dict[str, int], path: Path) -> dict[st
         stated = {}
         for r in roles:
             if r in cols and (u := read_name(names[cols[r]]).unit or implied_unit(names[cols[r]], names)) is not None:
-                unit = sensor_unit(r, u)
+                kind = read_name(names[cols[r]]).role or r  # its name's sensor (a gyro-only file's axes: gx..)
+                unit = sensor_unit(kind, u)
                 if unit is None:
                     raise ImucalError(f"column {short(names[cols[r]])} states {short(u)}, where a text file's "
-                                      f"{r[0]}x, {r[0]}y, {r[0]}z are read in {TEXT_UNITS[r[0]]}", file=str(path),
-                                      field=f"data.columns.{r}", fix="write the column in one of those units and "
-                                                                     "name it so, e.g. " + f"{r} [{_EXAMPLE[r[0]]}]")
+                                      f"{kind[0]}x, {kind[0]}y, {kind[0]}z are read in {TEXT_UNITS[kind[0]]}",
+                                      file=str(path), field=f"data.columns.{r}",
+                                      fix=f"write the column in one of those units and name it so, e.g. {kind} "
+                                          f"[{_EXAMPLE[kind[0]]}]")
                 stated[names[cols[r]]] = unit
         if len(set(stated.values())) > 1:
             (n1, u1), *rest = stated.items()
@@ -399,3 +401,29 @@ def head_layout(spec: DataSpec, path: Path) -> Layout:
                          fix="check the path (relative paths are relative to the YAML file)")
     with os.fdopen(fd, "rb") as f:
         return file_head(f, spec, path)[0]
+
+
+def gyro_file_spec(spec: DataSpec, path: Path) -> DataSpec:
+    """The spec a second, gyroscope-only file is read with (``--gyro-data``): its gyroscope columns as the three
+    axes when its header names them (gx.., gyro_x [rad/s], w_RS_S_x, Gyroscope x (rad/s)) and no accelerometer;
+    else ``spec`` (imu_tk's t x y z, or an accelerometer's names, as before)."""
+    if spec.columns:
+        return spec
+    fd, _ = open_regular(path, field="--gyro-data", max_bytes=MAX_STREAM_BYTES,
+                         fix="check the path of the gyroscope's file")
+    with os.fdopen(fd, "rb") as f:
+        head = f.read(1 << 20)
+    if b"\x00" in head:
+        raise binary_file(path, head=head)
+    lines = head.decode("utf-8-sig", errors="replace").splitlines()[spec.skip_rows:]
+    k0 = next((i for i, ln in enumerate(lines) if ln.strip() and not ln.lstrip().startswith("#")), None)
+    at = None if k0 is None else _find_header(lines, k0, spec, path)
+    if at is None:
+        return spec
+    names = [t.strip().strip('"').strip("'") for t in split(_uncommented(lines[at]), spec.delimiter
+                                                                   or sniff_delimiter(lines[at]))]
+    cols = _header_columns(names, spec, path)
+    if not {"gx", "gy", "gz"} <= cols.keys() or {"ax", "ay", "az"} & cols.keys():
+        return spec
+    roles = {"ax": "gx", "ay": "gy", "az": "gz", **({"t": "t"} if "t" in cols else {})}
+    return replace(spec, columns={r: names[cols[g]] for r, g in roles.items()})

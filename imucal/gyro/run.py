@@ -2,11 +2,16 @@
 file on the same time base (imu_tk's two files)."""
 from __future__ import annotations
 
+from dataclasses import dataclass
+from pathlib import Path
+
 import numpy as np
 
 from imucal.constants import TIME_UNITS
+from imucal.data.layout import gyro_file_spec
 from imucal.data.load import load_recording
 from imucal.data.recording import Recording
+from imucal.data.spec import DataSpec
 from imucal.errors import ImucalError
 from imucal.gyro.fit import GyroOptions, fit_gyro
 from imucal.gyro.result import motions
@@ -19,19 +24,32 @@ from imucal.gyro.segments import GyroData, gyro_data_from_run
 SAME_SAMPLE_FRACTION = 0.5
 
 
-def gyro_channel(rec: Recording, gyro_file: str | None = None
-                 ) -> tuple[np.ndarray, np.ndarray, str, float | None, np.ndarray | None] | None:
-    """(time stamps [s], raw rates (N, 3), source, accelerometer start in the gyro's clock, the
-    second file's gaps (its samples after one; None for the recording's own columns)), or None.
+@dataclass(frozen=True)
+class GyroChannel:
+    """The gyroscope's readings beside an accelerometer recording."""
 
-    A second file is read with the loader's defaults (imu_tk: t x y z); its time stamps and the
-    accelerometer's share one clock, so both keep their original origin.
+    t: np.ndarray  #: time stamps [s]
+    raw: np.ndarray  #: (N, 3) raw rates
+    source: str
+    acc_t0: float | None  #: the accelerometer's start in the gyro's clock (None: the recording's own columns)
+    gaps: np.ndarray | None  #: a second file's samples after a gap (None: the recording's own columns)
+    unit: str | None = None  #: the unit a second file's header states (rad/s, deg/s), None: none stated
+
+
+def gyro_channel(rec: Recording, gyro_file: str | None = None) -> GyroChannel | None:
+    """The gyroscope's readings: the recording's own columns, or a second file's, or None.
+
+    A second file is read with the loader's defaults (imu_tk: t x y z), or its gyroscope columns when its
+    header names them (imucal.data.layout.gyro_file_spec), in the unit the header states; its time stamps and
+    the accelerometer's share one clock, so both keep their original origin.
     """
     if gyro_file is None:
         if rec.gyro is None:
             return None
-        return rec.t, rec.gyro, rec.source, None, None
-    g = load_recording(gyro_file)
+        return GyroChannel(rec.t, rec.gyro, rec.source, None, None)
+    path = Path(gyro_file)
+    spec = gyro_file_spec(DataSpec(path=str(path)), path)
+    g = load_recording(spec)
     if g.t_source is None or rec.t_source is None:
         raise ImucalError("both files need time stamps to share one time base", file=str(gyro_file),
                           field="--gyro-data", fix="record t in both files (imu_tk: t x y z)")
@@ -46,7 +64,8 @@ def gyro_channel(rec: Recording, gyro_file: str | None = None
                               "samples on one clock", file=g.source, field="t",
                               fix="give the gyroscope's stamps on the accelerometer's clock (the same t for the same "
                                   "sample), in one unit")
-    return t_g, g.raw, g.source, acc_t0, None if g.time_base is None else g.time_base.gap_index
+    stated = g.unit if spec.columns and g.unit in ("rad/s", "deg/s") else None  # named gyro columns' unit
+    return GyroChannel(t_g, g.raw, g.source, acc_t0, None if g.time_base is None else g.time_base.gap_index, stated)
 
 
 #: A calibrated gyroscope that leaves the gravity direction this far off [deg rms] over the
@@ -62,14 +81,23 @@ def gyro_data(run, gyro_file: str | None = None, unit: str | None = None) -> tup
     ch = gyro_channel(run.recording, gyro_file)
     if ch is None:
         return None
-    t, raw, source, acc_t0, gaps = ch
-    if gyro_file is not None and raw.shape[0] == run.recording.n:
-        acc_t0 = None  # same samples: taken one by one
+    acc_t0 = None if gyro_file is not None and ch.raw.shape[0] == run.recording.n else ch.acc_t0  # same samples
+    unit = unit or _second_file_unit(run.recording.gyro_unit, ch)
     try:
-        return gyro_data_from_run(run, t, raw, unit=unit or run.recording.gyro_unit, acc_t0=acc_t0,
-                                  gyro_gaps=gaps), source
+        return gyro_data_from_run(run, ch.t, ch.raw, unit=unit, acc_t0=acc_t0, gyro_gaps=ch.gaps), ch.source
     except ImucalError as exc:
-        raise ImucalError(exc.message, file=exc.file or source, field=exc.field, fix=exc.fix) from None
+        raise ImucalError(exc.message, file=exc.file or ch.source, field=exc.field, fix=exc.fix) from None
+
+
+def _second_file_unit(given: str, ch: GyroChannel) -> str:
+    """The gyro's unit: the one a second file's header states unless the run gave another (refused: one line),
+    else the run's (data.gyro_unit)."""
+    if ch.unit is None or given == ch.unit:
+        return given
+    if given != "raw":  # the run's data.gyro_unit given (raw: not given, or counts)
+        raise ImucalError(f"data.gyro_unit {given} given, but the gyroscope file's header states {ch.unit}",
+                          file=ch.source, field="data.gyro_unit", fix=f"give {ch.unit} (or leave it out)")
+    return ch.unit
 
 
 def calibrate_gyro(run, gyro_file: str | None = None, options: GyroOptions = GyroOptions()) -> FitResult | None:
@@ -96,7 +124,7 @@ def gyro_on_accel_samples(rec: Recording, gyro_file: str | None = None) -> np.nd
     ch = gyro_channel(rec, gyro_file)
     if ch is None:
         return None
-    t_g, raw, source, acc_t0, _ = ch
+    t_g, raw, source, acc_t0 = ch.t, ch.raw, ch.source, ch.acc_t0
     if acc_t0 is None or raw.shape[0] == rec.n:
         return raw
     t_a = rec.t_source * TIME_UNITS[rec.time_unit]
