@@ -6,6 +6,7 @@ import pytest
 
 from imucal.data.load import load_recording
 from imucal.data.spec import DataSpec
+from imucal.data.stream import StreamedRecording
 from imucal.errors import ImucalError
 
 
@@ -28,7 +29,8 @@ def test_a_binary_recording_is_named_with_the_command_that_writes_text(tmp_path,
     p = tmp_path / name
     p.write_bytes(head + b"\x00" * 500)
     with pytest.raises(ImucalError) as ei:
-        load_recording(DataSpec(path=str(p), stream=stream))
+        spec = DataSpec(path=str(p), stream=stream)
+        load_recording(spec) if stream == "never" else StreamedRecording(spec)
     msg = str(ei.value)
     assert "\n" not in msg and f"{name}: data.path: {words}" in msg, msg
 

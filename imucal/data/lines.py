@@ -197,6 +197,20 @@ def check_lines(lines: list[str], first_lineno: int, delimiter: str | None, usec
 _DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+([eE][+-]?\d+)?$")
 
 
+def decimal_comma(lines: list[str], delimiter: str | None) -> bool:
+    """Whether the rows ``lines`` (a file's first, after its header) write their numbers with a decimal comma (a
+    spreadsheet's or phyphox's European export: 0,01;9,81): fields split by ";" or a tab, and a d,d field whose
+    comma is followed by other than three digits (1,234 alone could be a thousands separator)."""
+    if delimiter not in (";", "\t"):
+        return False
+    seen = False
+    for ln in [x for x in lines if x.strip() and not x.lstrip().startswith("#")][:50]:
+        for tok in (t.strip() for t in ln.split(delimiter)):
+            if _DECIMAL_COMMA.match(tok):  # another text is left for the parser to name
+                seen = seen or len(tok.split(",")[1].split("e")[0].split("E")[0]) != 3
+    return seen
+
+
 def not_a_number_fix(tok: str, delimiter: str | None) -> str:
     """What to do about a field that is not a number: an empty cell (sensors logged apart), a decimal comma
     (a spreadsheet's European locale), or another text."""

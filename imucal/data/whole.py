@@ -18,8 +18,8 @@ import numpy as np
 
 from imucal.data import fixed_width
 from imucal.data.layout import MAX_SCAN_LINES, Layout, header_spec, layout
-from imucal.data.lines import (BINARY_PROBE, binary_file, corrupt_value, decode, line_too_long, lineno, long_line,
-                               no_rows, not_increasing, parse_block, plain_text)
+from imucal.data.lines import (BINARY_PROBE, binary_file, corrupt_value, decimal_comma, decode, line_too_long,
+                               lineno, long_line, no_rows, not_increasing, parse_block, plain_text)
 from imucal.data.recording import MAX_ABS_VALUE, Recording
 from imucal.data.spec import DataSpec, gyro_unit
 from imucal.data.timebase import rate_time_base, stamped_times
@@ -101,6 +101,8 @@ def read_text(spec: DataSpec, path: Path) -> Recording:
         lines = decode(blob, path).splitlines()[spec.skip_rows:]
         lay = layout(lines, spec, path)
         body = lines[lay.body:]
+        if decimal_comma(body, lay.delimiter):  # 0,01;9,81: read as 0.01 and 9.81
+            body = [ln.replace(",", ".") for ln in body]
         arr = parse_block(body, lay.body_first, lay.delimiter, lay.usecols, path)
     del blob
     rate_source = "given" if spec.sample_rate is not None else "stated above the header"
