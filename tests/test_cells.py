@@ -51,3 +51,17 @@ def test_a_decimal_comma_is_read_as_the_decimal_point(tmp_path, delimiter):
     thousands.write_text("t;ax;ay;az\n" + "\n".join(f"{k};1,234;2,345;9,810" for k in range(40)) + "\n")
     with pytest.raises(ImucalError, match="'1,234' is not a number \\(fix: the numbers have a decimal comma"):
         load_recording(DataSpec(path=str(thousands)))
+
+
+def test_rows_with_more_fields_than_the_header_names_are_refused(tmp_path):
+    """0,01,9,81 under t,ax,ay,az used to be read as t=0, ax=1 (the first four fields): the header does not
+    describe such rows. A trailing delimiter (an empty last field) is no extra column."""
+    p = tmp_path / "c.csv"
+    p.write_text("t,ax,ay,az\n" + "\n".join(f"0,{k:02d},0,1,0,2,9,81" for k in range(20)) + "\n")
+    with pytest.raises(ImucalError) as ei:
+        load_recording(DataSpec(path=str(p)))
+    assert str(ei.value).endswith("c.csv: data.columns: line 2 has 8 fields, the header names 4 (numbers with a "
+                                  "decimal comma, and commas between them?) (fix: give the header one name per "
+                                  "column, and write the numbers with a decimal point or split the fields by ;)")
+    p.write_text("t,ax,ay,az\n" + "\n".join(f"{k * 0.01:.2f},0.1,0.2,9.81," for k in range(20)) + "\n")
+    assert load_recording(DataSpec(path=str(p))).raw.shape == (20, 3)

@@ -232,6 +232,7 @@ def layout(lines: list[str], spec: DataSpec, path: Path) -> Layout:
             names = [f"{n} [{u}]" if u and read_name(n).unit is None else n for n, u in zip(names, units_row)]
             body += 1
         _one_instance(names, lines[body:body + MAX_SCAN_LINES], delim, path)
+        _fields_named(names, lines[body:body + MAX_SCAN_LINES], delim, first_lineno + body, path)
     else:
         if not all(is_number(t) for t in split(lines[k0], spec.delimiter)):
             raise ImucalError(f"line {first_lineno + k0} is neither a header with known column names nor numbers",
@@ -280,6 +281,22 @@ def _units_row(line: str, delim: str | None, n: int) -> list[str] | None:
     if len(toks) != n or any(is_number(t) for t in toks if t) or any(len(t) > 16 for t in toks):
         return None
     return toks if any(t and is_unit_name(t) for t in toks) else None
+
+
+def _fields_named(names: list[str], head: list[str], delim: str | None, first: int, path: Path) -> None:
+    """Refuse a first row with more filled fields than the header has names: the names do not describe the rows
+    (0,01,9,81 with a comma for both the decimal point and the delimiter; a header from another table)."""
+    k = next((i for i, ln in enumerate(head) if ln.strip() and not ln.lstrip().startswith("#")), None)
+    if k is None or delim is None:
+        return
+    toks = split(head[k], delim)
+    filled = len(toks) - next((i for i, t in enumerate(reversed(toks)) if t), len(toks))  # a trailing empty field
+    if filled > len(names):
+        comma = " (numbers with a decimal comma, and commas between them?)" if delim == "," else ""
+        raise ImucalError(f"line {first + k} has {filled} fields, the header names {len(names)}{comma}",
+                          file=str(path), field="data.columns",
+                          fix="give the header one name per column" + (", and write the numbers with a decimal point "
+                                                                        "or split the fields by ;" if comma else ""))
 
 
 #: Column names that number the sensor a row comes from (ArduPilot's IMU message: I).
