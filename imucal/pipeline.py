@@ -14,7 +14,7 @@ from imucal.calibration.frozen import Calibration, now_utc
 from imucal.config.run import MagConfig, RunConfig
 
 from imucal.data.load import load_recording, use_stream
-from imucal.data.recording import MAX_ABS_VALUE, Recording, RecordingSummary, StaticSamples
+from imucal.data.recording import MAX_ABS_VALUE, Recording, RecordingSummary, StaticSamples, named_columns
 from imucal.errors import ImucalError
 from imucal.solve.fit import SCATTER_NOTABLE_Z, FitData, FitResult, fit, jacobian_rows
 from imucal.solve.initial import InitialGuess, ellipsoid_guess
@@ -465,7 +465,7 @@ def calibrate_accelerometer(config: RunConfig, recording: Recording | None = Non
     cal = Calibration(params=res.params, std=res.std, gravity=gravity, raw_unit=rec.unit,
                       effects=tuple((e.name, e.axes) for e in pb.model.effects), fit=cal_fit,
                       data={"file": Path(rec.source).name, "sha256": rec.sha256, "samples": rec.n,
-                            "time": rec.time_note,
+                            "time": rec.time_note, **_columns_read(rec),
                             "dropped_intervals": [dict(d) for d in dropped]},
                       created=now_utc())
     samp_res, rms_samples = _samples_rms(cal, pb, rec, iv, streamed, gravity)
@@ -562,7 +562,8 @@ def taken_whole(config: RunConfig, recording: Recording | None = None) -> Calibr
                        redchi_noise=chi2 / iv.n)
     cal = Calibration(params=params, std=std, gravity=gravity, raw_unit=rec.unit, fit=cal_fit,
                       data={"file": Path(rec.source).name, "sha256": rec.sha256, "samples": rec.n,
-                            "time": rec.time_note, "dropped_intervals": [dict(d) for d in iv.meta.get("dropped", [])]},
+                            "time": rec.time_note, **_columns_read(rec),
+                            "dropped_intervals": [dict(d) for d in iv.meta.get("dropped", [])]},
                       created=now_utc())
     ai = cal.apply(iv.mean)
     directions = ai / np.linalg.norm(ai, axis=1, keepdims=True) if iv.n else np.empty((0, 3))
@@ -640,3 +641,9 @@ def _with_mag(run: CalibrationRun, config: RunConfig) -> CalibrationRun:
     res = mag_of_run(rec.mag, acc, run.intervals.start, run.intervals.end, stated_mag(config.mag, rec),
                      source=rec.source)
     return _attach(run, calibrated(res, rec.sample_rate), mag_warnings(res), mag=res)
+
+
+def _columns_read(rec) -> dict:
+    """The calibration's record of the columns read by an exporter's names (imucal.data.recording.named_columns)."""
+    named = named_columns(rec.columns)
+    return {"columns": named} if named else {}

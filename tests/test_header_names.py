@@ -342,3 +342,30 @@ def test_a_gyroscope_file_with_named_columns_is_read_as_its_gyroscope(run_cli, t
     assert r.code == 2 and len(lines) == 1 and lines[0].endswith(
         "gyro_dps.csv: data.gyro_unit: data.gyro_unit rad/s given, but the gyroscope file's header states deg/s "
         "(fix: give deg/s (or leave it out))"), r.err
+
+
+def test_the_columns_read_by_an_exporters_names_are_recorded(run_cli, tmp_path, si_recording):
+    """The calibration file, report.txt and report.html say which column each role was read from when the
+    names were an exporter's (a user checks that AccX is the accelerometer); the names are escaped for each."""
+    import html
+    import yaml
+
+    from imucal.calibration.frozen import Calibration
+
+    d = np.loadtxt(si_recording.path, delimiter=",", skiprows=1)
+    p = tmp_path / "x.csv"
+    x_name = "<b>A&amp;x</b>"  # mapped by the user (--columns), beside names read by themselves
+    np.savetxt(p, d[:, :4], delimiter=",", comments="", fmt="%.10g",
+               header=f'"Time (s)","{x_name}","Acceleration y (m/s^2)","Acceleration z (m/s^2)"')
+    r = run_cli(["calibrate", p, "--columns", f"ax={x_name}", "--out", tmp_path / "o", "--quiet"])
+    assert r.code == 0, r.err
+    cal = yaml.safe_load((tmp_path / "o" / "calibration.yaml").read_text())
+    assert cal["data"]["columns"] == {"t": "Time (s)", "ax": x_name, "ay": "Acceleration y (m/s^2)",
+                                      "az": "Acceleration z (m/s^2)"}
+    assert Calibration.load(tmp_path / "o" / "calibration.yaml").data["columns"]["ax"] == x_name
+    words = f"t: Time (s); ax, ay, az: {x_name}, Acceleration y (m/s^2), Acceleration z (m/s^2)"
+    assert f"    columns            = {words}\n" in (tmp_path / "o" / "report.txt").read_text()
+    page = (tmp_path / "o" / "report.html").read_text()
+    assert f"<td>{html.escape(words)}</td>" in page and "<b>&amp;" not in page
+    r = run_cli(["calibrate", si_recording.path, "--out", tmp_path / "own", "--quiet", "--no-figures"])
+    assert r.code == 0 and "columns" not in yaml.safe_load((tmp_path / "own" / "calibration.yaml").read_text())["data"]

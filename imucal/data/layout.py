@@ -61,6 +61,8 @@ class Layout:
     units: dict = field(default_factory=dict)
     #: [Hz] a sample rate a metadata line above the header states ("Fs,100"), for header_spec
     sample_rate: float | None = None
+    #: role -> the header's name of its column (with a units row's unit), for the record of what was read
+    names: dict = field(default_factory=dict)
 
     @property
     def usecols(self) -> list[int]:
@@ -252,7 +254,7 @@ def layout(lines: list[str], spec: DataSpec, path: Path) -> Layout:
     tname = names[cols["t"]] if header_idx is not None and "t" in roles else "t"
     return Layout(delimiter=delim, columns=cols, roles=roles, body=body, body_first=first_lineno + body,
                   time_column=tname, units=_stated_units(names, cols, path) if names else {},
-                  sample_rate=meta_rate)
+                  sample_rate=meta_rate, names={r: names[cols[r]] for r in roles} if names else {})
 
 
 #: Keys of a metadata line above the header that states the sample rate [Hz] ("Fs,100": the MPU-6050

@@ -83,6 +83,8 @@ class Recording:
     mag_unit: str = "raw"
     #: a magnetometer the file holds but was not asked to read (a netCDF field variable not mapped): "NAME (UNITS)"
     mag_unread: str = ""
+    #: role -> the file's name of the column read for it (a text file's header; empty without one)
+    columns: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         """A temperature no sensor reads (below absolute zero, or above TEMPERATURE_RANGE) is refused: the fit
@@ -146,6 +148,7 @@ class RecordingSummary:
     time_note: str
     time_column: str
     time_base: TimeBase | None = None
+    columns: dict = field(default_factory=dict)  #: as Recording.columns
     raw: None = None
     t: None = None
     temp: None = None
@@ -181,3 +184,9 @@ def temperature_error(temp: np.ndarray, source: str, first: int = 0) -> ImucalEr
     return ImucalError(f"sample {first + k} holds temperature {temp[k]:g} degC, not a sensor's temperature "
                        f"({lo:g} to {hi:g} degC)", file=source, field="data.columns.temp",
                        fix="give the temperature in degC (kelvin less 273.15), or repair the corrupt samples")
+
+
+def named_columns(columns: dict) -> dict:
+    """The columns read, role -> the file's name, when a name is not its role's own (AccX for ax): what a
+    calibration records of a header imucal read by an exporter's names; empty for imucal's own names."""
+    return dict(columns) if any(name != role for role, name in columns.items()) else {}

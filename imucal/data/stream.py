@@ -142,7 +142,8 @@ class StreamedRecording:
         self._scan = scan
         self.recording = RecordingSummary(n=scan.n, t_last=scan.t_last, unit=self.spec.unit, source=str(self.path),
                                           sha256=self.file.sha, time_unit=scan.unit, time_note=scan.note,
-                                          time_column=self.file.lay.time_column, time_base=scan.time_base)
+                                          time_column=self.file.lay.time_column, time_base=scan.time_base,
+                                          columns=self.file.lay.names)
         self.intervals, self.samples = self._intervals(scan, timing.mv.finish(), keep_samples)
 
     # --- columns of a block -------------------------------------------------------------------

@@ -18,7 +18,7 @@ from imucal.report.datasheet import DatasheetRow, datasheet
 from imucal.report.figures import before_after
 from imucal.report.page import (CSP, STYLE, esc, figures_html, num, page_html, render_png,  # noqa: F401
                                 table_html)
-from imucal.report.text import interval_residuals, t_quantile_975, time_base_words
+from imucal.report.text import columns_words, interval_residuals, t_quantile_975, time_base_words
 from imucal.report.verdict import Check, SensorVerdict, Verdict, chi2_consistent, taken_words, verdict  # noqa: F401
 
 if TYPE_CHECKING:  # discovery pages only: `imucal calibrate` does not import the discovery modules
@@ -147,6 +147,8 @@ def _statistics_html(run: CalibrationRun) -> str:
             ("data", f"{esc(Path(rec.source).name)}: {rec.n} samples, {rec.duration:.1f} s, "
                      f"{rec.sample_rate:.4g} Hz, raw unit {esc(cal.raw_unit)}"),
             ("SHA-256", f"<code>{esc(rec.sha256)}</code>")] if "taken" not in cal.fit else _taken_rows(run)
+    if columns_words(cal.data.get("columns", {})):
+        rows.append(("columns read", esc(columns_words(cal.data["columns"]))))
     if rec.time_note:
         rows.append(("time", esc(rec.time_note)))
     if time_base_words(rec.time_base):

@@ -8,6 +8,7 @@ import numpy as np
 from imucal.calibration.frozen import Calibration
 from imucal.data.recording import TimeBase, TimeSource
 from imucal.data.timebase import GAP_STEPS, SHORT_STEP
+from imucal.errors import key_text
 from imucal.model.sensor import build_model
 from imucal.pipeline import CalibrationRun, fit_data
 from imucal.solve.fit import FitResult, jacobian_rows
@@ -68,6 +69,8 @@ def _calibration_lines(run: CalibrationRun) -> list[str]:
     L.append(f"    data               = {rec.source} ({rec.n} samples, {rec.duration:.1f} s, "
              f"{rec.sample_rate:.4g} Hz, unit {cal.raw_unit})")
     L.append(f"    sha256             = {rec.sha256}")
+    if columns_words(cal.data.get("columns", {})):
+        L.append(f"    columns            = {columns_words(cal.data['columns'])}")
     if rec.time_note:
         L.append(f"    time               = {rec.time_note}")
     if time_base_words(rec.time_base):
@@ -364,3 +367,18 @@ def _mag_json(run: CalibrationRun) -> dict:
     assert m is not None
     return {"model": m.model.name, "params": m.params.value_dict(),
             "std": {n: (float(v) if math.isfinite(v) else None) for n, v in m.std.items()}, "fit": dict(m.fit)}
+
+
+#: The roles of one sensor, shown together (ax, ay, az: AccX, AccY, AccZ).
+_ROLE_GROUPS = (("t",), ("ax", "ay", "az"), ("gx", "gy", "gz"), ("mx", "my", "mz"), ("temp",))
+
+
+def columns_words(columns: dict) -> str:
+    """The columns a calibration read by an exporter's names, as one printable line: "t: TimeUS; ax, ay, az: AccX,
+    AccY, AccZ; temp: T" (each name as a message shows a key: cut and escaped when not short and printable)."""
+    parts = []
+    for group in _ROLE_GROUPS:
+        roles = [r for r in group if r in columns]
+        if roles:
+            parts.append(f"{', '.join(roles)}: {', '.join(key_text(columns[r]) for r in roles)}")
+    return "; ".join(parts)
