@@ -369,3 +369,41 @@ def test_the_columns_read_by_an_exporters_names_are_recorded(run_cli, tmp_path, 
     assert f"<td>{html.escape(words)}</td>" in page and "<b>&amp;" not in page
     r = run_cli(["calibrate", si_recording.path, "--out", tmp_path / "own", "--quiet", "--no-figures"])
     assert r.code == 0 and "columns" not in yaml.safe_load((tmp_path / "own" / "calibration.yaml").read_text())["data"]
+
+
+@settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(names=st.dictionaries(st.sampled_from(["t", "ax", "ay", "az", "gx", "temp", "mx"]),
+                             st.text(min_size=1, max_size=60), min_size=1))
+def test_recorded_column_names_are_escaped_for_each_format(tmp_path, names):
+    """Whatever a header names its columns (quotes, */, <, control characters, line separators, NUL):
+    report.txt's line stays one printable line, the HTML has no markup from it, and calibration.yaml
+    gives the names back as written."""
+    from imucal.calibration.frozen import Calibration
+    from imucal.model.parameters import base_parameters
+    from imucal.report.page import esc
+    from imucal.report.text import columns_words
+
+    words = columns_words(names)
+    assert words.isprintable() and "\n" not in words
+    assert "<" not in esc(words) and ">" not in esc(words)
+    cal = Calibration(params=base_parameters([0.0] * 3, [1.0] * 3, [np.pi / 2] * 3, raw_unit="raw"), std={},
+                      gravity=9.81, data={"file": "x.csv", "sha256": "0" * 64, "columns": names})
+    cal.save(tmp_path / "c.yaml")
+    assert Calibration.load(tmp_path / "c.yaml").data["columns"] == names
+
+
+def test_a_gyroscope_file_that_is_no_regular_file_is_one_line(run_cli, tmp_path):
+    """The header of a second file is read before it is loaded (gyro_file_spec): a FIFO or a device there is
+    refused at once, naming --gyro-data, as the loader refuses them."""
+    import os
+
+    from conftest import real_file
+
+    fifo = tmp_path / "gyro.csv"
+    os.mkfifo(fifo)
+    for g in (fifo, "/dev/zero"):
+        r = run_cli(["calibrate", real_file("xsens-mti-imutk", "xsens_acc.mat"), "--gyro-data", g,
+                     "--gravity", "9.81744", "--out", tmp_path / "o", "--no-figures", "--quiet"])
+        lines = r.err.strip().splitlines()
+        assert r.code == 2 and len(lines) == 1 and "--gyro-data" in lines[0] and "regular file" in lines[0], r.err
+        assert not (tmp_path / "o").exists()
