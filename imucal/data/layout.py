@@ -7,15 +7,15 @@ MAX_SCAN_LINES after the first non-comment line.
 from __future__ import annotations
 
 import os
-import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import BinaryIO
 
-from imucal.data.header_names import TEXT_UNITS, implied_unit, is_celsius, is_unit_name, read_name, sensor_unit
+from imucal.data.header_names import read_name
+from imucal.data.header_units import metadata_rate, spec_with_units, stated_units, units_row
 from imucal.data.lines import BINARY_PROBE, MAX_STREAM_BYTES, binary_file, check_text, is_number, not_utf8, split
 from imucal.data.spec import ROLES, DataSpec
-from imucal.data.timebase import RATE_TOLERANCE, time_column_name
+from imucal.data.timebase import time_column_name
 from imucal.errors import ImucalError, short
 from imucal.files.inputs import open_regular
 
@@ -229,9 +229,9 @@ def layout(lines: list[str], spec: DataSpec, path: Path) -> Layout:
                               file=str(path), field=f"data.columns.{wide[0]}",
                               fix=f"give a 0-based index below {len(names)}, or the column's name")
         body = max(header_idx + 1, k0)
-        units_row = _units_row(lines[body] if body < len(lines) else "", delim, len(names))
-        if units_row is not None:  # a line of units under the names (s, m/s^2, deg/s, degC): read as theirs
-            names = [f"{n} [{u}]" if u and read_name(n).unit is None else n for n, u in zip(names, units_row)]
+        below = units_row(lines[body] if body < len(lines) else "", delim, len(names))
+        if below is not None:  # a line of units under the names (s, m/s^2, deg/s, degC): read as theirs
+            names = [f"{n} [{u}]" if u and read_name(n).unit is None else n for n, u in zip(names, below)]
             body += 1
         _one_instance(names, lines[body:body + MAX_SCAN_LINES], delim, path)
         _fields_named(names, lines[body:body + MAX_SCAN_LINES], delim, first_lineno + body, path)
@@ -248,41 +248,13 @@ def layout(lines: list[str], spec: DataSpec, path: Path) -> Layout:
         if not cols:
             cols = _no_header_layout(len(split(lines[k0], delim)), path)
         body = k0
-    meta_rate = _metadata_rate(lines[k0:header_idx], delim) if header_idx is not None else None
+    meta_rate = metadata_rate(lines[k0:header_idx], delim) if header_idx is not None else None
     _check_roles(cols, spec, path, meta_rate)
     roles = [r for r in ROLES if r in cols]
     tname = names[cols["t"]] if header_idx is not None and "t" in roles else "t"
     return Layout(delimiter=delim, columns=cols, roles=roles, body=body, body_first=first_lineno + body,
-                  time_column=tname, units=_stated_units(names, cols, path) if names else {},
+                  time_column=tname, units=stated_units(names, cols, path) if names else {},
                   sample_rate=meta_rate, names={r: names[cols[r]] for r in roles} if names else {})
-
-
-#: Keys of a metadata line above the header that states the sample rate [Hz] ("Fs,100": the MPU-6050
-#: logger of tomisuarez's calibration; "sample_rate: 200 Hz").
-RATE_KEYS = ("fs", "sample rate", "sample_rate", "sampling rate", "sampling_rate", "sampling frequency",
-             "sample frequency", "rate", "frequency", "odr", "data rate")
-
-
-def _metadata_rate(meta: list[str], delim: str | None) -> float | None:
-    """The sample rate [Hz] one metadata line states as key and value (a "Hz" after it allowed); None when
-    no line does, or two disagree."""
-    found = set()
-    for ln in meta:
-        parts = [p.strip().strip("\"'") for p in re.split(r"[,;:=\t]", ln.strip().lstrip("#"), maxsplit=1)]
-        if len(parts) == 2 and parts[0].lower().removesuffix(" [hz]").removesuffix(" (hz)") in RATE_KEYS:
-            value = parts[1].removesuffix("Hz").removesuffix("hz").strip().rstrip(",;")
-            if is_number(value) and 0 < float(value) < float("inf"):
-                found.add(float(value))
-    return found.pop() if len(found) == 1 else None
-
-
-def _units_row(line: str, delim: str | None, n: int) -> list[str] | None:
-    """The units of a line under the header that holds one per column (some empty) and no number, at least
-    one a unit imucal knows; None for any other line."""
-    toks = [t.strip().strip("\"'").strip("[]()").strip() for t in split(line, delim)]
-    if len(toks) != n or any(is_number(t) for t in toks if t) or any(len(t) > 16 for t in toks):
-        return None
-    return toks if any(t and is_unit_name(t) for t in toks) else None
 
 
 def _fields_named(names: list[str], head: list[str], delim: str | None, first: int, path: Path) -> None:
@@ -320,68 +292,10 @@ def _one_instance(names: list[str], head: list[str], delim: str | None, path: Pa
                                       f"--condition 'IMU.I==0' --format csv) and calibrate each")
 
 
-#: The spec's field each sensor's stated unit fills, its value when not given, and the roles that state it
-#: (the magnetometer's: the Recording's mag_unit, which the run's mag.unit is checked against).
-_UNIT_FIELDS = (("unit", "raw", ("ax", "ay", "az")), ("gyro_unit", "auto", ("gx", "gy", "gz")))
-_MAG_FIELD = ("mag_unit", "raw", ("mx", "my", "mz"))  # named data.columns.mx in messages: the spec has no field
-_EXAMPLE = {"a": "m/s^2", "g": "rad/s", "m": "uT"}
-
-
-def _stated_units(names: list[str], cols: dict[str, int], path: Path) -> dict[str, str]:
-    """The acceleration's and the rate's units the header's names state (the three axes agreeing); a
-    temperature stated in another unit than degC, or a unit not known, is refused naming the column."""
-    out: dict[str, str] = {}
-    if "temp" in cols:
-        u = read_name(names[cols["temp"]]).unit
-        if u is not None and not is_celsius(u):
-            raise ImucalError(f"the temperature column {short(names[cols['temp']])} states {short(u)}: imucal reads "
-                              "degrees Celsius", file=str(path), field="data.columns.temp",
-                              fix="convert the column to degC (and name it e.g. temp [degC])")
-    for spec_field, _, roles in (*_UNIT_FIELDS, _MAG_FIELD):
-        stated = {}
-        for r in roles:
-            if r in cols and (u := read_name(names[cols[r]]).unit or implied_unit(names[cols[r]], names)) is not None:
-                kind = read_name(names[cols[r]]).role or r  # its name's sensor (a gyro-only file's axes: gx..)
-                unit = sensor_unit(kind, u)
-                if unit is None:
-                    raise ImucalError(f"column {short(names[cols[r]])} states {short(u)}, where a text file's "
-                                      f"{kind[0]}x, {kind[0]}y, {kind[0]}z are read in {TEXT_UNITS[kind[0]]}",
-                                      file=str(path), field=f"data.columns.{r}",
-                                      fix=f"write the column in one of those units and name it so, e.g. {kind} "
-                                          f"[{_EXAMPLE[kind[0]]}]")
-                stated[names[cols[r]]] = unit
-        if len(set(stated.values())) > 1:
-            (n1, u1), *rest = stated.items()
-            n2, u2 = next((n, u) for n, u in rest if u != u1)
-            raise ImucalError(f"columns {short(n1)} and {short(n2)} state different units ({u1}, {u2})",
-                              file=str(path), field="data.columns.mx" if spec_field == "mag_unit" else f"data.{spec_field}",
-                              fix="give every axis in one unit")
-        if stated:
-            out[spec_field] = next(iter(stated.values()))
-    return out
-
-
 def header_spec(spec: DataSpec, lay: Layout, path: Path) -> DataSpec:
-    """``spec`` with the units the header states where it gave none (data.unit raw, data.gyro_unit auto);
-    a unit given that disagrees with the header's is refused, naming both."""
-    given = {}
-    if lay.sample_rate is not None and spec.sample_rate is None and "t" not in lay.roles:
-        given["sample_rate"] = lay.sample_rate  # "Fs,100" above the header of a file without a time column
-    elif lay.sample_rate is not None and spec.sample_rate is not None and (
-            abs(spec.sample_rate / lay.sample_rate - 1.0) > RATE_TOLERANCE):
-        raise ImucalError(f"sample rate {spec.sample_rate:g} Hz given, but the file states {lay.sample_rate:g} Hz "
-                          "above its header: two sources of time disagree", file=str(path), field="data.sample_rate",
-                          fix=f"give {lay.sample_rate:g} (or leave the rate out), or correct the file's line")
-    for spec_field, default, _ in _UNIT_FIELDS:
-        stated, now = lay.units.get(spec_field), getattr(spec, spec_field)
-        if stated is None or stated == now or (stated == "raw" and now in ("raw", "counts")):
-            continue
-        if now != default and not (now == "counts" and stated == "raw"):
-            raise ImucalError(f"data.{spec_field} {short(now)} given, but the header states {stated}",
-                              file=str(path), field=f"data.{spec_field}",
-                              fix=f"give {stated} (or leave the unit out), or correct the header")
-        given[spec_field] = stated
-    return replace(spec, **given) if given else spec
+    """``spec`` with what the file's head states (imucal.data.header_units.spec_with_units): its units, and a
+    rate above the header for a file without a time column."""
+    return spec_with_units(spec, lay.units, lay.sample_rate, "t" in lay.roles, path)
 
 
 def file_head(f: BinaryIO, spec: DataSpec, path: Path) -> tuple[Layout, int]:
