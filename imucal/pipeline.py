@@ -282,7 +282,7 @@ def read_intervals(config: RunConfig, recording: Recording | None = None, least:
         rec = recording if recording is not None else load_recording(config.data, config.base_dir)
         iv = detect_static(rec.t, rec.raw, config.static, rec.temp, source=rec.source, rails=declared)
     dropped = iv.meta.get("dropped", [])
-    if (err := stated_unit_error(rec.unit, iv.mean, rec.source)) is not None:
+    if (err := stated_unit_error(rec.unit, iv.mean, rec.source, rec.unit_stated_by)) is not None:
         raise err  # readings in m/s^2 stated as g: the exports would convert them again
     if iv.n >= least:
         return rec, iv, streamed

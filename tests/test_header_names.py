@@ -407,3 +407,17 @@ def test_a_gyroscope_file_that_is_no_regular_file_is_one_line(run_cli, tmp_path)
         lines = r.err.strip().splitlines()
         assert r.code == 2 and len(lines) == 1 and "--gyro-data" in lines[0] and "regular file" in lines[0], r.err
         assert not (tmp_path / "o").exists()
+
+
+def test_a_unit_the_header_states_wrongly_is_fixed_in_the_header(run_cli, tmp_path, counts_recording):
+    """Counts under names that state m/s^2: the rest check's fix names the header (giving data.unit would
+    contradict it, which is refused), not data.unit."""
+    d = np.loadtxt(counts_recording.path, delimiter=",", skiprows=1)
+    p = tmp_path / "c.csv"
+    np.savetxt(p, d[:, :4], delimiter=",", comments="", fmt="%.10g",
+               header="t,acc_x [m/s^2],acc_y [m/s^2],acc_z [m/s^2]")
+    r = run_cli(["calibrate", p, "--out", tmp_path / "o", "--no-figures", "--quiet"])
+    lines = r.err.strip().splitlines()
+    assert r.code == 2 and len(lines) == 1 and lines[0].endswith(
+        "they are not in m/s^2 (fix: the header states m/s^2 (column acc_x [m/s^2]): correct the header's unit, "
+        "e.g. acc_x [counts])"), r.err

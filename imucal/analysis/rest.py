@@ -12,8 +12,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from imucal.constants import STANDARD_GRAVITY
+from imucal.data.header_names import without_unit
 from imucal.data.static import Intervals, quantum
-from imucal.errors import ImucalError
+from imucal.errors import ImucalError, key_text
 from imucal.solve.stats import median
 
 #: Largest relative difference between |a| at rest after calibration and the calibration's gravity
@@ -63,11 +64,13 @@ STATED_UNIT_FACTOR = 2.0
 NO_GRAVITY = 0.05
 
 
-def stated_unit_error(unit: str, means: np.ndarray, source: str | None = None) -> ImucalError | None:
+def stated_unit_error(unit: str, means: np.ndarray, source: str | None = None,
+                      stated_by: str = "") -> ImucalError | None:
     """The refusal of readings stated in ``unit`` (one of REST_UNITS: m/s^2, g, mg) whose |reading| at rest (the
     median |mean| of still intervals ``means``) is not that unit's gravity within STATED_UNIT_FACTOR: the fit would
     be fine in the readings' unit, but the calibration would carry the wrong one into apply and the exports (PX4's
-    and ArduPilot's convert g to m/s^2); None when it fits or the unit is not one of them (raw counts)."""
+    and ArduPilot's convert g to m/s^2); None when it fits or the unit is not one of them (raw counts).
+    ``stated_by``: the header's column that stated the unit (its fix is then the header's, not data.unit)."""
     g = dict(REST_UNITS).get(unit)
     if g is None or len(means) == 0:
         return None
@@ -75,13 +78,16 @@ def stated_unit_error(unit: str, means: np.ndarray, source: str | None = None) -
     if 1.0 / STATED_UNIT_FACTOR <= at_rest / g <= STATED_UNIT_FACTOR:
         return None
     looks = next((u for u, gu in REST_UNITS if abs(at_rest / gu - 1.0) <= REST_TOLERANCE), None)
-    if looks:
-        hint = (f"they look like {looks}: give data.unit {looks} (--unit {looks}; a netCDF file: its variable's units "
-                "attribute)")
-    elif at_rest / g < NO_GRAVITY:
+    if not looks and at_rest / g < NO_GRAVITY:
         hint = ("still readings without gravity are an acceleration with gravity removed (a phone's or a filter's "
                 "linear acceleration), which cannot calibrate an accelerometer: record the sensor's own readings "
                 "(phyphox: Acceleration with g)")
+    elif stated_by:  # the header's names state the unit: only the file can be corrected
+        hint = (f"the header states {unit} (column {key_text(stated_by)}): correct the header's unit, e.g. "
+                f"{key_text(without_unit(stated_by))} [{looks or 'counts'}]")
+    elif looks:
+        hint = (f"they look like {looks}: give data.unit {looks} (--unit {looks}; a netCDF file: its variable's units "
+                "attribute)")
     else:
         hint = "give data.unit raw for counts"
     return ImucalError(f"the readings at rest are {at_rest:.4g} {unit} (median |mean| of {len(means)} still intervals), "

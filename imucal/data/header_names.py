@@ -130,3 +130,9 @@ def is_unit_name(text: str) -> bool:
     """Whether ``text`` is a unit of time, acceleration, angular rate, temperature or field a name may state."""
     u = text.strip().lower()
     return u in TIME_NAME_UNITS or u in RAW_UNITS or u in TEMPERATURE_UNITS or any(u in t for t in SENSOR_UNITS.values())
+
+
+def without_unit(name: str) -> str:
+    """A column name without the unit in brackets or parentheses at its end ("acc_x [m/s^2]" -> "acc_x")."""
+    m = _SUFFIX.match(name.strip())
+    return m["base"] if m and not m["inner"].strip().isdigit() else name.strip()

@@ -85,6 +85,7 @@ class Recording:
     mag_unread: str = ""
     #: role -> the file's name of the column read for it (a text file's header; empty without one)
     columns: dict = field(default_factory=dict)
+    unit_stated_by: str = ""  #: the header's column whose name stated ``unit`` (acc_x [g]); "" when none did
 
     def __post_init__(self) -> None:
         """A temperature no sensor reads (below absolute zero, or above TEMPERATURE_RANGE) is refused: the fit
@@ -149,6 +150,7 @@ class RecordingSummary:
     time_column: str
     time_base: TimeBase | None = None
     columns: dict = field(default_factory=dict)  #: as Recording.columns
+    unit_stated_by: str = ""  #: as Recording.unit_stated_by
     raw: None = None
     t: None = None
     temp: None = None

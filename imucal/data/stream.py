@@ -143,7 +143,8 @@ class StreamedRecording:
         self.recording = RecordingSummary(n=scan.n, t_last=scan.t_last, unit=self.spec.unit, source=str(self.path),
                                           sha256=self.file.sha, time_unit=scan.unit, time_note=scan.note,
                                           time_column=self.file.lay.time_column, time_base=scan.time_base,
-                                          columns=self.file.lay.names)
+                                          columns=self.file.lay.names, unit_stated_by=self.file.lay.names.get(
+                                              "ax", "") if "unit" in self.file.lay.units else "")
         self.intervals, self.samples = self._intervals(scan, timing.mv.finish(), keep_samples)
 
     # --- columns of a block -------------------------------------------------------------------

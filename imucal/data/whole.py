@@ -135,4 +135,4 @@ def read_text(spec: DataSpec, path: Path) -> Recording:
     return Recording(t=t, raw=raw, temp=data.get("temp"), unit=spec.unit, source=str(path), sha256=sha,
                      gyro=gyro, mag=mag, t_source=stamps, time_unit=unit, time_note=note, time_column=lay.time_column,
                      gyro_unit=gyro_unit(spec), time_base=tb, mag_unit=lay.units.get("mag_unit", "raw"),
-                     columns=lay.names)
+                     columns=lay.names, unit_stated_by=lay.names.get("ax", "") if "unit" in lay.units else "")
