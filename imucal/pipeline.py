@@ -4,7 +4,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 import math
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -591,8 +591,14 @@ def calibrate_imu(config: RunConfig, recording: Recording | None = None,
     has: the gyroscope (gx, gy, gz, or ``gyro_file``: imu_tk's second file) and the magnetometer (mx, my, mz):
     one calibration holding them all, each in the accelerometer's frame."""
     run = calibrate_accelerometer(config, recording)
-    if gyro_file is not None or getattr(run.recording, "gyro", None) is not None:
+    has_gyro = gyro_file is not None or getattr(run.recording, "gyro", None) is not None
+    if has_gyro and config.gyro.calibrate:
         run = _with_gyro(run, config, gyro_file)
+    elif has_gyro:  # said, not dropped
+        cal = run.calibration
+        run = replace(run, calibration=replace(cal, fit={**cal.fit, "warnings": [
+            *cal.fit.get("warnings", []), "the gyroscope's readings were not calibrated (--no-gyro, gyro.calibrate: "
+                                          "false): the calibration holds the accelerometer alone"]}))
     if getattr(run.recording, "mag", None) is not None:  # a file read in chunks never has one
         run = _with_mag(run, config)
     elif config.mag != MagConfig() or getattr(run.recording, "mag_unread", ""):  # said, not dropped
@@ -622,7 +628,14 @@ def _with_gyro(run: CalibrationRun, config: RunConfig, gyro_file: str | None) ->
     from imucal.gyro.run import calibrate_gyro
     from imucal.report.gyro import gyro_warnings
 
-    res = calibrate_gyro(run, gyro_file, GyroOptions(**asdict(config.gyro)))
+    try:
+        res = calibrate_gyro(run, gyro_file, GyroOptions(**config.gyro.fit_choices))
+    except ImucalError as exc:  # the recording's own gyroscope: the accelerometer may still be calibrated alone
+        if gyro_file is not None:
+            raise
+        raise ImucalError(exc.message, file=exc.file, field=exc.field,
+                          fix=f"{exc.fix + '; or ' if exc.fix else ''}calibrate the accelerometer alone: --no-gyro "
+                              "(gyro.calibrate: false)") from None
     if res is None:
         return run
     return _attach(run, calibrated(res), gyro_warnings(res), gyro=res)

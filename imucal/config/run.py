@@ -200,6 +200,14 @@ class GyroSettings:
     gsens: str = "auto"  #: g-sensitivity: auto (a likelihood-ratio test per axis), on or off
     lead_in_s: float | str = "auto"  #: [s] integrate from inside the still poses; auto: imucal.gyro.lead_in
     free_bias: bool = False  #: also fit a bias correction in the rotation fit (imu_tk's option)
+    #: calibrate the gyroscope when the recording has one (false: the accelerometer alone, e.g. a log whose
+    #: gyroscope turned too little between its poses)
+    calibrate: bool = True
+
+    @property
+    def fit_choices(self) -> dict:
+        """The choices of the gyro fit (imucal.gyro.fit.GyroOptions)."""
+        return {"gsens": self.gsens, "lead_in_s": self.lead_in_s, "free_bias": self.free_bias}
 
     def __post_init__(self) -> None:
         check_choice(self.gsens, GYRO_GSENS, "gyro.gsens", "g-sensitivity choice")
@@ -209,6 +217,8 @@ class GyroSettings:
                               field="gyro.lead_in_s", fix="give auto, or seconds such as 0.5")
         if not isinstance(self.free_bias, bool):
             raise ImucalError(f"free_bias {short(self.free_bias)} must be true or false", field="gyro.free_bias")
+        if not isinstance(self.calibrate, bool):
+            raise ImucalError(f"calibrate {short(self.calibrate)} must be true or false", field="gyro.calibrate")
 
 
 MAG_SOFT_IRON = ("auto", "symmetric", "full")

@@ -9,7 +9,7 @@ default fit's lead-in.
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -74,4 +74,4 @@ def run_still_check(run, gyro_file: str | None = None) -> StillCheck | None:
     got = gyro_data(run, gyro_file)
     if got is None:
         return None
-    return still_check(got[0], GyroOptions(**asdict(cfg.gyro)))
+    return still_check(got[0], GyroOptions(**cfg.gyro.fit_choices))

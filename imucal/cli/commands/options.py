@@ -101,6 +101,8 @@ def add_gyro_options(p: argparse.ArgumentParser) -> None:
                         "when the poses' edges turn and the g-sensitivity found is modelled, else 0")
     g.add_argument("--gyro-free-bias", action="store_true",
                    help="also fit a gyro bias correction in the rotation fit (imu_tk's option)")
+    g.add_argument("--no-gyro", action="store_true",
+                   help="calibrate the accelerometer alone, though the recording has a gyroscope (gyro.calibrate: false)")
 
 
 def add_mag_options(p: argparse.ArgumentParser) -> None:
@@ -158,7 +160,8 @@ def _gyro(args: argparse.Namespace, cfg: RunConfig) -> GyroSettings:
     """cfg.gyro with the --gyro-* options given."""
     over = {k: v for k, v in (("gsens", getattr(args, "gyro_gsens", None)),
                               ("lead_in_s", getattr(args, "gyro_lead_in", None)),
-                              ("free_bias", getattr(args, "gyro_free_bias", False) or None)) if v is not None}
+                              ("free_bias", getattr(args, "gyro_free_bias", False) or None),
+                              ("calibrate", False if getattr(args, "no_gyro", False) else None)) if v is not None}
     if not over:
         return cfg.gyro
     try:
