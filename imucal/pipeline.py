@@ -595,20 +595,23 @@ def calibrate_imu(config: RunConfig, recording: Recording | None = None,
     if has_gyro and config.gyro.calibrate:
         run = _with_gyro(run, config, gyro_file)
     elif has_gyro:  # said, not dropped
-        cal = run.calibration
-        run = replace(run, calibration=replace(cal, fit={**cal.fit, "warnings": [
-            *cal.fit.get("warnings", []), "the gyroscope's readings were not calibrated (--no-gyro, gyro.calibrate: "
-                                          "false): the calibration holds the accelerometer alone"]}))
-    if getattr(run.recording, "mag", None) is not None:  # a file read in chunks never has one
+        run = _warned(run, "the gyroscope's readings were not calibrated (--no-gyro, gyro.calibrate: false)")
+    has_mag = getattr(run.recording, "mag", None) is not None  # a file read in chunks never has one
+    if has_mag and config.mag.calibrate:
         run = _with_mag(run, config)
-    elif config.mag != MagConfig() or getattr(run.recording, "mag_unread", ""):  # said, not dropped
+    elif has_mag:  # said, not dropped
+        run = _warned(run, "the magnetometer's readings were not calibrated (--no-mag, mag.calibrate: false)")
+    elif replace(config.mag, calibrate=True) != MagConfig() or getattr(run.recording, "mag_unread", ""):
         from imucal.report.mag import no_magnetometer_warning
 
-        cal = run.calibration
-        warned = [*cal.fit.get("warnings", []),
-                  no_magnetometer_warning(run.recording.source, getattr(run.recording, "mag_unread", ""))]
-        run = replace(run, calibration=replace(cal, fit={**cal.fit, "warnings": warned}))
+        run = _warned(run, no_magnetometer_warning(run.recording.source, getattr(run.recording, "mag_unread", "")))
     return run
+
+
+def _warned(run: CalibrationRun, warning: str) -> CalibrationRun:
+    """``run`` with one more warning in its calibration."""
+    cal = run.calibration
+    return replace(run, calibration=replace(cal, fit={**cal.fit, "warnings": [*cal.fit.get("warnings", []), warning]}))
 
 
 def _attach(run: CalibrationRun, sensor: Any, warnings: list[str], **fields: Any) -> CalibrationRun:
@@ -651,8 +654,13 @@ def _with_mag(run: CalibrationRun, config: RunConfig) -> CalibrationRun:
     rec, cal = run.recording, run.calibration
     covs = covariate_values(cal.covariates, temp=rec.temp, time=rec.t, source=rec.source)
     acc = cal.apply(rec.raw, covs)
-    res = mag_of_run(rec.mag, acc, run.intervals.start, run.intervals.end, stated_mag(config.mag, rec),
-                     source=rec.source)
+    try:
+        res = mag_of_run(rec.mag, acc, run.intervals.start, run.intervals.end, stated_mag(config.mag, rec),
+                         source=rec.source)
+    except ImucalError as exc:  # the other sensors may still be calibrated without it
+        raise ImucalError(exc.message, file=exc.file, field=exc.field,
+                          fix=f"{exc.fix + '; or ' if exc.fix else ''}calibrate without the magnetometer: --no-mag "
+                              "(mag.calibrate: false)") from None
     return _attach(run, calibrated(res, rec.sample_rate), mag_warnings(res), mag=res)
 
 

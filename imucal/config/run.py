@@ -247,6 +247,8 @@ class MagConfig:
                                                                 ge=-180, le=360))
     height: float = field(default=0.0, metadata=rule(msg="height {value} is not a number of metres"))
     date: str | None = field(default=None, metadata=rule(msg="date {value} is not a date such as 2024-05-17"))
+    #: calibrate the magnetometer when the recording has one (false, --no-mag: the other sensors alone)
+    calibrate: bool = field(default=True, metadata=rule(msg="calibrate {value} must be true or false"))
     #: last: the name shadows dataclasses.field in the class body
     field: float | None = field(default=None, metadata=rule(
         msg="field {value} is not a field magnitude", gt=0,

@@ -116,6 +116,8 @@ def add_mag_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--mag-soft-iron", choices=("auto", "symmetric", "full"),
                    help="soft iron: auto (default: full 3x3 when the dip's constancy shows a rotation), "
                         "symmetric or full")
+    g.add_argument("--no-mag", action="store_true",
+                   help="leave the magnetometer uncalibrated, though the recording has one (mag.calibrate: false)")
 
 
 #: --mag-field: a number and an optional unit (48.2uT, 48.2 uT, 0.482gauss)
@@ -138,6 +140,8 @@ def _mag(args: argparse.Namespace, cfg: RunConfig) -> MagConfig:
         over["soft_iron"] = args.mag_soft_iron
     if getattr(args, "mag_unit", None) is not None:
         over["unit"] = args.mag_unit
+    if getattr(args, "no_mag", False):
+        over["calibrate"] = False
     if not over:
         return cfg.mag
     try:
