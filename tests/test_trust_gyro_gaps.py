@@ -155,7 +155,8 @@ def test_too_few_motions_left_is_one_line_exit_2_nothing_written(run_cli, unchan
     assert lines[0] == (f"imucal: error: {tmp_path / 'gaps.csv'}: t: 3 motions left for the gyro fit's 9 unknowns "
                         "(at least 5 needed): 8 of 11 motions left out: a gap in the time stamps lies inside each, "
                         "the longest 0.51 s (fix: record again without pauses of the logger during motions (or cut "
-                        "the recording at the gaps and calibrate the longest part))")
+                        "the recording at the gaps and calibrate the longest part); or calibrate the accelerometer "
+                        "alone: --no-gyro (gyro.calibrate: false))")
 
 
 def test_an_axis_turned_only_in_motions_with_gaps_is_refused_naming_the_gaps():
