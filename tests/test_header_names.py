@@ -421,3 +421,14 @@ def test_a_unit_the_header_states_wrongly_is_fixed_in_the_header(run_cli, tmp_pa
     assert r.code == 2 and len(lines) == 1 and lines[0].endswith(
         "they are not in m/s^2 (fix: the header states m/s^2 (column acc_x [m/s^2]): correct the header's unit, "
         "e.g. acc_x [counts])"), r.err
+
+
+def test_a_second_file_with_both_sensors_gives_its_gyroscope(tmp_path):
+    """An IMU's CSV given as --gyro-data (t, ax.., gx..): its gyroscope columns are the rates, not its
+    accelerometer's (which a second file's default roles would have read)."""
+    from imucal.data.layout import gyro_file_spec
+
+    p = tmp_path / "imu.csv"
+    p.write_text("t,ax,ay,az,gx,gy,gz\n" + "\n".join(f"{k * 0.01:.2f},0,0,9.81,0.1,0.2,0.3" for k in range(20)) + "\n")
+    rec = load_recording(gyro_file_spec(DataSpec(path=str(p)), p))
+    np.testing.assert_array_equal(rec.raw[0], [0.1, 0.2, 0.3])

@@ -337,9 +337,9 @@ def head_layout(spec: DataSpec, path: Path) -> Layout:
 
 
 def gyro_file_spec(spec: DataSpec, path: Path) -> DataSpec:
-    """The spec a second, gyroscope-only file is read with (``--gyro-data``): its gyroscope columns as the three
-    axes when its header names them (gx.., gyro_x [rad/s], w_RS_S_x, Gyroscope x (rad/s)) and no accelerometer;
-    else ``spec`` (imu_tk's t x y z, or an accelerometer's names, as before)."""
+    """The spec a second file is read with for its gyroscope (``--gyro-data``): its gyroscope columns as the three
+    axes when its header names them (gx.., gyro_x [rad/s], w_RS_S_x, Gyroscope x (rad/s)), also beside an
+    accelerometer's; else ``spec`` (imu_tk's t x y z)."""
     if spec.columns:
         return spec
     fd, _ = open_regular(path, field="--gyro-data", max_bytes=MAX_STREAM_BYTES,
@@ -356,7 +356,7 @@ def gyro_file_spec(spec: DataSpec, path: Path) -> DataSpec:
     names = [t.strip().strip('"').strip("'") for t in split(_uncommented(lines[at]), spec.delimiter
                                                                    or sniff_delimiter(lines[at]))]
     cols = _header_columns(names, spec, path)
-    if not {"gx", "gy", "gz"} <= cols.keys() or {"ax", "ay", "az"} & cols.keys():
+    if not {"gx", "gy", "gz"} <= cols.keys():  # (a file with both sensors gives its gyroscope's, not its ax..)
         return spec
     roles = {"ax": "gx", "ay": "gy", "az": "gz", **({"t": "t"} if "t" in cols else {})}
     return replace(spec, columns={r: names[cols[g]] for r, g in roles.items()})
