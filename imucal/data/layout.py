@@ -336,6 +336,11 @@ def head_layout(spec: DataSpec, path: Path) -> Layout:
         return file_head(f, spec, path)[0]
 
 
+#: The head of a second (gyroscope) file searched for its header [bytes]: a header further down is not looked
+#: for (the file is then read with the loader's defaults, imu_tk's t x y z).
+GYRO_HEAD_BYTES = 64 * 1024
+
+
 def gyro_file_spec(spec: DataSpec, path: Path) -> DataSpec:
     """The spec a second file is read with for its gyroscope (``--gyro-data``): its gyroscope columns as the three
     axes when its header names them (gx.., gyro_x [rad/s], w_RS_S_x, Gyroscope x (rad/s)), also beside an
@@ -345,10 +350,12 @@ def gyro_file_spec(spec: DataSpec, path: Path) -> DataSpec:
     fd, _ = open_regular(path, field="--gyro-data", max_bytes=MAX_STREAM_BYTES,
                          fix="check the path of the gyroscope's file")
     with os.fdopen(fd, "rb") as f:
-        head = f.read(1 << 20)
+        head = f.read(GYRO_HEAD_BYTES)
     if b"\x00" in head:
         raise binary_file(path, head=head)
     lines = head.decode("utf-8-sig", errors="replace").splitlines()[spec.skip_rows:]
+    if len(head) == GYRO_HEAD_BYTES:
+        lines = lines[:-1]  # whole lines only
     k0 = next((i for i, ln in enumerate(lines) if ln.strip() and not ln.lstrip().startswith("#")), None)
     at = None if k0 is None else _find_header(lines, k0, spec, path)
     if at is None:
