@@ -63,9 +63,10 @@ def stated_units(names: list[str], cols: dict[str, int], path: Path) -> dict[str
                               fix="convert the column to degC (and name it e.g. temp [degC])")
     for spec_field, _, roles in (*_UNIT_FIELDS, _MAG_FIELD):
         stated = {}
-        for r in roles:
-            if r in cols and (u := read_name(names[cols[r]]).unit or implied_unit(names[cols[r]], names)) is not None:
-                kind = read_name(names[cols[r]]).role or r  # its name's sensor (a gyro-only file's axes: gx..)
+        for r in (r for r in roles if r in cols):
+            name = read_name(names[cols[r]])
+            if (u := name.unit or implied_unit(names[cols[r]], names)) is not None:
+                kind = name.role or r  # its name's sensor (a gyro-only file's axes: gx..)
                 unit = sensor_unit(kind, u)
                 if unit is None:
                     raise ImucalError(f"column {short(names[cols[r]])} states {short(u)}, where a text file's "
