@@ -266,11 +266,21 @@ def sample_residuals(cal: Calibration, model: SensorModel, samples: StaticSample
     return np.linalg.norm(cal.apply(samples.raw, covs), axis=1) - gravity
 
 
+def _cut_at_jumps(config: RunConfig) -> RunConfig:
+    """``config`` whose detector also cuts a still interval where an effect of the model jumps (a bias step
+    given in fit.initial): its two sides hold two biases, and each is an interval of its own."""
+    cuts = tuple(t for e in effects_from_specs(config.fit.effects, config.source) for t in e.jumps(config.fit.initial))
+    if not cuts:
+        return config
+    return replace(config, static=replace(config.static, split=config.static.split + cuts))
+
+
 def read_intervals(config: RunConfig, recording: Recording | None = None, least: int = 2
                    ) -> tuple[Recording | RecordingSummary, Intervals, StreamedRecording | None]:
     """The recording (or its streamed summary) and its static intervals; refuses fewer than ``least`` (2 for
     a fit; 0 for an accelerometer taken from fit.base, whose intervals are only a check)."""
     declared = config.data.declared_rails
+    config = _cut_at_jumps(config)
     streamed: StreamedRecording | None = None
     if recording is None and use_stream(config.data, config.base_dir):  # bounded memory (imucal.data.stream)
         from imucal.data.stream import StreamedRecording  # measured start-up (docs/architecture.md)

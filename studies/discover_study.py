@@ -224,7 +224,8 @@ def visible_chi2(case, path: str, rel: bool = True, genie: bool = False,
 
 def run_case(args: tuple) -> dict:
     """Simulate one case, run discover, classify the outcome."""
-    seed, effect, snr, noise_mg, pool, visible, revisit = args
+    seed, effect, snr, noise_mg, pool, visible, revisit, *more = args
+    opts = more[0] if more else {}  # step_anywhere, scan_holds (--step-anywhere, --no-hold-scan)
     from imucal.config.run import config_from_dict
     from imucal.analysis.discover import DiscoverSettings, discover
     from imucal.analysis.simulate import draw_effect_case
@@ -242,14 +243,16 @@ def run_case(args: tuple) -> dict:
                 "seconds": 0.0, "lam": 0.0, "lam_rel": 0.0, "oracle": 0.0, "genie": 0.0, "genie_by_penalty": {},
                 "snr_size": math.nan}
     case = (cancelling_cross_case(seed, phys, noise_mg) if effect == CROSS_TWO
-            else draw_effect_case(seed, effect=effect, snr=phys, noise_mg=noise_mg, revisit=revisit))
+            else draw_effect_case(seed, effect=effect, snr=phys, noise_mg=noise_mg, revisit=revisit,
+                                  step_anywhere=opts.get("step_anywhere", False)))
     sim = case.config.run()
     with tempfile.TemporaryDirectory() as d:
         path = os.path.join(d, "case.csv")
         with open(path, "w") as f:
             f.write(sim.to_csv_text())
         t0 = time.perf_counter()
-        res = discover(config_from_dict({"data": {"path": path, "unit": case.config.sensor.unit}}))
+        res = discover(config_from_dict({"data": {"path": path, "unit": case.config.sensor.unit}}),
+                       DiscoverSettings(scan_holds=opts.get("scan_holds", True)))
         dt = time.perf_counter() - t0
         lam, rel, genie = (visible_chi2(case, os.path.join(d, "clean.csv"), genie=True) if case.effect is not None
                            else (0.0, 0.0, {}))
@@ -413,6 +416,11 @@ def main(argv: list[str] | None = None) -> int:
                     "its tau held at the true value, which no fit knows (smaller errors, so smaller warm-ups)")
     ap.add_argument("--revisit", action="store_true", help="every pose held twice, the second pass in reverse order "
                     "(36-52 holds; imucal.analysis.simulate.draw_effect_case); no pairs")
+    ap.add_argument("--step-anywhere", action="store_true", help="a bias step's time drawn over the holds and the "
+                    "moves alike (by default it falls in a move); size SNR; writes "
+                    "studies/results/discover_step_anywhere_study.md")
+    ap.add_argument("--no-hold-scan", action="store_true", help="discover without its scan of the still intervals for "
+                    "a step inside them (DiscoverSettings.scan_holds: the code before it), for comparison")
     ap.add_argument("--rows", help="re-render the page from a run's rows (OUT.rows.json) instead of running the cases")
     ap.add_argument("--out", help="markdown file to write (default studies/results/discover_grammar_study.md)")
     a = ap.parse_args(argv)
@@ -431,44 +439,54 @@ def main(argv: list[str] | None = None) -> int:
     if a.new_terms:
         size.update(noise=[0.3], snr=[10, 20, 40] if a.visible else [5, 10, 20, 40], cases=16, clean=200, pairs=20,
                     pair_snr=[10, 20, 40])
+    if a.step_anywhere:
+        if a.visible:
+            ap.error("--step-anywhere measures by the size SNR: leave out --visible")
+        size.update(noise=[0.3], snr=[10, 20, 40], cases=16, clean=50)
     if a.quick:
         size.update(noise=[0.3], snr=[10, 40], cases=2, clean=4, pairs=2, pair_snr=[40])
+    if a.step_anywhere:  # one term: no pairs
+        size.update(pairs=0, pair_snr=[])
     for k, v in size.items():
         if getattr(a, k) is None:
             setattr(a, k, v)
     if a.out is None:
-        a.out = str(ROOT / "studies" / "results" / ("discover_study.md" if a.classic else
+        a.out = str(ROOT / "studies" / "results" / (
+            f"discover_step_anywhere{'_no_scan' if a.no_hold_scan else ''}_study.md" if a.step_anywhere else
+            "discover_study.md" if a.classic else
                                      "discover_new_terms_coefficient_study.md" if a.new_terms and a.coefficient else
                                      "discover_new_terms_study.md" if a.new_terms else
                                      ("discover_revisit_" if a.revisit else "discover_") +
                                      ("coefficient_tau_known_study.md" if a.visible and a.tau_known else
                                       "coefficient_study.md" if a.visible and a.coefficient else
                                       "visible_study.md" if a.visible else "grammar_study.md")))
-    a.terms = tuple(a.effects or (CLASSIC if a.classic else NEW_TERMS if a.new_terms else EFFECTS))
+    a.terms = tuple(a.effects or (CLASSIC if a.classic else NEW_TERMS if a.new_terms else
+                                  ("bias_step",) if a.step_anywhere else EFFECTS))
     a.pool = (*NEW_TERMS, *CLASSIC) if a.new_terms else a.terms  # the pairs' terms
     if a.coefficient and not a.visible:
         ap.error("--coefficient is a definition of the visible SNR: use it with --visible")
     if a.tau_known and not a.coefficient:
         ap.error("--tau-known is a variant of --coefficient: use it with --visible --coefficient")
     mode = ("coefficient-tau-known" if a.tau_known else "coefficient") if a.coefficient else a.visible
+    opts = {"step_anywhere": a.step_anywhere, "scan_holds": not a.no_hold_scan}
     jobs = []
     seed = a.seed
     for noise in a.noise:
         for _ in range(a.clean):
-            jobs.append((seed, None, 0.0, noise, a.terms, mode, a.revisit))
+            jobs.append((seed, None, 0.0, noise, a.terms, mode, a.revisit, opts))
             seed += 1
         for eff in a.terms:
             for snr in a.snr:
                 for _ in range(a.cases):
-                    jobs.append((seed, eff, snr, noise, a.pool, mode, a.revisit))
+                    jobs.append((seed, eff, snr, noise, a.pool, mode, a.revisit, opts))
                     seed += 1
         for snr in (CROSS_TWO_SNR if a.new_terms else ()):
             for _ in range(a.cases):
-                jobs.append((seed, CROSS_TWO, snr, noise, a.pool, mode, a.revisit))
+                jobs.append((seed, CROSS_TWO, snr, noise, a.pool, mode, a.revisit, opts))
                 seed += 1
         for snr in a.pair_snr:
             for _ in range(a.pairs):
-                jobs.append((seed, "pair", snr, noise, a.pool, mode, a.revisit))
+                jobs.append((seed, "pair", snr, noise, a.pool, mode, a.revisit, opts))
                 seed += 1
     from imucal.files.output import write_text_atomic
 

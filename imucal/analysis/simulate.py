@@ -454,7 +454,8 @@ def _axis_subsets() -> list[tuple[int, ...]]:
 def draw_effect_case(seed: int, effect: str | None = "random", axes: tuple[int, ...] | None = None,
                      snr: float | tuple[float, float] = (15.0, 60.0), noise_mg: float | None = None,
                      counts: bool | None = None, with_temperature: bool = True,
-                     candidates: tuple[str, ...] | None = None, revisit: bool = False) -> EffectCase:
+                     candidates: tuple[str, ...] | None = None, revisit: bool = False,
+                     step_anywhere: bool = False) -> EffectCase:
     """Draw sensor, pose plan, temperature profile and (unless ``effect`` is None) one effect.
 
     ``effect``: "random" (drawn from ``candidates``, default the five classic effects), a name from
@@ -467,6 +468,8 @@ def draw_effect_case(seed: int, effect: str | None = "random", axes: tuple[int, 
     18 to 26 poses of 3 s at 100 Hz, so a case simulates in milliseconds and fits in well under a second.
     ``revisit``: every pose held twice, the second pass in reverse order (36 to 52 holds; the other
     draws unchanged): a plan that sees time and temperature terms on every axis early and late.
+    ``step_anywhere``: a bias step's time drawn uniformly over the holds and the moves between them
+    (within a hold the sensor's bias jumps while it is still; by default it jumps while it is moved).
     """
 
     rng = np.random.default_rng([seed, 20240611])
@@ -525,7 +528,7 @@ def draw_effect_case(seed: int, effect: str | None = "random", axes: tuple[int, 
             hold_cov = {"time": t_mid, "temp": clean.sample(t_mid, rng) if clean is not None else None}
             refs = {n: v for n, v in e.data_values(hold_cov).items() if n in e.reference_names}
             refs.update({n: float(rng.uniform(0.05, 0.3)) * duration for n in e.shape_names})
-            refs.update({n: _step_time(len(dirs), plan, rng) for n in e.given_names})
+            refs.update({n: _step_time(len(dirs), plan, rng, step_anywhere) for n in e.given_names})
         span = 0.0
         if isinstance(e, Term):
             cov = {"time": t, "temp": temp_clean,
@@ -539,9 +542,14 @@ def draw_effect_case(seed: int, effect: str | None = "random", axes: tuple[int, 
     return EffectCase(seed=int(seed), effect=name, axes=tuple(ax), size=size, sigma_mean=sigma_mean, config=cfg)
 
 
-def _step_time(n_holds: int, plan: PosePlan, rng: np.random.Generator) -> float:
+def _step_time(n_holds: int, plan: PosePlan, rng: np.random.Generator, anywhere: bool = False) -> float:
     """A bias step's time: in the middle of a transition between holds, with at least
-    imucal.model.effects.STEP_MIN_SIDE holds on each side (the sensor knocked while it was moved)."""
+    imucal.model.effects.STEP_MIN_SIDE holds on each side (the sensor knocked while it was moved);
+    ``anywhere``: uniform from the start of hold STEP_MIN_SIDE to the end of the STEP_MIN_SIDE-th last."""
+    if anywhere:
+        cycle = plan.hold + plan.transition
+        lo, hi = STEP_MIN_SIDE * cycle, (n_holds - STEP_MIN_SIDE) * cycle - plan.transition
+        return float(rng.uniform(lo, hi)) + (plan.initial_hold or 0.0)
     k = int(rng.integers(STEP_MIN_SIDE, n_holds - STEP_MIN_SIDE + 1))  # holds before the step
     return k * plan.hold + (k - 0.5) * plan.transition + (plan.initial_hold or 0.0)
 

@@ -12,7 +12,7 @@ window holds too few samples to estimate a variance: it is stretched, and the du
 """
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field, replace
 from typing import BinaryIO
 
@@ -78,6 +78,10 @@ class StaticSettings:
     threshold: float | None = field(default=None, metadata=rule(
         gt=0, fix="omit it to set it automatically from the data"))
     trim: float = field(default=0.25, metadata=rule(ge=0, unit="seconds"))  #: dropped from each end of an interval [s]
+    #: times [s from the first sample] at which a still interval is cut in two: a knock or a bias step
+    #: during a hold (imucal discover finds them, a bias_step term's time adds its own); each part is
+    #: judged as an interval of its own (edges, minimum duration)
+    split: tuple[float, ...] = field(default=(), metadata=rule(max_len=100000, unit="seconds"))
 
     def __post_init__(self) -> None:
         for name in ("window", "min_duration"):
@@ -88,6 +92,8 @@ class StaticSettings:
         if not (isinstance(self.trim, (int, float)) and np.isfinite(self.trim) and self.trim >= 0):
             raise ImucalError(f"trim {short(self.trim)} must be a non-negative number of seconds",
                               field="static.trim")
+        if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in self.split):
+            raise ImucalError(f"split {short(self.split)} must be a list of times in seconds", field="static.split")
         if self.threshold is not None and not (isinstance(self.threshold, (int, float))
                                                and not isinstance(self.threshold, bool)
                                                and np.isfinite(self.threshold) and self.threshold > 0):
@@ -602,6 +608,16 @@ def still_segment(start: int, seg: np.ndarray, t: np.ndarray, temp: np.ndarray |
     return segment(start + lo, seg[lo:hi], t[lo:hi], None if temp is None else temp[lo:hi], lows, highs, declared)
 
 
+def cut_runs(runs: Iterable[tuple], times: tuple[float, ...]) -> Iterator[tuple]:
+    """The candidate runs (first row, raw, t, temp), each cut in two at every time of ``times`` inside
+    it (StaticSettings.split): the sample at a cut's time starts the second part."""
+    cuts = np.sort(np.asarray(times, float))
+    for start, raw, t, temp in runs:
+        k = np.unique(np.searchsorted(t, cuts[(cuts > t[0]) & (cuts <= t[-1])])) if cuts.size else ()
+        for lo, hi in zip((0, *k), (*k, t.size)):  # (two cuts between the same two samples make one)
+            yield start + int(lo), raw[lo:hi], t[lo:hi], None if temp is None else temp[lo:hi]
+
+
 def judge_runs(batch: list[tuple], args: tuple) -> list[Segment | None]:
     """still_segment of each candidate run (first row, raw, t, temp) of a batch, None for one shorter
     than the minimum duration (``args``: still_segment's lows, highs, declared, settings, m, q). A
@@ -809,7 +825,8 @@ def detect_static(t: np.ndarray, raw: np.ndarray, settings: StaticSettings = Sta
     del var
     lows, highs = column_extremes(raw)
     m = edge_samples(dt)
-    segs = [g for i, j in zip(a, b) if t[j - 1] - t[i] >= settings.min_duration
-            and (g := still_segment(int(i), raw[i:j], t[i:j], None if temp is None else temp[i:j], lows, highs,
-                                    rails, settings, m, q)) is not None]
+    runs = cut_runs(((int(i), raw[i:j], t[i:j], None if temp is None else temp[i:j]) for i, j in zip(a, b)),
+                    settings.split)
+    segs = [g for i, seg, ts, tp in runs if ts[-1] - ts[0] >= settings.min_duration
+            and (g := still_segment(i, seg, ts, tp, lows, highs, rails, settings, m, q)) is not None]
     return intervals_from(segs, thr, q, settings, lows, highs, rails, temp is not None)

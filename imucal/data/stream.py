@@ -36,8 +36,8 @@ from imucal.data.recording import MAX_ABS_VALUE, RecordingSummary, StaticSamples
 from imucal.data.spec import DataSpec, as_spec, resolve_path
 from imucal.data.spill import RowSpill, temporary_file
 from imucal.data.static import (QUANTUM_ROWS, Intervals, MovingVariance, Segment, StaticSettings, VarianceStore,
-                                at_rate, auto_threshold, candidate_runs, column_extremes, edge_samples, intervals_from,
-                                judge_runs, quantum, window_samples)
+                                at_rate, auto_threshold, candidate_runs, column_extremes, cut_runs, edge_samples,
+                                intervals_from, judge_runs, quantum, window_samples)
 from imucal.data.timebase import (CLOCK_SPAN, GAP_STEPS, Decision, GapFinder, LagDiffs, StepStats, ValueCounts,
                                   clock_times, decide, gap_excess, rate_time_base, refine, time_base,
                                   time_unit_from_step)
@@ -306,7 +306,7 @@ class StreamedRecording:
         m = edge_samples(scan.dt)
 
         judge = functools.partial(judge_runs, args=(scan.lows, scan.highs, self.rails, st, m, scan.q))
-        runs = batches(self._pieces(a, b), lambda piece: piece[1].shape[0])
+        runs = batches(cut_runs(self._pieces(a, b), st.split), lambda piece: piece[1].shape[0])
         for batch, found in ordered_map(judge, runs, run_workers(a.size)):
             for (start, raw, t, temp), g in zip(batch, found):
                 if g is not None:

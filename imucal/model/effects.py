@@ -155,6 +155,11 @@ class AxisEffect(Effect):
         """The values of ``given_names`` discovery tries for these rows (none: nothing to profile)."""
         return []
 
+    def jumps(self, values: Mapping[str, float]) -> tuple[float, ...]:
+        """Times [s] at which the effect jumps, given ``values`` of its parameters: a still interval
+        that holds one holds two readings, and is cut there (imucal.pipeline)."""
+        return ()
+
     def _extra(self, base: Parameters | None) -> list[Parameter]:
         return []
 
@@ -232,6 +237,10 @@ class Basis:
     def grid(self, x: np.ndarray | None, prefix: str) -> list[dict[str, float]]:
         """Values of the given constants to profile over these rows (``AxisEffect.profile_grid``)."""
         return []
+
+    def jumps(self, prefix: str, values: Mapping[str, float]) -> tuple[float, ...]:
+        """Times at which f jumps (``AxisEffect.jumps``)."""
+        return ()
 
 
 def recurrence(x: np.ndarray, order: int, a1: float | None = None) -> tuple[list[float], list[float]]:
@@ -347,6 +356,10 @@ class Step(Basis):
     def given(self, prefix):
         return (f"{prefix}_t",)
 
+    def jumps(self, prefix, values):
+        t = values.get(f"{prefix}_t", math.nan)
+        return (float(t),) if math.isfinite(t) else ()
+
     def grid(self, x, prefix):
         """The midpoints between consecutive row times with ``STEP_MIN_SIDE`` rows on each side."""
         if x is None or len(x) < 2 * STEP_MIN_SIDE:
@@ -434,6 +447,9 @@ class Term(AxisEffect):
 
     def profile_grid(self, covariates):
         return self.basis.grid(self._rows(covariates), self.name)
+
+    def jumps(self, values):
+        return self.basis.jumps(self.name, values)
 
     def start(self, base, axis):
         # A warm-up amplitude starts at its scale: at 0 its tau would not enter the model, and the

@@ -40,6 +40,8 @@ class DiscoverSettings:
     max_effects: int = 3  #: effects added at most
     full_fits: int = 4  #: candidates fitted in full per round (best by the screening score)
     lookahead: int = 3  #: when no single candidate passes, pairs starting from this many are tried
+    #: scan every still interval's samples for a step inside it and cut it there (changepoint.inner_steps)
+    scan_holds: bool = True
 
     def __post_init__(self) -> None:
         unknown = [c for c in self.candidates if c not in EFFECTS]
