@@ -53,6 +53,8 @@ class CalibrationRun:
     gravity_source: str
     gyro: FitResult | None = None  #: the gyroscope fit, when the recording has one
     mag: "MagCalibration | None" = None  #: the magnetometer's calibration, when the recording has one
+    #: still intervals whose mean moved within them (imucal.analysis.hold_steps); none scanned when read in chunks
+    hold_steps: tuple = ()
 
     @property
     def rms_residual_samples(self) -> float:
@@ -457,6 +459,7 @@ def calibrate_accelerometer(config: RunConfig, recording: Recording | None = Non
     _refuse_absurd(res, pb.params, rec.source, config, rec, iv)
     rm = res.residuals if res.mode == "means" else jacobian_rows(pb.means, res.params, pb.model, gravity,
                                                                  residuals=True)  # residuals on means too
+    steps = _hold_steps(rec, iv)
     cal_fit = {
         "mode": res.mode, "weights": config.fit.weights, "noise": Path(pb.data.noise_source).name,
         "status": res.status, "iterations": res.iterations,
@@ -468,7 +471,7 @@ def calibrate_accelerometer(config: RunConfig, recording: Recording | None = Non
         **({"bias_drift": res.bias_drift.to_json(rec.unit)} if res.bias_drift is not None else {}),
         "n_intervals": iv.n, "n_distinct_orientations": pb.obs.n_distinct,
         "gravity_source": gsource,
-        "warnings": fit_warnings(res, config, rec, dropped),
+        "warnings": fit_warnings(res, config, rec, dropped) + [_hold_step_warning(s, iv, res, gravity) for s in steps],
     }
     if iv.temp is not None:  # the range a temperature effect holds over (exports write it: INS_TCAL1_TMIN ...)
         cal_fit["temperature_range"] = [float(np.min(iv.temp)), float(np.max(iv.temp))]
@@ -484,7 +487,27 @@ def calibrate_accelerometer(config: RunConfig, recording: Recording | None = Non
     directions = ai / np.linalg.norm(ai, axis=1, keepdims=True)
     return CalibrationRun(config=config, recording=rec, intervals=iv, guess=pb.guess, observability=pb.obs,
                           result=res, calibration=cal, directions=directions, sample_residuals=samp_res,
-                          gravity_source=gsource)
+                          gravity_source=gsource, hold_steps=tuple(steps))
+
+
+def _hold_steps(rec: Recording | RecordingSummary, iv: Intervals) -> list:
+    """The still intervals whose mean moved within them (none scanned when the file was read in chunks)."""
+    raw = getattr(rec, "raw", None)
+    if raw is None:
+        return []
+    from imucal.analysis.hold_steps import hold_steps
+    from imucal.data.static import quantum
+
+    return hold_steps(rec.t, raw, iv, quantum(raw))
+
+
+def _hold_step_warning(step: Any, iv: Intervals, res: FitResult, gravity: float) -> str:
+    from imucal.analysis.hold_steps import hold_step_words
+
+    scale = np.array([res.params[n].value for n in ("b1", "b2", "b3")])
+    return (f"{hold_step_words(step, iv, scale, gravity)}; its mean lies between the two, which no model of the "
+            f"means fits: cut it with static.split: [{step.time:.6g}] (or hold that pose again); `imucal discover` "
+            "cuts it and names a step")
 
 
 def _base_check(params: Parameters, std: Mapping[str, float], model: SensorModel, means: FitData, gravity: float

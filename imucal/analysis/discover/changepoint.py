@@ -9,7 +9,6 @@ misfit) of the best form the confidence set (Hinkley 1970: the likelihood-ratio 
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -76,85 +75,3 @@ def change_point(prob: Problem, res: FitResult, effects: Effects, name: str) -> 
     lo, hi = _gap(prob, min(inside)), _gap(prob, max(inside))
     return ChangePoint(t, _gap(prob, t), min(lo[0], t), max(hi[1], t), len(inside), len(grid))
 
-
-# --- a step inside a still interval -------------------------------------------------------------
-#: The shortest side of a cut inside an interval, as a fraction of its samples (the scan's t0).
-INNER_SIDE = 0.1
-#: Fewest samples an interval needs to be scanned for a step inside it.
-INNER_MIN_SAMPLES = 20
-
-
-@dataclass(frozen=True)
-class InnerStep:
-    """A still interval whose mean moved within it (a knock, a bias step during the hold)."""
-
-    interval: int
-    time: float  #: the first sample after the step [s]
-    shift: np.ndarray  #: (3,) mean after minus mean before [raw]
-    chi2: float  #: the scan's largest chi-square (3 dof at one cut)
-    p: float  #: its p, family-wise over the intervals scanned
-
-
-def sup_bridge_sf(c: float, dof: int, t0: float) -> float:
-    """P(sup over t0 <= u <= 1 - t0 of a standardised squared Brownian bridge in ``dof`` dimensions > c):
-    the largest two-mean chi-square over every cut of a series of white noise (Siegmund's approximation,
-    as for Andrews' sup-Wald test; conservative for the discrete cuts of a finite series)."""
-    if c <= dof:
-        return 1.0
-    head = math.exp((dof / 2) * math.log(c) - c / 2 - (dof / 2) * math.log(2.0) - math.lgamma(dof / 2))
-    return min(1.0, head * ((1 - dof / c) * math.log((1 - t0) ** 2 / t0 ** 2) + 4 / c))
-
-
-def _scan(x: np.ndarray, floor: float, inflation: float) -> tuple[int, float, np.ndarray]:
-    """The cut k (samples before it), its chi-square and shift of the two-mean model of ``x`` (n, 3): each
-    axis's mean difference over its standard error, the noise from the residual of the two means at that
-    cut (floored by quantisation, times the recording's correlated-noise factor)."""
-    n = x.shape[0]
-    x = x - x.mean(axis=0)
-    k = np.arange(1, n)[:, None]
-    left = np.cumsum(x, axis=0)[:-1]  # sums before each cut; the total is 0
-    d = -left / (n - k) - left / k  # mean after minus mean before
-    between = d ** 2 * k * (n - k) / n
-    resid = np.maximum((np.sum(x ** 2, axis=0) - between) / (n - 2), floor) * inflation
-    q = np.sum(between / resid, axis=1)
-    m = max(1, int(math.ceil(INNER_SIDE * n)))
-    j = m - 1 + int(np.argmax(q[m - 1:n - m]))
-    return j + 1, float(q[j]), d[j]
-
-
-#: Batches of the long-run variance of a scanned interval's residual (its noise at the scale of a mean).
-INNER_BATCHES = 8
-
-
-def _abrupt(x: np.ndarray, t: np.ndarray, k: int, floor: float, inflation: float) -> tuple[float, np.ndarray]:
-    """The chi-square of a step at cut ``k`` beside a line in time, per axis the step's coefficient over
-    its standard error with the residual's long-run variance (batch means, at least its variance times the
-    recording's pooled correlated-noise factor): slow wander and a drift through the hold are not a step,
-    and correlated noise is not evidence."""
-    n = x.shape[0]
-    u = (t - t.mean()) / max(float(np.ptp(t)), 1e-12)
-    A = np.column_stack([np.ones(n), u, (np.arange(n) >= k).astype(float)])
-    coef, *_ = np.linalg.lstsq(A, x, rcond=None)
-    e = x - A @ coef
-    nb = n // INNER_BATCHES
-    bm = e[:nb * INNER_BATCHES].reshape(INNER_BATCHES, nb, -1).mean(axis=1)
-    lrv = np.maximum(np.maximum(bm.var(axis=0, ddof=1) * nb, e.var(axis=0, ddof=3) * inflation), floor)
-    c = float(np.linalg.inv(A.T @ A)[2, 2])
-    return float(np.sum(coef[2] ** 2 / (c * lrv))), coef[2]
-
-
-def inner_steps(t: np.ndarray, raw: np.ndarray, iv, quantum: float, alpha: float) -> list[InnerStep]:
-    """The still intervals whose mean moved within them, at family-wise level ``alpha`` over the intervals
-    scanned: a bias step during a hold leaves its interval's mean between the two biases, which no term
-    of the interval means fits (the pipeline cuts it there: StaticSettings.split)."""
-    scanned = [i for i in range(iv.n) if iv.end[i] - iv.start[i] >= INNER_MIN_SAMPLES]
-    floor = quantum ** 2 / 12
-    out = []
-    for i in scanned:
-        x = np.asarray(raw[iv.start[i]:iv.end[i]], float)
-        k, _, _ = _scan(x, floor, iv.noise_inflation)
-        c, shift = _abrupt(x, np.asarray(t[iv.start[i]:iv.end[i]], float), k, floor, iv.noise_inflation)
-        p = min(1.0, sup_bridge_sf(c, x.shape[1], INNER_SIDE) * len(scanned))
-        if p < alpha:
-            out.append(InnerStep(i, float(t[iv.start[i] + k]), shift, c, p))
-    return out

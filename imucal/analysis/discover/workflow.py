@@ -15,7 +15,8 @@ from imucal.analysis.discover import backward as bw
 from imucal.analysis.discover import stochastic as noise
 from imucal.analysis.discover.candidates import candidates, found_effect, testable
 from imucal.analysis.discover.problem import EFFECT_ORDER, Effects, Problem, as_dict, canonical, labels, p_noise
-from imucal.analysis.discover.changepoint import change_point, inner_steps
+from imucal.analysis.discover.changepoint import change_point
+from imucal.analysis.hold_steps import HOLD_ALPHA, hold_step_words, hold_steps
 from imucal.analysis.discover.result import Discovery, FoundEffect, Step
 from imucal.analysis.discover.screening import scan
 from imucal.analysis.discover.selection import round_
@@ -164,26 +165,24 @@ def _start(config: RunConfig, settings: DiscoverSettings) -> tuple[Sweep | None,
                           fix="record more static orientations (e.g. 18 to 30 holds of 3 s)") from None
 
 
-def _cut_inner_steps(config: RunConfig, base: CalibrationRun, settings: DiscoverSettings,
-                     notes: list[str]) -> tuple[RunConfig, CalibrationRun]:
+def _cut_hold_steps(config: RunConfig, base: CalibrationRun, settings: DiscoverSettings,
+                    notes: list[str]) -> tuple[RunConfig, CalibrationRun]:
     """The run file and base calibration with every still interval whose mean moved within it cut there
     (static.split): a step during a hold, which would leave one interval between the two biases."""
     rec, iv = base.recording, base.intervals
     raw = getattr(rec, "raw", None)
     if not settings.scan_holds:
         return config, base
-    if raw is None:  # read in chunks: the samples are not kept
+    if raw is None:  # read in chunks
         notes.append("steps inside the still intervals not scanned: the recording was read in chunks")
         return config, base
-    found = inner_steps(rec.t, raw, iv, quantum(raw), settings.alpha_effect)
+    found = (list(base.hold_steps) if settings.alpha_effect == HOLD_ALPHA
+             else hold_steps(rec.t, raw, iv, quantum(raw), settings.alpha_effect))
     if not found:
         return config, base
-    scale = 1e3 / base.calibration.gravity  # mg per m/s^2
     for s in found:
-        mg = ", ".join(f"{v:+.3g}" for v in s.shift / base.guess.b * scale)
-        notes.append(f"interval {s.interval} ({iv.t_start[s.interval]:.6g}-{iv.t_end[s.interval]:.6g} s) cut at "
-                     f"{s.time:.6g} s: its mean moved within the hold by x, y, z = {mg} mg (chi-square {s.chi2:.3g}, "
-                     f"p = {s.p:.2g} over the intervals): its two sides are intervals of their own (static.split)")
+        notes.append(f"{hold_step_words(s, iv, base.guess.b, base.calibration.gravity)}: cut there, its two sides "
+                     "are intervals of their own (static.split)")
     cut = dataclasses.replace(config, static=dataclasses.replace(
         config.static, split=config.static.split + tuple(s.time for s in found)))
     return cut, calibrate_accelerometer(cut, rec)
@@ -292,7 +291,7 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings(),
     sweep, base = _start(config, settings)
     if base is None:
         return sweep_discovery(asked, sweep, settings, progress)
-    config, base = _cut_inner_steps(config, base, settings, notes)
+    config, base = _cut_hold_steps(config, base, settings, notes)
     prob = Problem(config, base, progress)
     notes += _sensors_left(base.recording)
     names = testable(list(settings.candidates), base.intervals, base.recording.source, notes)

@@ -1,6 +1,6 @@
 """A bias step while the sensor is still (issue 28's step at an unknown time): the detector cuts a still
 interval at given times (static.split, a bias_step term's time), and discover finds a step inside a hold
-by the samples' two-mean scan against a line and the long-run noise (imucal.analysis.discover.changepoint),
+by the samples' two-mean scan against a line and the long-run noise (imucal.analysis.hold_steps),
 without cutting intervals of white, correlated or drifting noise."""
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from imucal.analysis.discover import DiscoverSettings, Outcome, discover
-from imucal.analysis.discover.changepoint import inner_steps, sup_bridge_sf
+from imucal.analysis.hold_steps import hold_steps, sup_bridge_sf
 from imucal.analysis.simulate import draw_effect_case
 from imucal.config.run import config_from_dict
 from imucal.data.static import _BATCHES, Intervals, StaticSettings
@@ -54,10 +54,10 @@ def test_a_split_that_is_not_a_list_of_times_is_refused(split):
 def test_the_scans_null_tail_is_not_exceeded_on_white_noise():
     """Siegmund's approximation of the sup of the two-mean chi-square over the cuts is conservative for the
     discrete cuts: on 3000 white intervals the share past the 1 % point stays near or below 1 %."""
-    from imucal.analysis.discover.changepoint import INNER_SIDE, _scan
+    from imucal.analysis.hold_steps import HOLD_SIDE, _scan
 
     rng = np.random.default_rng(5)
-    p = [sup_bridge_sf(_scan(rng.normal(size=(240, 3)), 0.0, 1.0)[1], 3, INNER_SIDE) for _ in range(3000)]
+    p = [sup_bridge_sf(_scan(rng.normal(size=(240, 3)), 0.0, 1.0)[1], 3, HOLD_SIDE) for _ in range(3000)]
     assert np.mean(np.array(p) < 0.01) < 0.015
 
 
@@ -91,7 +91,7 @@ def test_no_interval_of_noise_or_drift_is_cut(kind):
     elif kind == "walk":  # a bias random walk as large as the noise over a hold
         e += np.cumsum(rng.normal(size=e.shape), axis=0) / np.sqrt(m)
     t, iv = _intervals(e, n_iv)
-    assert inner_steps(t, e, iv, 0.0, 1e-3) == []
+    assert hold_steps(t, e, iv, 0.0, 1e-3) == []
 
 
 def test_a_step_inside_a_hold_is_found_where_it_is():
@@ -99,7 +99,7 @@ def test_a_step_inside_a_hold_is_found_where_it_is():
     x = rng.normal(size=(20 * 300, 3))
     x[5 * 300 + 190:6 * 300, 1] += 1.5  # 1.5 noise sigmas on y, 190 samples into interval 5
     t, iv = _intervals(x, 20)
-    (s,) = inner_steps(t, x, iv, 0.0, 1e-3)
+    (s,) = hold_steps(t, x, iv, 0.0, 1e-3)
     assert s.interval == 5 and abs(s.time - t[5 * 300 + 190]) <= 0.03 and s.p < 1e-3
     assert abs(s.shift[1] - 1.5) < 0.4 and abs(s.shift[0]) < 0.4
 
@@ -117,6 +117,6 @@ def test_discover_names_a_step_that_happened_while_the_sensor_was_still(tmp_path
     path.write_text(cfg.run().to_csv_text())
     d = discover(config_from_dict({"data": {"path": str(path), "unit": cfg.sensor.unit}}), DiscoverSettings())
     assert [e.label for e in d.effects] == [case.label] and d.verdict.outcome is Outcome.EXPLAINED
-    assert any("cut at" in n for n in d.notes)
+    assert any("moved within it" in n and "static.split" in n for n in d.notes)
     (e,) = d.effects
     assert e.change_point.lower <= eff["bias_step_t"] <= e.change_point.upper
