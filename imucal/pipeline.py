@@ -23,7 +23,7 @@ from imucal.model.channels import covariate_matrix, covariate_values
 from imucal.solve.observability import Observability, analyse, distinct_directions, require_observable, thresholds
 from imucal.constants import RIGHT_ANGLE
 from imucal.model.parameters import ANGLE_NAMES, BASE_NAMES, Parameters, base_parameters
-from imucal.data.static import Intervals, detect_static
+from imucal.data.static import Intervals, StaticSettings, detect_static
 from imucal.analysis.rest import stated_unit_error
 from imucal.solve.misfit import POOR_FIT_P, excess_residuals  # one rule for every sensor's fit
 from imucal.report.misfit import excess_words
@@ -459,7 +459,7 @@ def calibrate_accelerometer(config: RunConfig, recording: Recording | None = Non
     _refuse_absurd(res, pb.params, rec.source, config, rec, iv)
     rm = res.residuals if res.mode == "means" else jacobian_rows(pb.means, res.params, pb.model, gravity,
                                                                  residuals=True)  # residuals on means too
-    steps = _hold_steps(rec, iv)
+    steps = _hold_steps(rec, iv, config.static)
     cal_fit = {
         "mode": res.mode, "weights": config.fit.weights, "noise": Path(pb.data.noise_source).name,
         "status": res.status, "iterations": res.iterations,
@@ -490,15 +490,17 @@ def calibrate_accelerometer(config: RunConfig, recording: Recording | None = Non
                           gravity_source=gsource, hold_steps=tuple(steps))
 
 
-def _hold_steps(rec: Recording | RecordingSummary, iv: Intervals) -> list:
+def _hold_steps(rec: Recording | RecordingSummary, iv: Intervals, settings: StaticSettings) -> list:
     """The still intervals whose mean moved within them (none scanned when the file was read in chunks)."""
     raw = getattr(rec, "raw", None)
-    if raw is None:
+    if raw is None or iv.n == 0:
         return []
-    from imucal.analysis.hold_steps import hold_steps
-    from imucal.data.static import quantum
+    from imucal.analysis.hold_steps import HOLD_WINDOW, hold_steps
+    from imucal.data.static import at_rate, quantum
 
-    return hold_steps(rec.t, raw, iv, quantum(raw))
+    dt = float(np.median(np.diff(rec.t[:20001]))) if rec.n > 1 else 1.0
+    span = HOLD_WINDOW * at_rate(settings, dt).min_duration / dt if dt > 0 else rec.n
+    return hold_steps(rec.t, raw, iv, quantum(raw), int(span))
 
 
 def _hold_step_warning(step: Any, iv: Intervals, res: FitResult, gravity: float) -> str:

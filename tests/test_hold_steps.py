@@ -91,7 +91,7 @@ def test_no_interval_of_noise_or_drift_is_cut(kind):
     elif kind == "walk":  # a bias random walk as large as the noise over a hold
         e += np.cumsum(rng.normal(size=e.shape), axis=0) / np.sqrt(m)
     t, iv = _intervals(e, n_iv)
-    assert hold_steps(t, e, iv, 0.0, 1e-3) == []
+    assert hold_steps(t, e, iv, 0.0, span=10**9) == []
 
 
 def test_a_step_inside_a_hold_is_found_where_it_is():
@@ -99,7 +99,7 @@ def test_a_step_inside_a_hold_is_found_where_it_is():
     x = rng.normal(size=(20 * 300, 3))
     x[5 * 300 + 190:6 * 300, 1] += 1.5  # 1.5 noise sigmas on y, 190 samples into interval 5
     t, iv = _intervals(x, 20)
-    (s,) = hold_steps(t, x, iv, 0.0, 1e-3)
+    (s,) = hold_steps(t, x, iv, 0.0, span=10**9)
     assert s.interval == 5 and abs(s.time - t[5 * 300 + 190]) <= 0.03 and s.p < 1e-3
     assert abs(s.shift[1] - 1.5) < 0.4 and abs(s.shift[0]) < 0.4
 

@@ -19,6 +19,9 @@ from imucal.data.static import Intervals
 
 #: The family-wise level of the scan (discover's alpha_effect by default).
 HOLD_ALPHA = 1e-3
+#: A long hold is judged in windows of this many minimum durations (StaticSettings.min_duration): a
+#: step against its neighbourhood, where a wandering bias (a random walk) moves little.
+HOLD_WINDOW = 4
 #: The shortest side of a cut inside an interval, as a fraction of its samples (the scan's t0).
 HOLD_SIDE = 0.1
 #: Fewest samples an interval needs to be scanned for a step inside it.
@@ -84,22 +87,35 @@ def _abrupt(x: np.ndarray, t: np.ndarray, k: int, floor: float, inflation: float
     return float(np.sum(coef[2] ** 2 / (c * lrv))), coef[2]
 
 
-def hold_steps(t: np.ndarray, raw: np.ndarray, iv: Intervals, quantum: float,
+def _windows(n: int, span: int) -> list[tuple[int, int]]:
+    """Rows [a, b) of a hold of ``n`` samples judged one at a time: the whole hold, or windows of ``span``
+    samples every span / 2 (a long hold's bias may wander: a step is judged against its neighbourhood)."""
+    if n <= span:
+        return [(0, n)]
+    starts = list(range(0, n - span, span // 2)) + [n - span]
+    return [(a, a + span) for a in starts]
+
+
+def hold_steps(t: np.ndarray, raw: np.ndarray, iv: Intervals, quantum: float, span: int,
                alpha: float = HOLD_ALPHA) -> list[HoldStep]:
     """The still intervals whose mean moved within them, at family-wise level ``alpha`` over the intervals
-    scanned: a bias step during a hold leaves its interval's mean between the two biases, which no term
-    of the interval means fits (the pipeline cuts it there: StaticSettings.split)."""
-    scanned = [i for i in range(iv.n) if iv.end[i] - iv.start[i] >= HOLD_MIN_SAMPLES]
+    and windows scanned (``span``: samples of a window; holds no longer are judged whole): a bias step during
+    a hold leaves its interval's mean between the two biases, which no term of the interval means fits (the
+    pipeline cuts it there: StaticSettings.split)."""
+    span = max(int(span), HOLD_MIN_SAMPLES)
+    parts = [(i, a, b) for i in range(iv.n) if iv.end[i] - iv.start[i] >= HOLD_MIN_SAMPLES
+             for a, b in _windows(int(iv.end[i] - iv.start[i]), span)]
     floor = quantum ** 2 / 12
-    out = []
-    for i in scanned:
-        x = np.asarray(raw[iv.start[i]:iv.end[i]], float)
+    best: dict[int, HoldStep] = {}
+    for i, a, b in parts:
+        lo, hi = int(iv.start[i]) + a, int(iv.start[i]) + b
+        x = np.asarray(raw[lo:hi], float)
         k, _, _ = _scan(x, floor, iv.noise_inflation)
-        c, shift = _abrupt(x, np.asarray(t[iv.start[i]:iv.end[i]], float), k, floor, iv.noise_inflation)
-        p = min(1.0, sup_bridge_sf(c, x.shape[1], HOLD_SIDE) * len(scanned))
-        if p < alpha:
-            out.append(HoldStep(i, float(t[iv.start[i] + k]), shift, c, p))
-    return out
+        c, shift = _abrupt(x, np.asarray(t[lo:hi], float), k, floor, iv.noise_inflation)
+        p = min(1.0, sup_bridge_sf(c, x.shape[1], HOLD_SIDE) * len(parts))
+        if p < alpha and (i not in best or c > best[i].chi2):
+            best[i] = HoldStep(i, float(t[lo + k]), shift, c, p)
+    return [best[i] for i in sorted(best)]
 
 
 def hold_step_words(s: HoldStep, iv: Intervals, scale: np.ndarray, gravity: float) -> str:

@@ -16,7 +16,7 @@ from imucal.analysis.discover import stochastic as noise
 from imucal.analysis.discover.candidates import candidates, found_effect, testable
 from imucal.analysis.discover.problem import EFFECT_ORDER, Effects, Problem, as_dict, canonical, labels, p_noise
 from imucal.analysis.discover.changepoint import change_point
-from imucal.analysis.hold_steps import HOLD_ALPHA, hold_step_words, hold_steps
+from imucal.analysis.hold_steps import hold_step_words
 from imucal.analysis.discover.result import Discovery, FoundEffect, Step
 from imucal.analysis.discover.screening import scan
 from imucal.analysis.discover.selection import round_
@@ -24,7 +24,6 @@ from imucal.analysis.discover.settings import DiscoverSettings
 from imucal.analysis.discover.sweep import sweep_discovery
 from imucal.analysis.discover.verdict import Shortfall, decide, stochastic_part
 from imucal.config.run import EffectSpec, RunConfig
-from imucal.data.static import quantum
 from imucal.errors import ImucalError
 from imucal.model.effects import EFFECTS, MIN_DOF, given_names, make_effect
 from imucal.model.parameters import BASE_NAMES
@@ -176,8 +175,7 @@ def _cut_hold_steps(config: RunConfig, base: CalibrationRun, settings: DiscoverS
     if raw is None:  # read in chunks
         notes.append("steps inside the still intervals not scanned: the recording was read in chunks")
         return config, base
-    found = (list(base.hold_steps) if settings.alpha_effect == HOLD_ALPHA
-             else hold_steps(rec.t, raw, iv, quantum(raw), settings.alpha_effect))
+    found = list(base.hold_steps)  # (the pipeline's scan, at HOLD_ALPHA: discover's default level)
     if not found:
         return config, base
     for s in found:
