@@ -52,13 +52,15 @@ def test_a_split_that_is_not_a_list_of_times_is_refused(split):
 
 
 def test_the_scans_null_tail_is_not_exceeded_on_white_noise():
-    """Siegmund's approximation of the sup of the two-mean chi-square over the cuts is conservative for the
-    discrete cuts: on 3000 white intervals the share past the 1 % point stays near or below 1 %."""
-    from imucal.analysis.hold_steps import HOLD_SIDE, _scan
+    """Siegmund's approximation of the sup of the two-mean chi-square over the cuts, for the step judged at
+    the best cut beside a line with the long-run variance: on 3000 white holds the share past the 1 % and
+    the 0.1 % points stays near or below them."""
+    from imucal.analysis.hold_steps import HOLD_SIDE, _judge
 
     rng = np.random.default_rng(5)
-    p = [sup_bridge_sf(_scan(rng.normal(size=(240, 3)), 0.0, 1.0)[1], 3, HOLD_SIDE) for _ in range(3000)]
-    assert np.mean(np.array(p) < 0.01) < 0.015
+    _, chi2, _ = _judge(rng.normal(size=(3000, 240, 3)), np.tile(np.arange(240) / 100.0, (3000, 1)), 0.0, 1.0)
+    p = np.array([sup_bridge_sf(float(c), 3, HOLD_SIDE) for c in chi2])
+    assert np.mean(p < 0.01) < 0.015 and np.mean(p < 0.001) < 0.002
 
 
 def _intervals(x: np.ndarray, n_iv: int, rate: float = 100.0) -> tuple[np.ndarray, Intervals]:
@@ -120,3 +122,17 @@ def test_discover_names_a_step_that_happened_while_the_sensor_was_still(tmp_path
     assert any("moved within it" in n and "static.split" in n for n in d.notes)
     (e,) = d.effects
     assert e.change_point.lower <= eff["bias_step_t"] <= e.change_point.upper
+
+
+def test_block_means_match_the_samples_up_to_the_recordings_last_one():
+    from imucal.analysis.hold_steps import _block_means
+
+    rng = np.random.default_rng(2)
+    x = rng.normal(size=(1000, 3))
+    t, iv = _intervals(x, 4)  # 250 samples each; the last ends at the recording's last sample
+    out = _block_means(x, iv, {0: 7, 3: 9})
+    for i, size in ((0, 7), (3, 9)):
+        m = 250 // size
+        a = int(iv.start[i])
+        assert np.allclose(out[i][0], x[a:a + m * size].reshape(m, size, 3).mean(axis=1))
+        assert np.array_equal(out[i][1], a + size * np.arange(m))

@@ -24,6 +24,8 @@ HOLD_ALPHA = 1e-3
 HOLD_WINDOW = 4
 #: The shortest side of a cut inside an interval, as a fraction of its samples (the scan's t0).
 HOLD_SIDE = 0.1
+#: Block means a window is judged on (fewer when it has fewer samples).
+HOLD_BLOCKS = 64
 #: Fewest samples an interval needs to be scanned for a step inside it.
 HOLD_MIN_SAMPLES = 20
 
@@ -49,51 +51,70 @@ def sup_bridge_sf(c: float, dof: int, t0: float) -> float:
     return min(1.0, head * ((1 - dof / c) * math.log((1 - t0) ** 2 / t0 ** 2) + 4 / c))
 
 
-def _scan(x: np.ndarray, floor: float, inflation: float) -> tuple[int, float, np.ndarray]:
-    """The cut k (samples before it), its chi-square and shift of the two-mean model of ``x`` (n, 3): each
-    axis's mean difference over its standard error, the noise from the residual of the two means at that
-    cut (floored by quantisation, times the recording's correlated-noise factor)."""
-    n = x.shape[0]
-    x = x - x.mean(axis=0)
-    k = np.arange(1, n)[:, None]
-    left = np.cumsum(x, axis=0)[:-1]  # sums before each cut; the total is 0
-    d = -left / (n - k) - left / k  # mean after minus mean before
-    between = d ** 2 * k * (n - k) / n
-    resid = np.maximum((np.sum(x ** 2, axis=0) - between) / (n - 2), floor) * inflation
-    q = np.sum(between / resid, axis=1)
-    m = max(1, int(math.ceil(HOLD_SIDE * n)))
-    j = m - 1 + int(np.argmax(q[m - 1:n - m]))
-    return j + 1, float(q[j]), d[j]
-
-
 #: Batches of the long-run variance of a scanned interval's residual (its noise at the scale of a mean).
 HOLD_BATCHES = 8
 
 
-def _abrupt(x: np.ndarray, t: np.ndarray, k: int, floor: float, inflation: float) -> tuple[float, np.ndarray]:
-    """The chi-square of a step at cut ``k`` beside a line in time, per axis the step's coefficient over
-    its standard error with the residual's long-run variance (batch means, at least its variance times the
-    recording's pooled correlated-noise factor): slow wander and a drift through the hold are not a step,
-    and correlated noise is not evidence."""
-    n = x.shape[0]
-    u = (t - t.mean()) / max(float(np.ptp(t)), 1e-12)
-    A = np.column_stack([np.ones(n), u, (np.arange(n) >= k).astype(float)])
-    coef, *_ = np.linalg.lstsq(A, x, rcond=None)
-    e = x - A @ coef
+def _judge(x: np.ndarray, t: np.ndarray, floor: float, inflation: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each of W windows of n samples (``x``: (W, n, 3), ``t``: (W, n)): the cut k (samples before it) that
+    best splits it into two means, and the chi-square and shift (W, 3) of a step there beside a line in time.
+
+    The cut: each axis's mean difference over its standard error, the noise from the residual of the two
+    means (floored by quantisation, times the recording's correlated-noise factor). The step's chi-square:
+    per axis its coefficient beside the line over its standard error with the residual's long-run variance
+    (batch means, at least its variance times that factor): slow wander and a drift through the hold are
+    not a step, and correlated noise is not evidence."""
+    w, n, _ = x.shape
+    x = x - x.mean(axis=1, keepdims=True)
+    ks = np.arange(1, n)[None, :, None]
+    left = np.cumsum(x, axis=1)[:, :-1]  # sums before each cut; the total is 0
+    d = -left / (n - ks) - left / ks  # mean after minus mean before
+    between = d ** 2 * ks * (n - ks) / n
+    resid = np.maximum((np.sum(x ** 2, axis=1, keepdims=True) - between) / (n - 2), floor) * inflation
+    m = max(1, int(math.ceil(HOLD_SIDE * n)))
+    k = m + np.argmax(np.sum(between / resid, axis=2)[:, m - 1:n - m], axis=1)
+    u = t - t.mean(axis=1, keepdims=True)
+    u = u / np.maximum(np.ptp(t, axis=1, keepdims=True), 1e-12)
+    h = (np.arange(n)[None, :] >= k[:, None]).astype(float)
+    cols = np.stack([np.ones_like(u), u, h], axis=2)  # (W, n, 3): 1, t, the step
+    colt = cols.transpose(0, 2, 1)
+    gram = colt @ cols
+    coef = np.linalg.solve(gram, colt @ x)  # (W, 3 columns, 3 axes)
+    e = x - cols @ coef
     nb = n // HOLD_BATCHES
-    bm = e[:nb * HOLD_BATCHES].reshape(HOLD_BATCHES, nb, -1).mean(axis=1)
-    lrv = np.maximum(np.maximum(bm.var(axis=0, ddof=1) * nb, e.var(axis=0, ddof=3) * inflation), floor)
-    c = float(np.linalg.inv(A.T @ A)[2, 2])
-    return float(np.sum(coef[2] ** 2 / (c * lrv))), coef[2]
+    bm = e[:, :nb * HOLD_BATCHES].reshape(w, HOLD_BATCHES, nb, 3).mean(axis=2)
+    lrv = np.maximum(np.maximum(bm.var(axis=1, ddof=1) * nb, np.sum(e ** 2, axis=1) / (n - 3) * inflation), floor)
+    c = np.linalg.inv(gram)[:, 2, 2]
+    return k, np.sum(coef[:, 2] ** 2 / (c[:, None] * lrv), axis=1), coef[:, 2]
 
 
 def _windows(n: int, span: int) -> list[tuple[int, int]]:
-    """Rows [a, b) of a hold of ``n`` samples judged one at a time: the whole hold, or windows of ``span``
-    samples every span / 2 (a long hold's bias may wander: a step is judged against its neighbourhood)."""
+    """Rows [a, b) of a hold of ``n`` rows judged one at a time: the whole hold, or windows of ``span``
+    rows every span / 2 (a long hold's bias may wander: a step is judged against its neighbourhood)."""
     if n <= span:
         return [(0, n)]
     starts = list(range(0, n - span, span // 2)) + [n - span]
     return [(a, a + span) for a in starts]
+
+
+def _block_means(raw: np.ndarray, iv: Intervals, sizes: dict[int, int]) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """{interval: (means of its consecutive blocks of sizes[interval] samples (the last few left out), the
+    first sample of each)}, in one pass over the samples: a step moves a block mean as it moves the samples."""
+    firsts, keep = [], []
+    for i, size in sizes.items():
+        lo, m = int(iv.start[i]), int(iv.end[i] - iv.start[i]) // size
+        firsts.append(lo + size * np.arange(m + 1))  # (the block after the last one only ends it)
+        keep.append(np.arange(m))
+    if not firsts:
+        return {}
+    idx = np.concatenate(firsts)
+    ends = idx < raw.shape[0]
+    sums = np.add.reduceat(np.asarray(raw, float), idx[ends], axis=0)
+    out, at = {}, 0
+    for (i, size), f in zip(sizes.items(), firsts):
+        out[i] = (sums[at:at + f.size - 1] / size, f[:-1])
+        at += f.size if ends[at + f.size - 1] else f.size - 1
+    return out
 
 
 def hold_steps(t: np.ndarray, raw: np.ndarray, iv: Intervals, quantum: float, span: int,
@@ -101,20 +122,26 @@ def hold_steps(t: np.ndarray, raw: np.ndarray, iv: Intervals, quantum: float, sp
     """The still intervals whose mean moved within them, at family-wise level ``alpha`` over the intervals
     and windows scanned (``span``: samples of a window; holds no longer are judged whole): a bias step during
     a hold leaves its interval's mean between the two biases, which no term of the interval means fits (the
-    pipeline cuts it there: StaticSettings.split)."""
+    pipeline cuts it there: StaticSettings.split). Judged on means of blocks of samples, HOLD_BLOCKS to a
+    window: the same evidence of a step at a fraction of the work."""
     span = max(int(span), HOLD_MIN_SAMPLES)
-    parts = [(i, a, b) for i in range(iv.n) if iv.end[i] - iv.start[i] >= HOLD_MIN_SAMPLES
-             for a, b in _windows(int(iv.end[i] - iv.start[i]), span)]
-    floor = quantum ** 2 / 12
+    n = iv.end - iv.start
+    sizes = {i: max(1, min(int(n[i]), span) // HOLD_BLOCKS) for i in range(iv.n) if n[i] >= HOLD_MIN_SAMPLES}
+    parts = []  # (interval, block means, their times, block size)
+    for i, (x, first) in _block_means(raw, iv, sizes).items():
+        tb = np.asarray(t[first], float)
+        parts += [(i, x[a:b], tb[a:b], sizes[i]) for a, b in _windows(x.shape[0], max(span // sizes[i], 1))]
     best: dict[int, HoldStep] = {}
-    for i, a, b in parts:
-        lo, hi = int(iv.start[i]) + a, int(iv.start[i]) + b
-        x = np.asarray(raw[lo:hi], float)
-        k, _, _ = _scan(x, floor, iv.noise_inflation)
-        c, shift = _abrupt(x, np.asarray(t[lo:hi], float), k, floor, iv.noise_inflation)
-        p = min(1.0, sup_bridge_sf(c, x.shape[1], HOLD_SIDE) * len(parts))
-        if p < alpha and (i not in best or c > best[i].chi2):
-            best[i] = HoldStep(i, float(t[lo + k]), shift, c, p)
+    for n in sorted({len(p[1]) for p in parts}):  # windows of one length judged together
+        group = [p for p in parts if len(p[1]) == n]
+        for size in sorted({p[3] for p in group}):
+            same = [p for p in group if p[3] == size]
+            k, chi2, shift = _judge(np.stack([p[1] for p in same]), np.stack([p[2] for p in same]),
+                                    quantum ** 2 / 12 / size, iv.noise_inflation)
+            for (i, _, tb, _), kk, c, sh in zip(same, k, chi2, shift):
+                p = min(1.0, sup_bridge_sf(float(c), 3, HOLD_SIDE) * len(parts))
+                if p < alpha and (i not in best or c > best[i].chi2):
+                    best[i] = HoldStep(i, float(tb[kk]), sh, float(c), p)
     return [best[i] for i in sorted(best)]
 
 
