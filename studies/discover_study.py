@@ -682,7 +682,12 @@ def summary_block(rows: list[dict], a: argparse.Namespace) -> list[str]:
     L += ["", f"A wrong term was named in {len(wrong)} of {len(single)} single-term cases; the report flagged the "
           f"ambiguity in {sum(r['ambiguous'] for r in wrong)} of them. The right term on the wrong axes: "
           f"{len(axes)} cases; in {sum(r.get('subset_flagged', False) for r in axes)} of them a subset of the true "
-          "axes, with every missing axis reported as not ruled out.", "<!-- end:summary -->", ""]
+          "axes, with every missing axis reported as not ruled out."]
+    if getattr(a, "step_anywhere", False):
+        hid = [r for r in single if r["snr"] >= 10]
+        L += ["", f"A step called stochastic (the verdict names a stochastic bias) at SNR >= 10: "
+              f"{sum(r['stochastic_called'] for r in hid)} of {len(hid)} (issue 28's target: at most 1 in 50)."]
+    L += ["<!-- end:summary -->", ""]
     return L
 
 
