@@ -5,6 +5,7 @@ without cutting intervals of white, correlated or drifting noise."""
 from __future__ import annotations
 
 import dataclasses
+import re
 
 import numpy as np
 import pytest
@@ -12,6 +13,7 @@ import pytest
 from imucal.analysis.discover import DiscoverSettings, Outcome, discover
 from imucal.analysis.hold_steps import hold_steps, sup_bridge_sf
 from imucal.analysis.simulate import draw_effect_case
+from imucal.report.discover_text import discovery_json
 from imucal.config.run import config_from_dict
 from imucal.data.static import _BATCHES, Intervals, StaticSettings
 from imucal.data.stream import StreamedRecording
@@ -122,6 +124,38 @@ def test_discover_names_a_step_that_happened_while_the_sensor_was_still(tmp_path
     assert any("moved within it" in n and "static.split" in n for n in d.notes)
     (e,) = d.effects
     assert e.change_point.lower <= eff["bias_step_t"] <= e.change_point.upper
+    (cut,) = discovery_json(d)["holds_cut"]  # the cut, typed: where, how large, what it looks like
+    assert cut["t_start_s"] < eff["bias_step_t"] < cut["t_end_s"] and abs(cut["time_s"] - eff["bias_step_t"]) < 0.1
+    assert cut["kind"] in ("bias_step", "turn_or_bias_step") and cut["p"] < 1e-3
+
+
+def test_calibrate_warns_of_a_turn_the_detector_did_not_see(tmp_path, run_cli):
+    """A hold whose second half is tilted by half a degree, three noise sigmas of a sample, which the moving
+    variance does not see: calibrate names a turn (|a| kept), where, and the static.split that cuts it; the
+    clean recording has no such warning."""
+    from imucal.analysis.simulate import PosePlan, cube_directions, si_sensor, simulate
+
+    rng = np.random.default_rng(4)
+    dirs = cube_directions("faces+edges")
+    sens = si_sensor(rng, noise=0.03)
+    sim = simulate(sens, PosePlan(dirs, hold=6.0, transition=2.0), seed=2)
+    clean = tmp_path / "clean.csv"
+    clean.write_text(sim.to_csv_text())
+    code, _, err = run_cli(["calibrate", "--data", clean, "--unit", "m/s^2", "--out", tmp_path / "a", "--no-figures"])
+    assert code == 0 and "moved within it" not in err
+    a, b = sim.hold_bounds[5]
+    mid = (a + b) // 2
+    g = np.linalg.norm(sim.raw[a:b].mean(axis=0))
+    u = sim.raw[a:b].mean(axis=0) / g
+    across = np.cross(u, [0.0, 0.0, 1.0] if abs(u[2]) < 0.9 else [1.0, 0.0, 0.0])
+    sim.raw[mid:b] += g * np.radians(0.5) * across / np.linalg.norm(across)  # half a degree across gravity
+    tilted = tmp_path / "tilted.csv"
+    tilted.write_text(sim.to_csv_text())
+    code, _, err = run_cli(["calibrate", "--data", tilted, "--unit", "m/s^2", "--out", tmp_path / "b", "--no-figures"])
+    assert code == 0
+    (line,) = [x for x in err.splitlines() if "moved within it" in x]
+    turn, at = re.search(r"a turn of ([\d.]+) deg the detector did not see .* static\.split: \[([\d.]+)\]", line).groups()
+    assert abs(float(turn) - 0.5) < 0.1 and abs(float(at) - sim.t[mid]) < 0.1
 
 
 def test_block_means_match_the_samples_up_to_the_recordings_last_one():

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from enum import Enum
 
 import numpy as np
 
@@ -145,19 +146,64 @@ def hold_steps(t: np.ndarray, raw: np.ndarray, iv: Intervals, quantum: float, sp
     return [best[i] for i in sorted(best)]
 
 
-def hold_step_words(s: HoldStep, iv: Intervals, scale: np.ndarray, gravity: float) -> str:
-    """One step in words: where, by how much (``scale``: raw per m/s^2 of each axis), its evidence, and
-    what it looks like: a turn keeps |a| (the shift across the reading), a bias step changes it."""
+class Kind(str, Enum):
+    """What a hold's step looks like from the reading's direction."""
+
+    TURN = "turn"  #: the shift lies across the reading: |a| kept (a turn the detector did not see)
+    BIAS_STEP = "bias_step"  #: the shift lies along the reading: |a| changed (a knock, a bias step)
+    EITHER = "turn_or_bias_step"  #: neither dominates (3x)
+
+
+@dataclass(frozen=True)
+class Reading:
+    """A hold's step in the calibrated units: its shift [mg], the part along gravity [mg] and the angle across it."""
+
+    kind: Kind
+    shift_mg: tuple[float, float, float]
+    along_mg: float  #: the change of |a|
+    turn_deg: float  #: the angle of the part across the reading
+
+    def to_json(self) -> dict:
+        return {"kind": self.kind.value, "shift_mg": list(self.shift_mg), "along_mg": self.along_mg,
+                "turn_deg": self.turn_deg}
+
+
+def reading(s: HoldStep, iv: Intervals, scale: np.ndarray, gravity: float) -> Reading:
+    """What ``s`` looks like (``scale``: raw per m/s^2 of each axis): a turn keeps |a| (the shift across the
+    reading), a bias step changes it (the shift along it)."""
     shift = s.shift / scale
     u = iv.mean[s.interval] / scale  # the reading's direction (offsets neglected: a few % of g)
     u = u / np.linalg.norm(u)
-    radial = float(shift @ u)
-    across = float(np.linalg.norm(shift - radial * u))
-    mg = ", ".join(f"{v:+.3g}" for v in shift * 1e3 / gravity)
-    cause = (f"a turn of {math.degrees(across / gravity):.2g} deg the detector did not see (|a| kept)"
-             if across > 3 * abs(radial) else
-             f"a knock or a bias step while still (|a| moved by {radial * 1e3 / gravity:+.3g} mg)"
-             if abs(radial) > 3 * across else "a turn or a bias step while still")
+    along = float(shift @ u)
+    across = float(np.linalg.norm(shift - along * u))
+    kind = Kind.TURN if across > 3 * abs(along) else Kind.BIAS_STEP if abs(along) > 3 * across else Kind.EITHER
+    mg = shift * 1e3 / gravity
+    return Reading(kind, (float(mg[0]), float(mg[1]), float(mg[2])), along * 1e3 / gravity,
+                   math.degrees(across / gravity))
+
+
+@dataclass(frozen=True)
+class Cut:
+    """A hold cut where its mean moved (imucal discover): the step, what it looks like, the hold's span [s]."""
+
+    step: HoldStep
+    reading: Reading
+    t_start: float
+    t_end: float
+
+    def to_json(self) -> dict:
+        s = self.step
+        return {"interval": s.interval, "t_start_s": self.t_start, "t_end_s": self.t_end, "time_s": s.time,
+                "chi2": s.chi2, "p": s.p, **self.reading.to_json()}
+
+
+def hold_step_words(s: HoldStep, iv: Intervals, scale: np.ndarray, gravity: float) -> str:
+    """One step in words: where, by how much, its evidence, and what it looks like (``reading``)."""
+    r = reading(s, iv, scale, gravity)
+    cause = {Kind.TURN: f"a turn of {r.turn_deg:.2g} deg the detector did not see (|a| kept)",
+             Kind.BIAS_STEP: f"a knock or a bias step while still (|a| moved by {r.along_mg:+.3g} mg)",
+             Kind.EITHER: "a turn or a bias step while still"}[r.kind]
+    mg = ", ".join(f"{v:+.3g}" for v in r.shift_mg)
     return (f"the still interval {s.interval} ({iv.t_start[s.interval]:.6g}-{iv.t_end[s.interval]:.6g} s) moved "
             f"within it at {s.time:.6g} s by x, y, z = {mg} mg (chi-square {s.chi2:.3g}, p = {s.p:.2g} over the "
             f"intervals): {cause}")

@@ -300,6 +300,7 @@ def discovery_json(d: Discovery) -> dict:
         "disagreement": [{"pattern": p, "chi2_removed": _num(v)} for p, v in d.disagreement],
         "steps": _steps_json(d),
         "notes": list(d.notes),
+        "holds_cut": [c.to_json() for c in d.holds_cut],
         "settings": dataclasses.asdict(d.settings),
         "stochastic": d.stochastic.to_json() if d.stochastic is not None else None,
         "structure_or_noise": [r.to_json() for r in d.rivals],

@@ -127,6 +127,8 @@ class Discovery:
     #: each term in time or temperature weighed against a bias random walk explaining the same excess, and
     #: which the data prefer (empty when no walk rivals them)
     rivals: tuple["stoch.Rival", ...] = ()
+    #: still intervals cut where their mean moved within them (imucal.analysis.hold_steps.Cut)
+    holds_cut: tuple = ()
 
     @property
     def calibration_run(self) -> CalibrationRun:

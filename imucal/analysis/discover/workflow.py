@@ -16,7 +16,7 @@ from imucal.analysis.discover import stochastic as noise
 from imucal.analysis.discover.candidates import candidates, found_effect, testable
 from imucal.analysis.discover.problem import EFFECT_ORDER, Effects, Problem, as_dict, canonical, labels, p_noise
 from imucal.analysis.discover.changepoint import change_point
-from imucal.analysis.hold_steps import hold_step_words
+from imucal.analysis.hold_steps import Cut, hold_step_words, reading
 from imucal.analysis.discover.result import Discovery, FoundEffect, Step
 from imucal.analysis.discover.screening import scan
 from imucal.analysis.discover.selection import round_
@@ -165,25 +165,25 @@ def _start(config: RunConfig, settings: DiscoverSettings) -> tuple[Sweep | None,
 
 
 def _cut_hold_steps(config: RunConfig, base: CalibrationRun, settings: DiscoverSettings,
-                    notes: list[str]) -> tuple[RunConfig, CalibrationRun]:
+                    notes: list[str]) -> tuple[RunConfig, CalibrationRun, tuple[Cut, ...]]:
     """The run file and base calibration with every still interval whose mean moved within it cut there
     (static.split): a step during a hold, which would leave one interval between the two biases."""
     rec, iv = base.recording, base.intervals
-    raw = getattr(rec, "raw", None)
     if not settings.scan_holds:
-        return config, base
-    if raw is None:  # read in chunks
+        return config, base, ()
+    if getattr(rec, "raw", None) is None:  # read in chunks
         notes.append("steps inside the still intervals not scanned: the recording was read in chunks")
-        return config, base
-    found = list(base.hold_steps)  # (the pipeline's scan, at HOLD_ALPHA: discover's default level)
-    if not found:
-        return config, base
-    for s in found:
-        notes.append(f"{hold_step_words(s, iv, base.guess.b, base.calibration.gravity)}: cut there, its two sides "
-                     "are intervals of their own (static.split)")
+        return config, base, ()
+    if not base.hold_steps:  # (the pipeline's scan, at HOLD_ALPHA: discover's default level)
+        return config, base, ()
+    g, b = base.calibration.gravity, base.guess.b
+    cuts = tuple(Cut(s, reading(s, iv, b, g), float(iv.t_start[s.interval]), float(iv.t_end[s.interval]))
+                 for s in base.hold_steps)
+    notes += [f"{hold_step_words(s, iv, b, g)}: cut there, its two sides are intervals of their own (static.split)"
+              for s in base.hold_steps]
     cut = dataclasses.replace(config, static=dataclasses.replace(
-        config.static, split=config.static.split + tuple(s.time for s in found)))
-    return cut, calibrate_accelerometer(cut, rec)
+        config.static, split=config.static.split + tuple(s.time for s in base.hold_steps)))
+    return cut, calibrate_accelerometer(cut, rec), cuts
 
 
 def _check_room(base: CalibrationRun) -> None:
@@ -289,7 +289,7 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings(),
     sweep, base = _start(config, settings)
     if base is None:
         return sweep_discovery(asked, sweep, settings, progress)
-    config, base = _cut_hold_steps(config, base, settings, notes)
+    config, base, cuts = _cut_hold_steps(config, base, settings, notes)
     prob = Problem(config, base, progress)
     notes += _sensors_left(base.recording)
     names = testable(list(settings.candidates), base.intervals, base.recording.source, notes)
@@ -319,4 +319,5 @@ def discover(config: RunConfig, settings: DiscoverSettings = DiscoverSettings(),
                      consistent_before=p_before >= settings.alpha_noise,
                      consistent_after=p_after >= settings.alpha_noise, p_before=p_before, p_after=p_after,
                      disagreement=tuple(st.disagreement), notes=tuple(notes) + (sto.notes if sto else ()),
-                     settings=settings, stochastic=sto, allan=stoch.allan_view(final, sto), rivals=st.rivals)
+                     settings=settings, stochastic=sto, allan=stoch.allan_view(final, sto), rivals=st.rivals,
+                     holds_cut=cuts)
