@@ -58,6 +58,12 @@ class Name:
     words: tuple[str, ...] = ()  #: the name's words (lower case), without unit or axis
 
 
+def _is_index(text: str) -> bool:
+    """An axis index in brackets (accelerometer_m_s2[0]): ASCII digits only, not "²" or another script's digits
+    (which int() refuses or reads as a number the name does not write)."""
+    return text.isascii() and text.isdigit()
+
+
 def _axis_of(words: list[str], index: str | None) -> tuple[str | None, list[str]]:
     """The axis (x, y, z) and the words before it: an index [0..2], a last word x/y/z, or a last
     letter x/y/z after a known stem (AccX, gyrx, mx)."""
@@ -79,7 +85,7 @@ def read_name(name: str) -> Name:
     m = _SUFFIX.match(text)
     if m:
         inner = m["inner"].strip()
-        index, unit = (inner, None) if inner.isdigit() else (None, inner or None)
+        index, unit = (inner, None) if _is_index(inner) else (None, inner or None)
         text = m["base"]
     text = text.lower().lstrip("#%").strip()
     if text.startswith("field."):  # rostopic echo -p
@@ -135,4 +141,4 @@ def is_unit_name(text: str) -> bool:
 def without_unit(name: str) -> str:
     """A column name without the unit in brackets or parentheses at its end ("acc_x [m/s^2]" -> "acc_x")."""
     m = _SUFFIX.match(name.strip())
-    return m["base"] if m and not m["inner"].strip().isdigit() else name.strip()
+    return m["base"] if m and not _is_index(m["inner"].strip()) else name.strip()

@@ -12,6 +12,7 @@ from pathlib import Path
 
 from imucal.data.header_names import TEXT_UNITS, implied_unit, is_celsius, is_unit_name, read_name, sensor_unit
 from imucal.data.lines import is_number, split
+from imucal.data.recording import MAX_RATE_HZ, MIN_RATE_HZ
 from imucal.data.spec import DataSpec
 from imucal.data.timebase import RATE_TOLERANCE
 from imucal.errors import ImucalError, short
@@ -91,6 +92,11 @@ def spec_with_units(spec: DataSpec, units: dict, sample_rate: float | None, time
     ``sample_rate`` a line above it states for a file without a time column (not ``timed``); a unit or a rate
     given that disagrees with the file's is refused, naming both."""
     given = {}
+    if sample_rate is not None and (spec.sample_rate is not None or not timed) and not (
+            MIN_RATE_HZ <= sample_rate <= MAX_RATE_HZ):  # the file's line is named, not data.sample_rate's value
+        raise ImucalError(f"the line above its header states a sample rate of {sample_rate:g} Hz: not an IMU rate",
+                          file=str(path), field="data.sample_rate",
+                          fix=f"correct the line to the logging rate in Hz ({MIN_RATE_HZ:g} to {MAX_RATE_HZ:g})")
     if sample_rate is not None and spec.sample_rate is None and not timed:
         given["sample_rate"] = sample_rate  # "Fs,100" above the header of a file without a time column
     elif sample_rate is not None and spec.sample_rate is not None and (

@@ -7,6 +7,7 @@ MAX_SCAN_LINES after the first non-comment line.
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import BinaryIO
@@ -63,6 +64,9 @@ class Layout:
     sample_rate: float | None = None
     #: role -> the header's name of its column (with a units row's unit), for the record of what was read
     names: dict = field(default_factory=dict)
+    #: (column, name, value) of an instance column (ArduPilot's I) that holds one value in the head: every row
+    #: is checked to hold it too (other_instance), as interleaved sensors may start past the head
+    instance: tuple[int, str, str] | None = None
 
     @property
     def usecols(self) -> list[int]:
@@ -233,7 +237,7 @@ def layout(lines: list[str], spec: DataSpec, path: Path) -> Layout:
         if below is not None:  # a line of units under the names (s, m/s^2, deg/s, degC): read as theirs
             names = [f"{n} [{u}]" if u and read_name(n).unit is None else n for n, u in zip(names, below)]
             body += 1
-        _one_instance(names, lines[body:body + MAX_SCAN_LINES], delim, path)
+        instance = _one_instance(names, lines[body:body + MAX_SCAN_LINES], delim, path)
         _fields_named(names, lines[body:body + MAX_SCAN_LINES], delim, first_lineno + body, path)
     else:
         if not all(is_number(t) for t in split(lines[k0], spec.delimiter)):
@@ -248,13 +252,15 @@ def layout(lines: list[str], spec: DataSpec, path: Path) -> Layout:
         if not cols:
             cols = _no_header_layout(len(split(lines[k0], delim)), path)
         body = k0
+        instance = None
     meta_rate = metadata_rate(lines[k0:header_idx], delim) if header_idx is not None else None
     _check_roles(cols, spec, path, meta_rate)
     roles = [r for r in ROLES if r in cols]
     tname = names[cols["t"]] if header_idx is not None and "t" in roles else "t"
     return Layout(delimiter=delim, columns=cols, roles=roles, body=body, body_first=first_lineno + body,
                   time_column=tname, units=stated_units(names, cols, path) if names else {},
-                  sample_rate=meta_rate, names={r: names[cols[r]] for r in roles} if names else {})
+                  sample_rate=meta_rate, names={r: names[cols[r]] for r in roles} if names else {},
+                  instance=instance)
 
 
 def _fields_named(names: list[str], head: list[str], delim: str | None, first: int, path: Path) -> None:
@@ -277,19 +283,45 @@ def _fields_named(names: list[str], head: list[str], delim: str | None, first: i
 INSTANCE_NAMES = ("i", "instance")
 
 
-def _one_instance(names: list[str], head: list[str], delim: str | None, path: Path) -> None:
+def _one_instance(names: list[str], head: list[str], delim: str | None, path: Path) -> tuple[int, str, str] | None:
     """Refuse rows of several sensors interleaved in one file (an instance column that changes in the
-    head's rows): read as one sensor, they would be calibrated as one."""
+    head's rows): read as one sensor, they would be calibrated as one. The (column, name, value) of the instance
+    column that holds one value in the head, for other_instance to check every row against; None without one."""
     for k, name in enumerate(names):
         if name.lower() in INSTANCE_NAMES:
             seen = {toks[k] for ln in head if ln.strip() and not ln.lstrip().startswith("#")
                     and len(toks := split(ln, delim)) > k}
             if len(seen) > 1:
-                shown = ", ".join(sorted(short(v, 20) for v in seen)[:4])
-                raise ImucalError(f"rows of {len(seen)} sensors are interleaved (column {short(name)} holds {shown})",
-                                  file=str(path), field="data.path",
-                                  fix=f"write one sensor's rows to a file (ArduPilot: mavlogdump.py --types IMU "
-                                      f"--condition 'IMU.I==0' --format csv) and calibrate each")
+                raise interleaved(path, name, seen)
+            if seen:
+                return k, name, seen.pop()
+    return None
+
+
+def interleaved(path: Path, name: str, seen: set[str], line: int | None = None) -> ImucalError:
+    """The refusal of rows of several sensors (column ``name`` holds the values ``seen``; from ``line`` on)."""
+    shown = ", ".join(sorted(short(v, 20) for v in seen)[:4])
+    where = "" if line is None else f" from line {line} on"
+    return ImucalError(f"rows of {len(seen)} sensors are interleaved{where} (column {short(name)} holds {shown})",
+                       file=str(path), field="data.path",
+                       fix="write one sensor's rows to a file (ArduPilot: mavlogdump.py --types IMU "
+                           "--condition 'IMU.I==0' --format csv) and calibrate each")
+
+
+def other_instance(lines: list[str], lay: Layout, path: Path, line_of: Callable[[int], int]) -> None:
+    """Refuse the first data row of ``lines`` whose instance column (Layout.instance) holds another value than
+    the head's (``line_of``: the file's line of data row k)."""
+    if lay.instance is None:
+        return
+    col, name, value = lay.instance
+    k = -1
+    for ln in lines:
+        if not ln.strip() or ln.lstrip().startswith("#"):
+            continue
+        k += 1
+        toks = split(ln, lay.delimiter)
+        if len(toks) > col and toks[col] != value:
+            raise interleaved(path, name, {value, toks[col]}, line_of(k))
 
 
 def header_spec(spec: DataSpec, lay: Layout, path: Path) -> DataSpec:

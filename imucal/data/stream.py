@@ -29,7 +29,7 @@ import numpy as np
 
 from imucal.constants import TIME_UNITS
 from imucal.data.blocks import TextBlocks
-from imucal.data.layout import header_spec
+from imucal.data.layout import header_spec, other_instance
 from imucal.data.lines import corrupt_value, no_rows, not_increasing
 from imucal.data.run_pool import batches, ordered_map, run_workers
 from imucal.data.recording import MAX_ABS_VALUE, RecordingSummary, StaticSamples, TimeBase, temperature_error
@@ -200,6 +200,12 @@ class StreamedRecording:
         if p.big is None and (arr.max() > MAX_ABS_VALUE or arr.min() < -MAX_ABS_VALUE):  # no copy of the block
             bad = (np.abs(arr) > MAX_ABS_VALUE).any(axis=1)
             p.big = corrupt_value(self.file.line_of(block, first, int(np.flatnonzero(bad)[0])), self.path)
+        if p.big is None and self.file.lay.instance is not None:  # one sensor's rows, past the head too
+            try:
+                other_instance(block.decode("utf-8").splitlines(), self.file.lay, self.path,
+                               lambda k: self.file.line_of(block, first, k))
+            except ImucalError as exc:
+                p.big = exc
         if p.big is None and "temp" in self._it:  # as the whole file's Recording refuses it
             p.big = temperature_error(arr[:, self._it["temp"]], str(self.path), p.n)
         if "t" not in self._it:

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from imucal.data import fixed_width
-from imucal.data.layout import MAX_SCAN_LINES, Layout, header_spec, layout
+from imucal.data.layout import MAX_SCAN_LINES, Layout, header_spec, layout, other_instance
 from imucal.data.lines import (BINARY_PROBE, binary_file, corrupt_value, decimal_comma, decode, line_too_long,
                                lineno, long_line, no_rows, not_increasing, parse_block, plain_text)
 from imucal.data.recording import MAX_ABS_VALUE, Recording
@@ -104,7 +104,6 @@ def read_text(spec: DataSpec, path: Path) -> Recording:
         if decimal_comma(body, lay.delimiter):  # 0,01;9,81: read as 0.01 and 9.81
             body = [ln.replace(",", ".") for ln in body]
         arr = parse_block(body, lay.body_first, lay.delimiter, lay.usecols, path)
-    del blob
     rate_source = "given" if spec.sample_rate is not None else "stated above the header"
     spec = header_spec(spec, lay, path)  # the units the header's names state, a rate its metadata lines state
     body_first = lay.body_first
@@ -112,6 +111,11 @@ def read_text(spec: DataSpec, path: Path) -> Recording:
     def line_of(k: int) -> int:  # the file's line number of row k
         return body_first + k if body is None else lineno(body, k, body_first)
 
+    if lay.instance is not None:  # an instance column: every row's, not only the head's (one sensor)
+        rows = decode(blob, path).splitlines()[spec.skip_rows + lay.body:] if body is None else body
+        other_instance(rows, lay, path, line_of)
+
+    del blob
     big = np.abs(arr) > MAX_ABS_VALUE
     if big.any():
         raise corrupt_value(line_of(int(np.flatnonzero(big.any(axis=1))[0])), path)

@@ -1,0 +1,73 @@
+"""Hostile invocations found by the attack37 campaign: each case failed before its fix (an internal error,
+a message without the file, a silently wrong reading) and is now one line, exit 2, nothing written.
+
+Small files, errors raised before any fit: the whole module runs in a few seconds.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from imucal.data.header_names import read_name
+from imucal.data.load import load_recording
+from imucal.data.spec import DataSpec
+from imucal.data.stream import StreamedRecording
+from imucal.errors import ImucalError
+from test_trust import one_line_error
+
+
+def _rows(n: int = 300) -> np.ndarray:
+    """``n`` rows of t [s], ax, ay, az [m/s^2] at 100 Hz."""
+    return np.c_[np.arange(n) * 0.01, np.zeros(n), np.zeros(n), np.full(n, 9.81)]
+
+
+def _csv(path: Path, header: str, arr: np.ndarray, above: str = "") -> Path:
+    path.write_text(above + header + "\n" + "\n".join(",".join(f"{v:.6g}" for v in r) for r in arr) + "\n",
+                    encoding="utf-8")
+    return path
+
+
+@pytest.mark.parametrize("inner", ["\u00b2", "\u00b9", "\u2460", "\u0661", "\uff11"])
+def test_an_axis_index_of_other_digits_is_a_unit_refused_in_one_line(run_cli, tmp_path, unchanged, inner):
+    """acc_x [²] (str.isdigit, but int() refuses it) was an internal error (exit 3); another script's digits
+    were read as an axis index the name does not write. Only ASCII digits index an axis now; the rest is a
+    stated unit, refused naming the column."""
+    assert read_name("accelerometer_m_s2[1]").role == "ay" and read_name(f"acc_x [{inner}]").unit == inner
+    src = _csv(tmp_path / "h.csv", f"t,acc_x [{inner}],acc_y,acc_z", _rows())
+    with unchanged():
+        r = run_cli(["calibrate", "--data", src, "--out", tmp_path / "o"])
+    assert r.code == 2, r
+    one_line_error(r.err, str(src), "data.columns.ax", f"'acc_x [{inner}]' states", "fix:")
+
+
+@pytest.mark.parametrize("rate", ["1e-300", "1e300", "0.5"])
+def test_an_implausible_rate_above_the_header_names_the_file_and_its_line(run_cli, tmp_path, unchanged, rate):
+    """"Fs,1e-300" above a header without a time column was refused as data.sample_rate's value without the
+    file (the user gave no rate); now the file and the line are named, with or without a rate given."""
+    src = _csv(tmp_path / "fs.csv", "ax,ay,az", _rows()[:, 1:], above=f"Fs,{rate}\n")
+    for extra in ([], ["--sample-rate", "100"]):
+        with unchanged():
+            r = run_cli(["calibrate", "--data", src, "--out", tmp_path / "o", *extra])
+        assert r.code == 2, r
+        one_line_error(r.err, str(src), "data.sample_rate", "the line above its header states a sample rate of",
+                       "not an IMU rate", "fix: correct the line")
+
+
+@pytest.mark.parametrize("stream", ["never", "always"])
+def test_sensors_interleaved_past_the_head_are_refused_naming_the_line(tmp_path, stream):
+    """An ArduPilot IMU log whose instance column I changes only after the rows the layout looks at was read as
+    one sensor (the check saw one value in the head): every row's I is checked now, by both readers."""
+    n = 400
+    inst = np.where(np.arange(n) < 200, 0, np.arange(n) % 2)
+    arr = _rows(n)
+    src = _csv(tmp_path / "ap.csv", "TimeUS,I,AccX,AccY,AccZ", np.c_[arr[:, 0] * 1e6, inst, arr[:, 1:]])
+    read = (lambda s: load_recording(s)) if stream == "never" else (lambda s: StreamedRecording(s))
+    with pytest.raises(ImucalError) as ei:
+        read(DataSpec(path=str(src), stream=stream))
+    assert str(ei.value).endswith("ap.csv: data.path: rows of 2 sensors are interleaved from line 203 on (column 'I' "
+                                  "holds '0', '1') (fix: write one sensor's rows to a file (ArduPilot: mavlogdump.py "
+                                  "--types IMU --condition 'IMU.I==0' --format csv) and calibrate each)"), str(ei.value)
+    one = _csv(tmp_path / "one.csv", "TimeUS,I,AccX,AccY,AccZ", np.c_[arr[:, 0] * 1e6, np.zeros(n), arr[:, 1:]])
+    assert read(DataSpec(path=str(one), stream=stream)) is not None  # one instance throughout: read
