@@ -71,3 +71,20 @@ def test_sensors_interleaved_past_the_head_are_refused_naming_the_line(tmp_path,
                                   "--types IMU --condition 'IMU.I==0' --format csv) and calibrate each)"), str(ei.value)
     one = _csv(tmp_path / "one.csv", "TimeUS,I,AccX,AccY,AccZ", np.c_[arr[:, 0] * 1e6, np.zeros(n), arr[:, 1:]])
     assert read(DataSpec(path=str(one), stream=stream)) is not None  # one instance throughout: read
+
+
+@pytest.mark.parametrize("header, units, words", [
+    ("t,acc_x [g],acc_y [g],acc_z [g]", "s,m/s^2,m/s^2,m/s^2", "column 'acc_x [g]' states 'g' in its name and 'm/s^2'"),
+    ("time (ms),ax,ay,az", "s,g,g,g", "column 'time (ms)' states 'ms' in its name and 's'")])
+def test_a_unit_the_name_and_the_units_line_state_differently_is_refused(run_cli, tmp_path, unchanged, header, units,
+                                                                          words):
+    """acc_x [g] over a line of units saying m/s^2 was read in g, the line's unit dropped in silence: the file
+    says both, so neither is taken. Two spellings of one unit (g over G) are read."""
+    src = _csv(tmp_path / "u.csv", header, _rows(), above="")
+    src.write_text(src.read_text().replace("\n", f"\n{units}\n", 1))
+    with unchanged():
+        r = run_cli(["calibrate", "--data", src, "--out", tmp_path / "o"])
+    assert r.code == 2, r
+    one_line_error(r.err, str(src), "data.columns", words, "in the line of units under the header", "fix:")
+    src.write_text(src.read_text().replace(units, "s,G,g,g" if "acc_x" in header else "ms,g,g,g"))
+    assert load_recording(DataSpec(path=str(src))).raw.shape == (300, 3)

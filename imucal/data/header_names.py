@@ -138,6 +138,17 @@ def is_unit_name(text: str) -> bool:
     return u in TIME_NAME_UNITS or u in RAW_UNITS or u in TEMPERATURE_UNITS or any(u in t for t in SENSOR_UNITS.values())
 
 
+def unit_meaning(text: str) -> tuple:
+    """What a unit spelling means, to tell two spellings of one unit (m/s^2, m s^-2) from two units: (unit, factor,
+    offset) from the tables a name's unit is read with; the lower-case text for one they do not hold."""
+    u = text.strip().lower()
+    if u in TIME_NAME_UNITS:
+        return TIME_NAME_UNITS[u], 1.0, 0.0
+    if u in RAW_UNITS:
+        return "raw", 1.0, 0.0
+    return next((t[u] for t in (*SENSOR_UNITS.values(), TEMPERATURE_UNITS) if u in t), (u,))
+
+
 def without_unit(name: str) -> str:
     """A column name without the unit in brackets or parentheses at its end ("acc_x [m/s^2]" -> "acc_x")."""
     m = _SUFFIX.match(name.strip())

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import BinaryIO
 
-from imucal.data.header_names import read_name
+from imucal.data.header_names import is_unit_name, read_name, unit_meaning
 from imucal.data.header_units import metadata_rate, spec_with_units, stated_units, units_row
 from imucal.data.lines import BINARY_PROBE, MAX_STREAM_BYTES, binary_file, check_text, is_number, not_utf8, split
 from imucal.data.spec import ROLES, DataSpec
@@ -235,6 +235,7 @@ def layout(lines: list[str], spec: DataSpec, path: Path) -> Layout:
         body = max(header_idx + 1, k0)
         below = units_row(lines[body] if body < len(lines) else "", delim, len(names))
         if below is not None:  # a line of units under the names (s, m/s^2, deg/s, degC): read as theirs
+            _one_unit_each(names, below, path)
             names = [f"{n} [{u}]" if u and read_name(n).unit is None else n for n, u in zip(names, below)]
             body += 1
         instance = _one_instance(names, lines[body:body + MAX_SCAN_LINES], delim, path)
@@ -261,6 +262,19 @@ def layout(lines: list[str], spec: DataSpec, path: Path) -> Layout:
                   time_column=tname, units=stated_units(names, cols, path) if names else {},
                   sample_rate=meta_rate, names={r: names[cols[r]] for r in roles} if names else {},
                   instance=instance)
+
+
+def _one_unit_each(names: list[str], below: list[str], path: Path) -> None:
+    """Refuse a column whose name states one unit and the line of units under the header another (acc_x [g] over
+    m/s^2): which one the numbers are in, the file does not say."""
+    for n, u in zip(names, below):
+        stated = read_name(n).unit
+        if u and stated is not None and is_unit_name(u) and is_unit_name(stated) and (
+                unit_meaning(u) != unit_meaning(stated)):
+            raise ImucalError(f"column {short(n)} states {short(stated)} in its name and {short(u)} in the line of "
+                              "units under the header", file=str(path), field="data.columns",
+                              fix="give each column's unit once (in its name or in the line of units), or make the two "
+                                  "agree")
 
 
 def _fields_named(names: list[str], head: list[str], delim: str | None, first: int, path: Path) -> None:
