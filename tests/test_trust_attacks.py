@@ -88,3 +88,15 @@ def test_a_unit_the_name_and_the_units_line_state_differently_is_refused(run_cli
     one_line_error(r.err, str(src), "data.columns", words, "in the line of units under the header", "fix:")
     src.write_text(src.read_text().replace(units, "s,G,g,g" if "acc_x" in header else "ms,g,g,g"))
     assert load_recording(DataSpec(path=str(src))).raw.shape == (300, 3)
+
+
+@pytest.mark.parametrize("encoding", ["utf-16", "utf-16-le", "utf-16-be", "utf-32"])
+def test_a_utf16_recording_is_named_with_the_fix_that_reads_it(run_cli, tmp_path, unchanged, encoding):
+    """A spreadsheet's "Unicode text" (UTF-16) was called a binary file to export as CSV, which it already is:
+    now the encoding is named and the fix says to save it as UTF-8."""
+    src = tmp_path / "wide.csv"
+    src.write_bytes(_csv(tmp_path / "plain.csv", "t,ax,ay,az", _rows()).read_text().encode(encoding))
+    with unchanged():
+        r = run_cli(["calibrate", "--data", src, "--out", tmp_path / "o"])
+    assert r.code == 2, r
+    one_line_error(r.err, str(src), "data.path", "is UTF-16", "not a text recording", "fix: save it as UTF-8 text")
