@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from imucal.data.blocks import TextBlocks
 from imucal.data.header_names import read_name
 from imucal.data.load import load_recording
 from imucal.data.spec import DataSpec
@@ -100,3 +101,37 @@ def test_a_utf16_recording_is_named_with_the_fix_that_reads_it(run_cli, tmp_path
         r = run_cli(["calibrate", "--data", src, "--out", tmp_path / "o"])
     assert r.code == 2, r
     one_line_error(r.err, str(src), "data.path", "is UTF-16", "not a text recording", "fix: save it as UTF-8 text")
+
+
+@pytest.mark.parametrize("delim", [";", "\t"])
+def test_a_decimal_comma_is_read_alike_by_both_readers(tmp_path, delim):
+    """0,01;9,81 was read by the whole-file reader and refused by the streaming one (a file above 64 MB, or
+    data.stream: always): both read it now, to the same numbers."""
+    arr = _rows()
+    arr[:, 1] = 0.125 + np.sin(np.arange(arr.shape[0])) * 1e-3
+    text = "t;ax;ay;az\n" + "\n".join(";".join(f"{v:.6g}" for v in r) for r in arr) + "\n"
+    src = tmp_path / "comma.csv"
+    src.write_text(text.replace(",", "").replace(".", ",").replace(";", delim))
+    whole = load_recording(DataSpec(path=str(src), stream="never"))
+    np.testing.assert_allclose(whole.raw, arr[:, 1:], rtol=1e-5)
+    blocks = TextBlocks(DataSpec(path=str(src), stream="always"), src)  # the streaming reader's rows
+    np.testing.assert_array_equal(np.concatenate([a for _, _, a in blocks.rows()])[:, 1:], whole.raw)
+
+
+@pytest.mark.parametrize("text, field", [('data: {path: "in\\0.csv"}', "data.path"),
+                                         ('data: {path: in.csv}\noutput: {dir: "o\\0ut"}', "output.dir"),
+                                         ('data: {path: in.csv}\nfit: {base: "b\\0.yaml"}', "fit.base")])
+def test_a_nul_escaped_in_a_run_files_text_is_refused(run_cli, tmp_path, unchanged, text, field):
+    """"in\\0.csv" (a YAML escape: the file holds no NUL byte) reached os.stat as an internal error (exit 3);
+    now any text of a YAML file holding a NUL is refused naming its field, and a notebook's mapping alike."""
+    from imucal.config.run import config_from_dict
+
+    _csv(tmp_path / "in.csv", "t,ax,ay,az", _rows())
+    run = tmp_path / "run.yaml"
+    run.write_text(text + "\n")
+    with unchanged():
+        r = run_cli(["calibrate", run, "--no-figures"])
+    assert r.code == 2, r
+    one_line_error(r.err, str(run), f"the text of '{field}' holds a NUL character", "fix: remove it")
+    with pytest.raises(ImucalError, match="'data.path' holds a NUL character"):
+        config_from_dict({"data": {"path": "in\0.csv"}})

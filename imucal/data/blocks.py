@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from imucal.data.layout import Layout, file_head
-from imucal.data.lines import (MAX_STREAM_BYTES, check_lines, check_text, lineno, not_utf8, parse_block, plain_text,
-                               unparsed)
+from imucal.data.lines import (MAX_STREAM_BYTES, check_lines, check_text, decimal_comma, lineno, not_utf8, parse_block,
+                               plain_text, unparsed)
 from imucal.data.spec import DataSpec
 from imucal.errors import ImucalError
 from imucal.files.inputs import open_regular
@@ -30,6 +30,8 @@ from imucal.report.progress import progress
 CHUNK_BYTES = 16 * 1024**2
 #: Blocks read and parsed ahead of the one being used (each about CHUNK_BYTES of text and its numbers).
 READ_AHEAD = 2
+#: Bytes of the first rows looked at for a decimal comma.
+DECIMAL_PROBE = 64 * 1024
 
 
 class TextBlocks:
@@ -50,6 +52,11 @@ class TextBlocks:
         self.lay, self.offset = self._head()
         self._counted = (self.offset, self.lay.body_first)
         self._lock = threading.Lock()
+        with self._open() as f:  # 0,01;9,81: read as the whole-file reader reads it, from the first rows
+            f.seek(self.offset)
+            first = f.read(DECIMAL_PROBE).decode("utf-8", errors="replace").splitlines()[:-1]
+        #: the rows write their numbers with a decimal comma (imucal.data.lines.decimal_comma)
+        self.comma = decimal_comma(first, self.lay.delimiter)
 
     def _open(self) -> io.BufferedReader:
         fd, _ = open_regular(self.path, field="data.path", max_bytes=MAX_STREAM_BYTES)
@@ -136,7 +143,7 @@ class TextBlocks:
             try:
                 df = pd.read_csv(io.BytesIO(block), sep=lay.delimiter or r"\s+", header=None, usecols=lay.usecols,
                                  dtype=np.float64, comment="#", skip_blank_lines=True, quoting=csv.QUOTE_NONE,
-                                 engine="c")
+                                 engine="c", decimal="," if self.comma else ".")
                 arr = df[lay.usecols].to_numpy(dtype=np.float64)
                 # NaN and infinity carry into the sum; so may huge finite values, which the line by
                 # line reader below then reads (and the caller refuses as corrupt)
@@ -157,9 +164,10 @@ class TextBlocks:
 
     def _lines(self, block: bytes) -> list[str]:
         try:
-            return block.decode("utf-8").splitlines()
+            lines = block.decode("utf-8").splitlines()
         except UnicodeDecodeError:
             raise not_utf8(self.path) from None
+        return [ln.replace(",", ".") for ln in lines] if self.comma else lines
 
     def rows(self, hash_it: bool = False) -> Iterator[tuple[int, bytes, np.ndarray]]:
         """(byte offset, block, its rows) of every block, read, hashed and parsed up to READ_AHEAD

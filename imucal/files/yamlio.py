@@ -146,8 +146,8 @@ class _Refused(Exception):
 
 
 def _check_values(obj: Any, depth: int = 0, where: str = "", seen: set | None = None) -> None:
-    """Nesting depth and numbers: an integer beyond 64 bits is corrupt, not a value. Objects
-    shared through aliases are visited once."""
+    """Nesting depth, numbers and text: an integer beyond 64 bits is corrupt, not a value, and so is text with a
+    NUL character. Objects shared through aliases are visited once."""
     seen = set() if seen is None else seen
     if depth > MAX_DEPTH:
         raise _Refused(f"nested deeper than {MAX_DEPTH} levels", "flatten the file")
@@ -162,6 +162,9 @@ def _check_values(obj: Any, depth: int = 0, where: str = "", seen: set | None = 
     elif isinstance(obj, list):
         for v in obj:
             _check_values(v, depth + 1, where, seen)
+    elif isinstance(obj, str) and "\x00" in obj:  # no path or label holds one (os.stat raised ValueError)
+        raise _Refused(f"the text of {short(where, 80) if where else 'the top level'} holds a NUL character",
+                       "remove it: no file name or label holds one")
     elif isinstance(obj, int) and not isinstance(obj, bool) and abs(obj) >= 2**1023:
         try:
             float(obj)
