@@ -135,3 +135,18 @@ def test_a_nul_escaped_in_a_run_files_text_is_refused(run_cli, tmp_path, unchang
     one_line_error(r.err, str(run), f"the text of '{field}' holds a NUL character", "fix: remove it")
     with pytest.raises(ImucalError, match="'data.path' holds a NUL character"):
         config_from_dict({"data": {"path": "in\0.csv"}})
+
+
+@pytest.mark.parametrize("text, field, fix", [("static: {window: 1e-1}", "static.window", "write 1.0e-1"),
+                                              ("static: {threshold: 1E5}", "static.threshold", "write 1.0e+5"),
+                                              ("fit: {initial: {b1: 4.1e2}}", "fit.initial.b1", "write 4.1e+2")])
+def test_a_number_yaml_reads_as_text_says_so_and_how_to_write_it(run_cli, tmp_path, unchanged, text, field, fix):
+    """window: 1e-1 is the text '1e-1' to YAML 1.1, refused as "must be a positive number of seconds", which it
+    looks like: the message now says YAML read it as text, and the fix writes it as a number."""
+    _csv(tmp_path / "in.csv", "t,ax,ay,az", _rows())
+    run = tmp_path / "run.yaml"
+    run.write_text(f"data: {{path: in.csv}}\n{text}\n")
+    with unchanged():
+        r = run_cli(["calibrate", run, "--no-figures"])
+    assert r.code == 2, r
+    one_line_error(r.err, str(run), field, "as text, not a number", f"(fix: {fix}: a decimal point and a signed")

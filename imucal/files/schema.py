@@ -17,6 +17,7 @@ import collections.abc
 import dataclasses
 import functools
 import math
+import re
 import types
 import typing
 from dataclasses import dataclass
@@ -124,9 +125,18 @@ def _name(where: str) -> str:
     return where.rsplit(".", 1)[-1].split("[", 1)[0]
 
 
+#: A number in exponent form YAML 1.1 reads as text (1e-3, 1.5e3, 1E+5: no "." before the exponent, or no sign in it).
+_EXPONENT_TEXT = re.compile(r"(?P<m>[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+))[eE](?P<e>[-+]?[0-9]+)")
+
+
 def _fail(ctx: _Ctx, raw: Any, where: str, r: Rule, expect: str) -> ImucalError:
     name = _name(where)
     msg = r.msg.format(value=short(raw)) if r.msg else f"{name} {short(raw)} must be {expect}"
+    m = _EXPONENT_TEXT.fullmatch(raw.strip()) if isinstance(raw, str) and "number" in expect else None
+    if m is not None:  # window: 1e-3 is the text '1e-3' to YAML 1.1: say so, and how to write the number
+        mant, exp = m["m"] + (".0" if "." not in m["m"] else "0" if m["m"].endswith(".") else ""), m["e"]
+        return ctx.error(f"{msg} (YAML reads {short(raw)} as text, not a number)", where,
+                         f"write {mant}e{exp if exp[0] in '+-' else '+' + exp}: a decimal point and a signed exponent")
     return ctx.error(msg, where, r.fix)
 
 
