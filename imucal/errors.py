@@ -25,7 +25,7 @@ class ImucalError(Exception):
         text = ": ".join(parts + [self.message])
         if self.fix:
             text += f" (fix: {self.fix})"
-        return " ".join(text.split())  # always one line
+        return printable(" ".join(text.split()))  # always one line, and no control character of a file's name
 
 
 class ImucalWarning(UserWarning):
@@ -144,6 +144,15 @@ def interruption_line(exc: BaseException | None, kept: str = "nothing was writte
     signum = getattr(exc, "signum", None) or next((s for s in SIGNALS if s != signal.SIGINT), None)
     what = "interrupted" if signum is None else f"terminated by {signal_name(signum)}"
     return f"imucal: {what}; {kept}"
+
+
+def printable(text: str, keep: str = "") -> str:
+    """``text`` with each character no terminal or page shows as itself written as its escape (ESC as \\x1b, a
+    bidi override as \\u202e, a line separator, a lone surrogate as \\udcff), but those in ``keep``: a file's or
+    a column's name (an attacker's text) then cannot move the cursor, retitle the terminal or reorder a line."""
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() or c in keep else c.encode("unicode_escape").decode("ascii") for c in text)
 
 
 def short(value: object, limit: int = 40) -> str:

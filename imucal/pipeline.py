@@ -4,6 +4,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 import math
+import shlex
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -227,8 +228,8 @@ def _noting_drops(dropped: list[dict]) -> Iterator[None]:
 
 def discover_command(config: RunConfig, rec: Recording) -> str:
     """The command that investigates a poor fit of this run."""
-    data = rec.source if not rec.source.startswith("<") else "FILE (the arrays saved as CSV)"
-    cmd = f"imucal discover --config {config.source}" if config.source else f"imucal discover --data {data}"
+    data = shlex.quote(rec.source) if not rec.source.startswith("<") else "FILE (the arrays saved as CSV)"
+    cmd = f"imucal discover --config {shlex.quote(config.source)}" if config.source else f"imucal discover --data {data}"
     g = config.gravity
     if g.value is not None:
         cmd += f" --gravity {g.value:g}"

@@ -150,3 +150,39 @@ def test_a_number_yaml_reads_as_text_says_so_and_how_to_write_it(run_cli, tmp_pa
         r = run_cli(["calibrate", run, "--no-figures"])
     assert r.code == 2, r
     one_line_error(r.err, str(run), field, "as text, not a number", f"(fix: {fix}: a decimal point and a signed")
+
+
+_CONTROLS = ("\x1b", "\x07", "\u202e")  #: ESC (cursor, colours), BEL (ends an OSC title), a bidi override
+
+
+def test_control_characters_of_a_file_name_reach_no_terminal_or_report(run_cli, tmp_path, si_recording):
+    """A recording named e\\x1b]0;pwned\\x07\\u202e.csv retitled the terminal and reordered its line: the name was
+    written raw into calibrate's and compare's output, the error line and report.txt and report.html. Every one
+    now shows the characters as escapes (imucal.errors.printable)."""
+    from imucal.errors import printable
+
+    assert printable("e\x1b]0;x\x07\u202e\udcff.csv µ") == "e\\x1b]0;x\\x07\\u202e\\udcff.csv µ"
+    src = tmp_path / "e\x1b]0;pwned\x07\u202e.csv"
+    src.write_bytes(Path(si_recording.path).read_bytes())
+    r = run_cli(["calibrate", "--data", src, "--out", tmp_path / "cal", "--no-figures"])
+    assert r.code == 0, r.err
+    r2 = run_cli(["compare", tmp_path / "cal" / "calibration.yaml", tmp_path / "cal" / "calibration.yaml",
+                  "--data", src])
+    r3 = run_cli(["calibrate", "--data", src, "--columns", "t=nope,ax=ax,ay=ay,az=az", "--out", tmp_path / "o"])
+    assert r2.code == 0 and r3.code == 2, (r2.err, r3.err)
+    shown = [r.out, r.err, r2.out, r3.err] + [(tmp_path / "cal" / f).read_text() for f in ("report.txt", "report.html")]
+    assert not [c for c in _CONTROLS for text in shown if c in text]
+    assert "e\\x1b]0;pwned\\x07\\u202e.csv" in r.out and "e\\x1b]0;pwned\\x07\\u202e.csv" in r3.err
+
+
+def test_the_command_a_warning_suggests_quotes_the_file_name():
+    """"investigate with: imucal discover --data x.csv; rm -rf ~" was a command to copy that runs another:
+    the file name is quoted for the shell now."""
+    from types import SimpleNamespace
+
+    from imucal.config.run import config_from_dict
+    from imucal.pipeline import discover_command
+
+    cfg = config_from_dict({"data": {"path": "x.csv"}, "gravity": {"value": 9.81}})
+    cmd = discover_command(cfg, SimpleNamespace(source="x.csv; rm -rf ~"))
+    assert cmd == "imucal discover --data 'x.csv; rm -rf ~' --gravity 9.81", cmd

@@ -385,7 +385,7 @@ def simulation_from_dict(d: object, path: str | None = None) -> SimulationConfig
     ``temperature`` (omit or null for a recording without a temp column). See
     configs/simulate_example.yaml.
     """
-    check_structure(d, path)
+    check_structure(d, path, paths=True)
     f = fill(SimulationFile, d, path)
     try:
         seed = check_seed(f.seed, "seed")

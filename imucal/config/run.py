@@ -331,7 +331,7 @@ def _fix_shorthand(fx: Any) -> tuple[tuple[str, ...], dict[str, float]]:
 
 def config_from_dict(d: Any, path: str | None = None) -> RunConfig:
     """A RunConfig from a YAML mapping (imucal.files.schema: unknown keys, types, one-line errors)."""
-    check_structure(d, path)
+    check_structure(d, path, paths=True)
     cfg = replace(fill(RunConfig, d, path), source=path)
     return cfg if cfg.fit.base is None else with_base(cfg, path)
 

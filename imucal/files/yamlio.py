@@ -145,9 +145,9 @@ class _Refused(Exception):
         self.fix = fix
 
 
-def _check_values(obj: Any, depth: int = 0, where: str = "", seen: set | None = None) -> None:
-    """Nesting depth, numbers and text: an integer beyond 64 bits is corrupt, not a value, and so is text with a
-    NUL character. Objects shared through aliases are visited once."""
+def _check_values(obj: Any, depth: int = 0, where: str = "", seen: set | None = None, paths: bool = False) -> None:
+    """Nesting depth and numbers: an integer beyond 64 bits is corrupt, not a value; with ``paths`` (a file whose
+    text names files), text with a NUL character too. Objects shared through aliases are visited once."""
     seen = set() if seen is None else seen
     if depth > MAX_DEPTH:
         raise _Refused(f"nested deeper than {MAX_DEPTH} levels", "flatten the file")
@@ -157,12 +157,12 @@ def _check_values(obj: Any, depth: int = 0, where: str = "", seen: set | None = 
         seen.add(id(obj))
     if isinstance(obj, dict):
         for k, v in obj.items():
-            _check_values(k, depth + 1, where, seen)
-            _check_values(v, depth + 1, f"{where}.{k}" if where else str(k), seen)
+            _check_values(k, depth + 1, where, seen, paths)
+            _check_values(v, depth + 1, f"{where}.{k}" if where else str(k), seen, paths)
     elif isinstance(obj, list):
         for v in obj:
-            _check_values(v, depth + 1, where, seen)
-    elif isinstance(obj, str) and "\x00" in obj:  # no path or label holds one (os.stat raised ValueError)
+            _check_values(v, depth + 1, where, seen, paths)
+    elif paths and isinstance(obj, str) and "\x00" in obj:  # no path holds one (os.stat raised ValueError)
         raise _Refused(f"the text of {short(where, 80) if where else 'the top level'} holds a NUL character",
                        "remove it: no file name or label holds one")
     elif isinstance(obj, int) and not isinstance(obj, bool) and abs(obj) >= 2**1023:
@@ -172,14 +172,15 @@ def _check_values(obj: Any, depth: int = 0, where: str = "", seen: set | None = 
             raise _TooLarge(where[:80] or "top level") from None
 
 
-def check_structure(obj: Any, path: str | None = None, field: str = "config") -> None:
-    """Refuse integers no float holds and nesting deeper than MAX_DEPTH, in one line.
+def check_structure(obj: Any, path: str | None = None, field: str = "config", paths: bool = False) -> None:
+    """Refuse integers no float holds and nesting deeper than MAX_DEPTH, in one line; with ``paths`` (a run file,
+    a manifest, a simulation: files whose text names files to open), text holding a NUL character too.
 
     read_yaml applies it to every file; config_from_dict and simulation_from_dict apply it to
     mappings a notebook user builds, so both paths refuse the same values.
     """
     try:
-        _check_values(obj)
+        _check_values(obj, paths=paths)
     except _TooLarge as exc:
         raise ImucalError("integer is too large for a float", file=path, field=str(exc),
                           fix="give a number within the field's range") from None

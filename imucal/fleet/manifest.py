@@ -301,7 +301,7 @@ class ManifestFile:
 
 def manifest_from_dict(d: Any, path: str, shared: dict | None = None) -> Manifest:
     """A Manifest from a YAML mapping (``path`` names it in messages and anchors relative paths)."""
-    check_structure(d, path)
+    check_structure(d, path, paths=True)
     m = fill(ManifestFile, d, path)
     base = Path(path).parent
     if shared is None:

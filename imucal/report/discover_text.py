@@ -13,6 +13,7 @@ from imucal.analysis.discover.result import FoundEffect
 from imucal.analysis.discover.verdict import StochasticPart
 from imucal.analysis.stochastic import Preferred
 from imucal.constants import STANDARD_GRAVITY
+from imucal.errors import printable
 from imucal.model.effects import EFFECTS
 from imucal.report.thermal import gap_lines, thermal_json, thermal_lines
 
@@ -245,7 +246,7 @@ def discovery_report(d: Discovery) -> str:
     gap = _gap_lines(d)
     if d.thermal is not None:  # a sweep's gap is its poses' constancy (imucal.report.thermal)
         gap = gap_lines(d.thermal, d.settings.alpha_noise) + [f"    model      = {d.final.result.model_name}"]
-    L = ["[[Discovery]]", f"    data      = {d.base.recording.source} ({d.base.intervals.n} static intervals)",
+    L = ["[[Discovery]]", f"    data      = {printable(d.base.recording.source)} ({d.base.intervals.n} static intervals)",
          f"    verdict   = {verdict_text(d.verdict)}", *gap, *_effect_lines(d)]
     for s in d.steps:
         L += _round_lines(s)

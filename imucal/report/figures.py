@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from imucal.errors import printable
 from imucal.pipeline import CalibrationRun
 from imucal.report.canvas import Margins, new_figure, plain_ticks, save_png
 from imucal.report.text import interval_residuals
@@ -34,9 +35,7 @@ def plain(text: str) -> str:
     not UTF-8 (a lone surrogate, b'log\xff.csv') is shown escaped, as every text output writes it
     (imucal.files.output.TEXT_ERRORS), and so is a character no font draws (a control character such as
     the \\r in a file name: matplotlib warned 'Glyph 13 missing from font(s)' on stderr)."""
-    text = text.encode("utf-8", errors="backslashreplace").decode("utf-8")
-    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in text).replace(
-        "$", r"\$")
+    return printable(text).replace("$", r"\$")
 
 
 def no_intervals_figure(path: str | Path) -> None:

@@ -12,6 +12,7 @@ import math
 from typing import Iterable, Mapping
 
 from imucal import __version__
+from imucal.errors import printable
 
 #: No network, no scripts: images only from data: URLs, styles only inline.
 CSP = "default-src 'none'; img-src data:; style-src 'unsafe-inline'"
@@ -42,7 +43,7 @@ code,td{overflow-wrap:break-word}
 
 def esc(text: object) -> str:
     """HTML-escaped text (quotes too: safe inside attributes)."""
-    return html.escape(str(text), quote=True)
+    return html.escape(printable(str(text), keep="\n\t"), quote=True)
 
 
 def num(v: float, fmt: str = ".6g") -> str:

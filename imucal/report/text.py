@@ -8,7 +8,7 @@ import numpy as np
 from imucal.calibration.frozen import Calibration
 from imucal.data.recording import TimeBase, TimeSource
 from imucal.data.timebase import GAP_STEPS, SHORT_STEP
-from imucal.errors import key_text
+from imucal.errors import key_text, printable
 from imucal.model.sensor import build_model
 from imucal.pipeline import CalibrationRun, fit_data
 from imucal.solve.fit import FitResult, jacobian_rows
@@ -66,7 +66,7 @@ def _calibration_lines(run: CalibrationRun) -> list[str]:
     L: list[str] = []
     L.append("[[Calibration]]")
     L.append(f"    model              = {res.model_name}")
-    L.append(f"    data               = {rec.source} ({rec.n} samples, {rec.duration:.1f} s, "
+    L.append(f"    data               = {printable(rec.source)} ({rec.n} samples, {rec.duration:.1f} s, "
              f"{rec.sample_rate:.4g} Hz, unit {cal.raw_unit})")
     L.append(f"    sha256             = {rec.sha256}")
     if columns_words(cal.data.get("columns", {})):
@@ -125,7 +125,7 @@ def _taken_lines(run: CalibrationRun) -> list[str]:
     else:
         L.append("    check on           = none: this log has no still interval")
     for wtext in cal.fit.get("warnings", []):
-        L.append(f"    WARNING            = {wtext}")
+        L.append(f"    WARNING            = {printable(wtext)}")
     return L
 
 
@@ -178,7 +178,7 @@ def _statistics_lines(run: CalibrationRun) -> list[str]:
                  + ", ".join(f"{n} (predicted std {run.observability.predicted_z[n]:.2g} x scale)"
                              for n in run.observability.poorly_determined))
     for wtext in cal.fit.get("warnings", []):
-        L.append(f"    WARNING            = {wtext}")
+        L.append(f"    WARNING            = {printable(wtext)}")
     return L
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 
 from imucal.cli.commands import options
+from imucal.errors import key_text, printable
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -115,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
         if (err := field_error(cal.sensor(MAGNETOMETER), out[MAGNETOMETER], rec.source)) is not None:
             if not args.no_gravity_check:
                 raise err
-            sys.stderr.write(f"imucal: warning: {err.message}\n")
+            sys.stderr.write(f"imucal: warning: {printable(err.message)}\n")
     done = [s for s in cal.all_sensors if s.kind in out]
     cols, body = [c for s in done for c in s.model.output.columns], [out[s.kind] for s in done]
     ts, tfmt = _time_column(rec)
@@ -124,7 +125,7 @@ def run(args: argparse.Namespace) -> int:
     np.savetxt(buf, np.column_stack([ts, *body]), delimiter=",", fmt=[tfmt] + ["%.9g"] * len(cols))
     check_outputs(inputs, [args.out])  # nothing changed meanwhile
     write_text_atomic(args.out, buf.getvalue())
-    how = (f"the input's {rec.time_column} column as read ({rec.time_unit})" if rec.t_source is not None
+    how = (f"the input's {key_text(rec.time_column)} column as read ({rec.time_unit})" if rec.t_source is not None
            else "s from the first sample")
     what = " and ".join((f"{s.model.output.role.replace('_', ' ')} " if k else "") + f"[{s.model.output.unit}]"
                         for k, s in enumerate(done))  # the acceleration first, as the samples

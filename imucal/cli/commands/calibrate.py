@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from imucal.cli.commands import options
+from imucal.errors import printable
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -68,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
         stage_files(o, out, files, figures, args.json)
     result, gyro, text = files.run, files.gyro, files.text
     for w in result.calibration.fit.get("warnings", []):
-        sys.stderr.write(f"imucal: warning: {w}\n")
+        sys.stderr.write(f"imucal: warning: {printable(w)}\n")
     if not args.quiet:
         print(text.split("[[Static intervals]]")[0].rstrip())
     if gyro is not None and not args.quiet:

@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 
 from imucal.cli.commands import options
+from imucal.errors import printable
 
 IMPORT_FORMATS = ("imucal", "imutk", "madlab", "matrix", "kalibr", "ardupilot", "px4", "tomisuarez")
 
@@ -45,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
     iv = detect_static(rec.t, rec.raw, cfg.static, rec.temp, source=rec.source, rails=declared)
     names = (Path(args.calibration).name, f"{Path(args.other).name} ({fmt})")
     res = compare(cal, other, rec, iv, cal.gravity, names)
-    print(f"{iv.n} still intervals of {rec.source}; g = {cal.gravity:.6g} m/s^2 (from {names[0]})")
+    print(f"{iv.n} still intervals of {printable(rec.source)}; g = {cal.gravity:.6g} m/s^2 (from {names[0]})")
     if getattr(other, "extra", {}).get("offset_held") is False:
         print(f"note: {names[1]} holds no bias (Kalibr estimates it online): its offset is taken as zero")
     print(res.table())
