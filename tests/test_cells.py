@@ -25,9 +25,6 @@ from imucal.errors import ImucalError
 def test_a_cell_that_is_not_a_number_says_why(tmp_path, text, words, stream):
     p = tmp_path / "c.csv"
     p.write_text(text)
-    if stream == "always" and "0,00" in text:  # read in chunks, a decimal comma is named, not read
-        words = ("data: line 2 column 1: '0,00' is not a number (fix: the numbers have a decimal comma: write them "
-                 "with a decimal point (a spreadsheet in an English locale))")
     with pytest.raises(ImucalError) as ei:
         spec = DataSpec(path=str(p), stream=stream)
         load_recording(spec) if stream == "never" else StreamedRecording(spec)
