@@ -186,3 +186,14 @@ def test_the_command_a_warning_suggests_quotes_the_file_name():
     cfg = config_from_dict({"data": {"path": "x.csv"}, "gravity": {"value": 9.81}})
     cmd = discover_command(cfg, SimpleNamespace(source="x.csv; rm -rf ~"))
     assert cmd == "imucal discover --data 'x.csv; rm -rf ~' --gravity 9.81", cmd
+
+
+@pytest.mark.parametrize("command", [["worst-case", "--starts", "2"], ["drift", "--error", "0.01"]])
+@pytest.mark.parametrize("g", ["1e26", "1e-308", "\uff11"])
+def test_a_gravity_option_no_earth_has_is_refused_as_calibrates_is(run_cli, tmp_path, unchanged, command, g):
+    """worst-case and drift took --gravity 1e26, 1e-308 or a full-width 1 (float() reads it: 1 m/s^2) and
+    analysed it; calibrate refuses those. One check (imucal.config.run.check_gravity) for all three now."""
+    with unchanged():
+        r = run_cli([*command, "--gravity", g, "--json", tmp_path / "o.json"])
+    assert r.code == 2, r
+    one_line_error(r.err, "--gravity: gravity", "is not a local gravity on Earth", "(fix: give local g")

@@ -233,7 +233,7 @@ def test_cli_worst_case_with_calibration(tmp_path, capsys):
     (["--tolerance", "1.5"], ["outside (0, pi)"]),
     (["--range-g", "0"], ["range 0 g must be positive"]),
     (["--range-g", "-4"], ["must be positive"]),
-    (["--gravity", "-9.8"], ["gravity -9.8 must be positive"]),
+    (["--gravity", "-9.8"], ["gravity -9.8 m/s^2 is not a local gravity on Earth"]),
 ])
 def test_cli_bad_input_one_line_exit_2_nothing_written(tmp_path, capsys, args, needles):
     out = tmp_path / "wc.json"

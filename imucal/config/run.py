@@ -32,6 +32,13 @@ FIT_MODES = ("means", "samples")
 WEIGHTS = ("auto", "noise", "uniform")
 
 
+def check_gravity(value: object, field: str) -> None:
+    """Refuse a gravity [m/s^2] that is no local gravity on Earth (the run file's gravity.value, --gravity)."""
+    if not (_is_real(value) and math.isfinite(value) and 9.7 < value < 9.9):
+        raise ImucalError(f"gravity {short(value)} m/s^2 is not a local gravity on Earth", field=field,
+                          fix="give local g in m/s^2 (9.78 .. 9.84)")
+
+
 @dataclass(frozen=True)
 class GravitySpec:
     """Local gravity: a value [m/s^2], or latitude [deg] and height [m] (WGS84 normal gravity)."""
@@ -46,10 +53,8 @@ class GravitySpec:
     def __post_init__(self) -> None:
         if self.value is not None and self.latitude is not None:
             raise ImucalError("give either gravity.value or gravity.latitude, not both", field="gravity")
-        if self.value is not None and not (_is_real(self.value) and math.isfinite(self.value)
-                                           and 9.7 < self.value < 9.9):
-            raise ImucalError(f"gravity {short(self.value)} m/s^2 is not a local gravity on Earth",
-                              field="gravity.value", fix="give local g in m/s^2 (9.78 .. 9.84)")
+        if self.value is not None:
+            check_gravity(self.value, "gravity.value")
         for name in ("latitude", "height"):
             v = getattr(self, name)
             if (v is not None or name == "height") and not _is_real(v):

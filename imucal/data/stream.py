@@ -202,7 +202,7 @@ class StreamedRecording:
             p.big = corrupt_value(self.file.line_of(block, first, int(np.flatnonzero(bad)[0])), self.path)
         if p.big is None and self.file.lay.instance is not None:  # one sensor's rows, past the head too
             try:
-                other_instance(block.decode("utf-8").splitlines(), self.file.lay, self.path,
+                other_instance(block.decode("utf-8", errors="replace").splitlines(), self.file.lay, self.path,
                                lambda k: self.file.line_of(block, first, k))
             except ImucalError as exc:
                 p.big = exc

@@ -30,6 +30,7 @@ def register(subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     import math
 
+    from imucal.config.run import check_gravity
     from imucal.constants import DEFAULT_ANGLE_TOL, STANDARD_GRAVITY
     from imucal.analysis.drift import DriftCase, DriftReport, calibration_cases, plot_drift, table_times
     from imucal.errors import ImucalError
@@ -49,9 +50,9 @@ def run(args: argparse.Namespace) -> int:
         from imucal.calibration.frozen import load_calibration
 
         cal = load_calibration(args.calibration)
+    if args.gravity is not None:  # as calibrate's: 1e26 or 1e-308 m/s^2 was integrated
+        check_gravity(args.gravity, "--gravity")
     gravity = args.gravity if args.gravity is not None else (cal.gravity if cal else STANDARD_GRAVITY)
-    if not (math.isfinite(gravity) and gravity > 0):
-        raise ImucalError(f"gravity {gravity:g} must be positive", field="gravity")
     tol = DEFAULT_ANGLE_TOL if args.tolerance is None else args.tolerance
     box = AngleBox.from_tolerance(tol)
     try:

@@ -55,12 +55,15 @@ def report(wc) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from imucal.config.run import check_gravity
     from imucal.constants import DEFAULT_ANGLE_TOL, STANDARD_GRAVITY
     from imucal.errors import ImucalError
     from imucal.files.output import check_outputs, write_json_atomic
     from imucal.analysis.worst_case import AngleBox, CertificateError, analyse
 
     check_outputs([args.calibration], [args.json])
+    if args.gravity is not None:  # as calibrate's: 1e26 or 1e-308 m/s^2 was analysed
+        check_gravity(args.gravity, "--gravity")
     gravity = args.gravity
     source: dict = {}
     if args.calibration:
