@@ -32,7 +32,7 @@ FIT_MODES = ("means", "samples")
 WEIGHTS = ("auto", "noise", "uniform")
 
 
-def check_gravity(value: object, field: str) -> None:
+def check_gravity(value: Any, field: str) -> None:
     """Refuse a gravity [m/s^2] that is no local gravity on Earth (the run file's gravity.value, --gravity)."""
     if not (_is_real(value) and math.isfinite(value) and 9.7 < value < 9.9):
         raise ImucalError(f"gravity {short(value)} m/s^2 is not a local gravity on Earth", field=field,
