@@ -18,7 +18,7 @@ import numpy as np
 
 from imucal.data.static import Intervals
 
-#: The family-wise level of the scan (discover's alpha_effect by default).
+#: The family-wise level of the scan, calibrate's and discover's alike (discover --alpha leaves it).
 HOLD_ALPHA = 1e-3
 #: A long hold is judged in windows of this many minimum durations (StaticSettings.min_duration): a
 #: step against its neighbourhood, where a wandering bias (a random walk) moves little.
@@ -38,8 +38,8 @@ class HoldStep:
     interval: int
     time: float  #: the first sample after the step [s]
     shift: np.ndarray  #: (3,) mean after minus mean before [raw]
-    chi2: float  #: the scan's largest chi-square (3 dof at one cut)
-    p: float  #: its p, family-wise over the intervals scanned
+    chi2: float  #: the step's chi-square beside a line in time (3 dof, at the best cut)
+    p: float  #: its p, family-wise over the intervals and windows scanned
 
 
 def sup_bridge_sf(c: float, dof: int, t0: float) -> float:
