@@ -197,3 +197,20 @@ def test_a_gravity_option_no_earth_has_is_refused_as_calibrates_is(run_cli, tmp_
         r = run_cli([*command, "--gravity", g, "--json", tmp_path / "o.json"])
     assert r.code == 2, r
     one_line_error(r.err, "--gravity: gravity", "is not a local gravity on Earth", "(fix: give local g")
+
+
+@pytest.mark.parametrize("text", ['{"a": NaN}', '{"a": 1, "a": 2}', "[" * 100000 + "]" * 100000, "a: 1",
+                                  '{"a": ' + "9" * 5000 + "}"])
+def test_a_json_input_that_is_not_json_says_what_to_do(tmp_path, text):
+    """A noise file, a mad-lab or matrix JSON, or a pose plan that was not plain JSON was refused without a fix;
+    each now says what to give."""
+    from imucal.analysis.plan_file import read_plan
+    from imucal.files.inputs import read_json
+
+    p = tmp_path / "x.json"
+    p.write_text(text)
+    for read, fix in ((lambda: read_json(str(p), "noise"), "(fix: give the JSON file as its tool wrote it"),
+                      (lambda: read_plan(str(p)), "(fix: ")):
+        with pytest.raises(ImucalError) as ei:
+            read()
+        assert fix in str(ei.value) and "\n" not in str(ei.value), str(ei.value)

@@ -71,5 +71,6 @@ def read_plan(path: str) -> np.ndarray:
         raise ImucalError("is nested too deeply", file=path, field="evaluate",
                           fix="give a JSON plan with 'poses'") from None
     except ValueError as exc:  # JSONDecodeError, or an integer with too many digits
-        raise ImucalError(f"is not readable JSON: {short(str(exc), 80)}", file=path, field="evaluate") from None
+        raise ImucalError(f"is not readable JSON: {short(str(exc), 80)}", file=path, field="evaluate",
+                          fix="give a JSON plan with 'poses' (imucal plan-poses --json writes one)") from None
     return np.array(fill(PlanFile, obj, path).poses, float)

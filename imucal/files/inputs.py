@@ -156,8 +156,10 @@ def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:
         return False
 
 
-def read_json(path: str, field_: str) -> Any:
-    """JSON without NaN/Infinity constants (not JSON) and without duplicate keys."""
+def read_json(path: str, field_: str,
+              fix: str = "give the JSON file as its tool wrote it (plain JSON: no NaN, each key once)") -> Any:
+    """JSON without NaN/Infinity constants (not JSON) and without duplicate keys; ``fix``: what to do about a file
+    that is not."""
     def no_constant(name: str) -> None:
         raise ValueError(f"{name} is not a JSON number")
 
@@ -175,4 +177,5 @@ def read_json(path: str, field_: str) -> Any:
         return json.loads(read_input_text(path, field=field_), parse_constant=no_constant,
                           object_pairs_hook=no_duplicates)
     except (ValueError, RecursionError) as exc:
-        raise ImucalError(f"is not valid JSON: {' '.join(str(exc).split())[:80]}", file=path, field=field_) from None
+        raise ImucalError(f"is not valid JSON: {' '.join(str(exc).split())[:80]}", file=path, field=field_,
+                          fix=fix) from None
