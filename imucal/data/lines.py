@@ -13,6 +13,7 @@ import numpy as np
 
 from imucal.data.recording import MAX_ABS_VALUE
 from imucal.errors import ImucalError
+from imucal.files.inputs import WIDE_TEXT_FIX, wide_text
 
 #: Largest recording read in chunks [bytes] (a file read whole: imucal.files.inputs.max_data_bytes).
 MAX_STREAM_BYTES = 1024**4
@@ -62,33 +63,13 @@ BINARY_FORMATS = (
 )
 
 
-UTF16_FIX = ("save it as UTF-8 text (a spreadsheet's \"CSV UTF-8\", or iconv -f UTF-16 -t UTF-8 FILE > FILE.csv) "
-             "and calibrate that")
-BINARY_FORMATS += ((b"\xff\xfe", "UTF-16 or UTF-32 text (a byte order mark)", UTF16_FIX),
-                   (b"\xfe\xff", "UTF-16 text (a byte order mark)", UTF16_FIX),
-                   (b"\x00\x00\xfe\xff", "UTF-32 text (a byte order mark)", UTF16_FIX))
-
-
-def _wide_text(head: bytes) -> bool:
-    """Whether ``head`` looks like ASCII characters in UTF-16 or UTF-32 without a byte order mark: every NUL
-    byte at the places the wide encoding's high bytes are, and characters at the others."""
-    probe = head[:256]
-    for width in (2, 4):
-        for at in range(width):
-            chars = probe[at::width]
-            rest = bytes(b for k, b in enumerate(probe) if k % width != at)
-            if len(chars) >= 8 and 0 not in chars and not rest.strip(b"\x00") and chars.isascii():
-                return True
-    return False
-
-
 def binary_file(path: Path, line: int | None = None, head: bytes = b"") -> ImucalError:
     """NUL bytes: at the head of the file (``head``: its first bytes, which may name its format), or
     (``line``) after text (a sparse or corrupt file)."""
     where = "" if line is None or line <= 1 else f" from line {line} on (a sparse or corrupt file)"
     known = next(((what, fix) for magic, what, fix in BINARY_FORMATS if head.startswith(magic)), None)
-    if known is None and _wide_text(head):
-        known = ("UTF-16 or UTF-32 text (NUL bytes between the characters)", UTF16_FIX)
+    if known is None and not where and wide_text(head):  # a spreadsheet's "Unicode text": text, not UTF-8
+        return ImucalError("is UTF-16 or UTF-32 text, not UTF-8", file=str(path), field="data.path", fix=WIDE_TEXT_FIX)
     if known is not None and not where:
         return ImucalError(f"is {known[0]}, not a text recording", file=str(path), field="data.path", fix=known[1])
     return ImucalError(f"is a binary file (NUL bytes){where}, not a text recording", file=str(path),

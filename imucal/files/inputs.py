@@ -108,11 +108,33 @@ def read_input_bytes(path: str | os.PathLike, *, field: str, fix: str | None = N
     return data
 
 
+#: What to do about text in UTF-16 or UTF-32 (a spreadsheet's "Unicode text"): imucal reads UTF-8.
+WIDE_TEXT_FIX = ("save it as UTF-8 text (a spreadsheet's \"CSV UTF-8\", or iconv -f UTF-16 -t UTF-8 FILE > NEW) "
+                 "and give that")
+
+
+def wide_text(head: bytes) -> bool:
+    """Whether ``head`` (a file's first bytes) is text in UTF-16 or UTF-32: a byte order mark, or ASCII
+    characters with the NUL bytes of the wide encoding between them."""
+    if head.startswith((b"\xff\xfe", b"\xfe\xff", b"\x00\x00\xfe\xff")):
+        return True
+    probe = head[:256]
+    for width in (2, 4):
+        for at in range(width):
+            chars = probe[at::width]
+            rest = bytes(b for k, b in enumerate(probe) if k % width != at)
+            if len(chars) >= 8 and 0 not in chars and not rest.strip(b"\x00") and chars.isascii():
+                return True
+    return False
+
+
 def read_input_text(path: str | os.PathLike, *, field: str, fix: str | None = None,
                     max_bytes: int = MAX_TEXT_BYTES) -> str:
     """UTF-8 text of a regular file (BOM allowed); binary content is refused in one line."""
     data = read_input_bytes(path, field=field, fix=fix, max_bytes=max_bytes)
     if b"\x00" in data[:65536]:
+        if wide_text(data):
+            raise ImucalError("is UTF-16 or UTF-32 text, not UTF-8", file=str(path), field=field, fix=WIDE_TEXT_FIX)
         raise ImucalError("is a binary file (NUL bytes), not text", file=str(path), field=field,
                           fix=fix or "give a text file")
     try:
