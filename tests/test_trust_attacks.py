@@ -93,14 +93,20 @@ def test_a_unit_the_name_and_the_units_line_state_differently_is_refused(run_cli
 
 @pytest.mark.parametrize("encoding", ["utf-16", "utf-16-le", "utf-16-be", "utf-32"])
 def test_a_utf16_recording_is_named_with_the_fix_that_reads_it(run_cli, tmp_path, unchanged, encoding):
-    """A spreadsheet's "Unicode text" (UTF-16) was called a binary file to export as CSV, which it already is:
-    now the encoding is named and the fix says to save it as UTF-8."""
+    """A spreadsheet's "Unicode text" (UTF-16) was called a binary file to export as CSV, which it already is
+    (a run file in UTF-16: a binary file): now the encoding is named and the fix says to save it as UTF-8."""
     src = tmp_path / "wide.csv"
     src.write_bytes(_csv(tmp_path / "plain.csv", "t,ax,ay,az", _rows()).read_text().encode(encoding))
     with unchanged():
         r = run_cli(["calibrate", "--data", src, "--out", tmp_path / "o"])
     assert r.code == 2, r
-    one_line_error(r.err, str(src), "data.path", "is UTF-16", "not a text recording", "fix: save it as UTF-8 text")
+    one_line_error(r.err, str(src), "data.path: is UTF-16 or UTF-32 text, not UTF-8", "fix: save it as UTF-8 text")
+    run = tmp_path / "run.yaml"  # a run file alike (every text file imucal reads: imucal.files.inputs)
+    run.write_bytes("data: {path: plain.csv}\n".encode(encoding))
+    with unchanged():
+        r = run_cli(["calibrate", run, "--out", tmp_path / "o"])
+    assert r.code == 2, r
+    one_line_error(r.err, str(run), "is UTF-16 or UTF-32 text, not UTF-8", "fix: save it as UTF-8 text")
 
 
 @pytest.mark.parametrize("delim", [";", "\t"])
@@ -214,3 +220,25 @@ def test_a_json_input_that_is_not_json_says_what_to_do(tmp_path, text):
         with pytest.raises(ImucalError) as ei:
             read()
         assert fix in str(ei.value) and "\n" not in str(ei.value), str(ei.value)
+
+
+def test_nanosecond_stamps_since_1970_are_written_back_as_the_file_holds_them(run_cli, tmp_path, si_recording):
+    """apply's t is "the input's time column as read": EuRoC's 1403636579758555399 ns came out as
+    1.4036365797585554e+18 (a double holds 2**53 exactly, these stamps to 256 ns), so no row joined the camera's
+    stamps. Integer stamps beyond 2**53 are now written as the file writes them; the samples are unchanged."""
+    d = np.loadtxt(si_recording.path, delimiter=",", skiprows=1)
+    stamps = [str(1403636579758555392 + round(t * 1e9) + 7) for t in d[:, 0]]
+    src = tmp_path / "euroc.csv"
+    src.write_text("#timestamp [ns],ax,ay,az\n" + "".join(f"{s},{r[1]:.17g},{r[2]:.17g},{r[3]:.17g}\n"
+                                                          for s, r in zip(stamps, d)))
+    plain = tmp_path / "plain.csv"
+    plain.write_text("t,ax,ay,az\n" + "".join(f"{r[0]:.17g},{r[1]:.17g},{r[2]:.17g},{r[3]:.17g}\n" for r in d))
+    r0 = run_cli(["calibrate", "--data", si_recording.path, "--out", tmp_path / "c", "--no-figures"])
+    assert r0.code == 0, r0.err
+    out = {}
+    for name, data in (("euroc", src), ("plain", plain)):
+        r = run_cli(["apply", tmp_path / "c" / "calibration.yaml", "--data", data, "--out", tmp_path / f"{name}.out"])
+        assert r.code == 0, r.err
+        out[name] = (tmp_path / f"{name}.out").read_text().splitlines()
+    assert [ln.split(",", 1)[0] for ln in out["euroc"][1:]] == stamps
+    assert [ln.split(",", 1)[1] for ln in out["euroc"]] == [ln.split(",", 1)[1] for ln in out["plain"]]

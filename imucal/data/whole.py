@@ -11,6 +11,7 @@ from __future__ import annotations
 import hashlib
 import io
 import os
+import re
 import warnings
 from pathlib import Path
 
@@ -19,7 +20,7 @@ import numpy as np
 from imucal.data import fixed_width
 from imucal.data.layout import MAX_SCAN_LINES, Layout, header_spec, layout, other_instance
 from imucal.data.lines import (BINARY_PROBE, binary_file, corrupt_value, decimal_comma, decode, line_too_long,
-                               lineno, long_line, no_rows, not_increasing, parse_block, plain_text)
+                               lineno, long_line, no_rows, not_increasing, parse_block, plain_text, split)
 from imucal.data.recording import MAX_ABS_VALUE, Recording
 from imucal.data.spec import DataSpec, gyro_unit
 from imucal.data.timebase import rate_time_base, stamped_times
@@ -140,3 +141,25 @@ def read_text(spec: DataSpec, path: Path) -> Recording:
                      gyro=gyro, mag=mag, t_source=stamps, time_unit=unit, time_note=note, time_column=lay.time_column,
                      gyro_unit=gyro_unit(spec), time_base=tb, mag_unit=lay.units.get("mag_unit", "raw"),
                      columns=lay.names, unit_stated_by=lay.names.get("ax", "") if "unit" in lay.units else "")
+
+
+def stamp_texts(spec: DataSpec, path: Path, n: int) -> list[str] | None:
+    """The time column's own text in each of the ``n`` rows of a text recording, when every one is an integer:
+    stamps beyond 2**53 (EuRoC's nanoseconds since 1970) that a double rounds (by up to 128 ns) are written back
+    as the file holds them. None for another file (binary, no time column) or rows that differ in count."""
+    try:
+        blob, _ = _read_bytes(path)
+        lines = decode(blob, path).splitlines()[spec.skip_rows:]
+        lay = layout(lines, spec, path)
+    except ImucalError:  # a netCDF file or a ROS bag: its stamps as read
+        return None
+    if "t" not in lay.columns:
+        return None
+    col = lay.columns["t"]
+    texts = [toks[col] if len(toks := split(ln, lay.delimiter)) > col else "" for ln in lines[lay.body:]
+             if ln.strip() and not ln.lstrip().startswith("#")]
+    return texts if len(texts) == n and all(_INTEGER.fullmatch(t) for t in texts) else None
+
+
+_INTEGER = re.compile(r"[-+]?[0-9]+")
+

@@ -26,16 +26,21 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=run)
 
 
-def _time_column(rec) -> tuple:
-    """(values, printf format): the input's stamps as read (unit and origin kept, integers kept
-    integers), or seconds from the first sample when the file had no time column."""
+def _time_column(rec, spec, path) -> tuple:
+    """(values, printf format, texts): the input's stamps as read (unit and origin kept, integers kept
+    integers), or seconds from the first sample when the file had no time column; texts: the stamps as the
+    file writes them when they are integers beyond 2**53, which a double does not hold (else None)."""
     import numpy as np
 
+    from imucal.data.whole import stamp_texts
+
     if rec.t_source is None:
-        return rec.t, "%.9g"
+        return rec.t, "%.9g", None
     ts = rec.t_source
-    exact_int = bool(np.all(ts == np.round(ts))) and float(np.max(np.abs(ts))) < 2.0**53
-    return ts, ("%d" if exact_int else "%.17g")
+    integers = bool(np.all(ts == np.round(ts)))
+    if integers and float(np.max(np.abs(ts))) >= 2.0**53:  # nanoseconds since 1970: the file's own digits
+        return ts, "%.17g", stamp_texts(spec, path, rec.n)
+    return ts, ("%d" if integers else "%.17g"), None
 
 
 def _rest_words(chk) -> str:
@@ -119,10 +124,15 @@ def run(args: argparse.Namespace) -> int:
             sys.stderr.write(f"imucal: warning: {printable(err.message)}\n")
     done = [s for s in cal.all_sensors if s.kind in out]
     cols, body = [c for s in done for c in s.model.output.columns], [out[s.kind] for s in done]
-    ts, tfmt = _time_column(rec)
+    ts, tfmt, texts = _time_column(rec, cfg.data, options.data_path(cfg))
     buf = io.StringIO()
     buf.write(",".join(["t", *cols]) + "\n")  # imucal's layout (examples/codegen reads it)
-    np.savetxt(buf, np.column_stack([ts, *body]), delimiter=",", fmt=[tfmt] + ["%.9g"] * len(cols))
+    if texts is None:
+        np.savetxt(buf, np.column_stack([ts, *body]), delimiter=",", fmt=[tfmt] + ["%.9g"] * len(cols))
+    else:
+        rows = io.StringIO()
+        np.savetxt(rows, np.column_stack(body), delimiter=",", fmt="%.9g")
+        buf.writelines(f"{t},{row}\n" for t, row in zip(texts, rows.getvalue().splitlines()))
     check_outputs(inputs, [args.out])  # nothing changed meanwhile
     write_text_atomic(args.out, buf.getvalue())
     how = (f"the input's {key_text(rec.time_column)} column as read ({rec.time_unit})" if rec.t_source is not None
