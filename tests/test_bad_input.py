@@ -256,7 +256,7 @@ APPLY_CASES: dict[str, Callable[[Path, Path, Path], tuple[list, tuple[str, ...]]
     "calibration not YAML": lambda tmp, cal, data: (
         [write(tmp, "cal.yaml", "format: [\n"), "--data", data], ("cal.yaml", "is not valid YAML")),
     "calibration not UTF-8": lambda tmp, cal, data: (
-        [write(tmp, "cal.yaml", b"\xff\xfe\x00"), "--data", data], ("cal.yaml", "is a binary file (NUL bytes)")),
+        [write(tmp, "cal.yaml", b"\xff\xfe\x00"), "--data", data], ("cal.yaml", "is UTF-16 or UTF-32 text, not UTF-8")),
     "config instead of calibration": lambda tmp, cal, data: (
         [yaml_cfg(tmp, {"data": {"path": "x.csv"}}, "cal.yaml"), "--data", data], ("cal.yaml", "format")),
     "unknown version": lambda tmp, cal, data: (
