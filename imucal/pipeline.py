@@ -498,10 +498,9 @@ def _hold_steps(rec: Recording | RecordingSummary, iv: Intervals, settings: Stat
         return []
     from imucal.analysis.hold_steps import HOLD_WINDOW, hold_steps
     from imucal.data.static import at_rate, quantum
-    from imucal.solve.stats import median  # (np.median loads numpy.ma)
 
-    dt = median(np.diff(rec.t[:20001])) if rec.n > 1 else 1.0
-    span = HOLD_WINDOW * at_rate(settings, dt).min_duration / dt if dt > 0 else rec.n
+    rate = rec.sample_rate  # (the time base's one rate)
+    span = HOLD_WINDOW * at_rate(settings, 1.0 / rate).min_duration * rate if rate > 0 else rec.n
     return hold_steps(rec.t, raw, iv, quantum(raw), int(span))
 
 
