@@ -6,6 +6,7 @@ MAX_SCAN_LINES after the first non-comment line.
 """
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -64,9 +65,9 @@ class Layout:
     sample_rate: float | None = None
     #: role -> the header's name of its column (with a units row's unit), for the record of what was read
     names: dict = field(default_factory=dict)
-    #: (column, name, value) of an instance column (ArduPilot's I) that holds one value in the head: every row
-    #: is checked to hold it too (other_instance), as interleaved sensors may start past the head
-    instance: tuple[int, str, str] | None = None
+    #: (column, name, value, its text) of an instance column (ArduPilot's I) that holds one number in the head:
+    #: every row is checked to hold it too (other_instance), as interleaved sensors may start past the head
+    instance: tuple[int, str, float, str] | None = None
 
     @property
     def usecols(self) -> list[int]:
@@ -238,7 +239,7 @@ def layout(lines: list[str], spec: DataSpec, path: Path) -> Layout:
             _one_unit_each(names, below, path)
             names = [f"{n} [{u}]" if u and read_name(n).unit is None else n for n, u in zip(names, below)]
             body += 1
-        instance = _one_instance(names, lines[body:body + MAX_SCAN_LINES], delim, path)
+        instance = _one_instance(names, lines[body:body + MAX_SCAN_LINES], delim, path, first_lineno + body)
         _fields_named(names, lines[body:body + MAX_SCAN_LINES], delim, first_lineno + body, path)
     else:
         if not all(is_number(t) for t in split(lines[k0], spec.delimiter)):
@@ -297,19 +298,38 @@ def _fields_named(names: list[str], head: list[str], delim: str | None, first: i
 INSTANCE_NAMES = ("i", "instance")
 
 
-def _one_instance(names: list[str], head: list[str], delim: str | None, path: Path) -> tuple[int, str, str] | None:
+def _one_instance(names: list[str], head: list[str], delim: str | None, path: Path,
+                  first_line: int) -> tuple[int, str, float, str] | None:
     """Refuse rows of several sensors interleaved in one file (an instance column that changes in the
-    head's rows): read as one sensor, they would be calibrated as one. The (column, name, value) of the instance
-    column that holds one value in the head, for other_instance to check every row against; None without one."""
+    head's rows): read as one sensor, they would be calibrated as one. The (column, name, value, text) of the
+    instance column that holds one number in the head, for other_instance to check every row against; None without one.
+    ``first_line``: the file's line of ``head[0]``."""
     for k, name in enumerate(names):
         if name.lower() in INSTANCE_NAMES:
-            seen = {toks[k] for ln in head if ln.strip() and not ln.lstrip().startswith("#")
-                    and len(toks := split(ln, delim)) > k}
+            seen: dict[float, str] = {}  # compared as numbers: 0 and 0.0 are one IMU
+            for i, ln in enumerate(head):
+                if ln.strip() and not ln.lstrip().startswith("#") and len(toks := split(ln, delim)) > k:
+                    seen.setdefault(instance_number(toks[k], name, path, first_line + i), toks[k])
             if len(seen) > 1:
-                raise interleaved(path, name, seen)
+                raise interleaved(path, name, set(seen.values()))
             if seen:
-                return k, name, seen.pop()
+                value, text = next(iter(seen.items()))
+                return k, name, value, text
     return None
+
+
+def instance_number(tok: str, name: str, path: Path, line: int) -> float:
+    """The IMU number an instance column's cell holds (its text as a number: 0, 0.0 and 0e0 are one IMU);
+    a cell that is no number is refused naming its line."""
+    try:
+        x = float(tok.strip().strip('"').strip("'"))
+    except ValueError:
+        x = math.nan
+    if not math.isfinite(x):
+        raise ImucalError(f"column {short(name)} holds {short(tok, 20)} at line {line}, not an IMU instance number",
+                          file=str(path), field="data.path",
+                          fix=f"give every row's IMU number (0, 1, ...) in column {short(name)}, or remove that column")
+    return x
 
 
 def interleaved(path: Path, name: str, seen: set[str], line: int | None = None) -> ImucalError:
@@ -327,15 +347,15 @@ def other_instance(lines: list[str], lay: Layout, path: Path, line_of: Callable[
     the head's (``line_of``: the file's line of data row k)."""
     if lay.instance is None:
         return
-    col, name, value = lay.instance
+    col, name, value, text = lay.instance
     k = -1
     for ln in lines:
         if not ln.strip() or ln.lstrip().startswith("#"):
             continue
         k += 1
         toks = split(ln, lay.delimiter)
-        if len(toks) > col and toks[col] != value:
-            raise interleaved(path, name, {value, toks[col]}, line_of(k))
+        if len(toks) > col and toks[col] != text and instance_number(toks[col], name, path, line_of(k)) != value:
+            raise interleaved(path, name, {text, toks[col]}, line_of(k))
 
 
 def header_spec(spec: DataSpec, lay: Layout, path: Path) -> DataSpec:
