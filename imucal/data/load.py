@@ -9,13 +9,14 @@ from __future__ import annotations
 
 import os
 
-from imucal.data.layout import head_layout
+from imucal.data.layout import gyro_file_spec, head_layout
 from imucal.data.netcdf import is_netcdf, read_netcdf
 from imucal.data.recording import Recording
 from imucal.data.rosbag import is_bag, read_bag
 from imucal.data.spec import DataSpec, as_spec, check_bag_spec, resolve_path
 from imucal.data.whole import read_text
 from imucal.errors import ImucalError
+from pathlib import Path
 
 #: Recordings above this size are read in chunks (imucal.data.stream) when data.stream is "auto" [bytes].
 STREAM_BYTES = 64 * 1024**2
@@ -44,6 +45,30 @@ def load_recording(spec: DataSpec | str | os.PathLike, base_dir: str | os.PathLi
             raise ImucalError(f"{name} applies to ROS bags only", file=str(path), field=f"data.{name}",
                               fix="give a .bag file or a ROS 2 bag folder, or drop the topic")
     return read_text(spec, path)
+
+
+#: The field a second gyroscope file's refusals name: the option that gives it (data.gyro_path in a run file).
+GYRO_FILE_FIELD = "--gyro-data"
+#: A second gyroscope file is read without the --data options (--columns, --time-unit apply to the recording).
+_GYRO_FILE_FIXES = {
+    "data.columns": "give the gyroscope file a header naming t, gx, gy, gz, or write it as imu_tk does: t x y z",
+    "data.time_unit": "write the gyroscope file's time in seconds, or state the unit in its header (t_ms, time_us)",
+}
+
+
+def load_gyro_file(path: str | os.PathLike) -> tuple[DataSpec, Recording]:
+    """imu_tk's second file, the gyroscope's (``--gyro-data``, data.gyro_path): the spec
+    imucal.data.layout.gyro_file_spec reads it with, and its Recording. Its refusals name --gyro-data, not the
+    recording's data fields."""
+    try:
+        spec = gyro_file_spec(DataSpec(path=str(path)), Path(path))
+        return spec, load_recording(spec)
+    except ImucalError as exc:
+        field = exc.field or "data"
+        if field != "data" and not field.startswith("data."):
+            raise
+        fix = next((f for k, f in _GYRO_FILE_FIXES.items() if field.startswith(k)), exc.fix)
+        raise ImucalError(exc.message, file=exc.file or str(path), field=GYRO_FILE_FIELD, fix=fix) from None
 
 
 def use_stream(spec: DataSpec, base_dir: str | os.PathLike | None = None) -> bool:

@@ -8,10 +8,8 @@ from pathlib import Path
 import numpy as np
 
 from imucal.constants import TIME_UNITS
-from imucal.data.layout import gyro_file_spec
-from imucal.data.load import load_recording
+from imucal.data.load import load_gyro_file
 from imucal.data.recording import Recording
-from imucal.data.spec import DataSpec
 from imucal.errors import ImucalError
 from imucal.gyro.fit import GyroOptions, fit_gyro
 from imucal.gyro.result import motions
@@ -48,8 +46,7 @@ def gyro_channel(rec: Recording, gyro_file: str | None = None) -> GyroChannel | 
             return None
         return GyroChannel(rec.t, rec.gyro, rec.source, None, None)
     path = Path(gyro_file)
-    spec = gyro_file_spec(DataSpec(path=str(path)), path)
-    g = load_recording(spec)
+    spec, g = load_gyro_file(path)
     if g.t_source is None or rec.t_source is None:
         raise ImucalError("both files need time stamps to share one time base", file=str(gyro_file),
                           field="--gyro-data", fix="record t in both files (imu_tk: t x y z)")
