@@ -241,7 +241,7 @@ def test_cli_refuses_a_noise_no_design_can_be_scored_at(run_cli, noise) -> None:
     r = run_cli(["plan-poses", "--n", "12", "--noise", noise])
     assert r.code == 2, r.err
     lines = r.err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("imucal: error: noise: noise "), r.err
+    assert len(lines) == 1 and lines[0].startswith("imucal: error: --noise: noise "), r.err
     assert "outside 1e-09 to 100 m/s^2" in lines[0] and "fix:" in lines[0]
 
 

@@ -105,6 +105,17 @@ def _run(args: argparse.Namespace) -> int:
         return args.run(args)
 
 
+def as_typed(exc: ImucalError, argv: list[str]) -> ImucalError:
+    """``exc`` naming the option the user typed (``--range-g``) where the library names its field without the
+    dashes (``range-g``, ``range_g``): a refusal of no file whose field is an option given on this command line."""
+    if exc.file is not None or not exc.field or exc.field.startswith("-"):
+        return exc
+    option = "--" + exc.field.replace("_", "-")
+    if not any(a == option or a.startswith(option + "=") for a in argv):
+        return exc
+    return ImucalError(exc.message, field=option, fix=exc.fix)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run one command. Exit statuses: imucal.errors.EXIT_* (README, "Exit status")."""
     as_program = argv is None  # the console script or python -m imucal, not a caller's code
@@ -132,7 +143,7 @@ def main(argv: list[str] | None = None) -> int:
         sys.stdout.flush()  # a reader gone shows here, not in the interpreter's last flush
         return code
     except ImucalError as exc:
-        sys.stderr.write(f"imucal: error: {exc}\n")
+        sys.stderr.write(f"imucal: error: {as_typed(exc, argv)}\n")
         return EXIT_BAD_INPUT
     except KeyboardInterrupt as exc:
         sys.stderr.write(interruption_line(exc) + "\n")

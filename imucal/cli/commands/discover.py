@@ -60,8 +60,10 @@ def run(args: argparse.Namespace) -> int:
     page_dir = args.out or args.plot  # report.html beside the other outputs
     page_path = Path(page_dir) / "report.html" if page_dir else None
     check_outputs(inputs, [args.json, *plot_names, *outs, page_path])
-    settings = DiscoverSettings(candidates=tuple(args.candidates or EFFECTS), alpha_noise=args.alpha,
-                                alpha_effect=args.alpha, alpha_scan=args.alpha / 10, max_effects=args.max_effects)
+    with options.named_options({"alpha_noise": "--alpha", "alpha_effect": "--alpha", "alpha_scan": "--alpha",
+                                "settings": "--max-effects", "candidates": "--candidates"}):
+        settings = DiscoverSettings(candidates=tuple(args.candidates or EFFECTS), alpha_noise=args.alpha,
+                                    alpha_effect=args.alpha, alpha_scan=args.alpha / 10, max_effects=args.max_effects)
     with progress("discover", unit="fit") as step:  # a bar on a terminal only
         result = discover(cfg, settings, step)
     text = discovery_report(result)

@@ -30,9 +30,11 @@ def run(args: argparse.Namespace) -> int:
     from imucal.files.output import OutputSet
 
     if not 2 <= args.grid <= 40:
-        raise ImucalError(f"grid {args.grid} must be between 2 and 40", field="grid")
+        raise ImucalError(f"grid {args.grid} must be between 2 and 40", field="--grid",
+                          fix="give --grid a whole number from 2 to 40 (voxels per axis)")
     if not 5 <= args.bins <= 2000:
-        raise ImucalError(f"bins {args.bins} must be between 5 and 2000", field="bins")
+        raise ImucalError(f"bins {args.bins} must be between 5 and 2000", field="--bins",
+                          fix="give --bins a whole number from 5 to 2000")
     emap = compute_error_map(args.angles, args.range, args.samples, args.seed,
                              [lv / 100 for lv in args.levels])
     out = Path(args.out)

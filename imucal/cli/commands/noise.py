@@ -1,4 +1,4 @@
-"""`imucal noise --data STILL_LOG [--calibration CAL] [--json OUT] [--plot PNG]`: Allan-deviation noise
+"""`imucal noise --data STILL_LOG | --config RUN.yaml [--calibration CAL] [--json OUT] [--plot PNG]`: Allan-deviation noise
 terms of the accelerometer and, when the recording has one, the gyroscope."""
 from __future__ import annotations
 
@@ -14,8 +14,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "gz columns or a bag's angular_velocity): white-noise density, bias instability "
                                    "and random walk with their uncertainty, and Kalibr's imu.yaml fields when the "
                                    "readings are in SI units (or a calibration converts them).")
-    options.add_data_options(p, data_required=True, gyro=True)
-    p.add_argument("--config", help="YAML run file: reuse its data section")
+    options.add_data_options(p, gyro=True)
+    p.add_argument("--config", help="YAML run file: reuse its data section (data.path is the still log unless --data "
+                                    "names another)")
     p.add_argument("--calibration", help="calibration.yaml: evaluate calibrated acceleration [m/s^2] (and angular "
                                          "rate [rad/s] when it holds a gyroscope)")
     p.add_argument("--json", help="write the estimates as JSON ('-': to stdout)")

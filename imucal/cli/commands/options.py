@@ -10,10 +10,11 @@ parser is built, so `imucal --help` and `--version` start in about 0.1 s.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import re
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Iterator
 
 from imucal.constants import GYRO_UNIT_CHOICES, TIME_UNIT_CHOICES
 from imucal.errors import ImucalError
@@ -108,9 +109,10 @@ def add_gyro_options(p: argparse.ArgumentParser) -> None:
 def add_mag_options(p: argparse.ArgumentParser) -> None:
     """The magnetometer fit's choices (the YAML mag: section)."""
     g = p.add_argument_group("magnetometer (with mx, my, mz columns)")
-    g.add_argument("--mag-field", type=_mag_field, metavar="VALUE[UNIT]",
-                   help="the local field's magnitude, e.g. 48.2uT (the WMM/IGRF value for your place); a number "
-                        "alone is in the sensor's unit; default: fitted (the output then in the sensor's unit)")
+    g.add_argument("--mag-field", metavar="VALUE[UNIT]",
+                   help="the local field's magnitude, e.g. 48.2uT, 48.2µT or 0.482G (the WMM/IGRF value for your "
+                        "place; units uT, nT, mT, T, gauss, G, mG, mgauss, Oe); a number alone is in the sensor's unit; "
+                        "default: fitted (the output then in the sensor's unit)")
     g.add_argument("--mag-unit", metavar="UNIT",
                    help="the magnetometer readings' unit: raw (default: counts) or a field unit (uT, gauss, mG, nT)")
     g.add_argument("--mag-soft-iron", choices=("auto", "symmetric", "full"),
@@ -120,22 +122,34 @@ def add_mag_options(p: argparse.ArgumentParser) -> None:
                    help="leave the magnetometer uncalibrated, though the recording has one (mag.calibrate: false)")
 
 
-#: --mag-field: a number and an optional unit (48.2uT, 48.2 uT, 0.482gauss)
-_MAG_FIELD = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([A-Za-z]*)\s*$")
+#: --mag-field: a number and an optional unit (48.2uT, 48.2 uT, 48.2µT, 0.482gauss)
+_MAG_FIELD = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([A-Za-z\u00b5\u03bc]*)\s*$")
+#: The micro prefix as typed (MICRO SIGN, GREEK SMALL LETTER MU) and as imucal writes it (imucal.mag.units.FIELD_UNITS).
+_MICRO = ("\u00b5", "\u03bc")
 
 
-def _mag_field(text: str) -> tuple[float, str | None]:
+def mag_field(text: str) -> tuple[float, str | None]:
+    """--mag-field's value and unit (None: the sensor's): 48.2uT, 48.2 uT, 48.2µT (the micro sign written u, as in
+    imucal.mag.units.FIELD_UNITS), 0.482G, 480."""
     m = _MAG_FIELD.match(text)
     if m is None:
-        raise argparse.ArgumentTypeError(f"{text[:40]!r} is not a field magnitude such as 48.2uT")
-    return float(m.group(1)), m.group(2) or None
+        from imucal.errors import short
+        from imucal.mag.units import FIELD_UNITS
+
+        raise ImucalError(f"{short(text)} is not a field magnitude", field="--mag-field",
+                          fix=f"write a number and one of {', '.join(FIELD_UNITS)}, e.g. 48.2uT, 48.2µT or 0.482G "
+                              "(a number alone is in the sensor's unit)")
+    unit = m.group(2)
+    if unit[:1] in _MICRO:
+        unit = "u" + unit[1:]
+    return float(m.group(1)), unit or None
 
 
 def _mag(args: argparse.Namespace, cfg: RunConfig) -> MagConfig:
     """cfg.mag with the --mag-* options given."""
     over: dict = {}
     if getattr(args, "mag_field", None) is not None:
-        over["field"], over["field_unit"] = args.mag_field
+        over["field"], over["field_unit"] = mag_field(args.mag_field)
     if getattr(args, "mag_soft_iron", None) is not None:
         over["soft_iron"] = args.mag_soft_iron
     if getattr(args, "mag_unit", None) is not None:
@@ -149,6 +163,18 @@ def _mag(args: argparse.Namespace, cfg: RunConfig) -> MagConfig:
     except ImucalError as exc:
         raise ImucalError(exc.message, field="--mag-" + exc.field.split(".")[-1].replace("_", "-"),
                           fix=exc.fix) from None
+
+
+@contextlib.contextmanager
+def named_options(fields: dict[str, str]) -> Iterator[None]:
+    """A library refusal inside the block names the option the user typed for its field (``alpha_noise`` is
+    ``--alpha``): the fields a command's options set under other names."""
+    try:
+        yield
+    except ImucalError as exc:
+        if exc.file is not None or exc.field not in fields:
+            raise
+        raise ImucalError(exc.message, field=fields[exc.field], fix=exc.fix) from None
 
 
 def _lead_in(text: str) -> float | str:

@@ -78,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
         source = {"calibration": str(args.calibration), "widen_std": args.widen}
     else:
         if args.widen:
-            raise ImucalError("--widen needs --calibration", field="widen",
+            raise ImucalError("--widen needs --calibration", field="--widen",
                               fix="pass --calibration FILE or drop --widen")
         tol = DEFAULT_ANGLE_TOL if args.tolerance is None else args.tolerance
         box = AngleBox.from_tolerance(tol)
