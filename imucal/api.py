@@ -160,7 +160,8 @@ def _readings(values: Any, name: str, n: int | None = None) -> np.ndarray:
     """An (N, 3) finite array of one sensor's readings (N >= 3, or ``n`` rows), within the readers' +-MAX_ABS_VALUE."""
     raw = _numbers(values, name)
     if raw.ndim != 2 or raw.shape[1] != 3 or raw.shape[0] < 3:
-        raise ImucalError(f"{name} must be an (N, 3) array with N >= 3, got shape {raw.shape}", field=name)
+        raise ImucalError(f"{name} must be an (N, 3) array with N >= 3, got shape {raw.shape}", field=name,
+                          fix="give one row of three readings (x, y, z) per sample, at least 3 rows")
     if n is not None and raw.shape[0] != n:
         raise ImucalError(f"{name} has {raw.shape[0]} rows, acc has {n}", field=name,
                           fix="give one row per accelerometer sample (on its time base)")
@@ -211,12 +212,14 @@ def recording_from_arrays(acc: ArrayLike, t: Sequence[float] | np.ndarray | None
     else:
         stamps = _numbers(t, "t")
         if stamps.shape != (n,) or not np.isfinite(stamps).all() or not (np.diff(stamps) > 0).all():
-            raise ImucalError("t must be N finite, strictly increasing time stamps", field="t")
+            raise ImucalError("t must be N finite, strictly increasing time stamps", field="t",
+                              fix="give one finite time stamp per row of acc, increasing, or drop t and give fs")
         # the readers' time base: unit, jitter, gaps, and fs (when given too) checked against t
         tt, tu, note, tb = stamped_times(stamps, time_unit, fs, "t", Path(name))
     tc = None if temp is None else _numbers(temp, "temp")
     if tc is not None and tc.shape != (n,):
-        raise ImucalError(f"temp must have {n} values, got shape {tc.shape}", field="temp")
+        raise ImucalError(f"temp must have {n} values, got shape {tc.shape}", field="temp",
+                          fix="give one temperature per row of acc")
     sha = hashlib.sha256(np.ascontiguousarray(raw).tobytes()).hexdigest()
     return Recording(t=tt, raw=raw, temp=tc, unit=unit, source=name, sha256=sha, t_source=stamps,
                      time_unit=tu, time_note=note, time_base=tb, gyro=rates, mag=field,

@@ -100,7 +100,8 @@ def _frame(angles: Sequence[float]) -> np.ndarray:
 def unit_rows(directions: np.ndarray) -> np.ndarray:
     d = np.atleast_2d(np.asarray(directions, float))
     if d.ndim != 2 or d.shape[1] != 3:
-        raise ImucalError(f"directions must be an (n, 3) array, got shape {short(d.shape)}", field="poses")
+        raise ImucalError(f"directions must be an (n, 3) array, got shape {short(d.shape)}", field="poses",
+                          fix="give one [x, y, z] direction per pose")
     if d.shape[0] > MAX_SIM_POSES:
         raise ImucalError(f"{d.shape[0]} poses, above the limit of {MAX_SIM_POSES}", field="poses",
                           fix="a calibration needs tens of poses")
@@ -302,7 +303,8 @@ def evaluate(directions: np.ndarray, criterion: str = "D", noise: float = DEFAUL
     if criterion not in CRITERIA:
         raise ImucalError(f"unknown criterion {short(criterion)}", field="criterion", fix="use D, A or E")
     if isinstance(noise, bool) or not isinstance(noise, (int, float)) or not (math.isfinite(noise) and noise > 0):
-        raise ImucalError(f"noise {short(noise)} must be a positive number of m/s^2", field="noise")
+        raise ImucalError(f"noise {short(noise)} must be a positive number of m/s^2", field="noise",
+                          fix=f"give the noise of a pose's mean in m/s^2, e.g. {DEFAULT_NOISE:g}")
     if not NOISE_RANGE[0] <= noise <= NOISE_RANGE[1]:
         raise ImucalError(f"noise {noise:g} m/s^2 per interval mean is outside {NOISE_RANGE[0]:g} to "
                           f"{NOISE_RANGE[1]:g} m/s^2", field="noise",
@@ -503,7 +505,8 @@ def best_cube_subset(n: int, criterion: str = "D", noise: float = DEFAULT_NOISE,
     scorer, rowfn = _setup(n, criterion, sensor, gravity, free)
     check_count(starts, "starts", 1, MAX_STARTS)
     if n > 26:
-        raise ImucalError(f"a cube has 26 directions, not {n}", field="n")
+        raise ImucalError(f"a cube has 26 directions, not {n}", field="n",
+                          fix="ask for at most 26 directions of the cube")
     v, U = _exchange_starts(cube_directions("faces+edges+corners"), n, scorer, rowfn,
                             np.random.default_rng(check_seed(seed)), starts, distinct=True)[0]
     return evaluate(U, criterion, noise, sensor, gravity, free, label="best cube subset", check_distinct=False)

@@ -112,7 +112,8 @@ def compute_error_map(angles: Sequence[float] = PAPER_ANGLES, range_ms2: float =
                       levels: Sequence[float] = PAPER_LEVELS) -> ErrorMap:
     """Sample [-range, range]^3 uniformly (seeded) and evaluate the relative error."""
     if len(angles) != 3:
-        raise ImucalError(f"need 3 angles (phi psi theta), got {len(angles)}", field="angles")
+        raise ImucalError(f"need 3 angles (phi psi theta), got {len(angles)}", field="angles",
+                          fix="give the three axis angles phi psi theta in radians")
     AngleBox.around(angles)  # refuses angles outside (0, pi) and degenerate frames
     if not (math.isfinite(range_ms2) and range_ms2 > 0):
         raise ImucalError(f"range {range_ms2:g} must be positive", field="range",

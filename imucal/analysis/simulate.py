@@ -31,7 +31,8 @@ from imucal.model.effects import (CLASSIC, EFFECTS, STEP_MIN_SIDE, Term, effects
 def frame_matrix(angles: np.ndarray) -> np.ndarray:
     """E (columns e_i in frame f), Eq. (eq:125), evaluated from the CasADi model (imucal.model.sensor)."""
     if not gram_det_np(angles) > 0:
-        raise ImucalError("the angles give no valid frame (Gram determinant <= 0)", field="sensor.angles")
+        raise ImucalError("the angles give no valid frame (Gram determinant <= 0)", field="sensor.angles",
+                          fix="give angles in (0, pi) rad near pi/2 (1.5708), the axes of a real sensor")
     return frame_np(angles)
 
 
@@ -117,11 +118,13 @@ class PosePlan:
     def __post_init__(self) -> None:
         d = np.asarray(self.directions, float)
         if d.ndim != 2 or d.shape[1] != 3 or d.shape[0] < 1:
-            raise ImucalError("directions must be an (n, 3) array", field="plan.directions")
+            raise ImucalError("directions must be an (n, 3) array", field="plan.directions",
+                              fix="give one [x, y, z] direction per pose")
         vals = (self.hold, self.transition, self.rate, self.initial_hold)
         if not all(np.isfinite(vals)) or self.hold <= 0 or self.transition <= 0 or self.rate <= 0 \
                 or self.initial_hold < 0:
-            raise ImucalError("hold, transition and rate must be positive and finite", field="plan")
+            raise ImucalError("hold, transition and rate must be positive and finite", field="plan",
+                              fix="give hold and transition in seconds and rate in Hz, each above 0 (initial_hold 0 or more)")
         if not 1.0 <= self.rate <= 1.0e5:
             raise ImucalError(f"rate {short(self.rate)} Hz is not an IMU sample rate", field="plan.rate",
                               fix="give 1 to 100000 Hz")
@@ -295,13 +298,16 @@ class SensorSection:
 
     def __post_init__(self) -> None:
         if self.b is not None and not all(x > 0 for x in _three(self.b)):
-            raise ImucalError("scales must be positive", field="sensor.b")
+            raise ImucalError("scales must be positive", field="sensor.b",
+                              fix="give each scale b as a positive number of raw units per m/s^2")
         if self.noise is not None and not all(x >= 0 for x in _three(self.noise)):
-            raise ImucalError("noise must be non-negative", field="sensor.noise")
+            raise ImucalError("noise must be non-negative", field="sensor.noise",
+                              fix="give the noise standard deviation in raw units, 0 or more")
         for key, unit in (("random_walk", "raw / sqrt(s)"), ("visit_offset", "raw")):
             v = getattr(self, key)
             if v is not None and not all(x >= 0 for x in _three(v)):
-                raise ImucalError(f"{key} must be non-negative [{unit}]", field=f"sensor.{key}")
+                raise ImucalError(f"{key} must be non-negative [{unit}]", field=f"sensor.{key}",
+                                  fix=f"give {key} as 0 or more [{unit}], one number or one per axis")
         if self.unit is not None:  # the rule calibrate and the calibration file apply: the readings calibrate
             check_raw_unit(self.unit, "sensor.unit", fix="e.g. unit: raw or unit: m/s^2")
 
@@ -365,13 +371,15 @@ def _plan(pd: PlanSection, rng: np.random.Generator) -> PosePlan:
         largest = np.max(np.abs(arr), axis=1, keepdims=True) if arr.size else np.zeros((0, 1))
         if arr.size == 0 or np.any(largest == 0):
             raise ImucalError("directions must be a set name or a list of non-zero [x, y, z]",
-                              field="plan.directions")
+                              field="plan.directions", fix="name a set (e.g. faces+edges+corners) or list [x, y, z] "
+                                                            "directions with at least one non-zero entry each")
         arr = arr / largest  # scaled first: the norm of [1e308, 1e308, 0] overflows
         parts = [arr / np.linalg.norm(arr, axis=1, keepdims=True)]
     if pd.n_random:
         parts.append(random_directions(pd.n_random, rng))
     if not parts:
-        raise ImucalError("no directions: 'random' needs n_random > 0", field="plan.n_random")
+        raise ImucalError("no directions: 'random' needs n_random > 0", field="plan.n_random",
+                          fix="give n_random, the number of random directions, above 0")
     order = np.vstack(parts)
     order = order[rng.permutation(len(order))]  # poses in a shuffled order, as a person would
     pkw = {k: float(getattr(pd, k)) for k in ("hold", "transition", "initial_hold", "vibration", "rate")

@@ -66,7 +66,8 @@ class AngleBox:
     def __post_init__(self) -> None:
         for name, lo, hi in zip(ANGLE_NAMES, self.lower, self.upper):
             if not (math.isfinite(lo) and math.isfinite(hi)):
-                raise ImucalError(f"angle {name} bound is not finite", field=f"angles.{name}")
+                raise ImucalError(f"angle {name} bound is not finite", field=f"angles.{name}",
+                                  fix="give finite bounds in (0, pi) rad")
             if not 0 < lo <= hi < math.pi:
                 raise ImucalError(f"angle {name} range [{lo:.6g}, {hi:.6g}] rad is outside (0, pi)",
                                   field=f"angles.{name}", fix="give angles near pi/2 = 1.5708 rad")
@@ -102,7 +103,7 @@ class AngleBox:
         """angles +- k standard errors (k = 0: the angles fixed)."""
         if not (math.isfinite(k) and k >= 0):
             raise ImucalError(f"widening {k} must be a non-negative number of standard errors",
-                              field="widen")
+                              field="widen", fix="give 0 or more standard errors, e.g. 2")
         half = [k * s if k > 0 else 0.0 for s in std]
         if any(not math.isfinite(h) for h in half):
             raise ImucalError("an angle's standard error is not finite, cannot widen by it",

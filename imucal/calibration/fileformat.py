@@ -386,12 +386,12 @@ def validate_parameters(params: Parameters, path: str = "<calibration>") -> None
     for i in (1, 2, 3):
         if not params[f"b{i}"].value > 0:
             raise ImucalError(f"scale b{i} = {params[f'b{i}'].value} must be positive", file=path,
-                              field=f"parameters.b{i}.value")
+                              field=f"parameters.b{i}.value", fix=REGEN)
     ang = [params[a].value for a in ANGLE_NAMES]
     for a, v in zip(ANGLE_NAMES, ang):
         if not 0 < v < math.pi:
             raise ImucalError(f"angle {a} = {v} rad is outside (0, pi)", file=path,
-                              field=f"parameters.{a}.value")
+                              field=f"parameters.{a}.value", fix=REGEN)
     det = float(gram_det_np(ang))  # Eq. (eq:12), from the CasADi model
     if not det > 1e-12:
         raise ImucalError("the angles phi, psi, theta give no valid frame (Gram determinant <= 0)",

@@ -121,7 +121,8 @@ class Calibration:
         if raw.shape == (3,):  # one sample
             return self.apply(raw[None, :], covariates)[0]
         if raw.ndim != 2 or raw.shape[1] != 3:
-            raise ImucalError(f"raw data must have shape (N, 3) or (3,), got {raw.shape}", field="raw")
+            raise ImucalError(f"raw data must have shape (N, 3) or (3,), got {raw.shape}", field="raw",
+                              fix="pass one row of three raw readings (x, y, z) per sample")
         covs = self.covariates
         covariates = covariates or {}
         missing = [c for c in covs if c not in covariates]

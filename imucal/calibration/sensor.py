@@ -118,7 +118,7 @@ class SensorCalibration:
         raw = np.atleast_2d(raw)
         if raw.ndim != 2 or raw.shape[1] != 3:
             raise ImucalError(f"{self.kind} data must have shape (N, 3) or (3,), got {raw.shape}",
-                              field=f"raw_{self.kind}")
+                              field=f"raw_{self.kind}", fix="pass one row of three raw readings (x, y, z) per sample")
         if inputs is None and self.reads_inputs():
             raise ImucalError(f"this {self.kind} calibration reads {', '.join(self.model.inputs)}", field="inputs",
                               fix=f"pass {', '.join(self.model.inputs)} of the same samples")

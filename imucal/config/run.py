@@ -52,7 +52,8 @@ class GravitySpec:
 
     def __post_init__(self) -> None:
         if self.value is not None and self.latitude is not None:
-            raise ImucalError("give either gravity.value or gravity.latitude, not both", field="gravity")
+            raise ImucalError("give either gravity.value or gravity.latitude, not both", field="gravity",
+                              fix="keep gravity.value (g in m/s^2) or gravity.latitude (WGS84 normal gravity), drop the other")
         if self.value is not None:
             check_gravity(self.value, "gravity.value")
         for name in ("latitude", "height"):
@@ -98,9 +99,11 @@ class EffectSpec:
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str):
-            raise ImucalError(f"effect name {short(self.name)} is not a string", field="fit.effects.name")
+            raise ImucalError(f"effect name {short(self.name)} is not a string", field="fit.effects.name",
+                              fix="name the effect as text, e.g. bias_temperature")
         if not isinstance(self.axes, (str, list, tuple)) or not all(isinstance(a, str) for a in self.axes):
-            raise ImucalError(f"axes {short(self.axes)} must be a list of x, y, z", field="fit.effects.axes")
+            raise ImucalError(f"axes {short(self.axes)} must be a list of x, y, z", field="fit.effects.axes",
+                              fix="e.g. axes: [x, z]")
 
 
 #: An effect parameter a run file may start or give: a coefficient <effect>_x|y|z (an angle term's
@@ -192,7 +195,8 @@ class FitSettings:
                 raise ImucalError(f"unknown parameter {short(n)}", field="fit.initial",
                                   fix=f"choose from {', '.join(BASE_NAMES)} or a free parameter of fit.effects")
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise ImucalError(f"initial value {short(v)} is not a finite number", field=f"fit.initial.{n}")
+                raise ImucalError(f"initial value {short(v)} is not a finite number", field=f"fit.initial.{n}",
+                                  fix=f"give {n} a number, e.g. fit.initial: {{{n}: 0.0}}")
 
 
 GYRO_GSENS = ("auto", "on", "off")
@@ -221,9 +225,11 @@ class GyroSettings:
             raise ImucalError(f"lead_in_s {short(self.lead_in_s)} is not auto or between 0 and 10 s",
                               field="gyro.lead_in_s", fix="give auto, or seconds such as 0.5")
         if not isinstance(self.free_bias, bool):
-            raise ImucalError(f"free_bias {short(self.free_bias)} must be true or false", field="gyro.free_bias")
+            raise ImucalError(f"free_bias {short(self.free_bias)} must be true or false", field="gyro.free_bias",
+                              fix="write free_bias: true or free_bias: false")
         if not isinstance(self.calibrate, bool):
-            raise ImucalError(f"calibrate {short(self.calibrate)} must be true or false", field="gyro.calibrate")
+            raise ImucalError(f"calibrate {short(self.calibrate)} must be true or false", field="gyro.calibrate",
+                              fix="write calibrate: true or calibrate: false")
 
 
 MAG_SOFT_IRON = ("auto", "symmetric", "full")
@@ -294,9 +300,11 @@ class OutputSettings:
 
     def __post_init__(self) -> None:
         if not isinstance(self.dir, str) or not self.dir:
-            raise ImucalError(f"dir {short(self.dir)} must be a directory name", field="output.dir")
+            raise ImucalError(f"dir {short(self.dir)} must be a directory name", field="output.dir",
+                              fix="give a folder name, e.g. dir: out")
         if not isinstance(self.figures, bool):
-            raise ImucalError(f"figures {short(self.figures)} must be true or false", field="output.figures")
+            raise ImucalError(f"figures {short(self.figures)} must be true or false", field="output.figures",
+                              fix="write figures: true or figures: false")
 
 
 @dataclass(frozen=True)

@@ -130,7 +130,7 @@ class _Reader:
         self.f, self.spec, self.path = f, spec, path
         self.vars = _datasets(f)
 
-    def fail(self, what: str, field: str, fix: str | None = None) -> ImucalError:
+    def fail(self, what: str, field: str, fix: str) -> ImucalError:
         return ImucalError(what, file=str(self.path), field=field, fix=fix)
 
     def by_kind(self, kind: str, role: str) -> str | None:

@@ -18,7 +18,7 @@ import numpy as np
 from imucal.data.recording import MAX_ABS_VALUE, MAX_RATE_HZ, MIN_RATE_HZ, Recording
 from imucal.data.timebase import stamped_times
 from imucal.errors import ImucalError
-from imucal.files.inputs import max_data_bytes, open_regular
+from imucal.files.inputs import max_data_bytes, open_regular, unreadable
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
 TEMP_TYPE = "sensor_msgs/msg/Temperature"
@@ -56,7 +56,7 @@ def _sha256(files: list[Path]) -> str:
                 for block in iter(lambda: f.read(1 << 20), b""):
                     h.update(block)
         except OSError as exc:
-            raise ImucalError(f"cannot read: {exc.strerror or exc}", file=str(q), field="data.path") from None
+            raise unreadable(q, "data.path", exc) from None
     return h.hexdigest()
 
 

@@ -78,7 +78,8 @@ class DataSpec:
                               fix="give the recording's path as text")
         for name in ("format", "time_unit", "unit", "gyro_unit", "stream"):
             if not isinstance(getattr(self, name), str):
-                raise ImucalError(f"{name} {short(getattr(self, name))} must be text", field=f"data.{name}")
+                raise ImucalError(f"{name} {short(getattr(self, name))} must be text", field=f"data.{name}",
+                                  fix=f"give data.{name} as a word, e.g. {name}: auto" if name != "unit" else "give data.unit as a word, e.g. unit: raw")
         check_raw_unit(self.unit, "data.unit")  # the calibration file's rule: what calibrate writes reads back
         if self.delimiter is not None and not (isinstance(self.delimiter, str) and len(self.delimiter) == 1
                                                and self.delimiter not in "\r\n"):
@@ -89,12 +90,14 @@ class DataSpec:
             raise ImucalError(f"sample rate {short(self.sample_rate)} is not an IMU rate (not a number)",
                               field="data.sample_rate", fix="give the logging rate in Hz")
         if not isinstance(self.columns, Mapping):
-            raise ImucalError("must map roles to columns", field="data.columns")
+            raise ImucalError("must map roles to columns", field="data.columns",
+                              fix="e.g. columns: {t: 0, ax: 1, ay: 2, az: 3} (--columns t=0,ax=1,ay=2,az=3)")
         for role, col in self.columns.items():
             if not ((isinstance(col, int) and not isinstance(col, bool) and 0 <= col < 10000)
                     or (isinstance(col, str) and col and len(col) <= 200)):
                 raise ImucalError(f"column {short(col)} for {short(role)} must be a header name or a "
-                                  "0-based index below 10000", field=f"data.columns.{role if isinstance(role, str) and len(role) <= 20 else short(role, 20)}")
+                                  "0-based index below 10000", field=f"data.columns.{role if isinstance(role, str) and len(role) <= 20 else short(role, 20)}",
+                                  fix="give the column's header name or its 0-based position, e.g. ax=4 or ax=acc_x")
         check_choice(self.format, FORMATS, "data.format", "format")
         check_choice(self.stream, STREAM_CHOICES, "data.stream", "stream setting")
         check_choice(self.gyro_unit, GYRO_UNIT_CHOICES, "data.gyro_unit", "gyro unit",
@@ -107,7 +110,8 @@ class DataSpec:
                               fix=f"give the logging rate in Hz ({MIN_RATE_HZ:g} to {MAX_RATE_HZ:g})")
         if not isinstance(self.skip_rows, int) or isinstance(self.skip_rows, bool) or not 0 <= self.skip_rows < 10**9:
             raise ImucalError(f"skip_rows {short(self.skip_rows)} must be a non-negative integer below 1e9",
-                              field="data.skip_rows")
+                              field="data.skip_rows",
+                              fix="give the number of lines above the header (or the data) as a whole number, e.g. 0")
         bad = set(self.columns) - set(ROLES)
         if bad:
             raise ImucalError(f"unknown column role(s) {short(sorted(map(str, bad)))}", field="data.columns",
@@ -160,7 +164,8 @@ def rails(spec: object, where: str = "data.saturation") -> dict[str, np.ndarray 
                               fix="give the raw value at which the sensor clips")
         out[k] = np.array(vals, float)
     if out["low"] is not None and out["high"] is not None and not np.all(out["low"] < out["high"]):
-        raise ImucalError("the low rail must lie below the high rail on every axis", field=where)
+        raise ImucalError("the low rail must lie below the high rail on every axis", field=where,
+                          fix="give low as the most negative raw value the sensor reports and high as the most positive")
     return out
 
 

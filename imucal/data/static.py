@@ -88,12 +88,13 @@ class StaticSettings:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) and v > 0):
                 raise ImucalError(f"{name} {short(v)} must be a positive number of seconds",
-                                  field=f"static.{name}")
+                                  field=f"static.{name}", fix=f"give {name} in seconds above 0, e.g. {name}: 1.0")
         if not (isinstance(self.trim, (int, float)) and np.isfinite(self.trim) and self.trim >= 0):
             raise ImucalError(f"trim {short(self.trim)} must be a non-negative number of seconds",
-                              field="static.trim")
+                              field="static.trim", fix="give trim in seconds, 0 or more, e.g. trim: 0.2")
         if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in self.split):
-            raise ImucalError(f"split {short(self.split)} must be a list of times in seconds", field="static.split")
+            raise ImucalError(f"split {short(self.split)} must be a list of times in seconds", field="static.split",
+                              fix="e.g. split: [12.5, 30.0] (seconds from the start)")
         if self.threshold is not None and not (isinstance(self.threshold, (int, float))
                                                and not isinstance(self.threshold, bool)
                                                and np.isfinite(self.threshold) and self.threshold > 0):

@@ -25,7 +25,7 @@ from imucal.data.recording import MAX_ABS_VALUE, Recording
 from imucal.data.spec import DataSpec, gyro_unit
 from imucal.data.timebase import rate_time_base, stamped_times
 from imucal.errors import ImucalError
-from imucal.files.inputs import first_hole, max_data_bytes, open_regular
+from imucal.files.inputs import first_hole, max_data_bytes, open_regular, unreadable
 
 
 def _read_bytes(path: Path) -> tuple[bytes, str]:
@@ -41,7 +41,7 @@ def _read_bytes(path: Path) -> tuple[bytes, str]:
             f.seek(0)
             blob = f.read(hole)
     except OSError as exc:
-        raise ImucalError(f"cannot read: {exc.strerror or exc}", file=str(path), field="data.path") from None
+        raise unreadable(path, "data.path", exc) from None
     nul = blob.find(b"\x00")
     if nul >= 0 or hole < size:
         raise binary_file(path, blob.count(b"\n", 0, nul if nul >= 0 else len(blob)) + 1)

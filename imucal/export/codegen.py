@@ -203,7 +203,8 @@ def c_literal(x: float, precision: str) -> str:
         text, suffix = "%.9g" % float(v), "f"
     else:
         if not math.isfinite(x):
-            raise ImucalError(f"constant {x!r} is not finite", field="parameters")
+            raise ImucalError(f"constant {x!r} is not finite", field="parameters",
+                              fix="regenerate the calibration with `imucal calibrate`")
         text, suffix = "%.17g" % float(x), ""
     if not re.search(r"[.e]", text):
         text += ".0"

@@ -219,7 +219,8 @@ def read_kalibr_yaml(path: str | Path) -> AffineCalibration:
     k = fill(KalibrImu, d, p)
     M = np.array(k.accelerometers.M, float)
     if np.any(M[np.triu_indices(3, 1)] != 0):
-        raise ImucalError("is not lower triangular (Kalibr's M_accel is)", file=p, field="accelerometers.M")
+        raise ImucalError("is not lower triangular (Kalibr's M_accel is)", file=p, field="accelerometers.M",
+                          fix="give Kalibr's own result file (the entries above M's diagonal are 0)")
     held = k.imucal_accelerometer_offset is not None
     o = np.array(k.imucal_accelerometer_offset, float) if held else np.zeros(3)
     extra: dict[str, Any] = {n: None if getattr(k, n) is None else float(getattr(k, n))
@@ -236,7 +237,8 @@ def _kalibr_gyro(k: KalibrImu, p: str, extra: dict[str, Any]) -> GyroMap:
     gy = k.gyroscopes
     M, A, R = (np.array(x, float) for x in (gy.M, gy.A, gy.C_gyro_i))
     if np.any(M[np.triu_indices(3, 1)] != 0):
-        raise ImucalError("is not lower triangular (Kalibr's M_gyro is)", file=p, field="gyroscopes.M")
+        raise ImucalError("is not lower triangular (Kalibr's M_gyro is)", file=p, field="gyroscopes.M",
+                          fix="give Kalibr's own result file (the entries above M's diagonal are 0)")
     dev = float(np.abs(R @ R.T - np.eye(3)).max())
     if not (dev <= ROTATION_TOL and np.linalg.det(R) > 0):
         raise ImucalError(f"is not a rotation (|C C^T - I| = {dev:.3g}, det {np.linalg.det(R):.3g})", file=p,

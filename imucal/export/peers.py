@@ -130,11 +130,13 @@ def numbers(value: Any, shape: tuple[int, ...], path: str, field_: str) -> np.nd
 def number(v: Any, path: str, field_: str) -> float:
     """One finite number no larger than MAX_MAGNITUDE (bools and text refused)."""
     if isinstance(v, bool) or not isinstance(v, (int, float)):
-        raise ImucalError(f"{short(v)} is not a number", file=path, field=field_)
+        raise ImucalError(f"{short(v)} is not a number", file=path, field=field_,
+                          fix="write a plain number there, as the tool that made the file does")
     try:
         x = float(v)
     except OverflowError:
-        raise ImucalError(f"{short(v)} is too large for a float", file=path, field=field_) from None
+        raise ImucalError(f"{short(v)} is too large for a float", file=path, field=field_,
+                          fix="regenerate the file with the tool that made it") from None
     if not math.isfinite(x) or abs(x) > MAX_MAGNITUDE:
         raise ImucalError(f"{short(v)} is not a finite number of magnitude <= {MAX_MAGNITUDE:g}", file=path,
                           field=field_, fix="regenerate the file with the tool that made it")
@@ -145,7 +147,8 @@ def _text_number(tok: str, path: str, field_: str) -> float:
     try:
         return number(float(tok), path, field_)
     except ValueError:
-        raise ImucalError(f"{short(tok)} is not a number", file=path, field=field_) from None
+        raise ImucalError(f"{short(tok)} is not a number", file=path, field=field_,
+                          fix="the file holds numbers only: regenerate it with the tool that made it") from None
 
 
 def checked(M: np.ndarray, o: np.ndarray, path: str, field_: str, fmt: str,
@@ -169,7 +172,8 @@ def _imutk_triad(path: str) -> tuple[np.ndarray, np.ndarray]:
     """T K and b of one imu_tk .calib text: T (3x3), blank, K (3x3), blank, b (3 lines)."""
     nums = [_text_number(x, path, "calib") for x in read_input_text(path, field="imu_tk calib").split()]
     if len(nums) != 21:
-        raise ImucalError(f"expected 21 numbers (T, K, b), found {len(nums)}", file=path, field="calib")
+        raise ImucalError(f"expected 21 numbers (T, K, b), found {len(nums)}", file=path, field="calib",
+                          fix="give imu_tk's .calib file as it wrote it: T (3x3), K (3x3), b (3)")
     T = np.array(nums[:9]).reshape(3, 3)
     K = np.array(nums[9:18]).reshape(3, 3)
     return T @ K, np.array(nums[18:])
@@ -194,9 +198,11 @@ def read_tomisuarez_params(path: str | Path) -> AffineCalibration:
     try:
         v = np.loadtxt(io.StringIO(read_input_text(path, field="params")), delimiter=",").ravel()
     except ValueError as exc:
-        raise ImucalError(f"cannot read: {short(str(exc), 80)}", file=p, field="params") from None
+        raise ImucalError(f"cannot read: {short(str(exc), 80)}", file=p, field="params",
+                          fix="give params_acc.csv as ImuCalibration wrote it: 9 comma-separated numbers") from None
     if v.size != 9:
-        raise ImucalError(f"expected 9 numbers, found {v.size}", file=p, field="params")
+        raise ImucalError(f"expected 9 numbers, found {v.size}", file=p, field="params",
+                          fix="give a_yz, a_zy, a_zx, K (3), b (3) as ImuCalibration writes them")
     v = numbers(v.tolist(), (9,), p, "params")
     a_yz, a_zy, a_zx = v[:3]
     T = np.array([[1, -a_yz, a_zy], [0, 1, -a_zx], [0, 0, 1]])
@@ -299,7 +305,8 @@ def read_matrix(path: str | Path) -> AffineCalibration:
         widths = [len(r.split(",")) for r in rows]
         if widths not in ([4] * 3, [4] * 3 + [7] * 3):
             raise ImucalError(f"expected 3 rows of 4 numbers (m1,m2,m3,offset), then optionally 3 rows of 7 "
-                              f"(the gyroscope), found rows of {short(widths)} numbers", file=p, field="matrix")
+                              f"(the gyroscope), found rows of {short(widths)} numbers", file=p, field="matrix",
+                              fix="write m1,m2,m3,offset on each of 3 lines (a = matrix raw + offset)")
         v = [[_text_number(x, p, "matrix") for x in r.split(",")] for r in rows]
         a = np.array(v[:3])
         A, c = a[:, :3], a[:, 3]

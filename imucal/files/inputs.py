@@ -51,7 +51,7 @@ def open_regular(path: str | os.PathLike, *, field: str, fix: str | None = None,
     except OSError as exc:
         if exc.errno == errno.ELOOP:
             raise symlink_loop(p, field) from None
-        raise ImucalError(f"cannot read: {exc.strerror or exc}", file=p, field=field, fix=fix) from None
+        raise unreadable(p, field, exc) from None
     try:
         st = os.fstat(fd)
         if stat.S_ISDIR(st.st_mode):
@@ -102,9 +102,10 @@ def read_input_bytes(path: str | os.PathLike, *, field: str, fix: str | None = N
         with os.fdopen(fd, "rb") as f:
             data = f.read(max_bytes + 1)
     except OSError as exc:
-        raise ImucalError(f"cannot read: {exc.strerror or exc}", file=str(path), field=field) from None
+        raise unreadable(path, field, exc) from None
     if len(data) > max_bytes:  # grew while we read it
-        raise ImucalError(f"is above the limit of {max_bytes} bytes", file=str(path), field=field, fix=fix)
+        raise ImucalError(f"is above the limit of {max_bytes} bytes", file=str(path), field=field,
+                          fix=fix or "let the program writing the file finish first, or split the file")
     return data
 
 
@@ -143,6 +144,17 @@ def read_input_text(path: str | os.PathLike, *, field: str, fix: str | None = No
         raise ImucalError("is not UTF-8 text", file=str(path), field=field, fix=fix or "save it as UTF-8") from None
 
 
+def unreadable(path: str | os.PathLike, field: str, exc: OSError) -> ImucalError:
+    """A file the system would not read (an OSError other than not-found), with what to do about its cause."""
+    if exc.errno in (errno.EACCES, errno.EPERM):
+        fix = "make the file readable for this user (chmod u+r FILE), or copy it somewhere readable"
+    elif exc.errno == errno.ENAMETOOLONG:
+        fix = "give a shorter path (move the file, or run from its folder)"
+    else:
+        fix = "check the disk or network share the file is on, or copy the file to a local disk"
+    return ImucalError(f"cannot read: {exc.strerror or exc}", file=str(path), field=field, fix=fix)
+
+
 def symlink_loop(path: str | os.PathLike, field: str) -> ImucalError:
     """A path whose symbolic links lead back to themselves (ELOOP)."""
     return ImucalError("is a loop of symbolic links, not a file", file=str(path), field=field,
@@ -159,7 +171,8 @@ def resolve(path: str | os.PathLike, *, field: str) -> Path:
     except OSError as exc:
         if exc.errno == errno.ELOOP:
             raise symlink_loop(path, field) from None
-        raise ImucalError(f"cannot resolve: {exc.strerror or exc}", file=str(path), field=field) from None
+        raise ImucalError(f"cannot resolve: {exc.strerror or exc}", file=str(path), field=field,
+                          fix="check the path: each folder on it must exist and be readable") from None
 
 
 def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:

@@ -166,7 +166,7 @@ def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> None:
             os.unlink(tmp)
         _remove_dirs(created)
         if isinstance(exc, OSError):
-            raise ImucalError(f"cannot write: {exc.strerror or exc}", file=str(path), field="output") from None
+            raise _write_error(Path(path), exc) from None
         raise
 
 

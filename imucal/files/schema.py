@@ -69,7 +69,7 @@ def keys(cls: type) -> dict[str, Any]:
 class _Ctx:
     path: str | None
 
-    def error(self, message: str, where: str, fix: str | None = None) -> ImucalError:
+    def error(self, message: str, where: str, fix: str) -> ImucalError:
         return ImucalError(message, file=self.path, field=where or "top level", fix=fix)
 
 
@@ -91,7 +91,9 @@ def _dataclass(cls: type, raw: Any, ctx: _Ctx, where: str) -> Any:
     raw = {} if raw is None else raw
     if not isinstance(raw, Mapping):
         raise ctx.error(f"{'top level' if not where else 'section'} must be a mapping, got {type(raw).__name__}",
-                        where)
+                        where, "write the file as a mapping of keys to values (YAML key: value lines, a JSON {...}), "
+                        "not a list or a single value"
+                        if not where else f"write {where} as key: value lines indented under it")
     spec = _fields(cls)
     allowed = [f.name for f, _, _ in spec]
     unknown = [k for k in raw if k not in allowed]
@@ -137,7 +139,7 @@ def _fail(ctx: _Ctx, raw: Any, where: str, r: Rule, expect: str) -> ImucalError:
         mant, exp = m["m"] + (".0" if "." not in m["m"] else "0" if m["m"].endswith(".") else ""), m["e"]
         return ctx.error(f"{msg} (YAML reads {short(raw)} as text, not a number)", where,
                          f"write {mant}e{exp if exp[0] in '+-' else '+' + exp}: a decimal point and a signed exponent")
-    return ctx.error(msg, where, r.fix)
+    return ctx.error(msg, where, r.fix or f"give {where or 'it'} as {expect}")
 
 
 def _value(tp: Any, raw: Any, ctx: _Ctx, where: str, r: Rule) -> Any:
@@ -254,9 +256,10 @@ def _scalar(tp: type, raw: Any, ctx: _Ctx, where: str, r: Rule) -> Any:
     try:
         x = float(raw)
     except OverflowError:  # an integer beyond the float range
-        raise ctx.error(f"{name} {short(raw)} is too large for a float", where, r.fix) from None
+        raise ctx.error(f"{name} {short(raw)} is too large for a float", where,
+                        r.fix or f"give {where} as {_number_text(tp, r)}") from None
     if (math.isnan(x) and not r.allow_nan) or (math.isinf(x) and not r.allow_inf):
-        raise ctx.error(f"{name} is not finite ({short(raw)})", where, r.fix)
+        raise ctx.error(f"{name} is not finite ({short(raw)})", where, r.fix or f"give {where} as {_number_text(tp, r)}")
     if not math.isnan(x) and not _within(x, r):
         raise _fail(ctx, raw, where, r, _number_text(tp, r))
     return raw  # an int stays an int (messages show the value as given)
@@ -276,9 +279,11 @@ def _sequence(tp: Any, origin: Any, args: tuple, raw: Any, ctx: _Ctx, where: str
         items = args
     else:
         if r.max_len is not None and len(raw) > r.max_len:
-            raise ctx.error(f"{len(raw)} entries, above the limit of {r.max_len}", where, r.fix)
+            raise ctx.error(f"{len(raw)} entries, above the limit of {r.max_len}", where,
+                            r.fix or f"give {where} at most {r.max_len} entries")
         if len(raw) < r.min_len:
-            raise ctx.error(f"{len(raw)} entries, at least {r.min_len} needed", where, r.fix)
+            raise ctx.error(f"{len(raw)} entries, at least {r.min_len} needed", where,
+                            r.fix or f"give {where} at least {r.min_len} entries")
         items = (args[0] if args else Any,) * len(raw)
     inner = dataclasses.replace(r, max_len=None, min_len=0)
     out = [_value(t, v, ctx, f"{where}[{i}]", inner) for i, (t, v) in enumerate(zip(items, raw))]

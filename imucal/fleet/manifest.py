@@ -81,7 +81,7 @@ class Tolerances:
     def __post_init__(self) -> None:
         if self.scale_min is not None and self.scale_max is not None and self.scale_min > self.scale_max:
             raise ImucalError(f"scale_min {self.scale_min:g} is above scale_max {self.scale_max:g}",
-                              field="tolerances.scale_min")
+                              field="tolerances.scale_min", fix="give scale_min below scale_max (or swap them)")
 
     def given(self) -> dict[str, float]:
         return {f.name: float(getattr(self, f.name)) for f in fields(self) if getattr(self, f.name) is not None}
@@ -159,7 +159,8 @@ def _unit(uid: str, data: Any, gyro: Any, over: dict, shared: dict, base: Path, 
             continue
         if not isinstance(v, str) or "\x00" in v or len(v) > 4000:
             raise ImucalError(f"{short(v)} is not a file name", file=path,
-                              field=f"{where}.{'data' if role == 'path' else 'gyro_data'}")
+                              field=f"{where}.{'data' if role == 'path' else 'gyro_data'}",
+                              fix="give the recording's path as text, relative to the manifest")
         files[role] = (str(resolve(base / v, field=f"{where}.{'data' if role == 'path' else 'gyro_data'}"))
                        if not Path(v).is_absolute() else v)
     if "path" not in files:
@@ -256,7 +257,8 @@ def load_manifest(path: str | Path, config: str | Path | None = None) -> Manifes
 def _run_file_settings(config: str | Path) -> dict:
     d = read_yaml(config, "config", "pass an `imucal calibrate` run file")
     if not isinstance(d, Mapping):
-        raise ImucalError("top level must be a mapping", file=str(config), field="top level")
+        raise ImucalError(f"top level must be a mapping, got {type(d).__name__}", file=str(config), field="top level",
+                          fix="write the run file's sections as keys (data:, fit:, ...), as for `imucal calibrate`")
     d = {k: v for k, v in d.items()}
     if isinstance(d.get("data"), Mapping):
         d["data"] = {k: v for k, v in d["data"].items() if k not in FILE_KEYS}
@@ -294,9 +296,11 @@ class ManifestFile:
             raise ImucalError("give either units: or folder:", field="units",
                               fix="units: [{id: U1, data: U1.csv}, ...], units: listing.csv, or folder: recordings/")
         if self.pattern is not None and self.folder is None:
-            raise ImucalError("pattern is used only with folder:", field="pattern")
+            raise ImucalError("pattern is used only with folder:", field="pattern",
+                              fix="add folder: DIR, or drop pattern")
         if self.pattern is not None and ("/" in self.pattern or ".." in self.pattern):
-            raise ImucalError("pattern must be a file pattern such as *.csv", field="pattern")
+            raise ImucalError("pattern must be a file pattern such as *.csv", field="pattern",
+                              fix="give a file name pattern without / or .., e.g. pattern: '*.csv'")
 
 
 def manifest_from_dict(d: Any, path: str, shared: dict | None = None) -> Manifest:

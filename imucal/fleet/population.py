@@ -61,7 +61,8 @@ def parse_spread(text: str) -> Population:
         try:
             kw[key] = float(val)
         except ValueError:
-            raise ImucalError(f"{short(val)} is not a number", field=f"--spread {key}") from None
+            raise ImucalError(f"{short(val)} is not a number", field=f"--spread {key}",
+                              fix=f"give {key}=NUMBER, e.g. --spread {key}=0.05") from None
     return Population(**kw)
 
 

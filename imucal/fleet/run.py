@@ -29,7 +29,7 @@ from typing import Any, Callable, Iterator
 
 from imucal.errors import (EXIT_INTERRUPTED, INTERRUPTING, ImucalError, interrupt_on_signals, raise_if_signalled,
                            short, signal_name)
-from imucal.files.inputs import max_data_bytes, open_regular, read_input_text
+from imucal.files.inputs import max_data_bytes, open_regular, read_input_text, unreadable
 from imucal.files.output import OutputSet, remove_stale_staging, write_json_atomic
 from imucal.fleet.manifest import Manifest, Unit
 from imucal.fleet.workers import worker_context
@@ -54,7 +54,7 @@ def file_sha256(path: str) -> str:
             for block in iter(lambda: f.read(_CHUNK), b""):
                 h.update(block)
     except OSError as exc:
-        raise ImucalError(f"cannot read: {exc.strerror or exc}", file=path, field="data") from None
+        raise unreadable(path, "data", exc) from None
     return h.hexdigest()
 
 

@@ -63,9 +63,11 @@ class MagSettings:
             raise ImucalError(f"soft_iron {self.soft_iron!r} is not a choice", field="mag.soft_iron",
                               fix=f"use one of {', '.join(SOFT_IRON_CHOICES)}")
         if not (isinstance(self.window, int) and self.window >= 4):
-            raise ImucalError(f"window {self.window!r} must be at least 4 samples", field="mag.window")
+            raise ImucalError(f"window {self.window!r} must be at least 4 samples", field="mag.window",
+                              fix="give a whole number of samples, 4 or more")
         if not (self.size > 0 and math.isfinite(self.size)):
-            raise ImucalError(f"size {self.size!r} must be positive", field="mag.size")
+            raise ImucalError(f"size {self.size!r} must be positive", field="mag.size",
+                              fix="give a positive, finite number")
 
 
 def _guess(mag: np.ndarray, F: float | None, size: float, source: str | None):

@@ -219,7 +219,8 @@ def shift(x: np.ndarray, lag: float) -> np.ndarray:
 
 def check_lengths(mag: np.ndarray, acc: np.ndarray | None, source: str | None) -> None:
     if mag.ndim != 2 or mag.shape[1] != 3:
-        raise ImucalError(f"magnetometer readings must be N x 3, got {mag.shape}", file=source, field="mx, my, mz")
+        raise ImucalError(f"magnetometer readings must be N x 3, got {mag.shape}", file=source, field="mx, my, mz",
+                          fix="give one row of three field readings (mx, my, mz) per sample")
     for name, x in (("mx, my, mz", mag), ("ax, ay, az", acc)):
         if x is not None and not np.isfinite(x).all():
             raise ImucalError(f"row {int(np.flatnonzero(~np.isfinite(x).all(axis=1))[0])} holds NaN or Inf", file=source,

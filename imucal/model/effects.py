@@ -111,7 +111,7 @@ class AxisEffect(Effect):
         super().__init__(axes)
         if not self.axes or any(a not in (0, 1, 2) for a in self.axes):
             raise ImucalError(f"axes {list(axes)} must be a non-empty subset of 0, 1, 2 (x, y, z)",
-                              field=f"effects.{self.name}.axes")
+                              field=f"effects.{self.name}.axes", fix="e.g. axes (0, 2) for x and z")
 
     def coefficient(self, axis: int) -> str:
         return f"{self.name}_{self.axis_names[axis]}"
@@ -794,7 +794,8 @@ def effects_from_coefficients(spec: Mapping[str, Mapping[str, float]]) -> list[A
         lo, hi = WARMUP_TAU_BOUNDS
         for n in proto.shape_names:
             if n in coeffs and not lo <= coeffs[n] <= hi:
-                raise ImucalError(f"{short(coeffs[n])} s is outside [{lo:g}, {hi:g}] s", field=f"sensor.effects.{name}.{n}")
+                raise ImucalError(f"{short(coeffs[n])} s is outside [{lo:g}, {hi:g}] s", field=f"sensor.effects.{name}.{n}",
+                                  fix=f"give {n} in seconds from {lo:g} to {hi:g}")
         out.append(EFFECTS[name](axes))
     return out
 

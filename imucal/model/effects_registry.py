@@ -21,7 +21,8 @@ def effects_from_specs(specs: Sequence, source: str | None = None) -> list:
         bad = [a for a in axes if a not in names]
         if bad or not axes:
             raise ImucalError(f"axes {short(list(s.axes))} must be a non-empty list of {', '.join(names)}",
-                              file=source, field=f"fit.effects[{i}].axes")
+                              file=source, field=f"fit.effects[{i}].axes",
+                              fix=f"e.g. axes: [{names[0]}, {names[-1]}], or leave axes out for all of them")
         if any(e.name == s.name for e in out):
             raise ImucalError(f"effect {s.name} is listed twice", file=source, field=f"fit.effects[{i}]",
                               fix=f"list it once with all its axes, e.g. {{name: {s.name}, axes: [x, y]}}")

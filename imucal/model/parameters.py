@@ -45,10 +45,10 @@ class Parameter:
     def __post_init__(self) -> None:
         if not self.scale > 0 or not math.isfinite(self.scale):
             raise ImucalError(f"scale must be positive and finite, got {self.scale}",
-                              field=f"parameters.{self.name}.scale")
+                              field=f"parameters.{self.name}.scale", fix="give the parameter's typical size, above 0")
         if self.lower > self.upper:
             raise ImucalError(f"lower bound {self.lower} exceeds upper bound {self.upper}",
-                              field=f"parameters.{self.name}")
+                              field=f"parameters.{self.name}", fix="give a lower bound at or below the upper one")
 
     @property
     def free(self) -> bool:

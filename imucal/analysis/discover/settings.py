@@ -53,6 +53,8 @@ class DiscoverSettings:
         for name in ("alpha_noise", "alpha_effect", "alpha_scan"):
             v = getattr(self, name)
             if not 0 < v < 1:
-                raise ImucalError(f"{name} {v!r} must lie in (0, 1)", field=name)
+                raise ImucalError(f"{name} {v!r} must lie in (0, 1)", field=name,
+                                  fix="give a significance level between 0 and 1, e.g. 1e-3")
         if self.max_effects < 1 or self.full_fits < 1:
-            raise ImucalError("max_effects and full_fits must be >= 1", field="settings")
+            raise ImucalError("max_effects and full_fits must be >= 1", field="settings",
+                              fix="give max_effects and full_fits each a whole number of at least 1")
