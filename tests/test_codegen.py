@@ -732,7 +732,7 @@ def test_cli_refuses_prefix_that_is_not_a_c_identifier(cases, tmp_path, capsys, 
     out = tmp_path / "fw"
     assert main(["codegen", str(cases["counts"].path), "--out", str(out), "--prefix", prefix]) == 2
     err = capsys.readouterr().err
-    assert err == (f"imucal: error: prefix: {prefix!r} is not a C identifier (fix: use letters, digits "
+    assert err == (f"imucal: error: --prefix: {prefix!r} is not a C identifier (fix: use letters, digits "
                    "and _, starting with a letter, e.g. imucal_xsens)\n")
     assert not out.exists()
 

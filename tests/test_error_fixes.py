@@ -72,7 +72,8 @@ def test_every_error_says_what_to_do():
     missing = [f"imucal/{f}:{line}: {msg[:80]}" for f, line, call, msg, _ in _calls()
                if (_fix(call) is None or (isinstance(_fix(call), ast.Constant) and _fix(call).value is None))
                and not _allowed(f, msg)]
-    assert not missing, "ImucalError without fix= (add a true, specific fix, or list it in NO_FIX):\n" + "\n".join(missing)
+    assert not missing, "ImucalError without fix= (add a true, specific fix, or list it in NO_FIX):\n" + \
+        "\n".join(missing)
 
 
 def test_the_no_fix_list_names_only_errors_that_exist():
@@ -96,8 +97,8 @@ def test_no_helper_forwards_a_fix_that_may_be_none():
         defaults = dict(zip([a.arg for a in params][len(params) - len(args.defaults):], args.defaults))
         defaults.update({a.arg: d for a, d in zip(args.kwonlyargs, args.kw_defaults) if d is not None})
         default = defaults.get(value.id)
-        assigned = any(isinstance(n, ast.Assign) and any(isinstance(t, ast.Name) and t.id == value.id for t in n.targets)
-                       for n in ast.walk(func))
+        assigned = any(isinstance(n, ast.Assign)
+                       and any(isinstance(t, ast.Name) and t.id == value.id for t in n.targets) for n in ast.walk(func))
         if isinstance(default, ast.Constant) and default.value is None and not assigned:
             found.append(f"imucal/{f}:{line}: fix={value.id} may be None ({func.name})")
     assert not found, "\n".join(found)
@@ -263,7 +264,7 @@ def test_discover_options_are_named_as_typed(run_cli, counts_recording, args, fi
 @pytest.mark.parametrize("text, field, words", [
     ("data:\n  path: x.csv\n  skip_rows: -1\n", "data.skip_rows", "whole number"),
     ("- data\n- fit\n", "top level: top level must be a mapping, got list", "mapping of keys to values"),
-    ("data: [1]\n", "data: section must be a mapping", "write data as key: value lines"),
+    ("data: [1]\n", "data: section must be a mapping", "write data as a mapping of keys to values"),
     ("data:\n  path: x.csv\ngravity:\n  value: 9.81\n  latitude: 45\n", "gravity: give either", "drop the other"),
     ("data:\n  path: x.csv\nstatic:\n  window: 0\n", "static.window", "give static.window as a positive number"),
     ("data:\n  path: x.csv\nfit:\n  effects: [{name: bias_temperature, axes: [w]}]\n", "fit.effects[0].axes",

@@ -124,7 +124,8 @@ class PosePlan:
         if not all(np.isfinite(vals)) or self.hold <= 0 or self.transition <= 0 or self.rate <= 0 \
                 or self.initial_hold < 0:
             raise ImucalError("hold, transition and rate must be positive and finite", field="plan",
-                              fix="give hold and transition in seconds and rate in Hz, each above 0 (initial_hold 0 or more)")
+                              fix="give hold and transition in seconds and rate in Hz, each above 0 "
+                                  "(initial_hold 0 or more)")
         if not 1.0 <= self.rate <= 1.0e5:
             raise ImucalError(f"rate {short(self.rate)} Hz is not an IMU sample rate", field="plan.rate",
                               fix="give 1 to 100000 Hz")

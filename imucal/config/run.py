@@ -53,7 +53,8 @@ class GravitySpec:
     def __post_init__(self) -> None:
         if self.value is not None and self.latitude is not None:
             raise ImucalError("give either gravity.value or gravity.latitude, not both", field="gravity",
-                              fix="keep gravity.value (g in m/s^2) or gravity.latitude (WGS84 normal gravity), drop the other")
+                              fix="keep gravity.value (g in m/s^2) or gravity.latitude (WGS84 normal gravity), "
+                                  "drop the other")
         if self.value is not None:
             check_gravity(self.value, "gravity.value")
         for name in ("latitude", "height"):

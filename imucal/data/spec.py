@@ -79,7 +79,7 @@ class DataSpec:
         for name in ("format", "time_unit", "unit", "gyro_unit", "stream"):
             if not isinstance(getattr(self, name), str):
                 raise ImucalError(f"{name} {short(getattr(self, name))} must be text", field=f"data.{name}",
-                                  fix=f"give data.{name} as a word, e.g. {name}: auto" if name != "unit" else "give data.unit as a word, e.g. unit: raw")
+                                  fix=f"give data.{name} as a word, e.g. {name}: {'raw' if name == 'unit' else 'auto'}")
         check_raw_unit(self.unit, "data.unit")  # the calibration file's rule: what calibrate writes reads back
         if self.delimiter is not None and not (isinstance(self.delimiter, str) and len(self.delimiter) == 1
                                                and self.delimiter not in "\r\n"):
@@ -165,7 +165,7 @@ def rails(spec: object, where: str = "data.saturation") -> dict[str, np.ndarray 
         out[k] = np.array(vals, float)
     if out["low"] is not None and out["high"] is not None and not np.all(out["low"] < out["high"]):
         raise ImucalError("the low rail must lie below the high rail on every axis", field=where,
-                          fix="give low as the most negative raw value the sensor reports and high as the most positive")
+                          fix="give low as the most negative raw value the sensor reports, high as the most positive")
     return out
 
 

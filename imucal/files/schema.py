@@ -93,7 +93,8 @@ def _dataclass(cls: type, raw: Any, ctx: _Ctx, where: str) -> Any:
         raise ctx.error(f"{'top level' if not where else 'section'} must be a mapping, got {type(raw).__name__}",
                         where, "write the file as a mapping of keys to values (YAML key: value lines, a JSON {...}), "
                         "not a list or a single value"
-                        if not where else f"write {where} as key: value lines indented under it")
+                        if not where else f"write {where} as a mapping of keys to values (YAML: key: value lines "
+                        "indented under it)")
     spec = _fields(cls)
     allowed = [f.name for f, _, _ in spec]
     unknown = [k for k in raw if k not in allowed]
@@ -259,7 +260,8 @@ def _scalar(tp: type, raw: Any, ctx: _Ctx, where: str, r: Rule) -> Any:
         raise ctx.error(f"{name} {short(raw)} is too large for a float", where,
                         r.fix or f"give {where} as {_number_text(tp, r)}") from None
     if (math.isnan(x) and not r.allow_nan) or (math.isinf(x) and not r.allow_inf):
-        raise ctx.error(f"{name} is not finite ({short(raw)})", where, r.fix or f"give {where} as {_number_text(tp, r)}")
+        raise ctx.error(f"{name} is not finite ({short(raw)})", where,
+                        r.fix or f"give {where} as {_number_text(tp, r)}")
     if not math.isnan(x) and not _within(x, r):
         raise _fail(ctx, raw, where, r, _number_text(tp, r))
     return raw  # an int stays an int (messages show the value as given)

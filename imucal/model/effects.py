@@ -794,8 +794,8 @@ def effects_from_coefficients(spec: Mapping[str, Mapping[str, float]]) -> list[A
         lo, hi = WARMUP_TAU_BOUNDS
         for n in proto.shape_names:
             if n in coeffs and not lo <= coeffs[n] <= hi:
-                raise ImucalError(f"{short(coeffs[n])} s is outside [{lo:g}, {hi:g}] s", field=f"sensor.effects.{name}.{n}",
-                                  fix=f"give {n} in seconds from {lo:g} to {hi:g}")
+                raise ImucalError(f"{short(coeffs[n])} s is outside [{lo:g}, {hi:g}] s",
+                                  field=f"sensor.effects.{name}.{n}", fix=f"give {n} in seconds from {lo:g} to {hi:g}")
         out.append(EFFECTS[name](axes))
     return out
 

@@ -1,5 +1,5 @@
-"""`imucal noise --data STILL_LOG | --config RUN.yaml [--calibration CAL] [--json OUT] [--plot PNG]`: Allan-deviation noise
-terms of the accelerometer and, when the recording has one, the gyroscope."""
+"""`imucal noise --data STILL_LOG | --config RUN.yaml [--calibration CAL] [--json OUT] [--plot PNG]`:
+Allan-deviation noise terms of the accelerometer and, when the recording has one, the gyroscope."""
 from __future__ import annotations
 
 import argparse

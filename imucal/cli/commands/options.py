@@ -111,8 +111,8 @@ def add_mag_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("magnetometer (with mx, my, mz columns)")
     g.add_argument("--mag-field", metavar="VALUE[UNIT]",
                    help="the local field's magnitude, e.g. 48.2uT, 48.2µT or 0.482G (the WMM/IGRF value for your "
-                        "place; units uT, nT, mT, T, gauss, G, mG, mgauss, Oe); a number alone is in the sensor's unit; "
-                        "default: fitted (the output then in the sensor's unit)")
+                        "place; units uT, nT, mT, T, gauss, G, mG, mgauss, Oe); a number alone is in the sensor's "
+                        "unit; default: fitted (the output then in the sensor's unit)")
     g.add_argument("--mag-unit", metavar="UNIT",
                    help="the magnetometer readings' unit: raw (default: counts) or a field unit (uT, gauss, mG, nT)")
     g.add_argument("--mag-soft-iron", choices=("auto", "symmetric", "full"),
