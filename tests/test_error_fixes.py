@@ -345,3 +345,19 @@ def test_library_refusals_say_what_to_do(counts_run):
             call()
         text = str(ei.value)
         assert where in text and "(fix: " in text and fix in text, text
+
+
+@pytest.mark.parametrize("args, words", [
+    (["error-map", "--angles", "1", "2", "3", "--out", "o", "--bins", "x"],
+     "argument --bins: invalid int value: 'x' (fix: give --bins a whole number)"),
+    (["worst-case", "--widen", "x"], "argument --widen: invalid float value: 'x' (fix: give --widen a number"),
+    (["error-map", "--angles", "1", "2"], "argument --angles: expected 3 arguments (fix: give --angles 3 values"),
+    (["calibrate", "--data"], "argument --data: expected one argument (fix: give --data a value after it)"),
+    (["error-map", "--out", "o"], "the following arguments are required: --angles (fix: add --angles)"),
+    (["calibrate", "--bogus"], "unrecognized arguments: --bogus (fix: `imucal COMMAND --help` lists the options"),
+])
+def test_a_refused_command_line_says_what_to_do(run_cli, args, words):
+    """argparse's own refusals (a word for a number, a missing value or option, an unknown option) had no fix."""
+    r = run_cli(args)
+    assert r.code == 2 and r.err.count("\n") == 1 and "Traceback" not in r.err, r
+    assert words in r.err, r.err

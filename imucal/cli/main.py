@@ -39,9 +39,26 @@ COMMANDS = {
 }
 
 
+def usage_fix(message: str) -> str | None:
+    """What to do about one of argparse's own refusals (read from its words), or None when they say it (the
+    choices of an invalid choice)."""
+    import re  # here: only a refused command line reads it
+
+    if m := re.match(r"argument ([^:/ ]+)[^:]*: invalid (int|float) value", message):
+        return f"give {m[1]} a {'whole number' if m[2] == 'int' else 'number, e.g. 0.5'}"
+    if m := re.match(r"argument ([^:/ ]+)[^:]*: expected (one|\d+) arguments?", message):
+        return f"give {m[1]} {'a value' if m[2] == 'one' else m[2] + ' values'} after it"
+    if m := re.match(r"the following arguments are required: (.+)", message):
+        return f"add {m[1]}"
+    if message.startswith("unrecognized arguments"):
+        return "`imucal COMMAND --help` lists the options of each command"
+    return None
+
+
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # one line, exit 2 (argparse's convention too)
-        sys.stderr.write(f"{self.prog}: error: {message}\n")
+        fix = usage_fix(message)
+        sys.stderr.write(f"{self.prog}: error: {message}" + (f" (fix: {fix})" if fix else "") + "\n")
         raise SystemExit(2)
 
 
