@@ -178,7 +178,7 @@ CALIBRATE_CASES: dict[str, Case] = {
         ["--data", tmp], (str(tmp), "data.path", "is a directory, not a file")),
     "time not increasing": lambda tmp, recs, good: (
         ["--data", write(tmp, "r.csv", CSV_HEAD + "0,1,2,3\n0.02,1,2,3\n0.01,1,2,3\n")],
-        ("r.csv", "data.columns.t", "time is not strictly increasing at line 4")),
+        ("r.csv", "data.columns.t", "time goes back at line 4 (0.01 after 0.02)")),
     "too few samples": lambda tmp, recs, good: (
         ["--data", write(tmp, "r.csv", CSV_HEAD + "0,1,2,3\n0.01,1,2,3\n")], ("r.csv", "only 2 samples")),
     "no time, no rate": lambda tmp, recs, good: (

@@ -246,7 +246,12 @@ def corrupt_value(line: int, path: Path) -> ImucalError:
                        field="data", fix="remove or repair the corrupt rows before calibrating")
 
 
-def not_increasing(line: int, path: Path) -> ImucalError:
-    """Time stamps that do not increase at ``line``."""
-    return ImucalError(f"time is not strictly increasing at line {line}", file=str(path), field="data.columns.t",
-                       fix="sort the rows by time and drop duplicates")
+def not_increasing(line: int, path: Path, before: float, after: float) -> ImucalError:
+    """Time stamps that do not increase at ``line``: ``after`` follows ``before``."""
+    if after == before:
+        return ImucalError(f"time stamp {after:.15g} repeats at line {line}", file=str(path), field="data.columns.t",
+                           fix="write the stamps with enough digits for each sample to have its own (or drop the time "
+                               "column and give --sample-rate HZ); a row written twice: remove it")
+    return ImucalError(f"time goes back at line {line} ({after:.15g} after {before:.15g})", file=str(path),
+                       field="data.columns.t",
+                       fix="sort the rows by time (a file merged out of order), or map the right time column")

@@ -29,6 +29,7 @@ import numpy as np
 
 from imucal.constants import TIME_UNITS
 from imucal.data.blocks import TextBlocks
+from imucal.data.counter_wrap import CounterWrap
 from imucal.data.layout import header_spec, other_instance
 from imucal.data.lines import corrupt_value, no_rows, not_increasing
 from imucal.data.run_pool import batches, ordered_map, run_workers
@@ -87,6 +88,7 @@ class _Parsed:
     stamp_steps: _Steps = field(default_factory=_Steps)
     spans: LagDiffs = field(default_factory=LagDiffs)  #: its tail: the last CLOCK_SPAN stamps
     head_stamps: list = field(default_factory=list)  #: the first CLOCK_SPAN stamps
+    wrap: CounterWrap = field(default_factory=CounterWrap)  #: the time column unwrapped (a counter's)
     head_raw: list = field(default_factory=list)  #: the first QUANTUM_ROWS readings
     blocks: list = field(default_factory=list)  #: (byte offset, bytes, first row) of each block with rows
 
@@ -210,16 +212,18 @@ class StreamedRecording:
             p.big = temperature_error(arr[:, self._it["temp"]], str(self.path), p.n)
         if "t" not in self._it:
             return
-        stamps = arr[:, self._it["t"]]
+        stamps = p.wrap.feed(arr[:, self._it["t"]])  # a counter that wrapped (micros()), unwrapped
+        arr[:, self._it["t"]] = stamps  # (the spill and every later pass read them so)
         if p.n == 0:
             p.t_first = float(stamps[0])
         if p.order is None:
             prev = p.last_stamp
-            d = np.diff(stamps) if prev is None else np.diff(np.concatenate([[prev], stamps]))
-            bad = ~(d > 0)
+            x = stamps if prev is None else np.concatenate([[prev], stamps])
+            bad = ~(np.diff(x) > 0)
             if bad.any():
-                k = int(np.flatnonzero(bad)[0]) + (1 if prev is None else 0)
-                p.order = not_increasing(self.file.line_of(block, first, k), self.path)
+                j = int(np.flatnonzero(bad)[0])  # x[j] -> x[j + 1]
+                k = j + (1 if prev is None else 0)
+                p.order = not_increasing(self.file.line_of(block, first, k), self.path, float(x[j]), float(x[j + 1]))
         p.last_stamp = float(stamps[-1])
         p.stamp_steps.feed(stamps)
         p.spans.add(stamps)
@@ -262,7 +266,7 @@ class StreamedRecording:
                 gi, gs = np.empty(0, np.int64), np.empty(0)
             dec, gs = refine(dec, stats, gi, gs, self.path)
             clock = _Clock(dec, gi, gs) if dec.jittered else None
-            unit, note = dec.unit, dec.note
+            unit, note = dec.unit, "; ".join(x for x in (dec.note, p.wrap.note) if x)
             tb = time_base(dec, stats, gi, gs, lambda k: self._row_line(p.blocks, k))
         else:
             unit, note, tb = rate_time_base(spec.sample_rate, self._rate_source)

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from imucal.data import fixed_width
+from imucal.data.counter_wrap import CounterWrap
 from imucal.data.layout import MAX_SCAN_LINES, Layout, header_spec, layout, other_instance
 from imucal.data.lines import (BINARY_PROBE, binary_file, corrupt_value, decimal_comma, decode, line_too_long,
                                lineno, long_line, no_rows, not_increasing, parse_block, plain_text, split)
@@ -122,16 +123,19 @@ def read_text(spec: DataSpec, path: Path) -> Recording:
         raise corrupt_value(line_of(int(np.flatnonzero(big.any(axis=1))[0])), path)
     data = {r: arr[:, i] for i, r in enumerate(lay.roles)}
     n = arr.shape[0]
-    stamps = data.get("t")
+    stamps, wrap = data.get("t"), CounterWrap()
     if stamps is not None and n > 1:
+        stamps = wrap.feed(stamps)  # a counter that wrapped (micros()), unwrapped
         d = np.diff(stamps)
         if not (d > 0).all():
-            raise not_increasing(line_of(int(np.flatnonzero(~(d > 0))[0]) + 1), path)
+            k = int(np.flatnonzero(~(d > 0))[0])
+            raise not_increasing(line_of(k + 1), path, float(stamps[k]), float(stamps[k + 1]))
     if stamps is None:
         unit, note, tb = rate_time_base(spec.sample_rate, rate_source)
         t = np.arange(n) / float(spec.sample_rate)
     elif n:  # a given sample rate beside the stamps is checked against them (imucal.data.timebase)
         t, unit, note, tb = stamped_times(stamps, spec.time_unit, spec.sample_rate, lay.time_column, path, line_of)
+        note = "; ".join(x for x in (note, wrap.note) if x)
     else:
         raise no_rows(path)
     raw = np.column_stack([data["ax"], data["ay"], data["az"]])
