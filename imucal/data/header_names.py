@@ -11,6 +11,8 @@ units taken from the names:
 - ROS (``rostopic echo -p`` of sensor_msgs/Imu): ``%time``, ``field.angular_velocity.x`` (rad/s),
   ``field.linear_acceleration.x`` (m/s^2: REP 103's units);
 - phyphox: ``Time (s)``, ``Acceleration x (m/s^2)``, ``Gyroscope x (rad/s)``;
+- an accelerometer's axes alone: ``x, y, z`` or ``x (g)`` (phone apps, lab scripts), when no other
+  column names the accelerometer;
 - Xsens MT Manager: ``Acc_X``, ``Mag_X`` (``Gyr_X`` only mapped: below); Arduino MPU-6050 sketches:
   ``AcX``, ``GyX`` (their ``Tmp`` is the sensor's raw count, not degC: not read as a temperature).
 A name is read as: an optional unit or axis index in brackets at its end, then words (split at
@@ -105,6 +107,23 @@ def read_name(name: str) -> Name:
         if stem in stems:
             return Name(kind + axis, unit if unit is not None else STEM_UNITS.get(stem), tuple(stem_words))
     return Name(None, unit, tuple(words))
+
+
+def bare_axes(names: list[str]) -> dict[str, int]:
+    """ax, ay, az -> column of a header that names an accelerometer's columns by the axis alone (``x, y, z``,
+    ``x (g)``, ``X [m/s^2]``: phone apps, lab scripts), when those are its only accelerometer columns; none
+    when a stated unit is not an acceleration's (``x (deg/s)``), an axis is named twice or one is missing."""
+    read = [read_name(n) for n in names]
+    if any(r.role in ("ax", "ay", "az") for r in read):
+        return {}
+    at: dict[str, int] = {}
+    for i, r in enumerate(read):
+        if r.role is None and r.words in (("x",), ("y",), ("z",)):
+            axis = r.words[0]
+            if axis in at or (r.unit is not None and sensor_unit("ax", r.unit) is None):
+                return {}
+            at[axis] = i
+    return {f"a{a}": at[a] for a in "xyz"} if len(at) == 3 else {}
 
 
 def sensor_unit(role: str, unit: str | None) -> str | None:

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import BinaryIO
 
-from imucal.data.header_names import is_unit_name, read_name, unit_meaning
+from imucal.data.header_names import bare_axes, is_unit_name, read_name, unit_meaning
 from imucal.data.header_units import metadata_rate, spec_with_units, stated_units, units_row
 from imucal.data.lines import BINARY_PROBE, MAX_STREAM_BYTES, binary_file, check_text, is_number, not_utf8, split
 from imucal.data.spec import ROLES, DataSpec
@@ -44,8 +44,9 @@ _DEFAULT_NAMES = {"t": ("t", "time", "timestamp"), "ax": ("ax", "acc_x", "accx",
 
 def _known(name: str) -> bool:
     """A header name a role is read from without a mapping (a time column's by time_column_name)."""
+    read = read_name(name)  # (an axis alone with its unit, "x (g)", as bare_axes reads it)
     return (name.lower() in sum(_DEFAULT_NAMES.values(), ()) or time_column_name(name)[0]
-            or read_name(name).role is not None)
+            or read.role is not None or read.words in (("x",), ("y",), ("z",)))
 
 
 @dataclass(frozen=True)
@@ -119,11 +120,13 @@ def _comment_header(lines: list[str], k0: int) -> list[int]:
 
 
 def _find_header(lines: list[str], k0: int, spec: DataSpec, path: Path) -> int | None:
-    """Index of the header line: the first text line with the mapped (or known default) names."""
+    """Index of the header line: the last text line with the mapped (or known default) names above the first
+    row of numbers (a title line above the header may hold a known word: "... Z up.")."""
     if spec.format not in ("auto", "csv"):
         return None
     wanted = [str(v) for r, v in spec.columns.items() if isinstance(v, str)]
     first_text: list[str] | None = None  # the first non-numeric line, for the message
+    found = None  # the last line with the names above the first row of numbers: a title above it is no header
     for i in [*_comment_header(lines, k0), *range(k0, min(len(lines), k0 + MAX_SCAN_LINES))]:
         toks = split(_uncommented(lines[i]), spec.delimiter or sniff_delimiter(lines[i]))
         if toks and not all(is_number(t) for t in toks):
@@ -133,7 +136,11 @@ def _find_header(lines: list[str], k0: int, spec: DataSpec, path: Path) -> int |
                 continue
             if not wanted and not any(_known(n) for n in names):
                 continue
-            return i
+            found = i
+        elif toks and found is not None:
+            break
+    if found is not None:
+        return found
     if wanted and first_text is not None:
         missing = [w for w in wanted if w not in first_text]
         raise ImucalError(f"mapped column(s) {missing} not in header {first_text[:12]}", file=str(path),
@@ -183,6 +190,8 @@ def _header_columns(names: list[str], spec: DataSpec, path: Path) -> dict[str, i
                                   fix=f"map {role} to one of them, e.g. --columns {role}={at[0]}")
             if at:
                 cols[role] = at[0]
+    if not any(r in cols for r in ("ax", "ay", "az")):  # x, y, z (g): an accelerometer's axes alone
+        cols.update({r: i for r, i in bare_axes(names).items() if i not in cols.values()})
     return cols
 
 
@@ -227,6 +236,10 @@ def layout(lines: list[str], spec: DataSpec, path: Path) -> Layout:
     if header_idx is not None:
         delim = spec.delimiter or sniff_delimiter(lines[header_idx])
         names = [t.strip().strip('"').strip("'") for t in split(_uncommented(lines[header_idx]), delim)]
+        if units_row(lines[header_idx + 1] if header_idx + 1 < len(lines) else "", delim, len(names)) is None:
+            # rows with more fields than names: said before any name is missed ("time (s)x (g),y (g),z (g)")
+            _fields_named(names, lines[header_idx + 1:header_idx + 1 + MAX_SCAN_LINES], delim,
+                          first_lineno + header_idx + 1, path)
         cols = _header_columns(names, spec, path)
         wide = [r for r, c in cols.items() if not 0 <= c < len(names)]
         if wide:
@@ -287,7 +300,8 @@ def _fields_named(names: list[str], head: list[str], delim: str | None, first: i
     toks = split(head[k], delim)
     filled = len(toks) - next((i for i, t in enumerate(reversed(toks)) if t), len(toks))  # a trailing empty field
     if filled > len(names):
-        comma = " (numbers with a decimal comma, and commas between them?)" if delim == "," else ""
+        decimal_comma = delim == "," and not any("." in t for t in toks)  # 0,01,9,81: no decimal point left
+        comma = " (numbers with a decimal comma, and commas between them?)" if decimal_comma else ""
         raise ImucalError(f"line {first + k} has {filled} fields, the header names {len(names)}{comma}",
                           file=str(path), field="data.columns",
                           fix="give the header one name per column" + (", and write the numbers with a decimal point "
