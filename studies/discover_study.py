@@ -222,6 +222,11 @@ def visible_chi2(case, path: str, rel: bool = True, genie: bool = False,
     return lam, rel, out
 
 
+def _design(opts: dict) -> dict:
+    """The recording design of --hold / --rate (draw_effect_case's hold and rate; default 3 s at 100 Hz)."""
+    return {k: opts[k] for k in ("hold", "rate") if k in opts}
+
+
 def run_case(args: tuple) -> dict:
     """Simulate one case, run discover, classify the outcome."""
     seed, effect, snr, noise_mg, pool, visible, revisit, *more = args
@@ -244,7 +249,7 @@ def run_case(args: tuple) -> dict:
                 "snr_size": math.nan}
     case = (cancelling_cross_case(seed, phys, noise_mg) if effect == CROSS_TWO
             else draw_effect_case(seed, effect=effect, snr=phys, noise_mg=noise_mg, revisit=revisit,
-                                  step_anywhere=opts.get("step_anywhere", False)))
+                                  step_anywhere=opts.get("step_anywhere", False), **_design(opts)))
     sim = case.config.run()
     with tempfile.TemporaryDirectory() as d:
         path = os.path.join(d, "case.csv")
@@ -313,6 +318,8 @@ NEW_TERMS = ("scale_asymmetry", "bias_step", "bias_hysteresis", "angle_temperatu
 #: to first order and each one's square to second order, so the SNR of these cells is far larger.
 CROSS_TWO = "cross_axis_nonlinearity:2"
 CROSS_TWO_SNR = (250.0, 500.0, 1000.0)
+#: The default recording design: each pose held DEFAULT_HOLD s, sampled at DEFAULT_RATE Hz (draw_effect_case).
+DEFAULT_HOLD, DEFAULT_RATE = 3.0, 100.0
 
 
 def cancelling_cross_case(seed: int, snr: float, noise_mg: float):
@@ -421,6 +428,9 @@ def main(argv: list[str] | None = None) -> int:
                     "studies/results/discover_step_anywhere_study.md")
     ap.add_argument("--no-hold-scan", action="store_true", help="discover without its scan of the still intervals for "
                     "a step inside them (DiscoverSettings.scan_holds: the code before it), for comparison")
+    ap.add_argument("--hold", type=float, default=DEFAULT_HOLD, help="each pose held this long [s] (default 3): "
+                    "another recording design, written to studies/results/discover_design_HOLDs_RATEhz_study.md")
+    ap.add_argument("--rate", type=float, default=DEFAULT_RATE, help="sample rate [Hz] (default 100); with --hold")
     ap.add_argument("--rows", help="re-render the page from a run's rows (OUT.rows.json) instead of running the cases")
     ap.add_argument("--out", help="markdown file to write (default studies/results/discover_grammar_study.md)")
     a = ap.parse_args(argv)
@@ -443,6 +453,13 @@ def main(argv: list[str] | None = None) -> int:
         if a.visible:
             ap.error("--step-anywhere measures by the size SNR: leave out --visible")
         size.update(noise=[0.3], snr=[10, 20, 40], cases=16, clean=50)
+    design = (a.hold, a.rate) != (DEFAULT_HOLD, DEFAULT_RATE)
+    if not (0.5 <= a.hold <= 600 and 10 <= a.rate <= 2000):
+        ap.error("--hold must be 0.5 to 600 s and --rate 10 to 2000 Hz")
+    if design and (a.visible or a.revisit or a.new_terms or a.classic):
+        ap.error("--hold / --rate is a study of its own (size SNR, every term, no pairs): leave out the other modes")
+    if design:  # size SNR, no pairs: how far the default design's results carry
+        size.update(noise=[0.3], snr=[10, 20], cases=4, clean=60, pairs=0, pair_snr=[])
     if a.quick:
         size.update(noise=[0.3], snr=[10, 40], cases=2, clean=4, pairs=2, pair_snr=[40])
     if a.step_anywhere:  # one term: no pairs
@@ -452,6 +469,7 @@ def main(argv: list[str] | None = None) -> int:
             setattr(a, k, v)
     if a.out is None:
         a.out = str(ROOT / "studies" / "results" / (
+            f"discover_design_{a.hold:g}s_{a.rate:g}hz_study.md" if design else
             f"discover_step_anywhere{'_no_scan' if a.no_hold_scan else ''}_study.md" if a.step_anywhere else
             "discover_study.md" if a.classic else
                                      "discover_new_terms_coefficient_study.md" if a.new_terms and a.coefficient else
@@ -468,7 +486,7 @@ def main(argv: list[str] | None = None) -> int:
     if a.tau_known and not a.coefficient:
         ap.error("--tau-known is a variant of --coefficient: use it with --visible --coefficient")
     mode = ("coefficient-tau-known" if a.tau_known else "coefficient") if a.coefficient else a.visible
-    opts = {"step_anywhere": a.step_anywhere, "scan_holds": not a.no_hold_scan}
+    opts = {"step_anywhere": a.step_anywhere, "scan_holds": not a.no_hold_scan, "hold": a.hold, "rate": a.rate}
     jobs = []
     seed = a.seed
     for noise in a.noise:
@@ -699,8 +717,8 @@ def report(rows: list[dict], a: argparse.Namespace, wall: float) -> str:
          f"{a.clean} clean cases and {a.pairs} pairs per SNR {', '.join(f'{s:g}' for s in a.pair_snr)} per noise level). "
          "Each case: a random sensor (raw counts with "
          "quantisation, or factory-scaled m/s^2), "
-         + ("18-26 poses of 3 s at 100 Hz, each held twice (the second pass in reverse order: 36-52 holds), "
-            if a.revisit else "18-26 poses of 3 s at 100 Hz, ") + "warm-up plus non-monotonic "
+         + (f"18-26 poses of {a.hold:g} s at {a.rate:g} Hz, each held twice (the second pass in reverse order: "
+            "36-52 holds), " if a.revisit else f"18-26 poses of {a.hold:g} s at {a.rate:g} Hz, ") + "warm-up plus non-monotonic "
          "temperature swing, one effect on a random axis subset with a random sign, or none. "
          "Discover is told nothing.", "",
          "*Size* = largest change of a reading at 1 g over the recording [mg]. *sigma_mean* = noise of one "

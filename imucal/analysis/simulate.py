@@ -464,7 +464,7 @@ def draw_effect_case(seed: int, effect: str | None = "random", axes: tuple[int, 
                      snr: float | tuple[float, float] = (15.0, 60.0), noise_mg: float | None = None,
                      counts: bool | None = None, with_temperature: bool = True,
                      candidates: tuple[str, ...] | None = None, revisit: bool = False,
-                     step_anywhere: bool = False) -> EffectCase:
+                     step_anywhere: bool = False, hold: float = 3.0, rate: float = 100.0) -> EffectCase:
     """Draw sensor, pose plan, temperature profile and (unless ``effect`` is None) one effect.
 
     ``effect``: "random" (drawn from ``candidates``, default the five classic effects), a name from
@@ -474,7 +474,8 @@ def draw_effect_case(seed: int, effect: str | None = "random", axes: tuple[int, 
     ``snr``: effect size in units of the noise of one interval mean (a number or a log-uniform
     range). ``noise_mg``: white noise per sample [mg]; default drawn in 0.1 .. 1 mg.
     ``counts``: raw counts with quantisation (True) or factory-scaled m/s^2 (False); default random.
-    18 to 26 poses of 3 s at 100 Hz, so a case simulates in milliseconds and fits in well under a second.
+    18 to 26 poses of ``hold`` s at ``rate`` Hz (default 3 s at 100 Hz: a case simulates in milliseconds and fits
+    in well under a second; other designs show how far the results carry to other recordings).
     ``revisit``: every pose held twice, the second pass in reverse order (36 to 52 holds; the other
     draws unchanged): a plan that sees time and temperature terms on every axis early and late.
     ``step_anywhere``: a bias step's time drawn uniformly over the holds and the moves between them
@@ -499,8 +500,8 @@ def draw_effect_case(seed: int, effect: str | None = "random", axes: tuple[int, 
     dirs = dirs[rng.permutation(len(dirs))]
     if revisit:
         dirs = np.vstack([dirs, dirs[::-1]])
-    plan = PosePlan(dirs, hold=3.0, transition=float(rng.uniform(1.5, 2.5)), initial_hold=0.0,
-                    vibration=float(rng.uniform(0.5, 1.5)), rate=100.0)
+    plan = PosePlan(dirs, hold=float(hold), transition=float(rng.uniform(1.5, 2.5)), initial_hold=0.0,
+                    vibration=float(rng.uniform(0.5, 1.5)), rate=float(rate))
     temperature = None
     if with_temperature:
         start = float(rng.uniform(15, 25))
