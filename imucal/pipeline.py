@@ -73,7 +73,8 @@ def covariates_for(model: SensorModel, intervals: Intervals | None = None, sampl
     """Covariate matrix (rows x k) for interval means, or for static samples."""
     rows = intervals if intervals is not None else samples
     time = intervals.t_mid if intervals is not None else samples.t
-    values = covariate_values(model.covariates, temp=rows.temp, time=time, source=source)
+    values = covariate_values(model.covariates, temp=rows.temp, time=time, source=source,
+                              temp_rate=intervals.temp_rate if intervals is not None else None)
     return covariate_matrix(model.covariates, values, np.asarray(time).size)
 
 
@@ -338,7 +339,7 @@ def _problem(config: RunConfig, rec: Recording | RecordingSummary, iv: Intervals
     with _noting_drops(iv.meta.get("dropped", [])):  # too few poses left: the refusal says clipping took some
         guess, dirs, n_distinct = initial_guess(iv, gravity, angles_free, rec.source)
         params = make_parameters(guess, config, gravity, model, rec.unit)  # the file's unit (netCDF, bags)
-        covariates = {"temp": iv.temp, "time": iv.t_mid}
+        covariates = iv.covariates
         if held:  # values another kind of evidence determined (imucal.thermal): held, with their references
             params = fit_to_data(model.effects, params, covariates).with_fixed(held, values=held)
         elif model.effects:  # covariate spread, enough intervals, reference temperature (imucal.model.effects)
@@ -484,7 +485,8 @@ def calibrate_accelerometer(config: RunConfig, recording: Recording | None = Non
                       created=now_utc())
     samp_res, rms_samples = _samples_rms(cal, pb, rec, iv, streamed, gravity)
     cal = replace(cal, fit={**cal_fit, "rms_residual_samples": rms_samples})
-    ai = cal.apply(iv.mean, covariate_values(pb.model.covariates, temp=iv.temp, time=iv.t_mid, source=rec.source))
+    ai = cal.apply(iv.mean, covariate_values(pb.model.covariates, temp=iv.temp, time=iv.t_mid, source=rec.source,
+                                             temp_rate=iv.temp_rate))
     directions = ai / np.linalg.norm(ai, axis=1, keepdims=True)
     return CalibrationRun(config=config, recording=rec, intervals=iv, guess=pb.guess, observability=pb.obs,
                           result=res, calibration=cal, directions=directions, sample_residuals=samp_res,

@@ -124,7 +124,7 @@ def calibration_cases(cal: Any, gravity: float, recording: Any = None) -> list[D
         raw = iv.mean
         where = f"over {iv.n} static intervals of {recording.source}"
         a = cal.apply(raw, covariate_values(cal.covariates, temp=iv.temp, time=iv.t_mid, source=recording.source,
-                                            what="the calibration"))
+                                            what="the calibration", temp_rate=iv.temp_rate))
         rms, mx = _stats(np.abs(np.linalg.norm(a, axis=1) - gravity))
         calibrated = DriftCase("calibrated", rms, f"RMS of | |a| - g | {where}", mx)
     rms_r, max_r = _stats(np.abs(np.linalg.norm((raw - s_bar) / b_bar, axis=1) - gravity))

@@ -20,6 +20,7 @@ import numpy as np
 
 from imucal.errors import ImucalError, short
 from imucal.files.schema import rule
+from imucal.model.channels import hold_rates
 from imucal.solve.stats import median
 
 #: Batches per interval for the batch-means estimate of a mean's noise.
@@ -123,6 +124,9 @@ class Intervals:
     noise_inflation: float  #: batch-means / white-noise variance ratio (>= 1)
     window: float = 1.0
     meta: dict = field(default_factory=dict)
+    #: dT/dt [degC/s] of each interval: the mean over its samples of the per-sample rate (what apply reads),
+    #: when the samples were read whole (imucal.model.channels.hold_rates); None: from the interval means
+    temp_rate: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -132,12 +136,22 @@ class Intervals:
     def n_samples(self) -> np.ndarray:
         return self.end - self.start
 
+    @property
+    def covariates(self) -> dict[str, np.ndarray | None]:
+        """The rows' covariates: mean temperature, mean time and (read whole) the holds' dT/dt (else the
+        effects derive it from the means: imucal.model.channels.temperature_rate)."""
+        out = {"temp": self.temp, "time": self.t_mid}
+        if self.temp_rate is not None:
+            out["temp_rate"] = self.temp_rate
+        return out
+
     def subset(self, keep: np.ndarray) -> "Intervals":
         keep = np.asarray(keep)
         return Intervals(self.start[keep], self.end[keep], self.t_start[keep], self.t_end[keep],
                          self.mean[keep], self.std[keep], self.mean_std[keep], self.t_mid[keep],
                          None if self.temp is None else self.temp[keep], self.threshold,
-                         self.noise_inflation, self.window, dict(self.meta))
+                         self.noise_inflation, self.window, dict(self.meta),
+                         None if self.temp_rate is None else self.temp_rate[keep])
 
     def sample_mask(self, n: int) -> np.ndarray:
         mask = np.zeros(n, bool)
@@ -830,4 +844,7 @@ def detect_static(t: np.ndarray, raw: np.ndarray, settings: StaticSettings = Sta
                     settings.split)
     segs = [g for i, seg, ts, tp in runs if ts[-1] - ts[0] >= settings.min_duration
             and (g := still_segment(i, seg, ts, tp, lows, highs, rails, settings, m, q)) is not None]
-    return intervals_from(segs, thr, q, settings, lows, highs, rails, temp is not None)
+    iv = intervals_from(segs, thr, q, settings, lows, highs, rails, temp is not None)
+    if temp is None or iv.n == 0:
+        return iv
+    return replace(iv, temp_rate=hold_rates(t, temp, iv.start, iv.end))

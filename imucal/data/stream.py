@@ -22,6 +22,7 @@ from __future__ import annotations
 import functools
 import os
 from collections.abc import Iterator
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -43,6 +44,7 @@ from imucal.data.timebase import (CLOCK_SPAN, GAP_STEPS, Decision, GapFinder, La
                                   clock_times, decide, gap_excess, rate_time_base, refine, time_base,
                                   time_unit_from_step)
 from imucal.errors import ImucalError
+from imucal.model.channels import TEMPERATURE_RATE_WINDOW, temperature_rate
 from imucal.solve.stats import median
 
 
@@ -122,6 +124,11 @@ class _Scan:
     highs: np.ndarray
     time_base: TimeBase
     clock: _Clock | None  #: the clock the times are made on (jittered stamps)
+
+
+#: Rows beyond the rate's window taken from a neighbouring block (temperature_rate takes the nearest rows
+#: when its window holds fewer than its least: a log below 0.1 Hz).
+RATE_CONTEXT = 3
 
 
 class StreamedRecording:
@@ -325,10 +332,46 @@ class StreamedRecording:
                         lo, hi = g.start - start, g.end - start
                         kept[g.start] = (raw[lo:hi], t[lo:hi], None if temp is None else temp[lo:hi])
         iv = intervals_from(segs, thr, scan.q, st, scan.lows, scan.highs, self.rails, has_temp)
+        if has_temp and iv.n:  # each hold's dT/dt as the whole file's reader gives it (detect_static)
+            iv = dataclasses.replace(iv, temp_rate=self._hold_rates(iv))
         if not keep_samples:
             return iv, None
         parts = [kept[int(s)] for s in iv.start]
         return iv, _samples(parts, has_temp)
+
+    def _hold_rates(self, iv: Intervals) -> np.ndarray:
+        """imucal.model.channels.hold_rates of the intervals, a block of the spill at a time: each block's
+        per-sample rates from its samples and the rows within the rate's window (and RATE_CONTEXT more) before
+        and after it, summed over the intervals' samples."""
+        sums = np.zeros(iv.n)
+        half = TEMPERATURE_RATE_WINDOW / 2
+        stream = ((row0, t, temp) for row0, _, t, temp in self._arrays())
+        back_t, back_T = np.empty(0), np.empty(0)  # the rows before the block, within its window
+        ahead: list[tuple] = []  # blocks read ahead
+        cur = next(stream, None)
+        while cur is not None:
+            row0, t, temp = cur
+            while not ahead or (ahead[-1] is not None and ahead[-1][1][-1] <= t[-1] + half):
+                ahead.append(next(stream, None))
+                if ahead[-1] is None:
+                    break
+            nxt = [b for b in ahead if b is not None]
+            fwd_t = np.concatenate([b[1] for b in nxt]) if nxt else np.empty(0)
+            fwd_T = np.concatenate([b[2] for b in nxt]) if nxt else np.empty(0)
+            i1 = min(fwd_t.size, int(np.searchsorted(fwd_t, t[-1] + half, "right")) + RATE_CONTEXT)
+            i0 = max(0, int(np.searchsorted(back_t, t[0] - half)) - RATE_CONTEXT)
+            tt = np.concatenate([back_t[i0:], t, fwd_t[:i1]])
+            TT = np.concatenate([back_T[i0:], temp, fwd_T[:i1]])
+            skip = back_t.size - i0
+            c = np.concatenate([[0.0], np.cumsum(temperature_rate(tt, TT)[skip:skip + t.size])])
+            row1 = row0 + t.size
+            for j in np.flatnonzero((iv.start < row1) & (iv.end > row0)):
+                sums[j] += c[min(iv.end[j], row1) - row0] - c[max(iv.start[j], row0) - row0]
+            back_t, back_T = np.concatenate([back_t[i0:], t]), np.concatenate([back_T[i0:], temp])
+            keep = max(0, int(np.searchsorted(back_t, back_t[-1] - half)) - RATE_CONTEXT)
+            back_t, back_T = back_t[keep:], back_T[keep:]
+            cur = ahead.pop(0) if ahead else None
+        return sums / np.maximum(iv.end - iv.start, 1)
 
     def _arrays(self) -> Iterator[tuple[int, np.ndarray, np.ndarray, np.ndarray | None]]:
         """(first row, raw, t, temp) of every block of the spill."""

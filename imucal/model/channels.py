@@ -96,14 +96,16 @@ def require(reads: tuple[Channel, ...], has: tuple[Channel, ...], source: str | 
 
 
 def covariate_values(keys: tuple[str, ...], *, temp: np.ndarray | None, time: np.ndarray,
-                     source: str | None = None, what: str = "the model") -> dict[str, np.ndarray]:
+                     source: str | None = None, what: str = "the model",
+                     temp_rate: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """{key: values} for the covariates ``keys`` from the temperature and time of some rows.
 
     The one place that turns covariate keys into arrays; a temperature effect without a temperature
     channel is refused here with the column to add.
     """
     given = {"temp": temp, "time": time,
-             "temp_rate": None if temp is None or "temp_rate" not in keys else temperature_rate(time, temp)}
+             "temp_rate": None if temp is None or "temp_rate" not in keys else
+             temp_rate if temp_rate is not None else temperature_rate(time, temp)}
     out: dict[str, np.ndarray] = {}
     for ch, key in zip(covariate_channels(keys), keys):
         v = given[key]
@@ -118,6 +120,17 @@ def covariate_matrix(keys: tuple[str, ...], values: Mapping[str, np.ndarray], n:
     return np.column_stack([values[k] for k in keys]) if keys else np.zeros((n, 0))
 
 
+def hold_rates(time: np.ndarray, temp: np.ndarray, start: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """dT/dt [degC/s] of each hold [start, end) of a recording's samples: the mean over its samples of
+    ``temperature_rate``, what the hold's mean reading holds of an effect linear in it. The slope across the
+    interval means (``temperature_rate`` of them) stands for it only while several holds fit in the window: a
+    hold of 10 s or more has no neighbour within it, and a swing that turns within a hold averages out."""
+    r = temperature_rate(time, temp)
+    c = np.concatenate([[0.0], np.cumsum(r)])
+    start, end = np.asarray(start, int), np.asarray(end, int)
+    return (c[end] - c[start]) / np.maximum(end - start, 1)
+
+
 def temperature_rate(time: np.ndarray, temp: np.ndarray, window: float = TEMPERATURE_RATE_WINDOW) -> np.ndarray:
     """dT/dt [degC/s] at each row: the least-squares slope of the temperature against time over the rows
     within +-window/2 [s] of it (at least the ``_RATE_MIN_ROWS`` nearest in time). The same definition for
@@ -126,9 +139,10 @@ def temperature_rate(time: np.ndarray, temp: np.ndarray, window: float = TEMPERA
     if t.size < 2:
         return np.zeros(t.size)
     order = np.argsort(t, kind="stable")
-    ts, Ts = t[order] - t[order[0]], T[order] - T[order[0]]
-    lo = np.searchsorted(ts, ts - window / 2, side="left")
-    hi = np.searchsorted(ts, ts + window / 2, side="right")
+    ta = t[order]  # the windows on the times as given: a part of the rows (a block read in chunks) finds the same
+    lo = np.searchsorted(ta, ta - window / 2, side="left")
+    hi = np.searchsorted(ta, ta + window / 2, side="right")
+    ts, Ts = ta - ta[0], T[order] - T[order[0]]  # (sums about the first row: fewer digits lost)
     k = np.arange(t.size)
     need = np.minimum(_RATE_MIN_ROWS, t.size)
     short = hi - lo < need

@@ -81,7 +81,7 @@ def _both_ways(names: list[str], iv, notes: list[str]) -> list[str]:
     if not rate or iv.temp is None or temperature_spread(iv.temp) < MIN_TEMPERATURE_SPREAD:
         return names
     try:
-        check_effects([make_effect(n, (0,)) for n in rate], {"temp": iv.temp, "time": iv.t_mid}, iv.n, 0)
+        check_effects([make_effect(n, (0,)) for n in rate], iv.covariates, iv.n, 0)
     except ImucalError as exc:
         notes.append(f"not tested: {exc.message}")
         return [n for n in names if n not in rate]

@@ -68,8 +68,8 @@ class Problem:
         self.iv = base.intervals
         self.rec = base.recording
         self.gravity = base.calibration.gravity
-        self.cov = {"temp": self.iv.temp, "time": self.iv.t_mid,
-                    "temp_rate": None if self.iv.temp is None else temperature_rate(self.iv.t_mid, self.iv.temp)}
+        self.cov = {"temp_rate": None if self.iv.temp is None else temperature_rate(self.iv.t_mid, self.iv.temp),
+                    **self.iv.covariates}  # (the holds' own dT/dt when the samples were read whole)
         g = base.guess  # the interval directions of imucal.pipeline.initial_guess
         d = (self.iv.mean - g.s) / g.b
         self.directions = d / np.linalg.norm(d, axis=1, keepdims=True)
