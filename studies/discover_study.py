@@ -705,6 +705,12 @@ def summary_block(rows: list[dict], a: argparse.Namespace) -> list[str]:
         hid = [r for r in single if r["snr"] >= 10]
         L += ["", f"A step called stochastic (the verdict names a stochastic bias) at SNR >= 10: "
               f"{sum(r['stochastic_called'] for r in hid)} of {len(hid)} (issue 28's target: at most 1 in 50)."]
+    if (getattr(a, "hold", DEFAULT_HOLD), getattr(a, "rate", DEFAULT_RATE)) != (DEFAULT_HOLD, DEFAULT_RATE):
+        hid = [r for r in single if r["snr"] >= 10]
+        alone = [r for r in hid if r["stochastic_called"] and not r["found"]]
+        L += ["", f"A hidden term called stochastic (the verdict names a stochastic bias) at SNR >= 10: "
+              f"{sum(r['stochastic_called'] for r in hid)} of {len(hid)}; with no term named beside it: {len(alone)} "
+              f"({', '.join(sorted(r['truth'] for r in alone)) or 'none'})."]
     L += ["<!-- end:summary -->", ""]
     return L
 
