@@ -114,3 +114,15 @@ def test_a_step_back_that_is_no_wrap_is_refused_by_its_name(tmp_path, stamps, wo
         with pytest.raises(ImucalError) as e:
             read(p)
         assert words in str(e.value) and "data.columns.t" in str(e.value) and "fix:" in str(e.value)
+
+
+def test_apply_writes_a_wrapped_counter_unwrapped_and_says_so(tmp_path, counts_recording, run_cli):
+    p = tmp_path / "micros.csv"
+    _micros_file(p, counts_recording, wrap_at=20.0)
+    r = run_cli(["calibrate", "--data", p, "--out", tmp_path / "cal", "--no-figures", "--quiet"])
+    assert r.code == 0, r.err
+    r = run_cli(["apply", tmp_path / "cal" / "calibration.yaml", "--data", p, "--out", tmp_path / "a.csv"])
+    assert r.code == 0, r.err
+    assert "(us, a wrapped counter unwrapped)" in r.out + r.err
+    t = np.loadtxt(tmp_path / "a.csv", delimiter=",", skiprows=1, usecols=0)
+    assert np.all(np.diff(t) > 0) and t[-1] > M32

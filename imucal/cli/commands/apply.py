@@ -135,8 +135,9 @@ def run(args: argparse.Namespace) -> int:
         buf.writelines(f"{t},{row}\n" for t, row in zip(texts, rows.getvalue().splitlines()))
     check_outputs(inputs, [args.out])  # nothing changed meanwhile
     write_text_atomic(args.out, buf.getvalue())
-    how = (f"the input's {key_text(rec.time_column)} column as read ({rec.time_unit})" if rec.t_source is not None
-           else "s from the first sample")
+    unwrapped = ", a wrapped counter unwrapped" if "wrapped" in rec.time_note else ""  # (imucal.data.counter_wrap)
+    how = (f"the input's {key_text(rec.time_column)} column as read ({rec.time_unit}{unwrapped})"
+           if rec.t_source is not None else "s from the first sample")
     what = " and ".join((f"{s.model.output.role.replace('_', ' ')} " if k else "") + f"[{s.model.output.unit}]"
                         for k, s in enumerate(done))  # the acceleration first, as the samples
     lack = [s for s in cal.attached if s.kind not in out]
