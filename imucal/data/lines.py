@@ -254,4 +254,5 @@ def not_increasing(line: int, path: Path, before: float, after: float) -> Imucal
                                "column and give --sample-rate HZ); a row written twice: remove it")
     return ImucalError(f"time goes back at line {line} ({after:.15g} after {before:.15g})", file=str(path),
                        field="data.columns.t",
-                       fix="sort the rows by time (a file merged out of order), or map the right time column")
+                       fix=f"sort the rows by time (a file merged out of order); a logger that restarted there: split "
+                           f"the file at line {line}; or map the right time column")
