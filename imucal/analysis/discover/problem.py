@@ -68,8 +68,9 @@ class Problem:
         self.iv = base.intervals
         self.rec = base.recording
         self.gravity = base.calibration.gravity
-        self.cov = {"temp_rate": None if self.iv.temp is None else temperature_rate(self.iv.t_mid, self.iv.temp),
-                    **self.iv.covariates}  # (the holds' own dT/dt when the samples were read whole)
+        self.cov = dict(self.iv.covariates)  # (with the holds' own dT/dt when the samples were read whole)
+        if "temp_rate" not in self.cov:  # a file read in chunks: the slope across the interval means
+            self.cov["temp_rate"] = None if self.iv.temp is None else temperature_rate(self.iv.t_mid, self.iv.temp)
         g = base.guess  # the interval directions of imucal.pipeline.initial_guess
         d = (self.iv.mean - g.s) / g.b
         self.directions = d / np.linalg.norm(d, axis=1, keepdims=True)
