@@ -133,6 +133,20 @@ def as_typed(exc: ImucalError, argv: list[str]) -> ImucalError:
     return ImucalError(exc.message, field=option, fix=exc.fix)
 
 
+def _interrupted_exit(as_program: bool) -> int:
+    """EXIT_INTERRUPTED; as the program itself, at once: the staged outputs are gone (files.output) and the
+    line is out, and an interpreter's teardown after a signal inside CasADi's C code has aborted (a fatal
+    'PyThreadState_Get' error, exit -6: seen once under a full test suite's load)."""
+    if as_program:
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):
+                pass
+        os._exit(EXIT_INTERRUPTED)
+    return EXIT_INTERRUPTED
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run one command. Exit statuses: imucal.errors.EXIT_* (README, "Exit status")."""
     as_program = argv is None  # the console script or python -m imucal, not a caller's code
@@ -164,7 +178,7 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_BAD_INPUT
     except KeyboardInterrupt as exc:
         sys.stderr.write(interruption_line(exc) + "\n")
-        return EXIT_INTERRUPTED
+        return _interrupted_exit(as_program)
     except BrokenPipeError:  # the reader of stdout left (e.g. `| head`): as a pipe tool, end quietly
         try:
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit's flush
@@ -180,7 +194,7 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as exc:  # noqa: BLE001 - the last line of defence: one line, never a traceback
         if _interrupted(exc):
             sys.stderr.write(interruption_line(None) + "\n")
-            return EXIT_INTERRUPTED
+            return _interrupted_exit(as_program)
         if isinstance(exc, OSError) and exc.errno in (errno.ENAMETOOLONG, errno.ELOOP):
             # a path the system cannot look up (too long, a symbolic-link loop): bad input, not a bug
             name = short(str(exc.filename), 80) if exc.filename is not None else "a path given"
