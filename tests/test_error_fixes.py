@@ -215,6 +215,26 @@ def test_mag_field_with_the_micro_sign_calibrates_as_with_u(run_cli, tmp_path):
     assert out["uT"] == out["µT"] and any(ln.strip().startswith("mx") or "magnetometer" in ln for ln in out["uT"])
 
 
+def test_a_run_files_mag_units_take_the_micro_sign(run_cli, tmp_path):
+    """mag.field_unit: µT (and mag.unit, --mag-unit) was refused as 'not a unit name' (fix: uT) while --mag-field
+    took 48.2µT: a run file's µT is uT, and the calibration is the one uT gives."""
+    from test_mag_plugin import write_log
+
+    log = tmp_path / "log.csv"
+    write_log(log)
+    out = {}
+    for unit in ("uT", "\u00b5T", "\u03bcT"):
+        run = _write(tmp_path / f"run{len(out)}.yaml", f"data:\n  path: {log.name}\nmag:\n  field: 48\n  field_unit: {unit}\n")
+        r = run_cli(["calibrate", run, "--out", tmp_path / f"o{len(out)}", "--no-figures", "--quiet"])
+        assert r.code in (0, 1), r.err
+        out[unit] = [ln for ln in (tmp_path / f"o{len(out)}" / "calibration.yaml").read_text().splitlines()
+                     if not ln.startswith("created: ")]
+    assert out["uT"] == out["\u00b5T"] == out["\u03bcT"]
+    r = run_cli(["calibrate", "--data", log, "--mag-unit", "\u00b5T", "--mag-field", "48uT", "--out", tmp_path / "cli",
+                 "--no-figures", "--quiet"])
+    assert r.code in (0, 1, 2) and "is not a unit name" not in r.err, r.err
+
+
 @pytest.mark.parametrize("text", ["48.2 tesla-ish", "forty uT", "48.2T2"])
 def test_a_bad_mag_field_says_how_to_write_one(run_cli, tmp_path, text):
     r = run_cli(["calibrate", "--data", tmp_path / "x.csv", "--mag-field", text])

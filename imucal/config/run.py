@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any, Mapping
 from imucal.constants import DEFAULT_ANGLE_TOL
 from imucal.data.spec import DataSpec
 from imucal.errors import ImucalError, check_choice, short
-from imucal.mag.units import is_sensor_unit
+from imucal.mag.units import ascii_micro, is_sensor_unit
 from imucal.model.gravity import normal_gravity
 from imucal.model.parameters import BASE_NAMES
 from imucal.data.static import StaticSettings
@@ -270,7 +270,9 @@ class MagConfig:
     def schema_input(cls, raw: Any) -> Any:
         """A date as YAML reads it unquoted (date: 2024-05-17 is a date, not text) taken as its ISO text."""
         if isinstance(raw, Mapping) and isinstance(raw.get("date"), dt.date):
-            return {**raw, "date": raw["date"].isoformat()}
+            raw = {**raw, "date": raw["date"].isoformat()}
+        if isinstance(raw, Mapping):  # unit: µT as uT (the field's units are written with u)
+            raw = {**raw, **{k: ascii_micro(raw[k]) for k in ("unit", "field_unit") if k in raw}}
         return raw
 
     def __post_init__(self) -> None:

@@ -15,6 +15,15 @@ from imucal.errors import ImucalError
 #: Field units and their factor to microtesla (SI: 1 gauss = 1e-4 T = 100 uT).
 FIELD_UNITS = {"uT": 1.0, "nT": 1e-3, "mT": 1e3, "T": 1e6, "gauss": 100.0, "G": 100.0, "mG": 0.1,
                "mgauss": 0.1, "Oe": 100.0}
+#: The micro prefix as typed (MICRO SIGN, GREEK SMALL LETTER MU); FIELD_UNITS writes it u.
+MICRO = ("\u00b5", "\u03bc")
+
+
+def ascii_micro(unit: object) -> object:
+    """A unit typed with the micro sign (µT, μT) as FIELD_UNITS writes it (uT); anything else as given."""
+    return "u" + unit[1:] if isinstance(unit, str) and unit[:1] in MICRO else unit
+
+
 #: Earth's field magnitude spans about 22 to 67 uT (IGRF-13 main field, 2020, at the surface); a value
 #: outside this range by more than this factor is refused as a unit mix-up.
 EARTH_FIELD_UT = (22.0, 67.0)

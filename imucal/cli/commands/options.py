@@ -124,8 +124,6 @@ def add_mag_options(p: argparse.ArgumentParser) -> None:
 
 #: --mag-field: a number and an optional unit (48.2uT, 48.2 uT, 48.2µT, 0.482gauss)
 _MAG_FIELD = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([A-Za-z\u00b5\u03bc]*)\s*$")
-#: The micro prefix as typed (MICRO SIGN, GREEK SMALL LETTER MU) and as imucal writes it (imucal.mag.units.FIELD_UNITS).
-_MICRO = ("\u00b5", "\u03bc")
 
 
 def mag_field(text: str) -> tuple[float, str | None]:
@@ -139,10 +137,9 @@ def mag_field(text: str) -> tuple[float, str | None]:
         raise ImucalError(f"{short(text)} is not a field magnitude", field="--mag-field",
                           fix=f"write a number and one of {', '.join(FIELD_UNITS)}, e.g. 48.2uT, 48.2µT or 0.482G "
                               "(a number alone is in the sensor's unit)")
-    unit = m.group(2)
-    if unit[:1] in _MICRO:
-        unit = "u" + unit[1:]
-    return float(m.group(1)), unit or None
+    from imucal.mag.units import ascii_micro
+
+    return float(m.group(1)), ascii_micro(m.group(2)) or None
 
 
 def _mag(args: argparse.Namespace, cfg: RunConfig) -> MagConfig:
@@ -153,7 +150,9 @@ def _mag(args: argparse.Namespace, cfg: RunConfig) -> MagConfig:
     if getattr(args, "mag_soft_iron", None) is not None:
         over["soft_iron"] = args.mag_soft_iron
     if getattr(args, "mag_unit", None) is not None:
-        over["unit"] = args.mag_unit
+        from imucal.mag.units import ascii_micro
+
+        over["unit"] = ascii_micro(args.mag_unit)  # --mag-unit µT as uT
     if getattr(args, "no_mag", False):
         over["calibrate"] = False
     if not over:
