@@ -240,6 +240,9 @@ def layout(lines: list[str], spec: DataSpec, path: Path) -> Layout:
             # rows with more fields than names: said before any name is missed ("time (s)x (g),y (g),z (g)")
             _fields_named(names, lines[header_idx + 1:header_idx + 1 + MAX_SCAN_LINES], delim,
                           first_lineno + header_idx + 1, path)
+            checked = True
+        else:
+            checked = False
         cols = _header_columns(names, spec, path)
         wide = [r for r, c in cols.items() if not 0 <= c < len(names)]
         if wide:
@@ -253,7 +256,8 @@ def layout(lines: list[str], spec: DataSpec, path: Path) -> Layout:
             names = [f"{n} [{u}]" if u and read_name(n).unit is None else n for n, u in zip(names, below)]
             body += 1
         instance = _one_instance(names, lines[body:body + MAX_SCAN_LINES], delim, path, first_lineno + body)
-        _fields_named(names, lines[body:body + MAX_SCAN_LINES], delim, first_lineno + body, path)
+        if not checked or below is not None:  # (the rows below a line of units, checked once)
+            _fields_named(names, lines[body:body + MAX_SCAN_LINES], delim, first_lineno + body, path)
     else:
         if not all(is_number(t) for t in split(lines[k0], spec.delimiter)):
             raise ImucalError(f"line {first_lineno + k0} is neither a header with known column names nor numbers",

@@ -43,6 +43,7 @@ class TimeBase:
     short_fraction: float = 0.0
     median_step: float = float("nan")
     rate_given: float | None = None  #: [Hz] a sample rate given beside the time column, checked against it
+    wraps: int = 0  #: times the time column wrapped as an unsigned counter, unwrapped (imucal.data.counter_wrap)
 
     @property
     def step(self) -> float:

@@ -274,7 +274,8 @@ class StreamedRecording:
             dec, gs = refine(dec, stats, gi, gs, self.path)
             clock = _Clock(dec, gi, gs) if dec.jittered else None
             unit, note = dec.unit, "; ".join(x for x in (dec.note, p.wrap.note) if x)
-            tb = time_base(dec, stats, gi, gs, lambda k: self._row_line(p.blocks, k))
+            tb = dataclasses.replace(time_base(dec, stats, gi, gs, lambda k: self._row_line(p.blocks, k)),
+                                     wraps=p.wrap.wraps)
         else:
             unit, note, tb = rate_time_base(spec.sample_rate, self._rate_source)
         if n < 3:  # as detect_static

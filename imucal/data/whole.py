@@ -13,6 +13,7 @@ import io
 import os
 import re
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -135,7 +136,7 @@ def read_text(spec: DataSpec, path: Path) -> Recording:
         t = np.arange(n) / float(spec.sample_rate)
     elif n:  # a given sample rate beside the stamps is checked against them (imucal.data.timebase)
         t, unit, note, tb = stamped_times(stamps, spec.time_unit, spec.sample_rate, lay.time_column, path, line_of)
-        note = "; ".join(x for x in (note, wrap.note) if x)
+        note, tb = "; ".join(x for x in (note, wrap.note) if x), replace(tb, wraps=wrap.wraps)
     else:
         raise no_rows(path)
     raw = np.column_stack([data["ax"], data["ay"], data["az"]])

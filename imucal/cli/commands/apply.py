@@ -135,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
         buf.writelines(f"{t},{row}\n" for t, row in zip(texts, rows.getvalue().splitlines()))
     check_outputs(inputs, [args.out])  # nothing changed meanwhile
     write_text_atomic(args.out, buf.getvalue())
-    unwrapped = ", a wrapped counter unwrapped" if "wrapped" in rec.time_note else ""  # (imucal.data.counter_wrap)
+    unwrapped = ", a wrapped counter unwrapped" if rec.time_base is not None and rec.time_base.wraps else ""
     how = (f"the input's {key_text(rec.time_column)} column as read ({rec.time_unit}{unwrapped})"
            if rec.t_source is not None else "s from the first sample")
     what = " and ".join((f"{s.model.output.role.replace('_', ' ')} " if k else "") + f"[{s.model.output.unit}]"
